@@ -1,0 +1,53 @@
+//! Exit codes and error reporting, in one place.
+//!
+//! | code | meaning |
+//! |------|---------|
+//! | 0    | success |
+//! | 1    | error (bad input, failed render, I/O); the message says what and what to do |
+//! | 2    | usage error (bad flags) |
+//! | 3    | finished, but some items failed (see the ledger / report) |
+//! | 130  | interrupted by Ctrl-C; finished outputs are kept, no partial output is left |
+
+/// Success.
+pub const OK: u8 = 0;
+/// Any error.
+pub const ERROR: u8 = 1;
+/// Bad command-line usage.
+pub const USAGE: u8 = 2;
+/// The run finished but some items failed.
+pub const PARTIAL: u8 = 3;
+/// Interrupted by Ctrl-C (128 + SIGINT).
+pub const INTERRUPTED: u8 = 130;
+
+/// Shown at the end of `--help`.
+pub const EXIT_CODES_HELP: &str = "Exit codes: 0 ok, 1 error, 2 usage error, 3 finished with some failed items, 130 interrupted (Ctrl-C)";
+
+/// What a subcommand returns: `Ok(code)` for a finished run (0 or [`PARTIAL`]).
+pub type CmdResult = anyhow::Result<u8>;
+
+/// Marker error: the user pressed Ctrl-C. Maps to exit code 130.
+#[derive(Debug)]
+pub struct Interrupted;
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("interrupted; finished outputs were kept and no partial output was left")
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
+/// Print an error (with its chain of causes) to stderr and pick the exit code.
+pub fn report(result: CmdResult) -> u8 {
+    match result {
+        Ok(code) => code,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            if err.downcast_ref::<Interrupted>().is_some() {
+                INTERRUPTED
+            } else {
+                ERROR
+            }
+        }
+    }
+}

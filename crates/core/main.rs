@@ -1,0 +1,65 @@
+//! The `clevrtex` command-line tool. This file only parses arguments, dispatches and maps the
+//! result to an exit code; the work lives in the library crates.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod cmd_bench;
+mod cmd_doctor;
+mod cmd_eval;
+mod cmd_generate;
+mod cmd_materials;
+mod cmd_sample;
+mod exit;
+
+/// Make and score texture-rich synthetic benchmarks for unsupervised multi-object
+/// segmentation, in the style of ClevrTex.
+#[derive(Debug, Parser)]
+#[command(name = "clevrtex", version, about, after_help = exit::EXIT_CODES_HELP)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Sample scene layouts (JSON scene files) without rendering.
+    Sample(cmd_sample::Args),
+    /// Sample and render a dataset through Blender.
+    Generate(cmd_generate::GenerateArgs),
+    /// Render scene files made by `clevrtex sample`.
+    Render(cmd_generate::RenderArgs),
+    /// Score predictions against a ground-truth dataset.
+    Eval(cmd_eval::Args),
+    /// List the material catalogue or render a contact sheet.
+    Materials(cmd_materials::Args),
+    /// Benchmarks: error against run time of render settings.
+    Bench(cmd_bench::Args),
+    /// Report the Blender found, its version, Cycles devices, and what is missing.
+    Doctor(cmd_doctor::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(err) => {
+            let _ = err.print();
+            return ExitCode::from(if err.use_stderr() {
+                exit::USAGE
+            } else {
+                exit::OK
+            });
+        }
+    };
+    let result = match cli.command {
+        Command::Sample(args) => cmd_sample::run(args),
+        Command::Generate(args) => cmd_generate::run_generate(args),
+        Command::Render(args) => cmd_generate::run_render(args),
+        Command::Eval(args) => cmd_eval::run(args),
+        Command::Materials(args) => cmd_materials::run(args),
+        Command::Bench(args) => cmd_bench::run(args),
+        Command::Doctor(args) => cmd_doctor::run(args),
+    };
+    ExitCode::from(exit::report(result))
+}

@@ -1,0 +1,244 @@
+//! The scene file: the contract between the Rust sampler and the Blender bridge.
+//!
+//! A scene file holds everything the bridge needs to build one image with no randomness of
+//! its own, and nothing it does not need. Every position, rotation and matrix here is final:
+//! the bridge copies them into Blender, it never derives or jitters. See
+//! `docs/scene-format.md` for the field-by-field description.
+
+use serde::{Deserialize, Serialize};
+
+/// Value of [`SceneFile::format`]: lets tools recognise a scene file.
+pub const SCENE_FORMAT: &str = "clevrtex-scene";
+/// Current value of [`SceneFile::version`]. Bump on any incompatible change.
+pub const SCENE_VERSION: u32 = 1;
+
+/// One image's scene, as written by `clevrtex sample` and read by the bridge.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    /// Always [`SCENE_FORMAT`].
+    pub format: String,
+    /// Always [`SCENE_VERSION`] for files this version writes.
+    pub version: u32,
+    /// Variant name (`full`, `pbg`, `vbg`, `grassbg`, `camo`, `outd`, `clevr` or a user config's name).
+    pub variant: String,
+    /// Image index within the run (the number in the file stem).
+    pub index: u64,
+    /// `test`, `val` or `train`, from the index and the run size.
+    pub split: String,
+    /// Run seed. Together with `index` and `attempt` it fixes every random draw.
+    pub seed: u64,
+    /// Visibility retry number: 0 for the first layout, +1 for each rejected one.
+    pub attempt: u32,
+    /// File stem shared by every output of this image, e.g. `CLEVRTEX_camo_000012`.
+    pub stem: String,
+    /// Render settings.
+    pub render: RenderSettings,
+    /// Passes to produce, in canonical order (a subset of [`Pass::ALL`]).
+    pub passes: Vec<Pass>,
+    /// The camera, fully posed.
+    pub camera: Camera,
+    /// Area lights (key, fill, back), fully posed.
+    pub lights: Vec<AreaLight>,
+    /// The sun.
+    pub sun: Sun,
+    /// The studio backdrop and its material.
+    pub backdrop: Backdrop,
+    /// Objects in metadata order: object `i` gets instance id `i + 1` in the mask.
+    pub objects: Vec<SceneObject>,
+}
+
+/// A render pass. The same names key the bridge's pass table (`blender_scripts/`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Pass {
+    /// Colour-managed RGB image.
+    Rgb,
+    /// Instance ids from the object-index pass.
+    Mask,
+    /// Metric depth.
+    Depth,
+    /// Surface normals.
+    Normal,
+    /// Diffuse colour.
+    Albedo,
+    /// Computed shadow amount.
+    Shadow,
+}
+
+impl Pass {
+    /// Every pass, in canonical order.
+    pub const ALL: [Pass; 6] = [
+        Pass::Rgb,
+        Pass::Mask,
+        Pass::Depth,
+        Pass::Normal,
+        Pass::Albedo,
+        Pass::Shadow,
+    ];
+
+    /// The pass's name as used on the command line and in files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Pass::Rgb => "rgb",
+            Pass::Mask => "mask",
+            Pass::Depth => "depth",
+            Pass::Normal => "normal",
+            Pass::Albedo => "albedo",
+            Pass::Shadow => "shadow",
+        }
+    }
+
+    /// Parse a pass name; `None` for an unknown name.
+    pub fn from_name(name: &str) -> Option<Pass> {
+        Pass::ALL.into_iter().find(|p| p.name() == name)
+    }
+}
+
+/// Cycles and colour-management settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSettings {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Samples per pixel.
+    pub samples: u32,
+    /// Adaptive-sampling noise threshold; `None` turns adaptive sampling off.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive_threshold: Option<f32>,
+    /// Total max bounces.
+    pub max_bounces: u32,
+    /// Diffuse bounces.
+    pub diffuse_bounces: u32,
+    /// Glossy bounces.
+    pub glossy_bounces: u32,
+    /// Transmission bounces.
+    pub transmission_bounces: u32,
+    /// Transparent bounces.
+    pub transparent_max_bounces: u32,
+    /// Indirect light clamp (0 = off).
+    #[serde(default)]
+    pub clamp_indirect: f32,
+    /// Pixel filter width in pixels (Blackman-Harris).
+    pub filter_width: f32,
+    /// Filter glossy ("blur glossy").
+    pub blur_glossy: f32,
+    /// Colour-management view transform, e.g. `Filmic`.
+    pub view_transform: String,
+    /// Colour-management look, e.g. `Very High Contrast` (Blender 3.x spelling, without the
+    /// view prefix; the bridge's compat module adapts it).
+    pub look: String,
+    /// Exposure.
+    pub exposure: f32,
+    /// Gamma.
+    pub gamma: f32,
+}
+
+/// A perspective camera. `matrix_world` is authoritative; the other pose fields restate it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    /// World position.
+    pub location: [f64; 3],
+    /// Point the camera looks at (its -Z axis points there, +Y up as Blender's track-to).
+    pub look_at: [f64; 3],
+    /// Row-major 4x4 camera-to-world matrix (columns: right, up, backward, position).
+    pub matrix_world: [[f64; 4]; 4],
+    /// Focal length in millimetres.
+    pub focal_length_mm: f64,
+    /// Sensor width in millimetres (sensor fit `AUTO`).
+    pub sensor_width_mm: f64,
+    /// Near clip distance.
+    pub clip_start: f64,
+    /// Far clip distance.
+    pub clip_end: f64,
+}
+
+/// A square area light aimed at a point.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AreaLight {
+    /// `key`, `fill` or `back`.
+    pub name: String,
+    /// World position (jitter already applied).
+    pub location: [f64; 3],
+    /// Row-major 4x4 light-to-world matrix; the light emits along its local -Z.
+    pub matrix_world: [[f64; 4]; 4],
+    /// Side of the square, metres.
+    pub size: f64,
+    /// Power in watts.
+    pub energy: f64,
+    /// Linear RGB colour.
+    pub color: [f64; 3],
+}
+
+/// The sun lamp.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Sun {
+    /// Unit vector the light travels along.
+    pub direction: [f64; 3],
+    /// Row-major 4x4 sun-to-world matrix (local -Z = `direction`).
+    pub matrix_world: [[f64; 4]; 4],
+    /// Strength (irradiance, W/m^2).
+    pub strength: f64,
+    /// Angular diameter in radians.
+    pub angle: f64,
+}
+
+/// The curved photo-studio backdrop.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Backdrop {
+    /// Profile in the backdrop's own frame: `[x, height]` pairs, x increasing; the surface is
+    /// this profile swept along y, smoothly interpolated between the points.
+    pub profile: Vec<[f64; 2]>,
+    /// Extent along the backdrop's own y axis `[min, max]`.
+    pub y_range: [f64; 2],
+    /// Rotation of the backdrop frame about world z, radians.
+    pub rotation_z: f64,
+    /// Material of the backdrop.
+    pub material: MaterialInstance,
+}
+
+/// One object.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneObject {
+    /// Shape name: `cube`, `sphere`, `cylinder`, `monkey`, `cone`, `torus`, `icosahedron`, `teapot`.
+    pub shape: String,
+    /// Size name: `large`, `medium`, `small`.
+    pub size: String,
+    /// Uniform scale applied to the mesh normalised to [-1, 1]^3.
+    pub scale: f64,
+    /// World position of the object's origin (z = scale: it rests on the floor).
+    pub location: [f64; 3],
+    /// Rotation about world z, degrees.
+    pub rotation_deg: f64,
+    /// Material of the object.
+    pub material: MaterialInstance,
+}
+
+/// A material with its per-instance parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialInstance {
+    /// Catalogue name.
+    pub name: String,
+    /// Per-instance random value in [0, 1) that varies the look.
+    pub random: f64,
+    /// Colour name, only in variants that use colours (`vbg`, `clevr`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub color_name: Option<String>,
+    /// Linear RGB colour, present exactly when `color_name` is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub color: Option<[f64; 3]>,
+    /// Displacement strength, only where the instance displaces (e.g. backgrounds: 0.35).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub displacement: Option<f64>,
+    /// Texture scale multiplier, only where set (e.g. backgrounds: 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
+}

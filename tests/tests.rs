@@ -1,0 +1,10 @@
+//! Integration tests: one binary, one module per topic. They run the real `clevrtex` binary
+//! and, where they render, the real Blender (see `util::blender_or_skip`).
+
+mod util;
+
+mod bench;
+mod eval;
+mod generate;
+mod materials;
+mod sample;

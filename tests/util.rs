@@ -1,0 +1,70 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The `clevrtex` binary under test.
+pub fn clevrtex() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_clevrtex"))
+}
+
+/// Run `clevrtex` with `args`, returning its output.
+pub fn run(args: &[&str]) -> Output {
+    clevrtex()
+        .args(args)
+        .output()
+        .expect("failed to start clevrtex")
+}
+
+/// Stdout and stderr as text, for assertion messages.
+pub fn text(out: &Output) -> String {
+    format!(
+        "status: {:?}\n--- stdout\n{}\n--- stderr\n{}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// Path of the repository root.
+pub fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Path of a fixture under `tests/data/`.
+pub fn data(rel: &str) -> PathBuf {
+    repo_root().join("tests/data").join(rel)
+}
+
+/// The Blender binary to use for real-render tests, or `None` to skip the test.
+///
+/// Looks at `CLEVRTEX_BLENDER`, then `blender` on `PATH`. When Blender is absent the test is
+/// skipped with a visible message on stderr, unless `CLEVRTEX_REQUIRE_BLENDER=1`, in which
+/// case it panics (CI sets it, so a missing Blender fails CI instead of skipping silently).
+pub fn blender_or_skip(test: &str) -> Option<PathBuf> {
+    let candidate = std::env::var_os("CLEVRTEX_BLENDER")
+        .map(PathBuf::from)
+        .or_else(|| find_on_path("blender"));
+    match candidate {
+        Some(p) if p.exists() => Some(p),
+        _ => {
+            if std::env::var("CLEVRTEX_REQUIRE_BLENDER").as_deref() == Ok("1") {
+                panic!("{test}: Blender is required (CLEVRTEX_REQUIRE_BLENDER=1) but was not found; install it with `apt-get install -y blender` or set CLEVRTEX_BLENDER");
+            }
+            eprintln!("SKIPPED {test}: Blender not found (install `blender` or set CLEVRTEX_BLENDER; set CLEVRTEX_REQUIRE_BLENDER=1 to make this a failure)");
+            None
+        }
+    }
+}
+
+fn find_on_path(name: &str) -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path)
+        .map(|dir| dir.join(name))
+        .find(|p| is_file(p))
+}
+
+fn is_file(p: &Path) -> bool {
+    p.is_file()
+}
