@@ -1,0 +1,466 @@
+"""Builds one scene file into Blender's current scene, and renders it.
+
+No randomness here: every pose comes from the scene file (docs/bridge-protocol.md and
+crates/scene/src/scene_file.rs). A worker builds many scenes in turn; `clear()` removes
+everything the previous scene made except the cached shape meshes.
+"""
+
+import json
+import os
+import time
+
+import bpy
+from bpy_extras.object_utils import world_to_camera_view
+from mathutils import Matrix
+
+import compat
+import passes
+import shapes
+
+SCENE_FORMAT = "clevrtex-scene"
+SCENE_VERSION = 1
+
+# Samples of the extra render with no object shadows (shadow pass only). Direct diffuse light
+# of area lights and a sun converges fast, and Cycles draws the same random numbers for the
+# first samples of both renders, so the ratio's noise is dominated by this count.
+NOSHADOW_SAMPLES = 16
+
+# Cycles seed: fixed, so two renders of one scene are identical (and visibility's single
+# sample is the final render's first sample).
+CYCLES_SEED = 0
+
+BACKDROP_STEP = 0.2  # metres between profile samples of the backdrop mesh
+BACKDROP_Y_STEP = 1.0  # metres between sweep samples along y
+
+
+def load_scene_file(path):
+    with open(path, "r", encoding="utf-8") as f:
+        scene = json.load(f)
+    if scene.get("format") != SCENE_FORMAT:
+        raise ValueError("`%s` is not a scene file (format is `%s`)" % (path, scene.get("format")))
+    if scene.get("version") != SCENE_VERSION:
+        raise ValueError(
+            "scene file `%s` has version %s, this bridge reads version %d"
+            % (path, scene.get("version"), SCENE_VERSION)
+        )
+    for obj in scene["objects"]:
+        if obj["shape"] not in shapes.SHAPES:
+            raise ValueError("unknown shape `%s` in `%s`" % (obj["shape"], path))
+    for name in scene["passes"]:
+        if name not in passes.PASSES:
+            raise ValueError("unknown pass `%s` in `%s`" % (name, path))
+    return scene
+
+
+def _matrix(rows):
+    return Matrix([list(r) for r in rows])
+
+
+# --- clearing ----------------------------------------------------------------------------
+
+
+def clear():
+    """Remove every object, camera, light, world and material, and orphaned data blocks.
+
+    Kept: the cached shape meshes, and anything with a fake user (the materials module may
+    mark node groups or images it caches across scenes that way).
+    """
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj, do_unlink=True)
+    keep = set(m.name for m in shapes.cached_meshes())
+    for me in list(bpy.data.meshes):
+        if me.name not in keep:
+            bpy.data.meshes.remove(me)
+    for coll in (bpy.data.cameras, bpy.data.lights, bpy.data.materials, bpy.data.worlds):
+        for block in list(coll):
+            coll.remove(block)
+    # Orphans left by materials (node groups, textures, images) unless protected.
+    for _ in range(3):
+        removed = 0
+        for coll in (bpy.data.node_groups, bpy.data.textures, bpy.data.images):
+            for block in list(coll):
+                if block.users == 0 and not block.use_fake_user:
+                    coll.remove(block)
+                    removed += 1
+        if not removed:
+            break
+
+
+# --- building ----------------------------------------------------------------------------
+
+
+def _pchip_slopes(xs, ys):
+    """Monotone cubic (Fritsch-Carlson) tangents: smooth, and never overshoots the profile."""
+    n = len(xs)
+    h = [xs[i + 1] - xs[i] for i in range(n - 1)]
+    d = [(ys[i + 1] - ys[i]) / h[i] for i in range(n - 1)]
+    m = [0.0] * n
+    m[0], m[-1] = d[0], d[-1]
+    for i in range(1, n - 1):
+        if d[i - 1] * d[i] <= 0.0:
+            m[i] = 0.0
+        else:
+            w1, w2 = 2.0 * h[i] + h[i - 1], h[i] + 2.0 * h[i - 1]
+            m[i] = (w1 + w2) / (w1 / d[i - 1] + w2 / d[i])
+    return m
+
+
+def _sample_profile(profile):
+    xs = [p[0] for p in profile]
+    ys = [p[1] for p in profile]
+    if len(xs) < 2 or any(xs[i + 1] <= xs[i] for i in range(len(xs) - 1)):
+        raise ValueError("backdrop profile needs at least two points with increasing x")
+    m = _pchip_slopes(xs, ys)
+    out = []
+    for i in range(len(xs) - 1):
+        h = xs[i + 1] - xs[i]
+        steps = max(1, int(round(h / BACKDROP_STEP)))
+        for s in range(steps):
+            t = s / steps
+            h00 = 2 * t ** 3 - 3 * t ** 2 + 1
+            h10 = t ** 3 - 2 * t ** 2 + t
+            h01 = -2 * t ** 3 + 3 * t ** 2
+            h11 = t ** 3 - t ** 2
+            y = h00 * ys[i] + h10 * h * m[i] + h01 * ys[i + 1] + h11 * h * m[i + 1]
+            out.append((xs[i] + t * h, y))
+    out.append((xs[-1], ys[-1]))
+    return out
+
+
+def _build_backdrop(spec, collection):
+    pts = _sample_profile(spec["profile"])
+    y0, y1 = spec["y_range"]
+    ny = max(1, int(round((y1 - y0) / BACKDROP_Y_STEP)))
+    ys = [y0 + (y1 - y0) * j / ny for j in range(ny + 1)]
+    verts = [(x, y, z) for (x, z) in pts for y in ys]
+    faces = []
+    cols = ny + 1
+    for i in range(len(pts) - 1):
+        for j in range(ny):
+            a = i * cols + j
+            # Counter-clockwise seen from above / in front: normals face the scene (+z on the floor).
+            faces.append((a, a + cols, a + cols + 1, a + 1))
+    me = bpy.data.meshes.new("clevrtex_backdrop")
+    me.from_pydata(verts, [], faces)
+    # Metric UVs: u = arc length along the profile, v = y, both in metres.
+    arc = [0.0]
+    for i in range(1, len(pts)):
+        dx, dz = pts[i][0] - pts[i - 1][0], pts[i][1] - pts[i - 1][1]
+        arc.append(arc[-1] + (dx * dx + dz * dz) ** 0.5)
+    uv = me.uv_layers.new(name="UVMap")
+    for poly in me.polygons:
+        for li in poly.loop_indices:
+            vi = me.loops[li].vertex_index
+            uv.data[li].uv = (arc[vi // cols], ys[vi % cols] - y0)
+    compat.shade_smooth(me)
+    me.materials.append(None)
+    me.update()
+    obj = bpy.data.objects.new("backdrop", me)
+    obj.rotation_euler = (0.0, 0.0, spec["rotation_z"])
+    obj.pass_index = 0
+    obj.material_slots[0].link = "OBJECT"
+    collection.objects.link(obj)
+    return obj
+
+
+def _build_camera(spec, scene, collection):
+    cam = bpy.data.cameras.new("camera")
+    cam.type = "PERSP"
+    cam.lens_unit = "MILLIMETERS"
+    cam.lens = spec["focal_length_mm"]
+    cam.sensor_fit = "AUTO"
+    cam.sensor_width = spec["sensor_width_mm"]
+    cam.clip_start = spec["clip_start"]
+    cam.clip_end = spec["clip_end"]
+    obj = bpy.data.objects.new("camera", cam)
+    collection.objects.link(obj)
+    obj.matrix_world = _matrix(spec["matrix_world"])
+    scene.camera = obj
+    return obj
+
+
+def _build_lights(scene_spec, collection):
+    out = []
+    for spec in scene_spec["lights"]:
+        light = bpy.data.lights.new(spec["name"], "AREA")
+        light.shape = "SQUARE"
+        light.size = spec["size"]
+        light.energy = compat.area_light_energy(spec["energy"])
+        light.color = spec["color"]
+        obj = bpy.data.objects.new(spec["name"], light)
+        collection.objects.link(obj)
+        obj.matrix_world = _matrix(spec["matrix_world"])
+        out.append(obj)
+    sun_spec = scene_spec["sun"]
+    sun = bpy.data.lights.new("sun", "SUN")
+    sun.energy = sun_spec["strength"]
+    sun.angle = sun_spec["angle"]
+    obj = bpy.data.objects.new("sun", sun)
+    collection.objects.link(obj)
+    obj.matrix_world = _matrix(sun_spec["matrix_world"])
+    out.append(obj)
+    return out
+
+
+def _build_world(scene):
+    world = bpy.data.worlds.new("black")
+    world.use_nodes = True
+    bg = world.node_tree.nodes.get("Background")
+    bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bg.inputs["Strength"].default_value = 0.0
+    world.color = (0.0, 0.0, 0.0)
+    scene.world = world
+
+
+def apply_render_settings(scene, spec, threads):
+    r = spec["render"]
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.render.resolution_x = r["width"]
+    scene.render.resolution_y = r["height"]
+    scene.render.resolution_percentage = 100
+    scene.render.pixel_aspect_x = 1.0
+    scene.render.pixel_aspect_y = 1.0
+    scene.render.film_transparent = False
+    scene.render.use_compositing = False
+    scene.render.use_sequencer = False
+    scene.render.dither_intensity = 0.0
+    if threads > 0:
+        scene.render.threads_mode = "FIXED"
+        scene.render.threads = threads
+    else:
+        scene.render.threads_mode = "AUTO"
+    c = scene.cycles
+    c.samples = r["samples"]
+    c.use_adaptive_sampling = r.get("adaptive_threshold") is not None
+    if c.use_adaptive_sampling:
+        c.adaptive_threshold = r["adaptive_threshold"]
+    c.max_bounces = r["max_bounces"]
+    c.diffuse_bounces = r["diffuse_bounces"]
+    c.glossy_bounces = r["glossy_bounces"]
+    c.transmission_bounces = r["transmission_bounces"]
+    c.transparent_max_bounces = r["transparent_max_bounces"]
+    c.sample_clamp_indirect = r.get("clamp_indirect", 0.0)
+    c.sample_clamp_direct = 0.0
+    c.pixel_filter_type = "BLACKMAN_HARRIS"
+    c.filter_width = r["filter_width"]
+    c.blur_glossy = r["blur_glossy"]
+    c.use_denoising = False
+    c.use_preview_denoising = False
+    c.seed = CYCLES_SEED
+    c.use_animated_seed = False
+    c.time_limit = 0.0
+    scene.display_settings.display_device = "sRGB"
+    compat.set_view_look(scene.view_settings, r["view_transform"], r["look"])
+    scene.view_settings.exposure = r["exposure"]
+    scene.view_settings.gamma = r["gamma"]
+    scene.view_settings.use_curve_mapping = False
+    scene.sequencer_colorspace_settings.name = "sRGB"
+    scene.frame_set(1)
+
+
+class BuiltScene:
+    """The Blender objects of one scene file, plus the materials currently assigned."""
+
+    def __init__(self, spec, key):
+        self.spec = spec
+        self.key = key
+        self.backdrop = None
+        self.objects = []
+        self.camera = None
+        self.material_context = None
+        self.build_s = 0.0
+
+
+def build(spec, key, threads):
+    t0 = time.perf_counter()
+    clear()
+    scene = bpy.context.scene
+    collection = scene.collection
+    built = BuiltScene(spec, key)
+    _build_world(scene)
+    built.camera = _build_camera(spec["camera"], scene, collection)
+    _build_lights(spec, collection)
+    built.backdrop = _build_backdrop(spec["backdrop"], collection)
+    for i, ospec in enumerate(spec["objects"]):
+        obj = shapes.new_object(ospec["shape"], "object_%02d_%s" % (i + 1, ospec["shape"]),
+                                collection)
+        s = ospec["scale"]
+        obj.scale = (s, s, s)
+        obj.rotation_euler = (0.0, 0.0, ospec["rotation_deg"] * 3.141592653589793 / 180.0)
+        obj.location = ospec["location"]
+        obj.pass_index = i + 1
+        built.objects.append(obj)
+    apply_render_settings(scene, spec, threads)
+    bpy.context.view_layer.update()
+    built.build_s = time.perf_counter() - t0
+    return built
+
+
+# --- materials ---------------------------------------------------------------------------
+
+
+def material_displaces(mat):
+    """True if Cycles will displace geometry with `mat` (true displacement, not bump)."""
+    if mat is None or not mat.use_nodes:
+        return False
+    if mat.cycles.displacement_method not in ("DISPLACEMENT", "BOTH"):
+        return False
+    for node in mat.node_tree.nodes:
+        if node.type == "OUTPUT_MATERIAL" and node.is_active_output:
+            sock = node.inputs.get("Displacement")
+            return sock is not None and sock.is_linked
+    return False
+
+
+def _set_adaptive(obj, enabled, simple):
+    """Adaptive subdivision on `obj` (needs a subdivision modifier last in the stack)."""
+    mod = obj.modifiers.get("subdivision")
+    if enabled and mod is None:
+        mod = obj.modifiers.new("subdivision", "SUBSURF")
+        mod.subdivision_type = "SIMPLE" if simple else "CATMULL_CLARK"
+        mod.levels = 0
+        mod.render_levels = 0
+    obj.cycles.use_adaptive_subdivision = enabled
+    if not enabled and simple and mod is not None:
+        obj.modifiers.remove(mod)
+
+
+def assign_materials(built, catalogue, build_material, displacement):
+    """Build (or rebuild for another context) every material the scene uses, and assign it."""
+    context = {"displacement": bool(displacement)}
+    if built.material_context == context:
+        return 0.0
+    t0 = time.perf_counter()
+    old = set(m.name for m in bpy.data.materials)
+    made = {}
+
+    def get(inst):
+        key = json.dumps(inst, sort_keys=True)
+        if key not in made:
+            name = inst["name"]
+            if catalogue is not None and name not in catalogue:
+                raise KeyError("material `%s` is not in the catalogue" % name)
+            recipe = catalogue[name] if catalogue is not None else {}
+            made[key] = build_material(name, recipe, dict(inst), dict(context))
+        return made[key]
+
+    any_displaced = False
+    pairs = [(built.backdrop, built.spec["backdrop"]["material"], True)]
+    pairs += [(o, s["material"], False) for o, s in zip(built.objects, built.spec["objects"])]
+    for obj, inst, simple in pairs:
+        mat = get(inst)
+        obj.material_slots[0].material = mat
+        displaces = displacement and material_displaces(mat)
+        any_displaced = any_displaced or displaces
+        _set_adaptive(obj, displaces, simple)
+    scene = bpy.context.scene
+    scene.cycles.feature_set = "EXPERIMENTAL" if any_displaced else "SUPPORTED"
+    keep = set(m.name for m in made.values())
+    for name in old:
+        mat = bpy.data.materials.get(name)
+        if mat is not None and name not in keep:
+            bpy.data.materials.remove(mat)
+    built.material_context = context
+    return time.perf_counter() - t0
+
+
+# --- rendering ---------------------------------------------------------------------------
+
+
+def _save(path, fmt):
+    scene = bpy.context.scene
+    settings = scene.render.image_settings
+    if fmt == "PNG":
+        settings.file_format = "PNG"
+        settings.color_mode = "RGB"
+        settings.color_depth = "8"
+        settings.compression = 15
+    else:
+        settings.file_format = "OPEN_EXR_MULTILAYER"
+        settings.color_mode = "RGBA"
+        settings.color_depth = "32"
+        settings.exr_codec = "ZIP"
+    bpy.data.images["Render Result"].save_render(path, scene=scene)
+
+
+def _render():
+    t0 = time.perf_counter()
+    bpy.ops.render.render(write_still=False)
+    return time.perf_counter() - t0
+
+
+def projected(built):
+    """Object origins through Blender's camera: [x right, y down, depth] in pixels/metres."""
+    scene = bpy.context.scene
+    w, h = scene.render.resolution_x, scene.render.resolution_y
+    out = []
+    for obj in built.objects:
+        co = world_to_camera_view(scene, built.camera, obj.matrix_world.translation)
+        out.append([co.x * w, (1.0 - co.y) * h, co.z])
+    return out
+
+
+def render_visibility(built, out_dir):
+    scene = bpy.context.scene
+    view_layer = bpy.context.view_layer
+    passes.enable(view_layer, ["mask"])
+    c = scene.cycles
+    saved = (c.samples, c.max_bounces, c.use_adaptive_sampling)
+    c.samples = 1
+    c.max_bounces = 0
+    c.use_adaptive_sampling = False
+    try:
+        render_s = _render()
+    finally:
+        c.samples, c.max_bounces, c.use_adaptive_sampling = saved
+    t0 = time.perf_counter()
+    path = os.path.join(out_dir, "visibility.exr")
+    _save(path, "EXR")
+    return {"visibility": path}, {"render_s": render_s, "write_s": time.perf_counter() - t0}
+
+
+def render_final(built, out_dir):
+    scene = bpy.context.scene
+    view_layer = bpy.context.view_layer
+    wanted = list(built.spec["passes"])
+    passes.enable(view_layer, wanted)
+    timings = {"render_s": _render()}
+    files = {}
+    t0 = time.perf_counter()
+    if "rgb" in wanted:
+        files["rgb"] = os.path.join(out_dir, "rgb.png")
+        _save(files["rgb"], "PNG")
+    if any(p in wanted for p in passes.EXR_PASSES):
+        files["passes"] = os.path.join(out_dir, "passes.exr")
+        _save(files["passes"], "EXR")
+    timings["write_s"] = time.perf_counter() - t0
+    if "shadow" in wanted:
+        files["noshadow"], timings["noshadow_render_s"] = _render_noshadow(built, out_dir)
+    return files, timings
+
+
+def _render_noshadow(built, out_dir):
+    """Direct diffuse light with objects casting no shadows, for shadow = 1 - with/without.
+
+    Only direct light matters, so bounces are off; displacement stays as in the final render
+    so the surfaces match.
+    """
+    scene = bpy.context.scene
+    passes.enable(bpy.context.view_layer, ["shadow"])
+    c = scene.cycles
+    saved = (c.samples, c.max_bounces, c.use_adaptive_sampling)
+    c.samples = min(NOSHADOW_SAMPLES, saved[0])
+    c.max_bounces = 0
+    c.use_adaptive_sampling = False
+    for obj in built.objects:
+        compat.set_cast_shadow(obj, False)
+    try:
+        render_s = _render()
+    finally:
+        c.samples, c.max_bounces, c.use_adaptive_sampling = saved
+        for obj in built.objects:
+            compat.set_cast_shadow(obj, True)
+    path = os.path.join(out_dir, "noshadow.exr")
+    _save(path, "EXR")
+    return path, render_s

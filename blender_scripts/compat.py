@@ -1,0 +1,122 @@
+"""Blender-version differences, in one place.
+
+The target is Debian's Blender 3.4.1; 4.x is handled where the difference is known. Every
+other module calls these helpers instead of testing `bpy.app.version` itself.
+"""
+
+import importlib.util
+import os
+
+import bpy
+
+VERSION = bpy.app.version
+
+
+def version_string():
+    return bpy.app.version_string.split(" ")[0]
+
+
+def set_view_look(view_settings, view_transform, look):
+    """Set the view transform and look.
+
+    3.x spells looks without the view prefix (`Very High Contrast`); 4.x prefixes them with
+    the view (`Filmic - Very High Contrast`, `AgX - Very High Contrast`). Scene files use the
+    3.x spelling.
+    """
+    view_settings.view_transform = view_transform
+    if look in ("", "None", "NONE"):
+        view_settings.look = "None"
+        return
+    candidates = [look, "%s - %s" % (view_transform, look)]
+    errors = []
+    for name in candidates:
+        try:
+            view_settings.look = name
+            return
+        except TypeError as exc:
+            errors.append(str(exc))
+    raise ValueError(
+        "look `%s` is not available for view transform `%s` in Blender %s: %s"
+        % (look, view_transform, version_string(), errors[-1])
+    )
+
+
+def area_light_energy(watts):
+    """Area-light power in Blender's unit for the scene file's watts (same in 3.x and 4.x)."""
+    return watts
+
+
+def set_auto_smooth(mesh, enabled):
+    """`Mesh.use_auto_smooth` exists up to 4.0; 4.1 replaced it by a modifier we do not need."""
+    if hasattr(mesh, "use_auto_smooth"):
+        mesh.use_auto_smooth = enabled
+
+
+def shade_smooth(mesh):
+    """Smooth-shade every face (4.1 has a dedicated call; setting the flag works everywhere)."""
+    if hasattr(mesh, "shade_smooth"):
+        mesh.shade_smooth()
+    else:
+        for poly in mesh.polygons:
+            poly.use_smooth = True
+
+
+def principled_input(node, name):
+    """A principled BSDF input by its 3.x name, mapped to the 4.x name where it changed."""
+    renamed_4x = {
+        "Subsurface": "Subsurface Weight",
+        "Specular": "Specular IOR Level",
+        "Transmission": "Transmission Weight",
+        "Coat": "Coat Weight",
+        "Clearcoat": "Coat Weight",
+        "Clearcoat Roughness": "Coat Roughness",
+        "Sheen": "Sheen Weight",
+        "Emission": "Emission Color",
+    }
+    if name in node.inputs:
+        return node.inputs[name]
+    return node.inputs[renamed_4x.get(name, name)]
+
+
+def set_cast_shadow(obj, enabled):
+    """Whether an object casts shadows in Cycles (`visible_shadow` since 3.0)."""
+    if hasattr(obj, "visible_shadow"):
+        obj.visible_shadow = enabled
+    else:
+        obj.cycles_visibility.shadow = enabled
+
+
+def cycles_devices():
+    """Names of the Cycles device types compiled in (always includes CPU)."""
+    devices = ["CPU"]
+    try:
+        prefs = bpy.context.preferences.addons["cycles"].preferences
+        for item in prefs.get_device_types(bpy.context):
+            if item[0] not in ("NONE", "CPU") and item[0] not in devices:
+                devices.append(item[0])
+    except Exception:  # device probing is informational only
+        pass
+    return devices
+
+
+def load_teapot_module():
+    """The bundled "extra objects" add-on's teapot module, loaded on its own.
+
+    Debian's build cannot enable the whole add-on headless (another of its modules needs
+    numpy, which Debian's Blender lacks), but its teapot module only needs bpy and mathutils,
+    so we load that one file directly. Blender 4.2+ moved the add-on to the online
+    extensions platform, where it may be absent: then this raises.
+    """
+    import addon_utils
+
+    for root in addon_utils.paths():
+        path = os.path.join(root, "add_mesh_extra_objects", "add_mesh_teapot.py")
+        if os.path.isfile(path):
+            spec = importlib.util.spec_from_file_location("clevrtex_extra_teapot", path)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            return module
+    raise RuntimeError(
+        "the teapot needs Blender's bundled `add_mesh_extra_objects` add-on, not found in %s"
+        % addon_utils.paths()
+    )

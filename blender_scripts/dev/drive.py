@@ -1,0 +1,73 @@
+"""Development driver: starts one worker and sends it render requests (plain python3).
+
+    python3 blender_scripts/dev/drive.py OUT_DIR MODE:SCENE.json [MODE:SCENE.json ...]
+
+MODE is `visibility`, `final` or `both`; `bad:` sends a request for a missing scene, to see
+the error reply. Prints every reply line and the wall time of each request; Blender's own
+chatter goes to OUT_DIR/blender.log.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SCRIPTS = os.path.dirname(HERE)
+
+
+def main():
+    out = os.path.abspath(sys.argv[1])
+    os.makedirs(out, exist_ok=True)
+    tag = "@@clevrtex-0123456789abcdef@@"
+    log = open(os.path.join(out, "blender.log"), "w")
+    cmd = ["blender", "-b", "--factory-startup", "--python-exit-code", "1",
+           "--python", os.path.join(SCRIPTS, "worker.py"), "--", "--tag", tag,
+           "--threads", os.environ.get("THREADS", "0")]
+    if os.environ.get("MATERIALS"):
+        cmd += ["--materials", os.environ["MATERIALS"]]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log)
+
+    def reply():
+        while True:
+            line = proc.stdout.readline()
+            if not line:
+                raise SystemExit("worker exited with %s" % proc.wait())
+            line = line.decode()
+            if line.startswith(tag + " "):
+                return json.loads(line[len(tag) + 1:])
+            print("NOT A REPLY (stdout must carry only replies):", line.rstrip())
+
+    print("ready", reply(), "after %.2f s" % (time.perf_counter() - t0))
+    n = 0
+    for item in sys.argv[2:]:
+        mode, scene = item.split(":", 1)
+        modes = ["visibility", "final"] if mode == "both" else [mode]
+        for m in modes:
+            n += 1
+            d = os.path.join(out, "%02d_%s_%s" % (n, os.path.basename(scene).split(".")[0], m))
+            os.makedirs(d, exist_ok=True)
+            req = {"type": "render", "id": n, "mode": "final" if m == "bad" else m,
+                   "scene": os.path.abspath(scene) + (".missing" if m == "bad" else ""),
+                   "out_dir": d}
+            t = time.perf_counter()
+            proc.stdin.write((json.dumps(req) + "\n").encode())
+            proc.stdin.flush()
+            r = reply()
+            wall = time.perf_counter() - t
+            if r.get("type") == "error":
+                print("ERROR", r["message"])
+                print(r["traceback"])
+            else:
+                print(json.dumps(r))
+            print("  wall %.3f s" % wall)
+    proc.stdin.write(b'{"type": "quit"}\n')
+    proc.stdin.flush()
+    t = time.perf_counter()
+    print("exit", proc.wait(), "in %.2f s" % (time.perf_counter() - t))
+
+
+if __name__ == "__main__":
+    main()

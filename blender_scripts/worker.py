@@ -1,0 +1,182 @@
+"""The Blender worker: renders scene files on request, over the protocol of
+docs/bridge-protocol.md.
+
+Run as `blender -b --factory-startup --python-exit-code 1 --python worker.py -- --tag TAG
+[--threads T] [--materials materials.json]`.
+
+Stdout discipline: before anything else the worker keeps a private duplicate of stdout for
+its replies and points file descriptor 1 (C stdio, Python's print, add-ons, Cycles' progress)
+at stderr. So stdout carries nothing but replies, each a single `TAG <json>\n` written with
+one write(2); the tag is still checked by the reader, as a second line of defence.
+"""
+
+import argparse
+import ctypes
+import json
+import os
+import sys
+import time
+import traceback
+
+BRIDGE_VERSION = 1
+
+# Sibling modules live beside this script (the Rust side writes them all to one temp dir).
+HERE = os.path.dirname(os.path.abspath(__file__))
+if HERE not in sys.path:
+    sys.path.insert(0, HERE)
+
+
+def _take_stdout():
+    """Return a private fd for replies; send everything else written to fd 1 to stderr."""
+    sys.stdout.flush()
+    try:
+        ctypes.CDLL(None).fflush(None)  # Blender's buffered C stdout, before we move it
+    except Exception:
+        pass
+    reply_fd = os.dup(1)
+    os.dup2(2, 1)
+    return reply_fd
+
+
+class Replier:
+    def __init__(self, fd, tag):
+        self.fd = fd
+        self.tag = tag
+
+    def send(self, message):
+        line = ("%s %s\n" % (self.tag, json.dumps(message, separators=(",", ":")))).encode()
+        view = memoryview(line)
+        while view:
+            n = os.write(self.fd, view)
+            view = view[n:]
+
+
+def _parse_args(argv):
+    argv = argv[argv.index("--") + 1:] if "--" in argv else []
+    p = argparse.ArgumentParser(prog="worker.py")
+    p.add_argument("--tag", required=True)
+    p.add_argument("--threads", type=int, default=0)
+    p.add_argument("--materials", default=None)
+    return p.parse_args(argv)
+
+
+def _load_catalogue(path):
+    if path is None:
+        return None  # development: every material name accepted, empty recipe
+    with open(path, "r", encoding="utf-8") as f:
+        doc = json.load(f)
+    return doc["materials"]
+
+
+class Worker:
+    def __init__(self, args, replier):
+        import builder
+        import compat
+        import materials
+
+        self.builder = builder
+        self.compat = compat
+        self.materials = materials
+        self.args = args
+        self.replier = replier
+        self.catalogue = _load_catalogue(args.materials)
+        self.built = None
+
+    def ready(self):
+        self.replier.send({
+            "type": "ready",
+            "bridge_version": BRIDGE_VERSION,
+            "blender_version": self.compat.version_string(),
+            "cycles_devices": self.compat.cycles_devices(),
+        })
+
+    def _scene_key(self, path):
+        st = os.stat(path)
+        return (os.path.abspath(path), st.st_mtime_ns, st.st_size)
+
+    def render(self, req):
+        b = self.builder
+        mode = req.get("mode")
+        if mode not in ("visibility", "final"):
+            raise ValueError("unknown render mode `%s` (expected `visibility` or `final`)" % mode)
+        path = req["scene"]
+        out_dir = req["out_dir"]
+        if not os.path.isdir(out_dir):
+            raise FileNotFoundError("output directory `%s` does not exist" % out_dir)
+        key = self._scene_key(path)
+        build_s = 0.0
+        if self.built is None or self.built.key != key:
+            self.built = None  # a failed build must not be reused
+            spec = b.load_scene_file(path)
+            built = b.build(spec, key, self.args.threads)
+            build_s += built.build_s
+            self.built = built
+        build_s += b.assign_materials(self.built, self.catalogue, self.materials.build_material,
+                                      displacement=(mode == "final"))
+        if mode == "visibility":
+            files, timings = b.render_visibility(self.built, out_dir)
+        else:
+            files, timings = b.render_final(self.built, out_dir)
+        timings["build_s"] = build_s
+        return {
+            "type": "done",
+            "id": req.get("id"),
+            "mode": mode,
+            "files": files,
+            "timings": timings,
+            "projected": b.projected(self.built),
+        }
+
+    def handle(self, req):
+        kind = req.get("type")
+        if kind == "render":
+            return self.render(req)
+        if kind == "ping":
+            return {"type": "pong", "id": req.get("id")}
+        raise ValueError("unknown request type `%s`" % kind)
+
+    def loop(self, stdin):
+        while True:
+            raw = stdin.readline()
+            if not raw:
+                return  # EOF: the parent is gone or done
+            raw = raw.strip()
+            if not raw:
+                continue
+            req_id = None
+            try:
+                req = json.loads(raw.decode("utf-8"))
+                if not isinstance(req, dict):
+                    raise ValueError("request is not a JSON object")
+                req_id = req.get("id")
+                if req.get("type") == "quit":
+                    return
+                reply = self.handle(req)
+            except Exception as exc:
+                self.built = None  # state after a failure is unknown: rebuild next time
+                reply = {
+                    "type": "error",
+                    "id": req_id,
+                    "message": "%s: %s" % (type(exc).__name__, exc),
+                    "traceback": traceback.format_exc(),
+                }
+            self.replier.send(reply)
+
+
+def main():
+    args = _parse_args(sys.argv)
+    replier = Replier(_take_stdout(), args.tag)
+    t0 = time.perf_counter()
+    try:
+        worker = Worker(args, replier)
+    except Exception as exc:
+        replier.send({"type": "error", "id": None, "message": "worker start failed: %s" % exc,
+                      "traceback": traceback.format_exc()})
+        raise
+    worker.ready()
+    print("clevrtex worker ready in %.2f s" % (time.perf_counter() - t0), file=sys.stderr)
+    worker.loop(sys.stdin.buffer)
+    sys.stderr.flush()
+
+
+main()
