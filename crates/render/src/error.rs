@@ -1,0 +1,194 @@
+//! Errors of the render crate: each names the offending program, file or scene and ends with
+//! a `hint:` line saying what to do next.
+
+use std::path::PathBuf;
+use std::process::ExitStatus;
+use std::time::Duration;
+
+/// The last lines a Blender process printed, kept for error reports.
+#[derive(Debug, Clone, Default)]
+pub struct Tails {
+    /// Last lines of stdout (Blender's own chatter; protocol replies are not kept here).
+    pub stdout: Vec<String>,
+    /// Last lines of stderr.
+    pub stderr: Vec<String>,
+}
+
+impl std::fmt::Display for Tails {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (label, lines) in [("stdout", &self.stdout), ("stderr", &self.stderr)] {
+            if lines.is_empty() {
+                writeln!(f, "--- {label}: (empty)")?;
+            } else {
+                writeln!(f, "--- {label} (last {} lines)", lines.len())?;
+                for line in lines {
+                    writeln!(f, "{line}")?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Anything that can go wrong while driving Blender or writing a sample.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// No Blender executable was found.
+    #[error("blender not found{}\nhint: install it with `apt-get install blender`, or pass its path with `--blender PATH` (or set `CLEVRTEX_BLENDER`)", .tried.as_ref().map(|p| format!(" at `{}`", p.display())).unwrap_or_default())]
+    BlenderNotFound {
+        /// The explicit path that did not exist, if one was given.
+        tried: Option<PathBuf>,
+    },
+    /// The Blender process could not be started.
+    #[error("could not start `{}`: {source}\nhint: check that the file is an executable Blender (`{} --version`), or pass another with `--blender PATH`", .program.display(), .program.display())]
+    Spawn {
+        /// The program.
+        program: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The worker did not answer within the time limit; it was killed.
+    #[error("blender worker `{}` timed out after {:.1} s while {doing}; it was killed\n{tails}hint: raise `--timeout` (seconds) if renders are just slow, or lower `--samples`", .program.display(), .after.as_secs_f64())]
+    Timeout {
+        /// The program.
+        program: PathBuf,
+        /// What the worker was doing (e.g. `rendering scene `x.json` (final)`).
+        doing: String,
+        /// How long we waited.
+        after: Duration,
+        /// Output tails.
+        tails: Tails,
+    },
+    /// The worker exited while we waited for it.
+    #[error("blender worker `{}` exited ({}) while {doing}\n{tails}hint: the stderr tail above says why; run `clevrtex doctor` to check the Blender install", .program.display(), status_text(.status))]
+    Exited {
+        /// The program.
+        program: PathBuf,
+        /// What the worker was doing.
+        doing: String,
+        /// Its exit status, if it could be read.
+        status: Option<ExitStatus>,
+        /// Output tails.
+        tails: Tails,
+    },
+    /// The worker printed a reply line that is not valid protocol.
+    #[error("blender worker `{}` sent a malformed reply while {doing}: `{line}` ({problem})\n{tails}hint: the bridge scripts and this binary disagree; reinstall `clevrtex`", .program.display())]
+    Protocol {
+        /// The program.
+        program: PathBuf,
+        /// What the worker was doing.
+        doing: String,
+        /// The offending line (truncated).
+        line: String,
+        /// What is wrong with it.
+        problem: String,
+        /// Output tails.
+        tails: Tails,
+    },
+    /// The bridge reported an error for one request (the worker stays usable).
+    #[error("the blender bridge failed while {doing}: {message}\n{traceback}hint: check the scene file; if it came from `clevrtex sample`, this is a bug: please report it with the traceback")]
+    Bridge {
+        /// What the worker was doing.
+        doing: String,
+        /// The bridge's message.
+        message: String,
+        /// Python traceback (may be empty).
+        traceback: String,
+    },
+    /// The run was interrupted (Ctrl-C).
+    #[error("interrupted")]
+    Interrupted,
+    /// Reading or writing a file failed.
+    #[error("{what} `{}`: {source}\nhint: {hint}", .path.display())]
+    Io {
+        /// What we were doing, e.g. `cannot write`.
+        what: &'static str,
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+        /// What to do about it.
+        hint: String,
+    },
+    /// A file Blender wrote could not be decoded or lacks what we asked for.
+    #[error("bad render output `{}`: {problem}\nhint: the bridge and this binary disagree about the pass layout; run `clevrtex doctor`", .path.display())]
+    BadOutput {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// A scene file could not be read or is invalid.
+    #[error("bad scene file `{}`: {problem}\nhint: regenerate it with `clevrtex sample`", .path.display())]
+    BadScene {
+        /// The scene file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The scene sampler could not produce a scene.
+    #[error("cannot sample scene {index} (attempt {attempt}): {message}")]
+    Sample {
+        /// Image index.
+        index: u64,
+        /// Attempt number.
+        attempt: u32,
+        /// Why.
+        message: String,
+    },
+    /// Every attempt produced a layout with a (nearly) hidden object.
+    #[error("scene {index}: {attempts} layouts in a row had an object with at most {threshold} visible pixels\nhint: the configuration places objects where they cannot be seen; use fewer or larger objects")]
+    TooManyRejects {
+        /// Image index.
+        index: u64,
+        /// Attempts made.
+        attempts: u32,
+        /// The pixel threshold.
+        threshold: u64,
+    },
+}
+
+impl RenderError {
+    /// Whether restarting the worker and trying again could help (crash, hang, garbage).
+    pub fn is_worker_failure(&self) -> bool {
+        matches!(
+            self,
+            RenderError::Timeout { .. } | RenderError::Exited { .. } | RenderError::Protocol { .. }
+        )
+    }
+
+    /// Shorthand for an I/O error with a hint.
+    pub fn io(
+        what: &'static str,
+        path: impl Into<PathBuf>,
+        source: std::io::Error,
+        hint: impl Into<String>,
+    ) -> RenderError {
+        RenderError::Io {
+            what,
+            path: path.into(),
+            source,
+            hint: hint.into(),
+        }
+    }
+
+    /// I/O error writing an output file; the hint covers full disks and permissions.
+    pub fn write(path: impl Into<PathBuf>, source: std::io::Error) -> RenderError {
+        RenderError::io(
+            "cannot write",
+            path,
+            source,
+            "check that the output folder is writable and the disk is not full; finished samples were kept and the run can be resumed",
+        )
+    }
+}
+
+fn status_text(status: &Option<ExitStatus>) -> String {
+    match status {
+        Some(s) => s.to_string(),
+        None => "status unknown".to_string(),
+    }
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = RenderError> = std::result::Result<T, E>;

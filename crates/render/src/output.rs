@@ -1,0 +1,188 @@
+//! The published dataset layout (reference §4) and crash-safe writing of a sample's files.
+//!
+//! `OUT/clevrtex_<variant>/<index / 1000>/CLEVRTEX_<variant>_<index:06>{.png, _flat.png,
+//! _depth_0001.png, _normal_0001.png, _albedo_0001.png, _shadow_0001.png, .json}`.
+//! Each file is written under a temporary name and renamed once every file of the sample
+//! is ready, metadata last; a sample is complete only when all its files exist.
+
+use std::path::{Path, PathBuf};
+
+use clevrtex_scene::Pass;
+
+use crate::error::{RenderError, Result};
+
+/// Suffix of temporary files (never matched by the public loader's `*.png` glob).
+pub const TMP_SUFFIX: &str = ".clevrtex-tmp";
+
+/// Folder of one variant: `OUT/clevrtex_<variant>`.
+pub fn variant_dir(out: &Path, variant: &str) -> PathBuf {
+    out.join(format!("clevrtex_{variant}"))
+}
+
+/// Folder of one sample: `OUT/clevrtex_<variant>/<index / 1000>`.
+pub fn sample_dir(out: &Path, variant: &str, index: u64) -> PathBuf {
+    variant_dir(out, variant).join((index / 1000).to_string())
+}
+
+/// File name of a pass's output for `stem`.
+pub fn pass_file(stem: &str, pass: Pass) -> String {
+    match pass {
+        Pass::Rgb => format!("{stem}.png"),
+        Pass::Mask => format!("{stem}_flat.png"),
+        Pass::Depth => format!("{stem}_depth_0001.png"),
+        Pass::Normal => format!("{stem}_normal_0001.png"),
+        Pass::Albedo => format!("{stem}_albedo_0001.png"),
+        Pass::Shadow => format!("{stem}_shadow_0001.png"),
+    }
+}
+
+/// File name of the metadata.
+pub fn metadata_file(stem: &str) -> String {
+    format!("{stem}.json")
+}
+
+/// File names of the float EXRs kept with `--keep-exr`.
+pub fn exr_files(stem: &str, shadow: bool) -> Vec<String> {
+    let mut v = vec![format!("{stem}_passes.exr")];
+    if shadow {
+        v.push(format!("{stem}_noshadow.exr"));
+    }
+    v
+}
+
+/// Every file a complete sample has: one per requested pass, the metadata, and the EXRs
+/// when kept.
+pub fn expected_files(stem: &str, passes: &[Pass], keep_exr: bool) -> Vec<String> {
+    let mut v: Vec<String> = passes.iter().map(|&p| pass_file(stem, p)).collect();
+    if keep_exr {
+        v.extend(exr_files(stem, passes.contains(&Pass::Shadow)));
+    }
+    v.push(metadata_file(stem));
+    v
+}
+
+/// Whether every file of the sample exists in `dir`.
+pub fn is_complete(dir: &Path, stem: &str, passes: &[Pass], keep_exr: bool) -> bool {
+    expected_files(stem, passes, keep_exr)
+        .iter()
+        .all(|f| dir.join(f).is_file())
+}
+
+/// Remove temporary files a killed run left in `dir` (not recursive).
+pub fn remove_stale_temps(dir: &Path) {
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            if e.file_name().to_string_lossy().ends_with(TMP_SUFFIX) {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
+}
+
+/// Files of one sample being written: each under a temporary name until [`Staged::commit`].
+/// Dropping without committing removes the temporaries, so no partial sample is left.
+#[derive(Debug)]
+pub struct Staged {
+    dir: PathBuf,
+    files: Vec<(PathBuf, PathBuf)>,
+}
+
+impl Staged {
+    /// Start staging files into `dir` (created if missing).
+    pub fn new(dir: &Path) -> Result<Staged> {
+        std::fs::create_dir_all(dir).map_err(|e| RenderError::write(dir, e))?;
+        Ok(Staged {
+            dir: dir.to_path_buf(),
+            files: Vec::new(),
+        })
+    }
+
+    /// Write `bytes` as the future `name`.
+    pub fn write(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
+        let (tmp, fin) = self.names(name);
+        self.files.push((tmp.clone(), fin));
+        crate::post::write_file(&tmp, bytes)
+    }
+
+    /// Copy the file `from` as the future `name`.
+    pub fn copy(&mut self, name: &str, from: &Path) -> Result<()> {
+        let bytes = std::fs::read(from).map_err(|e| {
+            RenderError::io(
+                "cannot read render output",
+                from,
+                e,
+                "the Blender worker's temporary folder vanished; rerun",
+            )
+        })?;
+        self.write(name, &bytes)
+    }
+
+    fn names(&self, name: &str) -> (PathBuf, PathBuf) {
+        (
+            self.dir.join(format!("{name}{TMP_SUFFIX}")),
+            self.dir.join(name),
+        )
+    }
+
+    /// Rename every temporary to its final name, in the order written (write the metadata
+    /// last: its presence then means everything else is there).
+    pub fn commit(mut self) -> Result<()> {
+        let files = std::mem::take(&mut self.files);
+        for (i, (tmp, fin)) in files.iter().enumerate() {
+            if let Err(e) = std::fs::rename(tmp, fin) {
+                for (t, _) in &files[i..] {
+                    let _ = std::fs::remove_file(t);
+                }
+                return Err(RenderError::write(fin, e));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        for (tmp, _) in &self.files {
+            let _ = std::fs::remove_file(tmp);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_matches_the_reference() {
+        let out = Path::new("data");
+        assert_eq!(
+            sample_dir(out, "camo", 12345),
+            Path::new("data/clevrtex_camo/12")
+        );
+        let stem = "CLEVRTEX_camo_012345";
+        assert_eq!(pass_file(stem, Pass::Mask), "CLEVRTEX_camo_012345_flat.png");
+        assert_eq!(
+            expected_files(stem, &[Pass::Rgb, Pass::Depth], false),
+            vec![
+                "CLEVRTEX_camo_012345.png",
+                "CLEVRTEX_camo_012345_depth_0001.png",
+                "CLEVRTEX_camo_012345.json"
+            ]
+        );
+    }
+
+    #[test]
+    fn uncommitted_files_vanish() {
+        let dir = tempfile::tempdir().unwrap();
+        {
+            let mut s = Staged::new(dir.path()).unwrap();
+            s.write("a.png", b"x").unwrap();
+        }
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+        let mut s = Staged::new(dir.path()).unwrap();
+        s.write("a.png", b"x").unwrap();
+        s.commit().unwrap();
+        assert!(dir.path().join("a.png").is_file());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+}

@@ -1,0 +1,312 @@
+//! Turning Blender's float passes into the final 8- and 16-bit PNG files.
+//!
+//! The encodings are documented in `docs/output-format.md`; the constants here are the
+//! single source of the numbers written into each sample's metadata.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::error::{RenderError, Result};
+
+/// Depth PNG: metres per unit (1 mm), so 16 bits cover 0 to 65.534 m.
+pub const DEPTH_SCALE_M: f64 = 0.001;
+/// Depth PNG value of pixels that hit nothing (the black world) or lie beyond the range.
+pub const DEPTH_BACKGROUND: u16 = 65535;
+/// Shadow value where the unshadowed direct light is ~0 (unlit or back-facing): the
+/// shadow ratio is undefined there, and we call it "not shadowed".
+pub const SHADOW_UNDEFINED: u8 = 0;
+/// Unshadowed direct-light luminance below which the shadow ratio counts as undefined.
+pub const SHADOW_EPS: f32 = 1e-4;
+
+/// Per-object visibility measured on a mask.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct ObjectPixels {
+    /// Visible pixels.
+    pub pixels: u64,
+    /// 2D bounding box `[x_min, y_min, x_max, y_max]`, inclusive pixel coordinates, y down;
+    /// `None` when the object is not visible at all.
+    pub bbox: Option<[u32; 4]>,
+}
+
+/// Exact instance ids from Blender's object-index pass: 0 = backdrop, `i` = object `i - 1`
+/// of the scene. Fails if a value is not an integer in `0..=n_objects`: the pass must
+/// never be filtered or colour-managed.
+pub fn instance_ids(index_ob: &[f32], n_objects: usize, source: &Path) -> Result<Vec<u8>> {
+    if n_objects > 255 {
+        return Err(RenderError::BadOutput {
+            path: source.to_path_buf(),
+            problem: format!("{n_objects} objects do not fit an 8-bit mask"),
+        });
+    }
+    let mut ids = Vec::with_capacity(index_ob.len());
+    for (i, &v) in index_ob.iter().enumerate() {
+        let r = v.round();
+        if !(v - r).abs().lt(&1e-3) || r < 0.0 || r > n_objects as f32 {
+            return Err(RenderError::BadOutput {
+                path: source.to_path_buf(),
+                problem: format!(
+                    "object index {v} at pixel {i} is not an instance id in 0..={n_objects}"
+                ),
+            });
+        }
+        ids.push(r as u8);
+    }
+    Ok(ids)
+}
+
+/// Visible pixels and bounding box of objects `1..=n_objects` in an id image.
+pub fn object_pixels(ids: &[u8], width: usize, n_objects: usize) -> Vec<ObjectPixels> {
+    let mut out = vec![ObjectPixels::default(); n_objects];
+    for (i, &id) in ids.iter().enumerate() {
+        if id == 0 || id as usize > n_objects {
+            continue;
+        }
+        let (x, y) = ((i % width) as u32, (i / width) as u32);
+        let o = &mut out[id as usize - 1];
+        o.pixels += 1;
+        o.bbox = Some(match o.bbox {
+            None => [x, y, x, y],
+            Some([x0, y0, x1, y1]) => [x0.min(x), y0.min(y), x1.max(x), y1.max(y)],
+        });
+    }
+    out
+}
+
+/// The visibility threshold at a resolution: an object needs MORE than this many pixels.
+/// 200 px at 320x240 (the reference), scaled by the pixel count.
+pub fn visibility_threshold(width: u32, height: u32) -> u64 {
+    (200.0 * (width as f64 * height as f64) / (320.0 * 240.0)).round() as u64
+}
+
+/// Depth in metres (Cycles' `Depth` pass: planar distance along the camera's view axis)
+/// as 16-bit values of [`DEPTH_SCALE_M`]; no hit or out of range -> [`DEPTH_BACKGROUND`].
+pub fn encode_depth(z: &[f32]) -> Vec<u16> {
+    z.iter()
+        .map(|&d| {
+            let units = d as f64 / DEPTH_SCALE_M;
+            if !units.is_finite() || units <= 0.0 || units >= DEPTH_BACKGROUND as f64 - 0.5 {
+                DEPTH_BACKGROUND
+            } else {
+                units.round() as u16
+            }
+        })
+        .collect()
+}
+
+/// World-space normals in [-1, 1] as 16-bit `round((n + 1) / 2 * 65535)`, RGB = XYZ.
+/// Background pixels have normal (0, 0, 0) and so encode as 32768 in every channel.
+pub fn encode_normal(x: &[f32], y: &[f32], z: &[f32]) -> Vec<u16> {
+    let enc = |v: f32| {
+        let v = if v.is_finite() {
+            v.clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        (((v as f64 + 1.0) / 2.0) * 65535.0).round() as u16
+    };
+    let mut out = Vec::with_capacity(x.len() * 3);
+    for i in 0..x.len() {
+        out.extend([enc(x[i]), enc(y[i]), enc(z[i])]);
+    }
+    out
+}
+
+/// Linear diffuse colour as 8-bit sRGB (the standard transfer curve, no view transform).
+pub fn encode_albedo(r: &[f32], g: &[f32], b: &[f32]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(r.len() * 3);
+    for i in 0..r.len() {
+        out.extend([srgb8(r[i]), srgb8(g[i]), srgb8(b[i])]);
+    }
+    out
+}
+
+fn srgb8(v: f32) -> u8 {
+    let v = if v.is_finite() {
+        v.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let s = if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0).round() as u8
+}
+
+/// Shadow amount `1 - L_shadowed / L_unshadowed` of direct diffuse light (luminance),
+/// clamped to [0, 1], as 8-bit (255 = fully shadowed). Where the unshadowed light is below
+/// [`SHADOW_EPS`] the ratio is undefined and the value is [`SHADOW_UNDEFINED`].
+pub fn encode_shadow(lit: [&[f32]; 3], unshadowed: [&[f32]; 3]) -> Vec<u8> {
+    let lum = |c: [&[f32]; 3], i: usize| 0.2126 * c[0][i] + 0.7152 * c[1][i] + 0.0722 * c[2][i];
+    (0..lit[0].len())
+        .map(|i| {
+            let (l, u) = (lum(lit, i), lum(unshadowed, i));
+            if !u.is_finite() || !l.is_finite() || u < SHADOW_EPS {
+                SHADOW_UNDEFINED
+            } else {
+                ((1.0 - l / u).clamp(0.0, 1.0) * 255.0).round() as u8
+            }
+        })
+        .collect()
+}
+
+/// A distinct colour per instance id for the mask's palette (0 = black).
+fn palette() -> Vec<u8> {
+    let mut p = vec![0u8; 256 * 3];
+    for i in 1..256usize {
+        // Golden-angle hues with alternating brightness: neighbours look different.
+        let h = (i as f64 * 0.618_033_988_75).fract() * 6.0;
+        let v = if i % 2 == 0 { 0.75 } else { 1.0 };
+        let c = v * 0.85;
+        let x = c * (1.0 - ((h % 2.0) - 1.0).abs());
+        let (r, g, b) = match h as u32 {
+            0 => (c, x, 0.0),
+            1 => (x, c, 0.0),
+            2 => (0.0, c, x),
+            3 => (0.0, x, c),
+            4 => (x, 0.0, c),
+            _ => (c, 0.0, x),
+        };
+        let m = v - c;
+        p[i * 3] = ((r + m) * 255.0).round() as u8;
+        p[i * 3 + 1] = ((g + m) * 255.0).round() as u8;
+        p[i * 3 + 2] = ((b + m) * 255.0).round() as u8;
+    }
+    p
+}
+
+/// PNG colour layouts we write.
+#[derive(Debug, Clone, Copy)]
+pub enum PngKind {
+    /// 8-bit palette (the instance mask).
+    Palette8,
+    /// 8-bit greyscale.
+    Gray8,
+    /// 8-bit RGB.
+    Rgb8,
+    /// 16-bit greyscale.
+    Gray16,
+    /// 16-bit RGB.
+    Rgb16,
+}
+
+/// Encode a PNG into memory. `data8` is used for 8-bit kinds, `data16` for 16-bit ones.
+pub fn encode_png(
+    kind: PngKind,
+    width: u32,
+    height: u32,
+    data8: &[u8],
+    data16: &[u16],
+) -> Result<Vec<u8>, png::EncodingError> {
+    let mut bytes = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut bytes, width, height);
+        let (color, depth) = match kind {
+            PngKind::Palette8 => (png::ColorType::Indexed, png::BitDepth::Eight),
+            PngKind::Gray8 => (png::ColorType::Grayscale, png::BitDepth::Eight),
+            PngKind::Rgb8 => (png::ColorType::Rgb, png::BitDepth::Eight),
+            PngKind::Gray16 => (png::ColorType::Grayscale, png::BitDepth::Sixteen),
+            PngKind::Rgb16 => (png::ColorType::Rgb, png::BitDepth::Sixteen),
+        };
+        enc.set_color(color);
+        enc.set_depth(depth);
+        if let PngKind::Palette8 = kind {
+            enc.set_palette(palette());
+        }
+        let mut w = enc.write_header()?;
+        match depth {
+            png::BitDepth::Sixteen => {
+                let be: Vec<u8> = data16.iter().flat_map(|v| v.to_be_bytes()).collect();
+                w.write_image_data(&be)?;
+            }
+            _ => w.write_image_data(data8)?,
+        }
+        w.finish()?;
+    }
+    Ok(bytes)
+}
+
+/// Write bytes to `path` and flush them to disk (so a full disk is reported here, not lost).
+pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    let mut f = std::fs::File::create(path).map_err(|e| RenderError::write(path, e))?;
+    f.write_all(bytes)
+        .and_then(|_| f.sync_all())
+        .map_err(|e| RenderError::write(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids_must_be_exact() {
+        let p = Path::new("x.exr");
+        assert_eq!(instance_ids(&[0.0, 1.0, 2.0], 2, p).unwrap(), vec![0, 1, 2]);
+        assert!(instance_ids(&[0.5], 2, p).is_err());
+        assert!(instance_ids(&[3.0], 2, p).is_err());
+        assert!(instance_ids(&[f32::NAN], 2, p).is_err());
+    }
+
+    #[test]
+    fn counts_and_boxes() {
+        let ids = [0, 1, 1, 0, 2, 0];
+        let o = object_pixels(&ids, 3, 3);
+        assert_eq!(
+            o[0],
+            ObjectPixels {
+                pixels: 2,
+                bbox: Some([1, 0, 2, 0])
+            }
+        );
+        assert_eq!(
+            o[1],
+            ObjectPixels {
+                pixels: 1,
+                bbox: Some([1, 1, 1, 1])
+            }
+        );
+        assert_eq!(
+            o[2],
+            ObjectPixels {
+                pixels: 0,
+                bbox: None
+            }
+        );
+    }
+
+    #[test]
+    fn threshold_scales_with_resolution() {
+        assert_eq!(visibility_threshold(320, 240), 200);
+        assert_eq!(visibility_threshold(640, 480), 800);
+        assert_eq!(visibility_threshold(64, 48), 8);
+    }
+
+    #[test]
+    fn depth_encoding() {
+        assert_eq!(
+            encode_depth(&[1.2345, 1e10, f32::NAN, -1.0, 70.0]),
+            vec![1235, 65535, 65535, 65535, 65535]
+        );
+    }
+
+    #[test]
+    fn shadow_is_never_nan() {
+        let z = [0.0f32, 1.0, 0.5];
+        let u = [0.0f32, 1.0, 1.0];
+        let s = encode_shadow([&z, &z, &z], [&u, &u, &u]);
+        assert_eq!(s, vec![SHADOW_UNDEFINED, 0, 128]);
+    }
+
+    #[test]
+    fn palette_png_round_trips() {
+        let bytes = encode_png(PngKind::Palette8, 2, 1, &[0, 3], &[]).unwrap();
+        let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
+        dec.set_transformations(png::Transformations::IDENTITY);
+        let mut r = dec.read_info().unwrap();
+        assert_eq!(r.info().color_type, png::ColorType::Indexed);
+        let mut buf = vec![0; r.output_buffer_size().unwrap()];
+        r.next_frame(&mut buf).unwrap();
+        assert_eq!(&buf[..2], &[0, 3]);
+    }
+}

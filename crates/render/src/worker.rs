@@ -1,0 +1,505 @@
+//! One long-lived Blender process speaking the bridge protocol (`docs/bridge-protocol.md`).
+//!
+//! The worker's stdout and stderr are read by two threads so Blender can never block on a
+//! full pipe; only stdout lines starting with the worker's random tag are replies, every
+//! other line is Blender's chatter and only kept as a tail for error reports. Every wait has
+//! a deadline: on expiry the process is killed and reaped.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::hash::{BuildHasher, Hasher};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use serde::Deserialize;
+
+use crate::error::{RenderError, Result, Tails};
+
+/// Lines of stdout and of stderr kept for error reports.
+const TAIL_LINES: usize = 25;
+/// How often a wait re-checks the child's status and the interrupt flag.
+const POLL: Duration = Duration::from_millis(50);
+/// After stdout closes, how long to wait for the exit status before killing.
+const EXIT_GRACE: Duration = Duration::from_secs(3);
+
+/// How to start a worker.
+#[derive(Debug, Clone)]
+pub struct WorkerOptions {
+    /// The Blender executable.
+    pub blender: PathBuf,
+    /// The bridge entry script (`worker.py` of a [`crate::BridgeDir`]).
+    pub script: PathBuf,
+    /// The resolved material catalogue file.
+    pub materials: PathBuf,
+    /// Cycles threads (0 = Blender's automatic choice).
+    pub threads: u32,
+    /// How long Blender may take to start and send `ready`.
+    pub startup_timeout: Duration,
+    /// Set to `true` (e.g. by a Ctrl-C handler) to abort any wait: the worker is killed and
+    /// the call returns [`RenderError::Interrupted`].
+    pub interrupt: Arc<AtomicBool>,
+}
+
+/// The worker's `ready` message.
+#[derive(Debug, Clone, Deserialize)]
+pub struct Ready {
+    /// Protocol version of the bridge.
+    pub bridge_version: u64,
+    /// Blender's version, e.g. `3.4.1`.
+    pub blender_version: String,
+    /// Cycles devices the bridge found, e.g. `["CPU"]`.
+    #[serde(default)]
+    pub cycles_devices: Vec<String>,
+    /// Anything else the bridge reported.
+    #[serde(flatten)]
+    pub extra: BTreeMap<String, serde_json::Value>,
+}
+
+/// Render mode of a request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Cheap check: 1 sample, no displacement, only the object-index pass.
+    Visibility,
+    /// Full settings from the scene file.
+    Final,
+}
+
+impl Mode {
+    /// The protocol name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Visibility => "visibility",
+            Mode::Final => "final",
+        }
+    }
+}
+
+/// Timings the bridge reports for one request, in seconds.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+pub struct BridgeTimings {
+    /// Building (or updating) the Blender scene; 0 when the build was reused.
+    #[serde(default)]
+    pub build_s: f64,
+    /// Cycles rendering.
+    #[serde(default)]
+    pub render_s: f64,
+    /// Writing the output files.
+    #[serde(default)]
+    pub write_s: f64,
+}
+
+/// The reply to a `render` request.
+#[derive(Debug, Clone, Deserialize)]
+pub struct RenderReply {
+    /// Files written, by role (`visibility`, `rgb`, `passes`, `noshadow`).
+    #[serde(default)]
+    pub files: BTreeMap<String, PathBuf>,
+    /// Where the time went.
+    #[serde(default)]
+    pub timings: BridgeTimings,
+    /// Each object's origin projected by Blender's camera: `[x, y, depth]`, pixels, y down.
+    #[serde(default)]
+    pub projected: Vec<[f64; 3]>,
+}
+
+enum Event {
+    Reply(String),
+    Eof,
+}
+
+/// A running Blender worker. Dropping it kills the process.
+#[derive(Debug)]
+pub struct Worker {
+    program: PathBuf,
+    child: Child,
+    stdin: Option<ChildStdin>,
+    events: Receiver<Event>,
+    tag: String,
+    tails: Arc<Mutex<(VecDeque<String>, VecDeque<String>)>>,
+    next_id: u64,
+    ready: Ready,
+    startup: Duration,
+    interrupt: Arc<AtomicBool>,
+    dead: bool,
+}
+
+impl std::fmt::Debug for Event {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Event::Reply(r) => write!(f, "Reply({r})"),
+            Event::Eof => f.write_str("Eof"),
+        }
+    }
+}
+
+/// A fresh tag such as `@@clevrtex-0123456789abcdef@@`. Not data, so not seeded: it only
+/// has to be unguessable by Blender's chatter.
+fn fresh_tag() -> String {
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u128(
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0),
+    );
+    h.write_u32(std::process::id());
+    format!("@@clevrtex-{:016x}@@", h.finish())
+}
+
+impl Worker {
+    /// Start Blender with the bridge and wait for its `ready` message.
+    pub fn start(opts: &WorkerOptions) -> Result<Worker> {
+        let started = Instant::now();
+        let tag = fresh_tag();
+        let mut cmd = Command::new(&opts.blender);
+        cmd.args([
+            "-b",
+            "--factory-startup",
+            "--python-exit-code",
+            "1",
+            "--python",
+        ])
+        .arg(&opts.script)
+        .arg("--")
+        .args(["--tag", &tag, "--threads", &opts.threads.to_string()])
+        .arg("--materials")
+        .arg(&opts.materials)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+        // Own process group: a Ctrl-C in the terminal reaches only us, and we stop the
+        // workers ourselves, so no half-written output is left behind.
+        #[cfg(unix)]
+        std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
+        let mut child = cmd.spawn().map_err(|source| {
+            if source.kind() == std::io::ErrorKind::NotFound {
+                RenderError::BlenderNotFound {
+                    tried: Some(opts.blender.clone()),
+                }
+            } else {
+                RenderError::Spawn {
+                    program: opts.blender.clone(),
+                    source,
+                }
+            }
+        })?;
+        let tails = Arc::new(Mutex::new((VecDeque::new(), VecDeque::new())));
+        let (tx, events) = mpsc::channel();
+        let stdout = child.stdout.take().expect("piped");
+        let stderr = child.stderr.take().expect("piped");
+        {
+            let tails = Arc::clone(&tails);
+            let prefix = format!("{tag} ");
+            std::thread::spawn(move || {
+                read_lines(stdout, |line| {
+                    if let Some(rest) = line.strip_prefix(&prefix) {
+                        let _ = tx.send(Event::Reply(rest.to_string()));
+                    } else if line.starts_with(prefix.trim_end()) {
+                        let _ = tx.send(Event::Reply(String::new()));
+                    } else {
+                        push_tail(&mut tails.lock().unwrap().0, line);
+                    }
+                });
+                let _ = tx.send(Event::Eof);
+            });
+        }
+        {
+            let tails = Arc::clone(&tails);
+            std::thread::spawn(move || {
+                read_lines(stderr, |line| push_tail(&mut tails.lock().unwrap().1, line));
+            });
+        }
+        let stdin = child.stdin.take();
+        let mut worker = Worker {
+            program: opts.blender.clone(),
+            child,
+            stdin,
+            events,
+            tag,
+            tails,
+            next_id: 1,
+            ready: Ready {
+                bridge_version: 0,
+                blender_version: String::new(),
+                cycles_devices: Vec::new(),
+                extra: BTreeMap::new(),
+            },
+            startup: Duration::ZERO,
+            interrupt: Arc::clone(&opts.interrupt),
+            dead: false,
+        };
+        let doing = "starting up".to_string();
+        let reply = worker.wait_reply(Instant::now() + opts.startup_timeout, &doing)?;
+        let ready: Ready = worker.expect_type(&reply, "ready", &doing)?;
+        if ready.bridge_version != crate::bridge::BRIDGE_VERSION {
+            let line = reply.to_string();
+            return Err(worker.fail_protocol(
+                &doing,
+                line,
+                format!(
+                    "bridge protocol version {} but this binary speaks {}",
+                    ready.bridge_version,
+                    crate::bridge::BRIDGE_VERSION
+                ),
+            ));
+        }
+        worker.ready = ready;
+        worker.startup = started.elapsed();
+        Ok(worker)
+    }
+
+    /// What the worker reported when it started.
+    pub fn ready(&self) -> &Ready {
+        &self.ready
+    }
+
+    /// How long start-up took (process start until `ready`).
+    pub fn startup_time(&self) -> Duration {
+        self.startup
+    }
+
+    /// The worker's reply tag.
+    pub fn tag(&self) -> &str {
+        &self.tag
+    }
+
+    /// Whether the worker died (crash, timeout, protocol error); a dead worker must be
+    /// replaced.
+    pub fn is_dead(&self) -> bool {
+        self.dead
+    }
+
+    /// Ask the worker to render `scene` (a scene file path) in `mode` into `out_dir`, and
+    /// wait at most `timeout` for the reply. On timeout, crash or garbage the worker is
+    /// killed (see [`Worker::is_dead`]); a [`RenderError::Bridge`] error leaves it usable.
+    pub fn render(
+        &mut self,
+        scene: &Path,
+        mode: Mode,
+        out_dir: &Path,
+        timeout: Duration,
+    ) -> Result<RenderReply> {
+        let id = self.next_id;
+        self.next_id += 1;
+        let doing = format!("rendering `{}` ({})", scene.display(), mode.name());
+        let request = serde_json::json!({
+            "type": "render",
+            "id": id,
+            "mode": mode.name(),
+            "scene": scene,
+            "out_dir": out_dir,
+        });
+        self.send(&request, &doing)?;
+        let reply = self.wait_reply(Instant::now() + timeout, &doing)?;
+        if reply.get("id").and_then(|v| v.as_u64()) != Some(id) {
+            let line = reply.to_string();
+            return Err(self.fail_protocol(
+                &doing,
+                line,
+                format!("expected a reply to request {id}"),
+            ));
+        }
+        self.expect_type(&reply, "done", &doing)
+    }
+
+    /// Ask the worker to quit and wait briefly for it; kills it if it lingers.
+    pub fn quit(mut self) {
+        let _ = self.send(&serde_json::json!({"type": "quit"}), "quitting");
+        self.stdin = None;
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                self.dead = true;
+                return;
+            }
+            std::thread::sleep(POLL);
+        }
+        self.kill();
+    }
+
+    /// Current output tails.
+    pub fn tails(&self) -> Tails {
+        let t = self.tails.lock().unwrap();
+        Tails {
+            stdout: t.0.iter().cloned().collect(),
+            stderr: t.1.iter().cloned().collect(),
+        }
+    }
+
+    fn send(&mut self, msg: &serde_json::Value, doing: &str) -> Result<()> {
+        let mut line = msg.to_string();
+        line.push('\n');
+        let ok = match self.stdin.as_mut() {
+            Some(stdin) => stdin
+                .write_all(line.as_bytes())
+                .and_then(|_| stdin.flush())
+                .is_ok(),
+            None => false,
+        };
+        if ok {
+            return Ok(());
+        }
+        // A broken pipe means the process died: report it with its status and tails.
+        let status = self.wait_exit(EXIT_GRACE);
+        Err(RenderError::Exited {
+            program: self.program.clone(),
+            doing: doing.to_string(),
+            status,
+            tails: self.tails(),
+        })
+    }
+
+    fn expect_type<T: serde::de::DeserializeOwned>(
+        &mut self,
+        reply: &serde_json::Value,
+        expected: &str,
+        doing: &str,
+    ) -> Result<T> {
+        match reply.get("type").and_then(|t| t.as_str()) {
+            Some(t) if t == expected => serde_json::from_value(reply.clone()).map_err(|e| {
+                self.fail_protocol(
+                    doing,
+                    reply.to_string(),
+                    format!("bad `{expected}` reply: {e}"),
+                )
+            }),
+            Some("error") => Err(RenderError::Bridge {
+                doing: doing.to_string(),
+                message: reply
+                    .get("message")
+                    .and_then(|m| m.as_str())
+                    .unwrap_or("(no message)")
+                    .to_string(),
+                traceback: reply
+                    .get("traceback")
+                    .and_then(|m| m.as_str())
+                    .map(|t| format!("{}\n", t.trim_end()))
+                    .unwrap_or_default(),
+            }),
+            _ => Err(self.fail_protocol(
+                doing,
+                reply.to_string(),
+                format!("expected a `{expected}` reply"),
+            )),
+        }
+    }
+
+    fn fail_protocol(&mut self, doing: &str, mut line: String, problem: String) -> RenderError {
+        self.kill();
+        if line.len() > 200 {
+            let mut cut = 200;
+            while !line.is_char_boundary(cut) {
+                cut -= 1;
+            }
+            line.truncate(cut);
+            line.push_str("...");
+        }
+        RenderError::Protocol {
+            program: self.program.clone(),
+            doing: doing.to_string(),
+            line,
+            problem,
+            tails: self.tails(),
+        }
+    }
+
+    /// Wait for the next reply line until `deadline`, watching for exit and interrupts.
+    fn wait_reply(&mut self, deadline: Instant, doing: &str) -> Result<serde_json::Value> {
+        let waited = Instant::now();
+        loop {
+            if self.interrupt.load(Ordering::SeqCst) {
+                self.kill();
+                return Err(RenderError::Interrupted);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                self.kill();
+                return Err(RenderError::Timeout {
+                    program: self.program.clone(),
+                    doing: doing.to_string(),
+                    after: waited.elapsed(),
+                    tails: self.tails(),
+                });
+            }
+            match self.events.recv_timeout(POLL.min(deadline - now)) {
+                Ok(Event::Reply(text)) => {
+                    return match serde_json::from_str::<serde_json::Value>(&text) {
+                        Ok(v) if v.is_object() => Ok(v),
+                        Ok(_) => Err(self.fail_protocol(doing, text, "not a JSON object".into())),
+                        Err(e) => Err(self.fail_protocol(doing, text, format!("not JSON: {e}"))),
+                    };
+                }
+                Ok(Event::Eof) | Err(RecvTimeoutError::Disconnected) => {
+                    let status = self.wait_exit(EXIT_GRACE);
+                    return Err(RenderError::Exited {
+                        program: self.program.clone(),
+                        doing: doing.to_string(),
+                        status,
+                        tails: self.tails(),
+                    });
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+            }
+        }
+    }
+
+    /// Wait up to `grace` for the process to exit (killing it after), returning its status.
+    fn wait_exit(&mut self, grace: Duration) -> Option<std::process::ExitStatus> {
+        self.dead = true;
+        self.stdin = None;
+        let deadline = Instant::now() + grace;
+        loop {
+            match self.child.try_wait() {
+                Ok(Some(status)) => return Some(status),
+                Ok(None) if Instant::now() < deadline => std::thread::sleep(POLL),
+                _ => {
+                    self.kill();
+                    return None;
+                }
+            }
+        }
+    }
+
+    /// Kill and reap the process (idempotent).
+    fn kill(&mut self) {
+        self.dead = true;
+        self.stdin = None;
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+fn push_tail(tail: &mut VecDeque<String>, line: &str) {
+    if tail.len() == TAIL_LINES {
+        tail.pop_front();
+    }
+    tail.push_back(line.to_string());
+}
+
+/// Call `f` on each line (lossy UTF-8, without the line ending) until EOF or a read error.
+fn read_lines(stream: impl Read, mut f: impl FnMut(&str)) {
+    let mut reader = BufReader::new(stream);
+    let mut buf = Vec::new();
+    loop {
+        buf.clear();
+        match reader.read_until(b'\n', &mut buf) {
+            Ok(0) | Err(_) => return,
+            Ok(_) => {
+                let text = String::from_utf8_lossy(&buf);
+                f(text.trim_end_matches(['\n', '\r']));
+            }
+        }
+    }
+}
