@@ -78,7 +78,9 @@ def _make_cone(bm):
 
 def _make_icosahedron(bm):
     bmesh.ops.create_icosphere(bm, subdivisions=1, radius=1.0, calc_uvs=True)
-    _bevel(bm, bm.edges[:], width=0.06, segments=1)
+    # A coplanar inset ring holds each facet flat under the subdivision (a bevel does not
+    # on triangles: the icosahedron came out as a blob).
+    bmesh.ops.inset_individual(bm, faces=bm.faces[:], thickness=0.06, use_even_offset=True)
 
 
 def _make_monkey(bm):
@@ -147,6 +149,9 @@ _BUILDERS = {
     "teapot": _make_teapot,
 }
 
+# Smooth shading would round the facets off visually even where the geometry is flat.
+_FLAT_SHADED = ("icosahedron",)
+
 # z range of the normalised mesh: (bottom, top or None for "whatever the aspect gives").
 _Z_BOTTOM = {"monkey": -0.97}
 
@@ -183,7 +188,8 @@ def mesh(shape):
     me = bpy.data.meshes.new(MESH_PREFIX + shape)
     bm.to_mesh(me)
     bm.free()
-    compat.shade_smooth(me)
+    if shape not in _FLAT_SHADED:
+        compat.shade_smooth(me)
     # One slot; each object links its own material to it (link = 'OBJECT').
     me.materials.append(None)
     me.use_fake_user = True

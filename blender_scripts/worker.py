@@ -116,7 +116,7 @@ class Worker:
         if mode == "visibility":
             files, timings = b.render_visibility(self.built, out_dir)
         else:
-            files, timings = b.render_final(self.built, out_dir)
+            files, timings = b.render_final(self.built, out_dir, req.get("noshadow_samples"))
         timings["build_s"] = build_s
         return {
             "type": "done",
@@ -125,6 +125,7 @@ class Worker:
             "files": files,
             "timings": timings,
             "projected": b.projected(self.built),
+            "data_blocks": b.data_block_counts(),
         }
 
     def handle(self, req):
