@@ -1,0 +1,287 @@
+//! Finding ground-truth samples (the published layout) and the predictions that go with them.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+
+use crate::error::EvalError;
+
+/// One ground-truth sample: `CLEVRTEX_<variant>_<index:06>{.png,_flat.png,.json}`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GtSample {
+    /// Numeric index.
+    pub index: u64,
+    /// File stem, `CLEVRTEX_<variant>_<index:06>`.
+    pub stem: String,
+    /// The RGB image.
+    pub image: PathBuf,
+    /// The instance mask (`_flat.png`).
+    pub mask: PathBuf,
+    /// The metadata.
+    pub meta: PathBuf,
+}
+
+/// Which samples to evaluate, by position in the index sequence.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Split {
+    /// The first `int(0.1 N)`.
+    Test,
+    /// The next `int(0.2 N) - int(0.1 N)`.
+    Val,
+    /// The rest.
+    Train,
+    /// Every sample.
+    All,
+}
+
+impl Split {
+    /// Name as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Test => "test",
+            Split::Val => "val",
+            Split::Train => "train",
+            Split::All => "all",
+        }
+    }
+
+    /// The positions `start..end` of this split among `n` samples of `variant` (`outd` is a
+    /// test-only dataset: its test split is all of it).
+    pub fn range(self, n: usize, variant: &str) -> Result<std::ops::Range<usize>, EvalError> {
+        let t = (0.1 * n as f64) as usize;
+        let v = (0.2 * n as f64) as usize;
+        if variant == "outd" {
+            return match self {
+                Split::Test | Split::All => Ok(0..n),
+                _ => Err(EvalError::Usage {
+                    message: format!(
+                        "`outd` is a test-only dataset, it has no `{}` split",
+                        self.name()
+                    ),
+                    hint: "use `--split test` (the default) or `--split all`".into(),
+                }),
+            };
+        }
+        Ok(match self {
+            Split::Test => 0..t,
+            Split::Val => t..v.max(t),
+            Split::Train => v.max(t)..n,
+            Split::All => 0..n,
+        })
+    }
+}
+
+/// Parse `CLEVRTEX_<variant>_<index:06>` + `suffix` from a file name.
+fn parse_stem<'a>(name: &'a str, suffix: &str) -> Option<(&'a str, &'a str, u64)> {
+    let stem = name.strip_suffix(suffix)?;
+    let rest = stem.strip_prefix("CLEVRTEX_")?;
+    let (variant, digits) = rest.rsplit_once('_')?;
+    if variant.is_empty() || digits.len() != 6 || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    Some((stem, variant, digits.parse().ok()?))
+}
+
+/// Every regular file under `dir`, recursively (symlinks followed, depth-limited).
+pub fn walk(dir: &Path) -> Result<Vec<PathBuf>, EvalError> {
+    let mut out = Vec::new();
+    walk_into(dir, 0, &mut out)?;
+    out.sort();
+    Ok(out)
+}
+
+fn walk_into(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) -> Result<(), EvalError> {
+    let io = |source| EvalError::Io {
+        path: dir.to_path_buf(),
+        source,
+    };
+    for entry in std::fs::read_dir(dir).map_err(io)? {
+        let path = entry.map_err(io)?.path();
+        match std::fs::metadata(&path) {
+            Ok(m) if m.is_dir() && depth < 32 => walk_into(&path, depth + 1, out)?,
+            Ok(m) if m.is_file() => out.push(path),
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+fn file_name(p: &Path) -> &str {
+    p.file_name().and_then(|n| n.to_str()).unwrap_or("")
+}
+
+/// Find the ground-truth samples under `dir`, sorted by index. Without `variant`, the
+/// directory must hold exactly one variant. Gaps in the index sequence and duplicate stems
+/// are errors, as are samples missing their mask or metadata.
+pub fn discover_gt(
+    dir: &Path,
+    variant: Option<&str>,
+) -> Result<(String, Vec<GtSample>), EvalError> {
+    if !dir.is_dir() {
+        return Err(EvalError::Io {
+            path: dir.to_path_buf(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
+        });
+    }
+    let files = walk(dir)?;
+    let mut by_variant: BTreeMap<String, Vec<(u64, String, PathBuf)>> = BTreeMap::new();
+    for f in &files {
+        if let Some((stem, v, idx)) = parse_stem(file_name(f), ".png") {
+            by_variant
+                .entry(v.to_string())
+                .or_default()
+                .push((idx, stem.to_string(), f.clone()));
+        }
+    }
+    let pattern = format!("CLEVRTEX_{}_??????.png", variant.unwrap_or("<variant>"));
+    let (variant, mut found) = match variant {
+        Some(v) => match by_variant.remove(v) {
+            Some(found) => (v.to_string(), found),
+            None => {
+                return Err(EvalError::NoSamples {
+                    dir: dir.to_path_buf(),
+                    pattern,
+                })
+            }
+        },
+        None => {
+            if by_variant.len() > 1 {
+                return Err(EvalError::SeveralVariants {
+                    dir: dir.to_path_buf(),
+                    variants: by_variant.into_keys().collect(),
+                });
+            }
+            match by_variant.pop_first() {
+                Some(x) => x,
+                None => {
+                    return Err(EvalError::NoSamples {
+                        dir: dir.to_path_buf(),
+                        pattern,
+                    })
+                }
+            }
+        }
+    };
+    found.sort();
+    for w in found.windows(2) {
+        if w[0].0 == w[1].0 {
+            return Err(EvalError::Duplicate {
+                what: "ground-truth sample",
+                stem: w[0].1.clone(),
+                a: w[0].2.clone(),
+                b: w[1].2.clone(),
+            });
+        }
+        if w[1].0 != w[0].0 + 1 {
+            return Err(EvalError::GtGap {
+                missing: w[0].0 + 1,
+                first: found[0].0,
+                last: found[found.len() - 1].0,
+                count: found.len(),
+            });
+        }
+    }
+    let mut samples = Vec::with_capacity(found.len());
+    for (index, stem, image) in found {
+        let parent = image.parent().unwrap_or(Path::new("."));
+        let mask = parent.join(format!("{stem}_flat.png"));
+        let meta = parent.join(format!("{stem}.json"));
+        for p in [&mask, &meta] {
+            if !p.is_file() {
+                return Err(EvalError::GtIncomplete {
+                    stem,
+                    path: p.clone(),
+                });
+            }
+        }
+        samples.push(GtSample {
+            index,
+            stem,
+            image,
+            mask,
+            meta,
+        });
+    }
+    Ok((variant, samples))
+}
+
+/// The prediction files found for one stem.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PredFiles {
+    /// `<stem>_mask.png`, `<stem>.npy` or `<stem>.npz`.
+    pub segmentation: Option<PathBuf>,
+    /// `<stem>_recon.png`.
+    pub recon: Option<PathBuf>,
+}
+
+/// Index the prediction files under `dir` by stem, for the stems of `variant`. Two
+/// segmentation files for one stem (e.g. in two folders, or both `.npy` and `_mask.png`) are an
+/// error naming both.
+pub fn index_preds(dir: &Path, variant: &str) -> Result<HashMap<String, PredFiles>, EvalError> {
+    if !dir.is_dir() {
+        return Err(EvalError::Io {
+            path: dir.to_path_buf(),
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
+        });
+    }
+    let mut out: HashMap<String, PredFiles> = HashMap::new();
+    for f in walk(dir)? {
+        let name = file_name(&f);
+        let (stem, is_recon) = if let Some((stem, _, _)) = parse_stem(name, "_recon.png") {
+            (stem, true)
+        } else if let Some((stem, _, _)) = ["_mask.png", ".npy", ".npz"]
+            .iter()
+            .find_map(|s| parse_stem(name, s))
+        {
+            (stem, false)
+        } else {
+            continue;
+        };
+        if !stem.starts_with(&format!("CLEVRTEX_{variant}_")) {
+            continue;
+        }
+        let entry = out.entry(stem.to_string()).or_default();
+        let slot = if is_recon {
+            &mut entry.recon
+        } else {
+            &mut entry.segmentation
+        };
+        if let Some(prev) = slot {
+            return Err(EvalError::Duplicate {
+                what: "prediction",
+                stem: stem.to_string(),
+                a: prev.clone(),
+                b: f.clone(),
+            });
+        }
+        *slot = Some(f.clone());
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stems() {
+        assert_eq!(
+            parse_stem("CLEVRTEX_full_000123.png", ".png"),
+            Some(("CLEVRTEX_full_000123", "full", 123))
+        );
+        assert_eq!(parse_stem("CLEVRTEX_full_000123_flat.png", ".png"), None);
+        assert_eq!(parse_stem("CLEVRTEX_full_12345.png", ".png"), None);
+        assert_eq!(
+            parse_stem("CLEVRTEX_full_000001_mask.png", "_mask.png"),
+            Some(("CLEVRTEX_full_000001", "full", 1))
+        );
+    }
+
+    #[test]
+    fn splits() {
+        assert_eq!(Split::Test.range(50, "full").unwrap(), 0..5);
+        assert_eq!(Split::Val.range(50, "full").unwrap(), 5..10);
+        assert_eq!(Split::Train.range(50, "full").unwrap(), 10..50);
+        assert_eq!(Split::Test.range(7, "outd").unwrap(), 0..7);
+        assert!(Split::Val.range(7, "outd").is_err());
+    }
+}

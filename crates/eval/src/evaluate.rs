@@ -1,0 +1,474 @@
+//! Evaluating a predictions directory against a ground-truth dataset, in parallel over images.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+use xxhash_rust::xxh3::xxh3_64;
+
+use crate::dataset::{discover_gt, index_preds, PredFiles, Split};
+use crate::error::{corrupt, EvalError, MAX_SLOTS};
+use crate::metrics::{score_image, Metric, Recon, Scores};
+use crate::resize::{crop_resize_bilinear_rgb, crop_resize_nearest, EVAL_SIDE};
+use crate::{meta, predict, read};
+
+/// How ground truth is brought to the predictions' resolution.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Protocol {
+    /// Centre crop of side `int(0.8 min(W, H))`, resized to 128x128 (the benchmark's).
+    Clevrtex,
+    /// No crop or resize: predictions at the ground truth's resolution.
+    Native,
+}
+
+impl Protocol {
+    /// Name as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::Clevrtex => "clevrtex",
+            Protocol::Native => "native",
+        }
+    }
+}
+
+/// Options of an evaluation.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Crop/resize protocol.
+    pub protocol: Protocol,
+    /// Which split; `None` is the default (`test`; all of `outd`).
+    pub split: Option<Split>,
+    /// Variant name; `None` to infer it from the files.
+    pub variant: Option<String>,
+    /// Soft masks have no background slot: put `1 - Σ m_k` in front.
+    pub no_background: bool,
+    /// Score missing predictions as all-background instead of failing.
+    pub allow_missing: bool,
+    /// Bootstrap resamples for the confidence intervals (0 to skip).
+    pub bootstrap: usize,
+    /// Seed of the bootstrap.
+    pub seed: u64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            protocol: Protocol::Clevrtex,
+            split: None,
+            variant: None,
+            no_background: false,
+            allow_missing: false,
+            bootstrap: 1000,
+            seed: 0,
+        }
+    }
+}
+
+/// One object's contribution to the per-object breakdown.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObjectScore {
+    /// `(kind, value)` pairs, e.g. `("material", "rope")`.
+    pub groups: Vec<(&'static str, String)>,
+    /// Matched IoU of the object's true slot.
+    pub iou: f64,
+    /// Squared error summed over its pixels and channels, with a reconstruction.
+    pub mse: Option<f64>,
+}
+
+/// The result for one image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageResult {
+    /// Numeric index of the sample.
+    pub index: u64,
+    /// Stem of the sample.
+    pub stem: String,
+    /// Its metrics.
+    pub scores: Scores,
+    /// No prediction was found; scored as all-background.
+    pub missing: bool,
+    /// Objects (and the background, kind `ground_material`) for the breakdowns.
+    pub objects: Vec<ObjectScore>,
+    /// Metadata objects whose label does not occur in the (cropped) mask.
+    pub objects_skipped: usize,
+    /// Hash of the ground-truth files read.
+    pub gt_hash: u64,
+    /// Hash of the prediction files read (0 when missing).
+    pub pred_hash: u64,
+}
+
+/// Mean, confidence interval and count of one metric over the dataset.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Summary {
+    /// Mean over images where the metric is defined; `None` if it is defined nowhere.
+    pub mean: Option<f64>,
+    /// 95% percentile-bootstrap interval, when requested and defined.
+    pub ci: Option<(f64, f64)>,
+    /// Images where the metric is defined.
+    pub defined: usize,
+}
+
+/// Mean IoU and MSE of one breakdown group.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Group {
+    /// Number of objects.
+    pub count: usize,
+    /// Mean matched IoU.
+    pub iou: f64,
+    /// Mean per-object squared error, over objects with a reconstruction.
+    pub mse: Option<f64>,
+    /// Objects with a reconstruction.
+    pub mse_count: usize,
+}
+
+/// A finished evaluation.
+#[derive(Clone, Debug)]
+pub struct Report {
+    /// Variant evaluated.
+    pub variant: String,
+    /// Split evaluated.
+    pub split: Split,
+    /// Protocol used.
+    pub protocol: Protocol,
+    /// Soft masks had no background slot.
+    pub no_background: bool,
+    /// Per-image results, in index order.
+    pub images: Vec<ImageResult>,
+    /// Per-metric summaries, indexed like [`Metric::ALL`].
+    pub summaries: [Summary; 10],
+    /// Breakdowns: kind (`material`, `shape`, `size`, `color`, `ground_material`) -> value ->
+    /// group.
+    pub breakdowns: BTreeMap<&'static str, BTreeMap<String, Group>>,
+    /// Bootstrap resamples used.
+    pub bootstrap: usize,
+    /// Bootstrap seed.
+    pub seed: u64,
+    /// Hash of all ground-truth files read (xxh3 of the per-image hashes).
+    pub gt_hash: u64,
+    /// Hash of all prediction files read.
+    pub pred_hash: u64,
+    /// Ground-truth directory.
+    pub gt_dir: PathBuf,
+    /// Predictions directory.
+    pub pred_dir: PathBuf,
+}
+
+impl Report {
+    /// Images scored without a prediction.
+    pub fn missing(&self) -> usize {
+        self.images.iter().filter(|i| i.missing).count()
+    }
+
+    /// Metadata objects whose label did not occur.
+    pub fn objects_skipped(&self) -> usize {
+        self.images.iter().map(|i| i.objects_skipped).sum()
+    }
+
+    /// Summary of one metric.
+    pub fn summary(&self, m: Metric) -> Summary {
+        self.summaries[Metric::ALL.iter().position(|&x| x == m).unwrap_or(0)]
+    }
+}
+
+fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
+    std::fs::read(path).map_err(|source| EvalError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+const GT_HINT: &str = "the ground truth is damaged: regenerate or re-download this sample";
+
+/// Evaluate the predictions under `preds` against the dataset under `gt`.
+pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalError> {
+    let (variant, samples) = discover_gt(gt, opts.variant.as_deref())?;
+    let split = opts.split.unwrap_or(if variant == "outd" {
+        Split::All
+    } else {
+        Split::Test
+    });
+    let range = split.range(samples.len(), &variant)?;
+    let samples = &samples[range];
+    if samples.is_empty() {
+        return Err(EvalError::Usage {
+            message: format!("the `{}` split of `{}` is empty", split.name(), gt.display()),
+            hint: "a split is a share of the samples (test 10%, val 10%, train 80%); use `--split all` for small datasets".into(),
+        });
+    }
+    let pred_index = index_preds(preds, &variant)?;
+    let missing: Vec<&str> = samples
+        .iter()
+        .filter(|s| {
+            pred_index
+                .get(&s.stem)
+                .is_none_or(|p| p.segmentation.is_none())
+        })
+        .map(|s| s.stem.as_str())
+        .collect();
+    if !missing.is_empty() && !opts.allow_missing {
+        return Err(EvalError::MissingPredictions {
+            count: missing.len(),
+            total: samples.len(),
+            first: missing.iter().take(5).map(|s| s.to_string()).collect(),
+        });
+    }
+
+    let images = samples
+        .par_iter()
+        .map(|s| {
+            let files = pred_index.get(&s.stem).cloned().unwrap_or_default();
+            score_sample(s, &files, &variant, opts)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+
+    let mut summaries = [Summary::default(); 10];
+    for (mi, &m) in Metric::ALL.iter().enumerate() {
+        let vals: Vec<Option<f64>> = images.iter().map(|r| r.scores.get(m)).collect();
+        summaries[mi] = summarise(&vals, opts.bootstrap, opts.seed.wrapping_add(mi as u64));
+    }
+
+    // kind -> value -> (objects, IoU sum, objects with MSE, MSE sum)
+    type Sums = BTreeMap<&'static str, BTreeMap<String, (usize, f64, usize, f64)>>;
+    let mut sums: Sums = BTreeMap::new();
+    for r in &images {
+        for o in &r.objects {
+            for (kind, value) in &o.groups {
+                let g = sums
+                    .entry(kind)
+                    .or_default()
+                    .entry(value.clone())
+                    .or_default();
+                g.0 += 1;
+                g.1 += o.iou;
+                if let Some(e) = o.mse {
+                    g.2 += 1;
+                    g.3 += e;
+                }
+            }
+        }
+    }
+    let breakdowns = sums
+        .into_iter()
+        .map(|(k, groups)| {
+            let groups = groups
+                .into_iter()
+                .map(|(v, (n, iou, mn, mse))| {
+                    let g = Group {
+                        count: n,
+                        iou: iou / n as f64,
+                        mse: (mn > 0).then(|| mse / mn as f64),
+                        mse_count: mn,
+                    };
+                    (v, g)
+                })
+                .collect();
+            (k, groups)
+        })
+        .collect();
+
+    let cat = |f: fn(&ImageResult) -> u64| {
+        let bytes: Vec<u8> = images.iter().flat_map(|r| f(r).to_le_bytes()).collect();
+        xxh3_64(&bytes)
+    };
+    Ok(Report {
+        gt_hash: cat(|r| r.gt_hash),
+        pred_hash: cat(|r| r.pred_hash),
+        variant,
+        split,
+        protocol: opts.protocol,
+        no_background: opts.no_background,
+        images,
+        summaries,
+        breakdowns,
+        bootstrap: opts.bootstrap,
+        seed: opts.seed,
+        gt_dir: gt.to_path_buf(),
+        pred_dir: preds.to_path_buf(),
+    })
+}
+
+/// Mean over defined values, and a percentile bootstrap over images.
+pub fn summarise(vals: &[Option<f64>], bootstrap: usize, seed: u64) -> Summary {
+    let defined: Vec<f64> = vals.iter().flatten().copied().collect();
+    if defined.is_empty() {
+        return Summary::default();
+    }
+    let mean = defined.iter().sum::<f64>() / defined.len() as f64;
+    let ci = (bootstrap > 0).then(|| {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let n = vals.len();
+        let mut means = Vec::with_capacity(bootstrap);
+        for _ in 0..bootstrap {
+            let (mut s, mut c) = (0.0, 0usize);
+            for _ in 0..n {
+                if let Some(v) = vals[rng.random_range(0..n)] {
+                    s += v;
+                    c += 1;
+                }
+            }
+            if c > 0 {
+                means.push(s / c as f64);
+            }
+        }
+        means.sort_by(f64::total_cmp);
+        (percentile(&means, 2.5), percentile(&means, 97.5))
+    });
+    Summary {
+        mean: Some(mean),
+        ci: ci.filter(|(a, b)| a.is_finite() && b.is_finite()),
+        defined: defined.len(),
+    }
+}
+
+/// Linear-interpolation percentile of sorted values (numpy's default).
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let pos = q / 100.0 * (sorted.len() - 1) as f64;
+    let lo = pos.floor() as usize;
+    let hi = pos.ceil() as usize;
+    sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
+}
+
+fn score_sample(
+    s: &crate::dataset::GtSample,
+    files: &PredFiles,
+    variant: &str,
+    opts: &Options,
+) -> Result<ImageResult, EvalError> {
+    let mask_bytes = read_file(&s.mask)?;
+    let meta_bytes = read_file(&s.meta)?;
+    let gt_mask = read::png_labels(&mask_bytes).map_err(|r| corrupt(&s.mask, r, GT_HINT))?;
+    if let Some(&bad) = gt_mask.labels.iter().find(|&&l| l as usize >= MAX_SLOTS) {
+        return Err(corrupt(
+            &s.mask,
+            format!("segment id `{bad}` is outside 0..{MAX_SLOTS}"),
+            GT_HINT,
+        ));
+    }
+    let sample_meta = meta::parse(&meta_bytes).map_err(|r| corrupt(&s.meta, r, GT_HINT))?;
+    let (gw, gh) = (gt_mask.width, gt_mask.height);
+    let (truth, hw) = match opts.protocol {
+        Protocol::Native => (gt_mask.labels, (gw, gh)),
+        Protocol::Clevrtex => {
+            let t = crop_resize_nearest(&gt_mask.labels, gw, gh, EVAL_SIDE).ok_or_else(|| {
+                corrupt(
+                    &s.mask,
+                    format!("a {gw}x{gh} mask is too small to crop"),
+                    GT_HINT,
+                )
+            })?;
+            (t, (EVAL_SIDE, EVAL_SIDE))
+        }
+    };
+    let n = hw.0 * hw.1;
+
+    let mut gt_hasher_input = Vec::with_capacity(3);
+    gt_hasher_input.push(xxh3_64(&mask_bytes));
+    gt_hasher_input.push(xxh3_64(&meta_bytes));
+
+    let (pred, pred_hash, missing) = if files.segmentation.is_some() {
+        let (p, bytes) = predict::load(files, hw, opts.no_background)?;
+        let hs: Vec<u8> = bytes
+            .iter()
+            .flat_map(|b| xxh3_64(b).to_le_bytes())
+            .collect();
+        (p, xxh3_64(&hs), false)
+    } else {
+        let p = predict::Prediction {
+            labels: vec![0; n],
+            slots: 1,
+            recon: None,
+        };
+        (p, 0, true)
+    };
+
+    // The true image is needed only for MSE.
+    let truth_rgb = match &pred.recon {
+        Some(_) => {
+            let img_bytes = read_file(&s.image)?;
+            gt_hasher_input.push(xxh3_64(&img_bytes));
+            let img = read::png_rgb(&img_bytes).map_err(|r| corrupt(&s.image, r, GT_HINT))?;
+            if (img.width, img.height) != (gw, gh) {
+                return Err(corrupt(
+                    &s.image,
+                    format!(
+                        "the image is {}x{} but its mask is {gw}x{gh}",
+                        img.width, img.height
+                    ),
+                    GT_HINT,
+                ));
+            }
+            Some(match opts.protocol {
+                Protocol::Native => img.rgb,
+                Protocol::Clevrtex => crop_resize_bilinear_rgb(&img.rgb, gw, gh, EVAL_SIDE)
+                    .ok_or_else(|| corrupt(&s.image, "too small to crop", GT_HINT))?,
+            })
+        }
+        None => None,
+    };
+    let recon = match (&truth_rgb, &pred.recon) {
+        (Some(t), Some(p)) => Some(Recon {
+            truth_rgb: t,
+            pred_rgb: p,
+        }),
+        _ => None,
+    };
+    let scores = score_image(&truth, &pred.labels, pred.slots, recon);
+
+    // Per-object breakdown: object i has label i + 1; the background goes by ground material.
+    let mut objects = Vec::new();
+    let mut skipped = 0;
+    let mse_of = |t: usize| scores.sq_err_per_true.as_ref().map(|v| v[t]);
+    if scores.true_sizes.first().is_some_and(|&s| s > 0) {
+        if let Some(g) = &sample_meta.ground_material {
+            objects.push(ObjectScore {
+                groups: vec![("ground_material", g.clone())],
+                iou: scores.iou_per_true[0],
+                mse: mse_of(0),
+            });
+        }
+    }
+    for (i, o) in sample_meta.objects.iter().enumerate() {
+        let t = i + 1;
+        if scores.true_sizes.get(t).is_none_or(|&s| s == 0) {
+            skipped += 1;
+            continue;
+        }
+        let mut groups = Vec::new();
+        for (kind, v) in [
+            ("material", &o.material),
+            ("shape", &o.shape),
+            ("size", &o.size),
+        ] {
+            if let Some(v) = v {
+                groups.push((kind, v.clone()));
+            }
+        }
+        if variant == "vbg" {
+            if let Some(c) = &o.color {
+                groups.push(("color", c.clone()));
+            }
+        }
+        objects.push(ObjectScore {
+            groups,
+            iou: scores.iou_per_true[t],
+            mse: mse_of(t),
+        });
+    }
+    let gh_bytes: Vec<u8> = gt_hasher_input
+        .iter()
+        .flat_map(|h| h.to_le_bytes())
+        .collect();
+    Ok(ImageResult {
+        index: s.index,
+        stem: s.stem.clone(),
+        scores,
+        missing,
+        objects,
+        objects_skipped: skipped,
+        gt_hash: xxh3_64(&gh_bytes),
+        pred_hash,
+    })
+}

@@ -1,0 +1,92 @@
+//! The per-sample metadata `.json`: only what the per-object breakdown needs. Unknown keys are
+//! ignored and values of unexpected types are kept as their JSON text, so any JSON the
+//! published datasets or our generator write parses.
+
+use serde::Deserialize;
+use serde_json::Value;
+
+/// The fields of one metadata object used by the breakdowns.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ObjectMeta {
+    /// Material name.
+    pub material: Option<String>,
+    /// Shape name.
+    pub shape: Option<String>,
+    /// Size name (`large`, `medium`, `small`).
+    pub size: Option<String>,
+    /// Colour name (meaningful in `vbg` only).
+    pub color: Option<String>,
+}
+
+/// The fields of a sample's metadata used by the breakdowns.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SampleMeta {
+    /// Material of the ground (the background).
+    pub ground_material: Option<String>,
+    /// Objects in mask-label order (object `i` has label `i + 1`).
+    pub objects: Vec<ObjectMeta>,
+}
+
+#[derive(Deserialize)]
+struct RawMeta {
+    #[serde(default)]
+    ground_material: Value,
+    #[serde(default)]
+    objects: Value,
+}
+
+fn text(v: Option<&Value>) -> Option<String> {
+    match v? {
+        Value::Null => None,
+        Value::String(s) => Some(s.clone()),
+        other => Some(other.to_string()),
+    }
+}
+
+/// Parse a metadata file's bytes.
+pub fn parse(bytes: &[u8]) -> Result<SampleMeta, String> {
+    let value: Value =
+        serde_json::from_slice(bytes).map_err(|e| format!("not valid metadata JSON ({e})"))?;
+    if !value.is_object() {
+        return Err("metadata must be a JSON object".into());
+    }
+    let raw: RawMeta =
+        serde_json::from_value(value).map_err(|e| format!("not valid metadata JSON ({e})"))?;
+    let objects = match raw.objects {
+        Value::Null => Vec::new(),
+        Value::Array(items) => items
+            .iter()
+            .map(|o| ObjectMeta {
+                material: text(o.get("material")),
+                shape: text(o.get("shape")),
+                size: text(o.get("size")),
+                color: text(o.get("color")),
+            })
+            .collect(),
+        _ => return Err("`objects` must be a list".into()),
+    };
+    Ok(SampleMeta {
+        ground_material: text(Some(&raw.ground_material)),
+        objects,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_objects_in_order() {
+        let m = parse(br#"{"ground_material":"moss","objects":[{"material":"rope","shape":"cube","size":"large","color":[1,2,3]},{"shape":"sphere"}]}"#).unwrap();
+        assert_eq!(m.ground_material.as_deref(), Some("moss"));
+        assert_eq!(m.objects.len(), 2);
+        assert_eq!(m.objects[0].color.as_deref(), Some("[1,2,3]"));
+        assert_eq!(m.objects[1].material, None);
+    }
+
+    #[test]
+    fn rejects_non_object() {
+        assert!(parse(b"[1]").is_err());
+        assert!(parse(br#"{"objects": 3}"#).is_err());
+    }
+}

@@ -1,0 +1,174 @@
+//! Rendering a [`Report`] as a table, JSON and CSV.
+
+use std::fmt::Write as _;
+
+use serde_json::{json, Map, Value};
+
+use crate::evaluate::Report;
+use crate::metrics::Metric;
+
+fn num(v: Option<f64>) -> Value {
+    v.filter(|x| x.is_finite()).map_or(Value::Null, Value::from)
+}
+
+/// The JSON report: `metrics` (name -> number, `null` where no image defines it), `ci`,
+/// `counts`, `breakdowns` and `provenance`.
+pub fn to_json(r: &Report, tool_version: &str) -> Value {
+    let mut metrics = Map::new();
+    let mut ci = Map::new();
+    let mut undefined = Map::new();
+    for &m in &Metric::ALL {
+        let s = r.summary(m);
+        metrics.insert(m.name().into(), num(s.mean));
+        ci.insert(
+            m.name().into(),
+            s.ci.map_or(Value::Null, |(a, b)| json!([a, b])),
+        );
+        undefined.insert(m.name().into(), json!(r.images.len() - s.defined));
+    }
+    let mut breakdowns = Map::new();
+    for (kind, groups) in &r.breakdowns {
+        let mut g = Map::new();
+        for (name, grp) in groups {
+            g.insert(
+                name.clone(),
+                json!({"count": grp.count, "mIoU": grp.iou, "MSE": num(grp.mse)}),
+            );
+        }
+        breakdowns.insert((*kind).into(), Value::Object(g));
+    }
+    json!({
+        "metrics": metrics,
+        "ci95": ci,
+        "counts": {
+            "images": r.images.len(),
+            "missing": r.missing(),
+            "undefined": undefined,
+            "objects_skipped": r.objects_skipped(),
+        },
+        "breakdowns": breakdowns,
+        "provenance": {
+            "tool": "clevrtex",
+            "version": tool_version,
+            "variant": r.variant,
+            "split": r.split.name(),
+            "protocol": r.protocol.name(),
+            "no_background": r.no_background,
+            "bootstrap": r.bootstrap,
+            "seed": r.seed,
+            "first_index": r.images.first().map(|i| i.index),
+            "last_index": r.images.last().map(|i| i.index),
+            "gt_dir": r.gt_dir.display().to_string(),
+            "preds_dir": r.pred_dir.display().to_string(),
+            "gt_hash_xxh3": format!("{:016x}", r.gt_hash),
+            "preds_hash_xxh3": format!("{:016x}", r.pred_hash),
+        },
+    })
+}
+
+/// One CSV row per image: index, stem, every metric (empty where undefined), segment counts,
+/// `num_pairs` and whether the prediction was missing.
+pub fn to_csv(r: &Report) -> String {
+    let mut s = String::from("index,stem");
+    for m in Metric::ALL {
+        let _ = write!(s, ",{}", m.name());
+    }
+    s.push_str(",true_segments,pred_segments,num_pairs,missing\n");
+    for img in &r.images {
+        let _ = write!(s, "{},{}", img.index, img.stem);
+        for m in Metric::ALL {
+            match img.scores.get(m) {
+                Some(v) if v.is_finite() => {
+                    let _ = write!(s, ",{v}");
+                }
+                _ => s.push(','),
+            }
+        }
+        let _ = writeln!(
+            s,
+            ",{},{},{},{}",
+            img.scores.true_segments,
+            img.scores.pred_segments,
+            img.scores.num_pairs,
+            u8::from(img.missing)
+        );
+    }
+    s
+}
+
+/// The human-readable table for stdout.
+pub fn to_table(r: &Report) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "clevrtex eval: variant `{}`, split `{}` ({} images), protocol `{}`",
+        r.variant,
+        r.split.name(),
+        r.images.len(),
+        r.protocol.name()
+    );
+    let ci_head = if r.bootstrap > 0 {
+        "95% CI (bootstrap)"
+    } else {
+        ""
+    };
+    let _ = writeln!(
+        s,
+        "\n{:<8} {:>10}  {:<24} {:>7}",
+        "metric", "value", ci_head, "images"
+    );
+    for &m in &Metric::ALL {
+        let sm = r.summary(m);
+        let value = sm.mean.map_or("n/a".to_string(), |v| fmt_val(m, v));
+        let ci = sm.ci.map_or(String::new(), |(a, b)| {
+            format!("[{}, {}]", fmt_val(m, a), fmt_val(m, b))
+        });
+        let _ = writeln!(
+            s,
+            "{:<8} {:>10}  {:<24} {:>7}",
+            m.name(),
+            value,
+            ci,
+            sm.defined
+        );
+    }
+    if r.summary(Metric::Mse).mean.is_none() {
+        s.push_str(
+            "\nMSE: no reconstructions given (`<stem>_recon.png` or `recon` in the `.npz`)\n",
+        );
+    }
+    let missing = r.missing();
+    if missing > 0 {
+        let _ = writeln!(
+            s,
+            "\n{missing} predictions missing, scored as all-background (`--allow-missing`)"
+        );
+    }
+    for (kind, groups) in &r.breakdowns {
+        let _ = writeln!(s, "\nby {kind}: {:>6} {:>8} {:>10}", "count", "mIoU", "MSE");
+        for (name, g) in groups {
+            let mse = g.mse.map_or("n/a".to_string(), |v| format!("{v:.3}"));
+            let _ = writeln!(
+                s,
+                "  {:<28} {:>6} {:>8.4} {:>10}",
+                name, g.count, g.iou, mse
+            );
+        }
+    }
+    let skipped = r.objects_skipped();
+    if skipped > 0 {
+        let _ = writeln!(
+            s,
+            "\n{skipped} objects not visible after cropping were left out of the breakdowns"
+        );
+    }
+    s
+}
+
+fn fmt_val(m: Metric, v: f64) -> String {
+    if m == Metric::Mse {
+        format!("{v:.4}")
+    } else {
+        format!("{v:.6}")
+    }
+}

@@ -1,0 +1,328 @@
+//! Loading one prediction: hard labels or soft masks (argmax), and the optional
+//! reconstruction, checked against the expected shape (never reshaped).
+
+use std::path::Path;
+
+use crate::dataset::PredFiles;
+use crate::error::{corrupt, EvalError, MAX_SLOTS};
+use crate::read::{self, NpyArray, NpyData};
+
+/// A prediction ready for scoring.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Prediction {
+    /// Segment id per pixel, row-major.
+    pub labels: Vec<u32>,
+    /// Number of predicted slots (masks, or the largest id + 1).
+    pub slots: usize,
+    /// Reconstruction, interleaved RGB in [0, 1], when given.
+    pub recon: Option<Vec<f32>>,
+}
+
+/// Bytes of the files read, for the provenance hash.
+pub type ReadBytes = Vec<Vec<u8>>;
+
+fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
+    std::fs::read(path).map_err(|source| EvalError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn shape_str(dims: &[usize]) -> String {
+    format!(
+        "({})",
+        dims.iter()
+            .map(|d| d.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
+}
+
+const SHAPE_HINT: &str = "predictions must have the ground truth's evaluation shape: 128x128 under `--protocol clevrtex` (crop then resize), the dataset's own size under `--protocol native`; they are never reshaped";
+
+fn mismatch(path: &Path, pred: &[usize], truth: &[usize]) -> EvalError {
+    EvalError::ShapeMismatch {
+        path: path.to_path_buf(),
+        pred: shape_str(pred),
+        truth: shape_str(truth),
+        hint: SHAPE_HINT.into(),
+    }
+}
+
+fn labels_from_ids<I: Iterator<Item = i64>>(
+    path: &Path,
+    ids: I,
+    n: usize,
+) -> Result<(Vec<u32>, usize), EvalError> {
+    let mut labels = Vec::with_capacity(n);
+    let mut max = 0u32;
+    for v in ids {
+        if v < 0 || v >= MAX_SLOTS as i64 {
+            return Err(corrupt(
+                path,
+                format!("segment id `{v}` is outside 0..{MAX_SLOTS}"),
+                "segment ids must be slot indices 0..K-1 (background 0 when there is one); relabel them compactly",
+            ));
+        }
+        max = max.max(v as u32);
+        labels.push(v as u32);
+    }
+    Ok((labels, max as usize + 1))
+}
+
+/// A float type soft masks can hold.
+trait MaskValue:
+    Copy + PartialOrd + std::ops::Add<Output = Self> + std::ops::Sub<Output = Self>
+{
+    const ZERO: Self;
+    const ONE: Self;
+    fn nan(self) -> bool;
+}
+
+impl MaskValue for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    fn nan(self) -> bool {
+        self.is_nan()
+    }
+}
+
+impl MaskValue for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    fn nan(self) -> bool {
+        self.is_nan()
+    }
+}
+
+/// Argmax over the K masks (`data` is `(K, n)`), first index on ties, NaN as the maximum.
+/// With `no_background`, a background slot `1 - Σ_k m_k` is put in front.
+fn argmax<T: MaskValue>(data: &[T], k: usize, n: usize, no_background: bool) -> Vec<u32> {
+    if n == 0 || data.len() < k * n || k == 0 {
+        return vec![0; n];
+    }
+    let data = &data[..k * n];
+    let mut best: Vec<T>;
+    let mut idx: Vec<u32>;
+    let first;
+    if no_background {
+        let mut sum = vec![T::ZERO; n];
+        for m in data.chunks_exact(n) {
+            sum.iter_mut().zip(m).for_each(|(s, &v)| *s = *s + v);
+        }
+        best = sum.into_iter().map(|s| T::ONE - s).collect();
+        idx = vec![0; n];
+        first = 0;
+    } else {
+        best = data[..n].to_vec();
+        idx = vec![0; n];
+        first = 1;
+    }
+    let offset = usize::from(no_background);
+    for (slot, m) in data.chunks_exact(n).enumerate().skip(first) {
+        let label = (slot + offset) as u32;
+        for i in 0..n {
+            let (b, v) = (best[i], m[i]);
+            if !b.nan() && (v.nan() || v > b) {
+                best[i] = v;
+                idx[i] = label;
+            }
+        }
+    }
+    idx
+}
+
+fn segmentation_from_array(
+    path: &Path,
+    arr: &NpyArray,
+    name: &str,
+    hw: (usize, usize),
+    no_background: bool,
+) -> Result<(Vec<u32>, usize), EvalError> {
+    let (w, h) = hw;
+    let n = w * h;
+    match name {
+        "labels" => {
+            if arr.shape != [h, w] {
+                return Err(mismatch(path, &arr.shape, &[h, w]));
+            }
+            match &arr.data {
+                NpyData::Int(v) => labels_from_ids(path, v.iter().copied(), n),
+                _ => Err(corrupt(
+                    path,
+                    format!("`labels` has float dtype `{}`", arr.descr),
+                    "`labels` must hold integer segment ids; for per-slot probabilities use `masks` (K, H, W)",
+                )),
+            }
+        }
+        _ => {
+            // (K, H, W), or (K, 1, H, W) as models often emit.
+            let s = &arr.shape;
+            let k = match s.as_slice() {
+                [k, hh, ww] if (*hh, *ww) == (h, w) => *k,
+                [k, 1, hh, ww] if (*hh, *ww) == (h, w) => *k,
+                _ => {
+                    let want = if s.len() == 4 {
+                        vec![s[0], 1, h, w]
+                    } else {
+                        vec![s.first().copied().unwrap_or(0), h, w]
+                    };
+                    return Err(mismatch(path, s, &want));
+                }
+            };
+            let slots = k + usize::from(no_background);
+            if k == 0 || slots > MAX_SLOTS {
+                return Err(corrupt(
+                    path,
+                    format!("`masks` has {k} slots"),
+                    &format!("give between 1 and {} masks", MAX_SLOTS - 1),
+                ));
+            }
+            let labels = match &arr.data {
+                NpyData::F32(v) => argmax(v, k, n, no_background),
+                NpyData::F64(v) => argmax(v, k, n, no_background),
+                NpyData::Int(v) => {
+                    let f: Vec<f64> = v.iter().map(|&x| x as f64).collect();
+                    argmax(&f, k, n, no_background)
+                }
+            };
+            Ok((labels, slots))
+        }
+    }
+}
+
+fn recon_from_array(
+    path: &Path,
+    arr: &NpyArray,
+    hw: (usize, usize),
+) -> Result<Vec<f32>, EvalError> {
+    let (w, h) = hw;
+    let n = w * h;
+    let vals: Vec<f32> = match &arr.data {
+        NpyData::F32(v) => v.clone(),
+        NpyData::F64(v) => v.iter().map(|&x| x as f32).collect(),
+        NpyData::Int(_) => {
+            return Err(corrupt(
+                path,
+                format!("`recon` has integer dtype `{}`", arr.descr),
+                "give `recon` as floats in [0, 1], shaped (3, H, W) or (H, W, 3)",
+            ))
+        }
+    };
+    match arr.shape.as_slice() {
+        [3, hh, ww] if (*hh, *ww) == (h, w) => {
+            let mut out = Vec::with_capacity(3 * n);
+            for i in 0..n {
+                out.extend_from_slice(&[vals[i], vals[n + i], vals[2 * n + i]]);
+            }
+            Ok(out)
+        }
+        [hh, ww, 3] if (*hh, *ww) == (h, w) => Ok(vals),
+        s => Err(mismatch(path, s, &[3, h, w])),
+    }
+}
+
+/// Load the prediction for one sample, expecting `hw = (width, height)`. Returns the
+/// prediction and the bytes of every file read (for hashing).
+pub fn load(
+    files: &PredFiles,
+    hw: (usize, usize),
+    no_background: bool,
+) -> Result<(Prediction, ReadBytes), EvalError> {
+    let (w, h) = hw;
+    let n = w * h;
+    let Some(seg) = &files.segmentation else {
+        return Err(EvalError::Usage {
+            message: "internal: no segmentation file".into(),
+            hint: "report this bug".into(),
+        });
+    };
+    let bytes = read_file(seg)?;
+    let name = seg.file_name().and_then(|s| s.to_str()).unwrap_or("");
+    let mut recon = None;
+    let (labels, slots) = if name.ends_with(".png") {
+        let img = read::png_labels(&bytes).map_err(|r| {
+            corrupt(
+                seg,
+                r,
+                "a `_mask.png` must be an 8- or 16-bit greyscale or palette PNG of segment ids",
+            )
+        })?;
+        if (img.width, img.height) != (w, h) {
+            return Err(mismatch(seg, &[img.height, img.width], &[h, w]));
+        }
+        labels_from_ids(seg, img.labels.iter().map(|&v| v as i64), n)?
+    } else if name.ends_with(".npy") {
+        let arr = read::npy(&bytes).map_err(|r| corrupt(seg, r, "write it with `numpy.save`"))?;
+        let kind = if arr.shape.len() == 2 {
+            "labels"
+        } else {
+            "masks"
+        };
+        segmentation_from_array(seg, &arr, kind, hw, no_background)?
+    } else {
+        let mut arrays = read::npz(&bytes, &["labels", "masks", "recon"]).map_err(|r| {
+            corrupt(
+                seg,
+                r,
+                "write it with `numpy.savez` or `numpy.savez_compressed`",
+            )
+        })?;
+        if let Some(r) = arrays.remove("recon") {
+            recon = Some(recon_from_array(seg, &r, hw)?);
+        }
+        match (arrays.get("labels"), arrays.get("masks")) {
+            (Some(_), Some(_)) => {
+                return Err(corrupt(
+                    seg,
+                    "it holds both `labels` and `masks`",
+                    "keep one of them, so which prediction is scored is never a guess",
+                ))
+            }
+            (Some(a), None) => segmentation_from_array(seg, a, "labels", hw, no_background)?,
+            (None, Some(a)) => segmentation_from_array(seg, a, "masks", hw, no_background)?,
+            (None, None) => {
+                let names = read::npz_names(&bytes);
+                return Err(corrupt(
+                    seg,
+                    format!(
+                        "no `labels` or `masks` array (it holds: {})",
+                        names
+                            .iter()
+                            .map(|n| format!("`{n}`"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                    "save the segmentation as `labels` (H, W) or `masks` (K, H, W)",
+                ));
+            }
+        }
+    };
+    let mut read_bytes = vec![bytes];
+    if let Some(rp) = &files.recon {
+        if recon.is_some() {
+            return Err(EvalError::Duplicate {
+                what: "reconstruction",
+                stem: name.to_string(),
+                a: seg.clone(),
+                b: rp.clone(),
+            });
+        }
+        let rb = read_file(rp)?;
+        let img = read::png_rgb(&rb)
+            .map_err(|r| corrupt(rp, r, "a `_recon.png` must be an RGB(A) PNG"))?;
+        if (img.width, img.height) != (w, h) {
+            return Err(mismatch(rp, &[img.height, img.width, 3], &[h, w, 3]));
+        }
+        recon = Some(img.rgb.iter().map(|&v| v as f32 / 255.0).collect());
+        read_bytes.push(rb);
+    }
+    Ok((
+        Prediction {
+            labels,
+            slots,
+            recon,
+        },
+        read_bytes,
+    ))
+}
