@@ -1,0 +1,755 @@
+//! Variant configs: the rules of a variant (shapes, sizes, materials, colours) plus the base
+//! scene (camera, lights, backdrop, placement, render defaults).
+//!
+//! The built-in configs are the files of `configs/`, embedded at compile time, so an installed
+//! binary never reads them at run time. A variant file may carry a `base_scene` object: it is
+//! merged key by key over the built-in `configs/base-scene.json` (objects merge recursively,
+//! any other value replaces), so a user config only states what it changes, e.g.
+//! `"base_scene": {"render": {"samples": 256}}`. This crate does no I/O: the CLI reads a
+//! user's file and calls [`Config::from_json_str`].
+
+use std::collections::BTreeSet;
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::scene_file::{Pass, RenderSettings};
+
+/// The built-in base scene (values of the reference's §3).
+pub const BASE_SCENE_JSON: &str = include_str!("../../../configs/base-scene.json");
+
+/// Built-in variants: name and file text, in the order `variant_names` lists them.
+const BUILTIN: [(&str, &str); 7] = [
+    ("full", include_str!("../../../configs/full.json")),
+    ("pbg", include_str!("../../../configs/pbg.json")),
+    ("vbg", include_str!("../../../configs/vbg.json")),
+    ("grassbg", include_str!("../../../configs/grassbg.json")),
+    ("camo", include_str!("../../../configs/camo.json")),
+    ("outd", include_str!("../../../configs/outd.json")),
+    ("clevr", include_str!("../../../configs/clevr.json")),
+];
+
+/// Shapes the bridge can build, the four main ones first.
+pub const KNOWN_SHAPES: [&str; 8] = [
+    "cube",
+    "sphere",
+    "cylinder",
+    "monkey",
+    "cone",
+    "torus",
+    "icosahedron",
+    "teapot",
+];
+
+/// A config that failed to load: the file, the key and the value at fault, and what to do.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("invalid config `{file}`: key `{key}`{}: {problem}\nhint: {hint}", value.as_ref().map(|v| format!(" (value `{v}`)")).unwrap_or_default())]
+pub struct ConfigError {
+    /// The file (or built-in name) the config came from.
+    pub file: String,
+    /// Dotted path of the offending key (`.` for the whole document).
+    pub key: String,
+    /// The offending value, when there is one.
+    pub value: Option<String>,
+    /// What is wrong.
+    pub problem: String,
+    /// What to do about it.
+    pub hint: String,
+}
+
+/// Which images go to which split.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Splits {
+    /// First 10% of the run's indices `test`, next 10% `val`, the rest `train`.
+    Standard,
+    /// Every image is `test` (the OOD set).
+    TestOnly,
+}
+
+/// A size class: name and the scale applied to the unit mesh.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SizeRule {
+    /// `large`, `medium`, `small` or any name.
+    pub name: String,
+    /// Scale factor (also the object's radius in the spacing rule).
+    pub scale: f64,
+}
+
+/// A named colour in sRGB 0-255, as CLEVR lists them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ColorRule {
+    /// Colour name recorded in metadata.
+    pub name: String,
+    /// sRGB components, 0-255.
+    pub srgb: [u8; 3],
+}
+
+impl ColorRule {
+    /// The colour in linear RGB (the sRGB transfer function undone), as Blender wants it.
+    pub fn linear(&self) -> [f64; 3] {
+        self.srgb.map(|c| {
+            let c = f64::from(c) / 255.0;
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        })
+    }
+}
+
+/// Object rules of a variant, with the material list resolved to names.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjectRules {
+    /// Inclusive range of the object count, drawn uniformly once per image.
+    pub count: [u32; 2],
+    /// Shapes, drawn uniformly.
+    pub shapes: Vec<String>,
+    /// Sizes, drawn uniformly.
+    pub sizes: Vec<SizeRule>,
+    /// Material names, drawn uniformly (sorted, no duplicates).
+    pub materials: Vec<String>,
+    /// Colours, drawn uniformly; empty when the variant does not colour objects.
+    pub colors: Vec<ColorRule>,
+}
+
+/// Background rules of a variant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BackgroundRules {
+    /// Material names, drawn uniformly (the object's material when `same_material`).
+    pub materials: Vec<String>,
+    /// Displacement strength of the backdrop material, if it displaces.
+    pub displacement: Option<f64>,
+    /// Texture scale of the backdrop material, if set.
+    pub scale: Option<f64>,
+}
+
+/// Camera of the base scene before jitter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraRig {
+    /// Location before jitter.
+    pub location: [f64; 3],
+    /// Point tracked.
+    pub look_at: [f64; 3],
+    /// Each coordinate of `location` moves by Uniform(-jitter, jitter).
+    pub jitter: f64,
+    /// Focal length, mm.
+    pub focal_length_mm: f64,
+    /// Sensor width, mm (sensor fit `AUTO`).
+    pub sensor_width_mm: f64,
+    /// Near clip.
+    pub clip_start: f64,
+    /// Far clip.
+    pub clip_end: f64,
+}
+
+/// An area light of the base scene before jitter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightRig {
+    /// `key`, `fill`, `back`.
+    pub name: String,
+    /// Location before jitter.
+    pub location: [f64; 3],
+    /// Point tracked.
+    pub look_at: [f64; 3],
+    /// Each coordinate of `location` moves by Uniform(-jitter, jitter).
+    pub jitter: f64,
+    /// Side of the square, m.
+    pub size: f64,
+    /// Power, W.
+    pub energy: f64,
+    /// Linear RGB.
+    pub color: [f64; 3],
+}
+
+/// The sun of the base scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SunRig {
+    /// Direction the light travels (normalised by the sampler).
+    pub direction: [f64; 3],
+    /// Strength.
+    pub strength: f64,
+    /// Angular diameter, rad.
+    pub angle: f64,
+}
+
+/// The backdrop's shape.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BackdropShape {
+    /// `[x, height]` profile points, x increasing.
+    pub profile: Vec<[f64; 2]>,
+    /// Extent along the backdrop's y.
+    pub y_range: [f64; 2],
+    /// Rotation about world z, rad.
+    pub rotation_z: f64,
+}
+
+/// Placement rules (reference §1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Placement {
+    /// Object centres are drawn from `[area.0, area.1]^2`.
+    pub area: [f64; 2],
+    /// Minimum gap between two objects' radii.
+    pub min_dist: f64,
+    /// Projected offsets along left/right/front/behind must not fall in `(0, margin)`.
+    pub margin: f64,
+    /// Position draws per object before the whole layout restarts.
+    pub tries_per_object: u32,
+    /// Layout restarts before giving up with an error.
+    pub max_restarts: u32,
+    /// Divide a placed cube's recorded radius by sqrt(2), as CLEVR does.
+    pub cube_radius_quirk: bool,
+}
+
+/// The base scene: everything that is the same for every variant.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BaseScene {
+    /// Render defaults.
+    pub render: RenderSettings,
+    /// Passes requested by default.
+    pub passes: Vec<Pass>,
+    /// Camera.
+    pub camera: CameraRig,
+    /// Area lights.
+    pub lights: Vec<LightRig>,
+    /// Sun.
+    pub sun: SunRig,
+    /// Backdrop.
+    pub backdrop: BackdropShape,
+    /// Placement rules.
+    pub placement: Placement,
+}
+
+/// A loaded and validated config.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// Variant name, used in file names (`[A-Za-z0-9_-]+`).
+    pub name: String,
+    /// One line saying what the variant is.
+    pub description: String,
+    /// Split rule.
+    pub splits: Splits,
+    /// One material per scene, on every object and the background (CAMO).
+    pub same_material: bool,
+    /// Object rules.
+    pub objects: ObjectRules,
+    /// Background rules.
+    pub background: BackgroundRules,
+    /// Base scene.
+    pub base: BaseScene,
+}
+
+// ---- file shapes -------------------------------------------------------------------------
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct VariantFile {
+    name: String,
+    #[serde(default)]
+    description: String,
+    splits: Splits,
+    #[serde(default)]
+    same_material: bool,
+    objects: ObjectsFile,
+    background: BackgroundFile,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ObjectsFile {
+    count: [u32; 2],
+    shapes: Vec<String>,
+    sizes: Vec<SizeRule>,
+    materials: MaterialSelect,
+    colors: Option<Vec<ColorRule>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BackgroundFile {
+    materials: Option<MaterialSelect>,
+    displacement: Option<f64>,
+    scale: Option<f64>,
+}
+
+/// `{"sets": [...], "include": [...], "exclude": [...]}`: members of the sets plus `include`,
+/// minus `exclude`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MaterialSelect {
+    #[serde(default)]
+    sets: Vec<String>,
+    #[serde(default)]
+    include: Vec<String>,
+    #[serde(default)]
+    exclude: Vec<String>,
+}
+
+#[derive(Deserialize)]
+struct Catalogue {
+    materials: Vec<CatalogueEntry>,
+}
+
+#[derive(Deserialize)]
+struct CatalogueEntry {
+    name: String,
+    set: String,
+}
+
+impl Config {
+    /// Names of the built-in variants.
+    pub fn variant_names() -> Vec<&'static str> {
+        BUILTIN.iter().map(|(n, _)| *n).collect()
+    }
+
+    /// The built-in config of `variant`.
+    pub fn builtin(variant: &str) -> Result<Config, ConfigError> {
+        match BUILTIN.iter().find(|(n, _)| *n == variant) {
+            Some((name, text)) => Config::from_json_str(text, &format!("configs/{name}.json")),
+            None => Err(ConfigError {
+                file: "--variant".into(),
+                key: "variant".into(),
+                value: Some(variant.into()),
+                problem: "unknown variant".into(),
+                hint: format!(
+                    "use one of {}, or copy one of `configs/` and pass it with `--config`",
+                    Config::variant_names().join(", ")
+                ),
+            }),
+        }
+    }
+
+    /// Parse and validate a variant config. `source` names the file in error messages.
+    pub fn from_json_str(text: &str, source: &str) -> Result<Config, ConfigError> {
+        let err = |key: &str, value: Option<String>, problem: String, hint: &str| ConfigError {
+            file: source.to_string(),
+            key: key.to_string(),
+            value,
+            problem,
+            hint: hint.to_string(),
+        };
+        let mut doc: Value = serde_json::from_str(text).map_err(|e| {
+            err(
+                ".",
+                None,
+                format!("not valid JSON: {e}"),
+                "fix the JSON syntax at the line and column given",
+            )
+        })?;
+        let mut base: Value =
+            serde_json::from_str(BASE_SCENE_JSON).expect("built-in base scene is valid JSON");
+        if let Some(obj) = doc.as_object_mut() {
+            if let Some(over) = obj.remove("base_scene") {
+                if !over.is_object() {
+                    return Err(err(
+                        "base_scene",
+                        Some(over.to_string()),
+                        "must be an object".into(),
+                        "give only the keys to change, e.g. `{\"render\": {\"samples\": 256}}`",
+                    ));
+                }
+                merge(&mut base, over);
+            }
+        }
+        let file: VariantFile = serde_path_to_error::deserialize(&doc).map_err(|e| {
+            err(
+                &e.path().to_string(),
+                None,
+                e.inner().to_string(),
+                "compare with the built-in configs in `configs/` and `docs/scene-format.md`",
+            )
+        })?;
+        let base: BaseScene = serde_path_to_error::deserialize(&base).map_err(|e| {
+            err(
+                &format!("base_scene.{}", e.path()),
+                None,
+                e.inner().to_string(),
+                "compare with `configs/base-scene.json`",
+            )
+        })?;
+        validate(file, base, source)
+    }
+}
+
+/// Merge `over` into `base`: objects key by key (recursively), anything else replaces.
+fn merge(base: &mut Value, over: Value) {
+    match (base, over) {
+        (Value::Object(b), Value::Object(o)) => {
+            for (k, v) in o {
+                match b.get_mut(&k) {
+                    Some(slot) => merge(slot, v),
+                    None => {
+                        b.insert(k, v);
+                    }
+                }
+            }
+        }
+        (slot, v) => *slot = v,
+    }
+}
+
+fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Config, ConfigError> {
+    let err = |key: &str, value: Option<String>, problem: &str, hint: &str| ConfigError {
+        file: source.to_string(),
+        key: key.to_string(),
+        value,
+        problem: problem.to_string(),
+        hint: hint.to_string(),
+    };
+    let catalogue: Catalogue = serde_json::from_str(clevrtex_materials::CATALOGUE_JSON)
+        .expect("built-in material catalogue is valid JSON");
+
+    if file.name.is_empty()
+        || !file
+            .name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        return Err(err(
+            "name",
+            Some(file.name),
+            "must be non-empty ASCII letters, digits, `_` or `-` (it is used in file names)",
+            "rename the variant, e.g. `my_variant`",
+        ));
+    }
+
+    let [lo, hi] = file.objects.count;
+    if lo == 0 || lo > hi || hi > 255 {
+        return Err(err(
+            "objects.count",
+            Some(format!("[{lo}, {hi}]")),
+            "must be `[min, max]` with 1 <= min <= max <= 255",
+            "the reference uses `[3, 10]`",
+        ));
+    }
+    if file.objects.shapes.is_empty() {
+        return Err(err(
+            "objects.shapes",
+            Some("[]".into()),
+            "must not be empty",
+            "list at least one shape",
+        ));
+    }
+    for (i, s) in file.objects.shapes.iter().enumerate() {
+        if !KNOWN_SHAPES.contains(&s.as_str()) {
+            return Err(err(
+                &format!("objects.shapes[{i}]"),
+                Some(s.clone()),
+                "unknown shape",
+                &format!("use one of {}", KNOWN_SHAPES.join(", ")),
+            ));
+        }
+    }
+    if file.objects.sizes.is_empty() {
+        return Err(err(
+            "objects.sizes",
+            Some("[]".into()),
+            "must not be empty",
+            "list at least one size, e.g. `{\"name\": \"large\", \"scale\": 0.9}`",
+        ));
+    }
+    for (i, s) in file.objects.sizes.iter().enumerate() {
+        if !(s.scale.is_finite() && s.scale > 0.0) {
+            return Err(err(
+                &format!("objects.sizes[{i}].scale"),
+                Some(s.scale.to_string()),
+                "must be a positive number",
+                "the reference uses 0.4, 0.6 and 0.9",
+            ));
+        }
+    }
+    let colors = match file.objects.colors {
+        Some(c) if c.is_empty() => {
+            return Err(err(
+                "objects.colors",
+                Some("[]".into()),
+                "must not be empty",
+                "remove the key for uncoloured objects, or list at least one colour",
+            ))
+        }
+        Some(c) => c,
+        None => Vec::new(),
+    };
+    let materials = resolve(
+        &file.objects.materials,
+        "objects.materials",
+        &catalogue,
+        &err,
+    )?;
+
+    let bg_materials = match (&file.background.materials, file.same_material) {
+        (Some(_), true) => {
+            return Err(err(
+                "background.materials",
+                None,
+                "must be absent when `same_material` is true (the background takes the objects' material)",
+                "remove `background.materials` or set `same_material` to false",
+            ))
+        }
+        (None, true) => materials.clone(),
+        (None, false) => {
+            return Err(err(
+                "background.materials",
+                None,
+                "missing",
+                "add e.g. `\"materials\": {\"include\": [\"plain\"]}`",
+            ))
+        }
+        (Some(sel), false) => resolve(sel, "background.materials", &catalogue, &err)?,
+    };
+    for (key, v) in [
+        ("background.displacement", file.background.displacement),
+        ("background.scale", file.background.scale),
+    ] {
+        if let Some(v) = v {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(err(
+                    key,
+                    Some(v.to_string()),
+                    "must be a non-negative number",
+                    "the reference uses displacement 0.35 and scale 2",
+                ));
+            }
+        }
+    }
+
+    // Base scene checks.
+    let r = &base.render;
+    if r.width == 0 || r.height == 0 || r.samples == 0 {
+        return Err(err(
+            "base_scene.render",
+            Some(format!("{}x{}, {} samples", r.width, r.height, r.samples)),
+            "width, height and samples must be positive",
+            "the reference uses 320x240",
+        ));
+    }
+    if base.passes.is_empty() {
+        return Err(err(
+            "base_scene.passes",
+            Some("[]".into()),
+            "must not be empty",
+            "list passes from rgb, mask, depth, normal, albedo, shadow",
+        ));
+    }
+    base.passes.sort();
+    base.passes.dedup();
+    let p = &base.placement;
+    if !p.area.iter().all(|v| v.is_finite())
+        || p.area[0] >= p.area[1]
+        || p.min_dist < 0.0
+        || p.margin < 0.0
+    {
+        return Err(err(
+            "base_scene.placement",
+            Some(format!(
+                "area {:?}, min_dist {}, margin {}",
+                p.area, p.min_dist, p.margin
+            )),
+            "area must be `[lo, hi]` with lo < hi; min_dist and margin must be >= 0",
+            "the reference uses area [-3, 3], min_dist 0.25, margin 0.4",
+        ));
+    }
+    if p.tries_per_object == 0 || p.max_restarts == 0 {
+        return Err(err(
+            "base_scene.placement",
+            Some(format!(
+                "tries_per_object {}, max_restarts {}",
+                p.tries_per_object, p.max_restarts
+            )),
+            "must both be at least 1",
+            "the reference uses 50 tries per object",
+        ));
+    }
+    if base.backdrop.profile.len() < 2
+        || base.backdrop.profile.windows(2).any(|w| w[0][0] >= w[1][0])
+    {
+        return Err(err(
+            "base_scene.backdrop.profile",
+            None,
+            "needs at least two points with strictly increasing x",
+            "compare with `configs/base-scene.json`",
+        ));
+    }
+    if base.camera.focal_length_mm <= 0.0 || base.camera.sensor_width_mm <= 0.0 {
+        return Err(err(
+            "base_scene.camera",
+            None,
+            "focal length and sensor width must be positive",
+            "the reference uses 35 mm and 32 mm",
+        ));
+    }
+
+    Ok(Config {
+        name: file.name,
+        description: file.description,
+        splits: file.splits,
+        same_material: file.same_material,
+        objects: ObjectRules {
+            count: file.objects.count,
+            shapes: file.objects.shapes,
+            sizes: file.objects.sizes,
+            materials,
+            colors,
+        },
+        background: BackgroundRules {
+            materials: bg_materials,
+            displacement: file.background.displacement,
+            scale: file.background.scale,
+        },
+        base,
+    })
+}
+
+/// Builds a [`ConfigError`] from key, value, problem and hint.
+type MakeError<'a> = dyn Fn(&str, Option<String>, &str, &str) -> ConfigError + 'a;
+
+fn resolve(
+    sel: &MaterialSelect,
+    key: &str,
+    catalogue: &Catalogue,
+    err: &MakeError<'_>,
+) -> Result<Vec<String>, ConfigError> {
+    let sets: BTreeSet<&str> = catalogue.materials.iter().map(|m| m.set.as_str()).collect();
+    let known = |name: &str| catalogue.materials.iter().any(|m| m.name == name);
+    let mut out = BTreeSet::new();
+    for (i, s) in sel.sets.iter().enumerate() {
+        if !sets.contains(s.as_str()) {
+            return Err(err(
+                &format!("{key}.sets[{i}]"),
+                Some(s.clone()),
+                "unknown material set",
+                &format!(
+                    "use one of {}",
+                    sets.iter().copied().collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        }
+        out.extend(
+            catalogue
+                .materials
+                .iter()
+                .filter(|m| &m.set == s)
+                .map(|m| m.name.clone()),
+        );
+    }
+    for (field, names) in [("include", &sel.include), ("exclude", &sel.exclude)] {
+        for (i, n) in names.iter().enumerate() {
+            if !known(n) {
+                return Err(err(
+                    &format!("{key}.{field}[{i}]"),
+                    Some(n.clone()),
+                    "unknown material",
+                    "run `clevrtex materials` to list the catalogue",
+                ));
+            }
+        }
+    }
+    out.extend(sel.include.iter().cloned());
+    for n in &sel.exclude {
+        out.remove(n);
+    }
+    if out.is_empty() {
+        return Err(err(
+            key,
+            None,
+            "selects no material",
+            "add a set (`\"sets\": [\"main\"]`) or names to `include`, or exclude fewer",
+        ));
+    }
+    Ok(out.into_iter().collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_variant_loads() {
+        for name in Config::variant_names() {
+            let c = Config::builtin(name).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(c.name, name);
+        }
+    }
+
+    #[test]
+    fn base_scene_overrides_merge_over_the_builtin() {
+        let text = include_str!("../../../configs/camo.json").replacen(
+            "{",
+            r#"{"base_scene": {"render": {"samples": 7}, "placement": {"margin": 0.1}},"#,
+            1,
+        );
+        let c = Config::from_json_str(&text, "my.json").unwrap();
+        assert_eq!(c.base.render.samples, 7);
+        assert_eq!(c.base.render.width, 320);
+        assert_eq!(c.base.placement.margin, 0.1);
+        assert_eq!(c.base.placement.min_dist, 0.25);
+    }
+
+    #[test]
+    fn unknown_key_names_file_and_key() {
+        let text = include_str!("../../../configs/full.json").replacen(
+            "\"shapes\"",
+            "\"shapez\": [], \"shapes\"",
+            1,
+        );
+        let e = Config::from_json_str(&text, "my.json").unwrap_err();
+        assert_eq!(e.file, "my.json");
+        assert_eq!(e.key, "objects.shapez");
+        assert!(e.problem.contains("shapez"), "{e}");
+        let text = include_str!("../../../configs/full.json").replacen(
+            "{",
+            r#"{"base_scene": {"camera": {"fov": 1}},"#,
+            1,
+        );
+        let e = Config::from_json_str(&text, "my.json").unwrap_err();
+        assert_eq!(e.key, "base_scene.camera.fov");
+        assert!(e.problem.contains("fov"), "{e}");
+    }
+
+    #[test]
+    fn unknown_names_and_empty_lists_are_errors() {
+        let full = include_str!("../../../configs/full.json");
+        let e = Config::from_json_str(&full.replacen("\"monkey\"", "\"donkey\"", 1), "f.json")
+            .unwrap_err();
+        assert_eq!(e.key, "objects.shapes[3]");
+        assert_eq!(e.value.as_deref(), Some("donkey"));
+        let e = Config::from_json_str(
+            &full.replacen(
+                "\"sets\": [\n        \"main\"\n      ]",
+                "\"include\": [\"velvet\"]",
+                1,
+            ),
+            "f.json",
+        )
+        .unwrap_err();
+        assert_eq!(e.key, "objects.materials.include[0]", "{e}");
+        let e = Config::from_json_str(
+            &full.replacen("\"sets\": [\n        \"main\"\n      ]", "\"sets\": []", 1),
+            "f.json",
+        )
+        .unwrap_err();
+        assert_eq!(e.key, "objects.materials", "{e}");
+        assert!(e.to_string().contains("\nhint: "));
+    }
+
+    #[test]
+    fn srgb_to_linear() {
+        let c = ColorRule {
+            name: "x".into(),
+            srgb: [0, 255, 128],
+        };
+        let l = c.linear();
+        assert_eq!(l[0], 0.0);
+        assert!((l[1] - 1.0).abs() < 1e-12);
+        assert!((l[2] - 0.2158605).abs() < 1e-6);
+    }
+}

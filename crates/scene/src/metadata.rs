@@ -1,0 +1,205 @@
+//! CLEVR-style metadata (`<stem>.json` of a published sample), computed from a scene file.
+
+use serde::Serialize;
+
+use crate::camera::{directions, dot, project};
+use crate::scene_file::{Pass, SceneFile};
+
+/// Threshold of the relationships: `j` is `behind` `i` when
+/// `dot(pos_j - pos_i, behind) > RELATION_EPS`.
+pub const RELATION_EPS: f64 = 0.2;
+
+/// The six ground-plane directions (unit vectors) from the camera.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Directions {
+    /// Away from the camera.
+    pub behind: [f64; 3],
+    /// Towards the camera.
+    pub front: [f64; 3],
+    /// The camera's left.
+    pub left: [f64; 3],
+    /// The camera's right.
+    pub right: [f64; 3],
+    /// World up.
+    pub above: [f64; 3],
+    /// World down.
+    pub below: [f64; 3],
+}
+
+/// For each relation and each object `i`, the sorted 0-based indices `j` in that relation.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Relationships {
+    /// Objects behind object `i`.
+    pub behind: Vec<Vec<usize>>,
+    /// Objects in front of object `i`.
+    pub front: Vec<Vec<usize>>,
+    /// Objects left of object `i`.
+    pub left: Vec<Vec<usize>>,
+    /// Objects right of object `i`.
+    pub right: Vec<Vec<usize>>,
+}
+
+/// One object's metadata.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ObjectMetadata {
+    /// Shape name.
+    pub shape: String,
+    /// Rotation about z, degrees.
+    pub rotation: f64,
+    /// Size name.
+    pub size: String,
+    /// World position.
+    #[serde(rename = "3d_coords")]
+    pub coords_3d: [f64; 3],
+    /// `[x, y, depth]` of the origin: pixels (y down, not rounded) and distance along the view
+    /// axis, from [`project`].
+    pub pixel_coords: [f64; 3],
+    /// Instance id in the mask (`i + 1`).
+    pub index: usize,
+    /// Colour name, `null` in variants without colours.
+    pub color: Option<String>,
+    /// Material name.
+    pub material: String,
+}
+
+/// The metadata file of one image.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClevrMetadata {
+    /// Number of objects.
+    pub num_objects: usize,
+    /// `test`, `val` or `train`.
+    pub split: String,
+    /// Image index.
+    pub image_index: u64,
+    /// `<stem>.png`, when the RGB pass is produced.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub image_filename: Option<String>,
+    /// Backdrop material name.
+    pub ground_material: String,
+    /// Ground-plane directions.
+    pub directions: Directions,
+    /// Objects in mask order.
+    pub objects: Vec<ObjectMetadata>,
+    /// Spatial relationships.
+    pub relationships: Relationships,
+    /// `<stem>_flat.png`, when the mask pass is produced.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mask_filename: Option<String>,
+    /// `<stem>_normal_0001.png`, when produced.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub normal_filename: Option<String>,
+    /// `<stem>_albedo_0001.png`, when produced.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub albedo_filename: Option<String>,
+    /// `<stem>_depth_0001.png`, when produced.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth_filename: Option<String>,
+    /// `<stem>_shadow_0001.png`, when produced.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shadow_filename: Option<String>,
+}
+
+/// File name of `pass` for the image with file stem `stem` (reference §4).
+pub fn pass_filename(stem: &str, pass: Pass) -> String {
+    match pass {
+        Pass::Rgb => format!("{stem}.png"),
+        Pass::Mask => format!("{stem}_flat.png"),
+        other => format!("{stem}_{}_0001.png", other.name()),
+    }
+}
+
+/// Relationships of points `pos` along the four ground directions.
+pub fn relationships(pos: &[[f64; 3]], dirs: &Directions) -> Relationships {
+    let rel = |d: [f64; 3]| -> Vec<Vec<usize>> {
+        pos.iter()
+            .enumerate()
+            .map(|(i, pi)| {
+                (0..pos.len())
+                    .filter(|&j| {
+                        j != i
+                            && dot([pos[j][0] - pi[0], pos[j][1] - pi[1], pos[j][2] - pi[2]], d)
+                                > RELATION_EPS
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    Relationships {
+        behind: rel(dirs.behind),
+        front: rel(dirs.front),
+        left: rel(dirs.left),
+        right: rel(dirs.right),
+    }
+}
+
+/// The CLEVR metadata of a scene, at the scene's render resolution.
+pub fn metadata(scene: &SceneFile) -> ClevrMetadata {
+    let dirs = directions(&scene.camera);
+    let (w, h) = (scene.render.width, scene.render.height);
+    let pos: Vec<[f64; 3]> = scene.objects.iter().map(|o| o.location).collect();
+    let file = |pass: Pass| {
+        scene
+            .passes
+            .contains(&pass)
+            .then(|| pass_filename(&scene.stem, pass))
+    };
+    ClevrMetadata {
+        num_objects: scene.objects.len(),
+        split: scene.split.clone(),
+        image_index: scene.index,
+        image_filename: file(Pass::Rgb),
+        ground_material: scene.backdrop.material.name.clone(),
+        directions: dirs,
+        objects: scene
+            .objects
+            .iter()
+            .enumerate()
+            .map(|(i, o)| ObjectMetadata {
+                shape: o.shape.clone(),
+                rotation: o.rotation_deg,
+                size: o.size.clone(),
+                coords_3d: o.location,
+                pixel_coords: project(&scene.camera, w, h, o.location),
+                index: i + 1,
+                color: o.material.color_name.clone(),
+                material: o.material.name.clone(),
+            })
+            .collect(),
+        relationships: relationships(&pos, &dirs),
+        mask_filename: file(Pass::Mask),
+        normal_filename: file(Pass::Normal),
+        albedo_filename: file(Pass::Albedo),
+        depth_filename: file(Pass::Depth),
+        shadow_filename: file(Pass::Shadow),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relationships_use_the_threshold() {
+        let dirs = Directions {
+            behind: [0.0, 1.0, 0.0],
+            front: [0.0, -1.0, 0.0],
+            left: [-1.0, 0.0, 0.0],
+            right: [1.0, 0.0, 0.0],
+            above: [0.0, 0.0, 1.0],
+            below: [0.0, 0.0, -1.0],
+        };
+        let pos = [[0.0, 0.0, 0.0], [0.1, 1.0, 0.0], [1.0, 0.15, 0.0]];
+        let r = relationships(&pos, &dirs);
+        assert_eq!(r.behind, vec![vec![1], vec![], vec![1]]);
+        assert_eq!(r.front, vec![vec![], vec![0, 2], vec![]]);
+        assert_eq!(r.right, vec![vec![2], vec![2], vec![]]);
+        assert_eq!(r.left, vec![vec![], vec![], vec![0, 1]]);
+    }
+
+    #[test]
+    fn pass_filenames_match_the_published_layout() {
+        assert_eq!(pass_filename("S", Pass::Rgb), "S.png");
+        assert_eq!(pass_filename("S", Pass::Mask), "S_flat.png");
+        assert_eq!(pass_filename("S", Pass::Depth), "S_depth_0001.png");
+    }
+}
