@@ -1,12 +1,236 @@
-//! `clevrtex sample`.
+//! `clevrtex sample`: write one scene file per image, without rendering.
 
-use crate::exit::CmdResult;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use clevrtex_scene::{config::Config, sample, sample_dir, SampleRequest};
+use rayon::prelude::*;
+
+use crate::exit::{CmdResult, OK};
 
 /// Arguments of `clevrtex sample`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+#[command(
+    after_help = "Sharding: `--shard K/N` keeps the indices with `index % N == K`, so \
+N shards together write every index exactly once. Without `--shard`, the shard comes from \
+SLURM_ARRAY_TASK_ID (minus SLURM_ARRAY_TASK_MIN when set) and SLURM_ARRAY_TASK_COUNT, or \
+from JOB_COMPLETION_INDEX (Kubernetes indexed jobs) with the count from `--shard-count`."
+)]
+pub struct Args {
+    /// Built-in variant: full, pbg, vbg, grassbg, camo, outd or clevr.
+    #[arg(
+        long,
+        value_name = "NAME",
+        required_unless_present = "config",
+        conflicts_with = "config"
+    )]
+    pub variant: Option<String>,
+    /// A variant config file (copy one of `configs/`); its `name` names the outputs.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Number of images, indices `start .. start + n`.
+    #[arg(short = 'n', long = "count", value_name = "N")]
+    pub count: u64,
+    /// Run seed; with the image index it fixes every random draw.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output root; files go to `<out>/clevrtex_<variant>/<index / 1000>/CLEVRTEX_<variant>_<index:06>.json`.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// First image index.
+    #[arg(long, default_value_t = 0, value_name = "I")]
+    pub start: u64,
+    /// Size of the whole dataset, which fixes the splits (first 10% test, next 10% val, rest
+    /// train) [default: start + n].
+    #[arg(long, value_name = "T")]
+    pub total: Option<u64>,
+    /// Write only the indices with `index % N == K` (0 <= K < N).
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<String>,
+    /// Number of shards when the shard index comes from JOB_COMPLETION_INDEX.
+    #[arg(long, value_name = "N", env = "CLEVRTEX_SHARD_COUNT")]
+    pub shard_count: Option<u64>,
+    /// Worker threads [default: one per core].
+    #[arg(short = 'j', long, value_name = "N")]
+    pub jobs: Option<usize>,
+}
+
+/// Which share of the indices this process writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Shard {
+    k: u64,
+    n: u64,
+}
+
+/// Parse `K/N`.
+fn parse_shard(text: &str, origin: &str) -> anyhow::Result<Shard> {
+    let parsed = text
+        .split_once('/')
+        .and_then(|(k, n)| Some((k.trim().parse().ok()?, n.trim().parse().ok()?)));
+    match parsed {
+        Some((k, n)) if n > 0 && k < n => Ok(Shard { k, n }),
+        _ => bail!(
+            "invalid shard `{text}` from {origin}\nhint: give `K/N` with 0 <= K < N, e.g. `--shard 0/4`"
+        ),
+    }
+}
+
+fn env_u64(name: &str) -> anyhow::Result<Option<u64>> {
+    match std::env::var(name) {
+        Ok(v) => v.trim().parse().map(Some).map_err(|_| {
+            anyhow::anyhow!("environment variable `{name}` is `{v}`, not a whole number\nhint: unset it or pass `--shard K/N`")
+        }),
+        Err(_) => Ok(None),
+    }
+}
+
+/// `--shard`, else SLURM array variables, else JOB_COMPLETION_INDEX, else everything.
+fn resolve_shard(args: &Args) -> anyhow::Result<Shard> {
+    if let Some(s) = &args.shard {
+        return parse_shard(s, "`--shard`");
+    }
+    if let (Some(id), Some(count)) = (
+        env_u64("SLURM_ARRAY_TASK_ID")?,
+        env_u64("SLURM_ARRAY_TASK_COUNT")?,
+    ) {
+        let min = env_u64("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+        let k = id.checked_sub(min).unwrap_or(u64::MAX);
+        return parse_shard(
+            &format!("{k}/{count}"),
+            "SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN / SLURM_ARRAY_TASK_COUNT",
+        );
+    }
+    if let Some(k) = env_u64("JOB_COMPLETION_INDEX")? {
+        let Some(n) = args.shard_count else {
+            bail!("JOB_COMPLETION_INDEX is `{k}` but the number of shards is unknown\nhint: pass `--shard-count N` or set CLEVRTEX_SHARD_COUNT to the job's completion count");
+        };
+        return parse_shard(&format!("{k}/{n}"), "JOB_COMPLETION_INDEX / --shard-count");
+    }
+    Ok(Shard { k: 0, n: 1 })
+}
+
+fn load_config(args: &Args) -> anyhow::Result<Config> {
+    match (&args.config, &args.variant) {
+        (Some(path), _) => {
+            let text = std::fs::read_to_string(path).with_context(|| {
+                format!(
+                    "cannot read config `{}`\nhint: check the path; built-in configs are listed in `configs/`",
+                    path.display()
+                )
+            })?;
+            Ok(Config::from_json_str(&text, &path.display().to_string())?)
+        }
+        (None, Some(variant)) => Ok(Config::builtin(variant)?),
+        (None, None) => {
+            bail!("no variant given\nhint: pass `--variant camo` or `--config my.json`")
+        }
+    }
+}
 
 /// Run `clevrtex sample`.
-pub fn run(_args: Args) -> CmdResult {
-    anyhow::bail!("`clevrtex sample` is not implemented yet")
+pub fn run(args: Args) -> CmdResult {
+    let started = Instant::now();
+    let config = load_config(&args)?;
+    let shard = resolve_shard(&args)?;
+    let end = args.start.checked_add(args.count).with_context(|| {
+        format!(
+            "`--start {}` plus `-n {}` overflows",
+            args.start, args.count
+        )
+    })?;
+    let total = args.total.unwrap_or(end);
+    if total < end {
+        bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset, or leave `--total` out");
+    }
+    // Fail before writing anything when no draw could ever succeed.
+    clevrtex_scene::sample::check_feasible(&config)?;
+
+    // First index >= start with index % n == k, then every n-th.
+    let first = args.start + (shard.k + shard.n - args.start % shard.n) % shard.n;
+    let indices: Vec<u64> = (first..end).step_by(shard.n as usize).collect();
+
+    let mut dirs: Vec<PathBuf> = indices
+        .iter()
+        .map(|&i| args.out.join(sample_dir(&config.name, i)))
+        .collect();
+    dirs.dedup();
+    for d in &dirs {
+        std::fs::create_dir_all(d).with_context(|| {
+            format!(
+                "cannot create `{}`\nhint: check that `--out` is writable",
+                d.display()
+            )
+        })?;
+    }
+
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.jobs.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")?;
+    let progress = indicatif::ProgressBar::new(indices.len() as u64);
+    let stop = AtomicBool::new(false);
+    // Results come back in index order, so the error reported is the first one by index.
+    let results: Vec<anyhow::Result<()>> = pool.install(|| {
+        indices
+            .par_iter()
+            .map(|&index| {
+                if stop.load(Ordering::Relaxed) {
+                    return Ok(());
+                }
+                let req = SampleRequest {
+                    seed: args.seed,
+                    index,
+                    attempt: 0,
+                    total,
+                };
+                let result = sample(&config, &req)
+                    .map_err(anyhow::Error::from)
+                    .and_then(|scene| write_scene(&args.out, &config.name, &scene));
+                if result.is_err() {
+                    stop.store(true, Ordering::Relaxed);
+                }
+                progress.inc(1);
+                result
+            })
+            .collect()
+    });
+    progress.finish_and_clear();
+    if let Some(err) = results.into_iter().find_map(Result::err) {
+        return Err(err);
+    }
+    eprintln!(
+        "wrote {} scene files (indices {}..{end}, shard {}/{}, seed {}) under `{}` in {:.2} s",
+        indices.len(),
+        args.start,
+        shard.k,
+        shard.n,
+        args.seed,
+        args.out.join(format!("clevrtex_{}", config.name)).display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(OK)
+}
+
+/// Write one scene file atomically: to a temporary name in the same folder, then rename.
+fn write_scene(out: &Path, variant: &str, scene: &clevrtex_scene::SceneFile) -> anyhow::Result<()> {
+    let dir = out.join(sample_dir(variant, scene.index));
+    let path = dir.join(format!("{}.json", scene.stem));
+    let tmp = dir.join(format!(".{}.json.tmp{}", scene.stem, std::process::id()));
+    let text = clevrtex_scene::to_pretty_json(scene).context("cannot serialise scene")?;
+    let write = || -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(text.as_bytes())?;
+        drop(f);
+        std::fs::rename(&tmp, &path)
+    };
+    write().map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        anyhow::anyhow!(
+            "cannot write `{}`: {e}\nhint: check free space and permissions under `--out`",
+            path.display()
+        )
+    })
 }

@@ -21,6 +21,7 @@
 
 pub mod camera;
 pub mod config;
+pub mod json;
 pub mod metadata;
 pub mod naming;
 mod rng;
@@ -29,6 +30,7 @@ pub mod scene_file;
 
 pub use camera::{look_at_matrix, project, track_matrix};
 pub use config::{Config, ConfigError};
+pub use json::to_pretty_json;
 pub use metadata::{metadata, ClevrMetadata};
 pub use naming::{sample_dir, stem};
 pub use rng::SceneRng;

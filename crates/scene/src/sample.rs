@@ -34,10 +34,8 @@ pub enum SampleError {
         total: u64,
     },
     /// The request cannot be met whatever the draws (an area bound), so nothing was tried.
-    #[error("cannot place {count} objects of size at least {min_size} with min-dist {min_dist} in the {side}x{side} area: at most {bound} fit by an area bound (image `{index}`)\nhint: lower the maximum of `objects.count`, use smaller sizes or a smaller `min_dist`, or enlarge `placement.area`")]
+    #[error("cannot place {count} objects of size at least {min_size} with min-dist {min_dist} in the {side}x{side} area: at most {bound} fit (an area bound), so nothing was tried\nhint: lower the maximum of `objects.count`, use smaller sizes or a smaller `min_dist`, or enlarge `placement.area`")]
     Infeasible {
-        /// Image index.
-        index: u64,
         /// Objects requested.
         count: u32,
         /// Smallest size scale of the config.
@@ -117,6 +115,24 @@ pub fn max_objects_bound(config: &Config) -> u32 {
     bound.floor().min(f64::from(u32::MAX)) as u32
 }
 
+/// Fail when the largest object count of `config` exceeds [`max_objects_bound`]: such a
+/// config can never sample its largest scenes, so a run should stop before it starts.
+pub fn check_feasible(config: &Config) -> Result<(), SampleError> {
+    let p = &config.base.placement;
+    let bound = max_objects_bound(config);
+    let count = config.objects.count[1];
+    if count > bound {
+        return Err(SampleError::Infeasible {
+            count,
+            min_size: min_size(config),
+            min_dist: p.min_dist,
+            side: p.area[1] - p.area[0],
+            bound,
+        });
+    }
+    Ok(())
+}
+
 fn min_size(config: &Config) -> f64 {
     config
         .objects
@@ -152,7 +168,6 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
     let bound = max_objects_bound(config);
     if count > bound {
         return Err(SampleError::Infeasible {
-            index: req.index,
             count,
             min_size: min_size(config),
             min_dist: p.min_dist,
