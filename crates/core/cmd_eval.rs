@@ -1,12 +1,127 @@
 //! `clevrtex eval`.
 
-use crate::exit::CmdResult;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clevrtex_eval::{evaluate, output, Options, Protocol, Split};
+
+use crate::exit::{CmdResult, OK};
 
 /// Arguments of `clevrtex eval`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+#[command(
+    after_help = "Predictions are found anywhere under PREDS by the ground-truth stem \
+`CLEVRTEX_<variant>_<index:06>`: `<stem>_mask.png` (segment ids), `<stem>.npy` or `<stem>.npz` \
+(`labels` (H, W) or `masks` (K, H, W), optional `recon`), and `<stem>_recon.png` for MSE. \
+Metric definitions: docs/eval.md.\n\nExit codes: 0 ok, 1 error (missing or malformed \
+predictions, shape mismatch, damaged ground truth), 2 usage error"
+)]
+pub struct Args {
+    /// Directory holding the predictions (searched recursively).
+    pub preds: PathBuf,
+    /// Ground-truth dataset directory in the published layout.
+    pub gt: PathBuf,
+    /// Variant name in the file names (`full`, `pbg`, `vbg`, `grassbg`, `camo`, `outd`, ...);
+    /// inferred when the dataset holds one.
+    #[arg(long)]
+    pub variant: Option<String>,
+    /// Which samples to score, by position in the index sequence [default: test; all for outd].
+    #[arg(long, value_enum)]
+    pub split: Option<SplitArg>,
+    /// `clevrtex`: crop the centre 80% square and resize to 128x128; `native`: no resize.
+    #[arg(long, value_enum, default_value = "clevrtex")]
+    pub protocol: ProtocolArg,
+    /// Soft masks hold foreground slots only: put a background `1 - sum(masks)` in front.
+    #[arg(long)]
+    pub no_background: bool,
+    /// Score samples without a prediction as all-background (counted in the report).
+    #[arg(long)]
+    pub allow_missing: bool,
+    /// Bootstrap resamples for the 95% confidence intervals (0 to skip).
+    #[arg(long, default_value_t = 1000)]
+    pub bootstrap: usize,
+    /// Seed of the bootstrap.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Write the report as JSON to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+    /// Write one CSV row per image to FILE.
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+}
+
+/// `--split` values.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum SplitArg {
+    /// First 10%.
+    Test,
+    /// Next 10%.
+    Val,
+    /// Remaining 80%.
+    Train,
+    /// Every sample.
+    All,
+}
+
+/// `--protocol` values.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum ProtocolArg {
+    /// The benchmark's crop and resize to 128x128.
+    Clevrtex,
+    /// Predictions at the dataset's own resolution.
+    Native,
+}
+
+/// Write `text` to `path` through a temporary file, so no partial file is left behind.
+fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, text)
+        .and_then(|()| std::fs::rename(&tmp, path))
+        .with_context(|| {
+            format!(
+                "cannot write `{}`\nhint: check that its directory exists and is writable",
+                path.display()
+            )
+        })
+}
 
 /// Run `clevrtex eval`.
-pub fn run(_args: Args) -> CmdResult {
-    anyhow::bail!("`clevrtex eval` is not implemented yet")
+pub fn run(args: Args) -> CmdResult {
+    let opts = Options {
+        protocol: match args.protocol {
+            ProtocolArg::Clevrtex => Protocol::Clevrtex,
+            ProtocolArg::Native => Protocol::Native,
+        },
+        split: args.split.map(|s| match s {
+            SplitArg::Test => Split::Test,
+            SplitArg::Val => Split::Val,
+            SplitArg::Train => Split::Train,
+            SplitArg::All => Split::All,
+        }),
+        variant: args.variant,
+        no_background: args.no_background,
+        allow_missing: args.allow_missing,
+        bootstrap: args.bootstrap,
+        seed: args.seed,
+    };
+    let report = evaluate(&args.preds, &args.gt, &opts)?;
+    if let Some(path) = &args.json {
+        let json = output::to_json(&report, env!("CARGO_PKG_VERSION"));
+        write_atomic(path, &format!("{json:#}\n"))?;
+    }
+    if let Some(path) = &args.csv {
+        write_atomic(path, &output::to_csv(&report))?;
+    }
+    print!("{}", output::to_table(&report));
+    let missing = report.missing();
+    if missing > 0 {
+        eprintln!(
+            "warning: {missing} of {} predictions were missing and scored as all-background",
+            report.images.len()
+        );
+    }
+    Ok(OK)
 }
