@@ -1,21 +1,479 @@
-//! `clevrtex generate` and `clevrtex render`.
+//! `clevrtex generate` and `clevrtex render`: glue between the command line, the sampler
+//! (`clevrtex-scene`) and the render pool (`clevrtex-render`).
 
-use crate::exit::CmdResult;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{bail, Context};
+use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, RunReport};
+use clevrtex_render::{output, RenderError};
+use clevrtex_scene::{Config, Pass, SampleRequest, SceneFile};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::exit::{self, CmdResult};
+
+/// Options shared by `generate` and `render`: how to run Blender and write the output.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// Output root; samples go to `OUT/clevrtex_<variant>/<index / 1000>/`.
+    #[arg(long, value_name = "OUT")]
+    out: PathBuf,
+    /// Passes to write, comma-separated: rgb,mask,depth,normal,albedo,shadow (default all
+    /// for `generate`; the scene files' own list for `render`).
+    #[arg(long, value_delimiter = ',', value_name = "LIST")]
+    passes: Option<Vec<String>>,
+    /// Blender executable (default: `blender` on PATH).
+    #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
+    blender: Option<PathBuf>,
+    /// Blender processes rendering in parallel (default: 2 on machines with 2+ cores).
+    #[arg(long, value_name = "N")]
+    workers: Option<usize>,
+    /// Cycles threads per Blender process (default: cores / workers).
+    #[arg(long, value_name = "T")]
+    threads: Option<u32>,
+    /// Time limit per render request, seconds (default: 120 + 1.5 per sample at 320x240,
+    /// doubled with the shadow pass). A worker over it is killed and the scene retried.
+    #[arg(long, value_name = "SECONDS")]
+    timeout: Option<f64>,
+    /// Restarts of a crashed or hung worker per scene before it goes to the failure ledger.
+    #[arg(long, default_value_t = 2, value_name = "N")]
+    retries: u32,
+    /// Also keep the float EXRs (`<stem>_passes.exr`, `<stem>_noshadow.exr`).
+    #[arg(long)]
+    keep_exr: bool,
+    /// Redo samples that are already complete (default: skip them, i.e. resume).
+    #[arg(long)]
+    overwrite: bool,
+    /// Stop at the first failed scene instead of recording it in the ledger and going on.
+    #[arg(long)]
+    fail_fast: bool,
+}
 
 /// Arguments of `clevrtex generate`.
 #[derive(Debug, clap::Args)]
-pub struct GenerateArgs {}
+pub struct GenerateArgs {
+    /// Built-in variant: full, pbg, vbg, grassbg, camo, outd, clevr.
+    #[arg(long, default_value = "full", conflicts_with = "config")]
+    variant: String,
+    /// A variant config file (JSON, like those in `configs/`) instead of `--variant`.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Number of images.
+    #[arg(short = 'n', long = "count", value_name = "N")]
+    count: u64,
+    /// Run seed: with the image index it fixes every random draw.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// First image index; images `START..START+N` are made (splits use START+N as the size).
+    #[arg(long, default_value_t = 0, value_name = "I")]
+    start: u64,
+    /// Make only shard K of N (1-based, contiguous index blocks; every image is in exactly
+    /// one shard).
+    #[arg(long, value_name = "K/N")]
+    shard: Option<String>,
+    /// Image width in pixels (default 320).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Image height in pixels (default 240).
+    #[arg(long)]
+    height: Option<u32>,
+    /// Cycles samples per pixel (default from the config).
+    #[arg(long)]
+    samples: Option<u32>,
+    /// Layout attempts per image when objects are hidden, before the image fails.
+    #[arg(long, default_value_t = 20, value_name = "N")]
+    max_attempts: u32,
+    #[command(flatten)]
+    run: RunArgs,
+}
 
 /// Arguments of `clevrtex render`.
 #[derive(Debug, clap::Args)]
-pub struct RenderArgs {}
+pub struct RenderArgs {
+    /// Scene files, or folders searched (not recursively) for `*.json` scene files.
+    #[arg(required = true, value_name = "SCENES")]
+    scenes: Vec<PathBuf>,
+    #[command(flatten)]
+    run: RunArgs,
+}
 
 /// Run `clevrtex generate`.
-pub fn run_generate(_args: GenerateArgs) -> CmdResult {
-    anyhow::bail!("`clevrtex generate` is not implemented yet")
+pub fn run_generate(args: GenerateArgs) -> CmdResult {
+    let mut config = match &args.config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| {
+                format!(
+                    "cannot read config `{}`\nhint: pass an existing JSON file, e.g. one of `configs/`",
+                    path.display()
+                )
+            })?;
+            Config::from_json_str(&text, &path.display().to_string())?
+        }
+        None => Config::builtin(&args.variant)?,
+    };
+    if let Some(w) = args.width {
+        config.base.render.width = positive("--width", w)?;
+    }
+    if let Some(h) = args.height {
+        config.base.render.height = positive("--height", h)?;
+    }
+    if let Some(s) = args.samples {
+        config.base.render.samples = positive("--samples", s)?;
+    }
+    let passes = match &args.run.passes {
+        Some(list) => parse_passes(list)?,
+        None => Pass::ALL.to_vec(),
+    };
+    config.base.passes = passes.clone();
+    if args.count == 0 {
+        bail!("`-n 0` asks for no images\nhint: pass the number of images, e.g. `-n 100`");
+    }
+    let total = args
+        .start
+        .checked_add(args.count)
+        .context("`--start` + `-n` overflows")?;
+    let range = match &args.shard {
+        Some(s) => shard_range(s, args.start, args.count)?,
+        None => args.start..total,
+    };
+    let config = Arc::new(config);
+    let variant = config.name.clone();
+    let jobs: Vec<Job> = range
+        .map(|index| {
+            let config = Arc::clone(&config);
+            let seed = args.seed;
+            Job {
+                index,
+                variant: variant.clone(),
+                stem: clevrtex_scene::stem(&variant, index),
+                passes: passes.clone(),
+                scene: Arc::new(move |attempt| {
+                    clevrtex_scene::sample(
+                        &config,
+                        &SampleRequest {
+                            seed,
+                            index,
+                            attempt,
+                            total,
+                        },
+                    )
+                    .map_err(|e| e.to_string())
+                }),
+                resample: true,
+            }
+        })
+        .collect();
+    let ledger = output::variant_dir(&args.run.out, &variant).join("failures.jsonl");
+    run_jobs(&args.run, jobs, ledger, args.max_attempts)
 }
 
 /// Run `clevrtex render`.
-pub fn run_render(_args: RenderArgs) -> CmdResult {
-    anyhow::bail!("`clevrtex render` is not implemented yet")
+pub fn run_render(args: RenderArgs) -> CmdResult {
+    let mut files = Vec::new();
+    for p in &args.scenes {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .with_context(|| format!("cannot read folder `{}`", p.display()))?
+                .flatten()
+                .map(|e| e.path())
+                .filter(|f| f.extension().is_some_and(|e| e == "json") && f.is_file())
+                .collect();
+            found.sort();
+            files.extend(found);
+        } else if p.is_file() {
+            files.push(p.clone());
+        } else {
+            bail!(
+                "scene path `{}` does not exist\nhint: pass scene files or folders written by `clevrtex sample`",
+                p.display()
+            );
+        }
+    }
+    if files.is_empty() {
+        bail!("no `*.json` scene files found\nhint: make some with `clevrtex sample`");
+    }
+    let override_passes = match &args.run.passes {
+        Some(list) => Some(parse_passes(list)?),
+        None => None,
+    };
+    let mut jobs = Vec::new();
+    let mut variants = std::collections::BTreeSet::new();
+    for f in files {
+        let scene = read_scene(&f)?;
+        let passes = override_passes
+            .clone()
+            .unwrap_or_else(|| scene.passes.clone());
+        variants.insert(scene.variant.clone());
+        let scene = Arc::new(scene);
+        jobs.push(Job {
+            index: scene.index,
+            variant: scene.variant.clone(),
+            stem: scene.stem.clone(),
+            passes,
+            scene: Arc::new(move |_| Ok((*scene).clone())),
+            resample: false,
+        });
+    }
+    let ledger = match variants.iter().next() {
+        Some(v) if variants.len() == 1 => {
+            output::variant_dir(&args.run.out, v).join("failures.jsonl")
+        }
+        _ => args.run.out.join("failures.jsonl"),
+    };
+    run_jobs(&args.run, jobs, ledger, 1)
+}
+
+fn read_scene(path: &Path) -> anyhow::Result<SceneFile> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read scene file `{}`", path.display()))?;
+    let scene: SceneFile = serde_json::from_str(&text).map_err(|e| {
+        anyhow::anyhow!(
+            "bad scene file `{}`: {e}\nhint: regenerate it with `clevrtex sample`",
+            path.display()
+        )
+    })?;
+    if scene.format != clevrtex_scene::scene_file::SCENE_FORMAT
+        || scene.version != clevrtex_scene::scene_file::SCENE_VERSION
+    {
+        bail!(
+            "`{}` is not a version {} clevrtex scene file (format `{}`, version {})\nhint: regenerate it with this version's `clevrtex sample`",
+            path.display(),
+            clevrtex_scene::scene_file::SCENE_VERSION,
+            scene.format,
+            scene.version
+        );
+    }
+    Ok(scene)
+}
+
+fn positive(flag: &str, v: u32) -> anyhow::Result<u32> {
+    if v == 0 {
+        bail!("`{flag} 0` is not allowed\nhint: pass a positive number");
+    }
+    Ok(v)
+}
+
+fn parse_passes(list: &[String]) -> anyhow::Result<Vec<Pass>> {
+    let mut out = Vec::new();
+    for name in list.iter().map(|s| s.trim()).filter(|s| !s.is_empty()) {
+        match Pass::from_name(name) {
+            Some(p) if !out.contains(&p) => out.push(p),
+            Some(_) => {}
+            None => bail!(
+                "unknown pass `{name}`\nhint: use a comma-separated list of {}",
+                Pass::ALL.map(Pass::name).join(", ")
+            ),
+        }
+    }
+    if out.is_empty() {
+        bail!(
+            "`--passes` is empty\nhint: name at least one of {}",
+            Pass::ALL.map(Pass::name).join(", ")
+        );
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// Indices of shard `K/N` (1-based) of `start..start+count`: contiguous blocks whose sizes
+/// differ by at most one, so no image is dropped.
+fn shard_range(spec: &str, start: u64, count: u64) -> anyhow::Result<std::ops::Range<u64>> {
+    let bad = || {
+        anyhow::anyhow!(
+            "bad `--shard {spec}`\nhint: write K/N with 1 <= K <= N, e.g. `--shard 2/4`"
+        )
+    };
+    let (k, n) = spec.split_once('/').ok_or_else(bad)?;
+    let (k, n): (u64, u64) = (
+        k.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if n == 0 || k == 0 || k > n {
+        return Err(bad());
+    }
+    let lo = (count as u128 * (k - 1) as u128 / n as u128) as u64;
+    let hi = (count as u128 * k as u128 / n as u128) as u64;
+    Ok(start + lo..start + hi)
+}
+
+fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) -> CmdResult {
+    let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
+    check_output_writable(&args.out)?;
+    let materials_json = clevrtex_render::default_materials_json()
+        .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
+    let interrupt = Arc::new(AtomicBool::new(false));
+    {
+        let flag = Arc::clone(&interrupt);
+        // Failing to install the handler (e.g. one is already set) only loses clean Ctrl-C.
+        let _ = ctrlc::set_handler(move || {
+            if flag.swap(true, Ordering::SeqCst) {
+                std::process::exit(exit::INTERRUPTED as i32);
+            }
+            eprintln!("\ninterrupt: stopping the workers; finished samples are kept (Ctrl-C again to quit at once)");
+        });
+    }
+    if let Some(t) = args.timeout {
+        if !(t > 0.0 && t.is_finite()) {
+            bail!(
+                "`--timeout {t}` must be a positive number of seconds\nhint: e.g. `--timeout 600`"
+            );
+        }
+    }
+    if args.workers == Some(0) {
+        bail!("`--workers 0` cannot render anything\nhint: pass at least 1");
+    }
+    let opts = PoolOptions {
+        blender,
+        materials_json,
+        workers: args.workers.unwrap_or_else(pool::default_workers),
+        threads: args.threads.unwrap_or(0),
+        timeout: args.timeout.map(Duration::from_secs_f64),
+        startup_timeout: Duration::from_secs(120),
+        retries: args.retries,
+        max_attempts: max_attempts.max(1),
+        visibility_check: true,
+        keep_exr: args.keep_exr,
+        overwrite: args.overwrite,
+        fail_fast: args.fail_fast,
+        out: args.out.clone(),
+        ledger: ledger.clone(),
+        interrupt: Arc::clone(&interrupt),
+    };
+    let total = jobs.len() as u64;
+    let bar = progress_bar(total);
+    let (done, rejects, failures) = (AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0));
+    let started = std::time::Instant::now();
+    let plain = bar.is_hidden();
+    let on_event = |ev: &PoolEvent| {
+        match ev {
+            PoolEvent::Skipped { .. } => bar.inc(1),
+            PoolEvent::WorkerStarted { .. } => {}
+            PoolEvent::WorkerRestarted { error } => {
+                bar.println(format!("warning: restarting a Blender worker: {error}"));
+            }
+            PoolEvent::Rejected { .. } => {
+                rejects.fetch_add(1, Ordering::Relaxed);
+            }
+            PoolEvent::Done { sample } => {
+                let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+                bar.inc(1);
+                if plain {
+                    eprintln!(
+                        "[{}/{}] wrote {}",
+                        bar.position(),
+                        total,
+                        sample.metadata.display()
+                    );
+                }
+                let _ = d;
+            }
+            PoolEvent::Failed { index, error } => {
+                failures.fetch_add(1, Ordering::Relaxed);
+                bar.inc(1);
+                bar.println(format!(
+                    "error: image {index} failed (recorded in `{}`): {error}",
+                    ledger.display()
+                ));
+            }
+        }
+        let d = done.load(Ordering::Relaxed);
+        let per_hour = d as f64 / started.elapsed().as_secs_f64().max(1e-9) * 3600.0;
+        bar.set_message(format!(
+            "{per_hour:.0} img/h, rejects {}, failures {}",
+            rejects.load(Ordering::Relaxed),
+            failures.load(Ordering::Relaxed)
+        ));
+    };
+    let result = pool::run(&opts, jobs, &on_event);
+    bar.finish_and_clear();
+    match result {
+        Ok(report) => {
+            print_summary(&report, &args.out, &ledger);
+            Ok(if report.failed.is_empty() {
+                exit::OK
+            } else {
+                exit::PARTIAL
+            })
+        }
+        Err(RenderError::Interrupted) => Err(exit::Interrupted.into()),
+        Err(e) => Err(e.into()),
+    }
+}
+
+fn progress_bar(total: u64) -> ProgressBar {
+    let target = if std::io::stderr().is_terminal() {
+        ProgressDrawTarget::stderr()
+    } else {
+        ProgressDrawTarget::hidden()
+    };
+    let bar = ProgressBar::with_draw_target(Some(total), target);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} images, {msg}, ETA {eta}")
+            .expect("valid template"),
+    );
+    bar.enable_steady_tick(Duration::from_millis(500));
+    bar
+}
+
+/// Make sure the output root exists and a file can be created in it, before any rendering.
+fn check_output_writable(out: &Path) -> anyhow::Result<()> {
+    let hint = "hint: pass a writable folder with `--out`";
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output folder `{}`\n{hint}", out.display()))?;
+    let probe = out.join(format!(".clevrtex-write-test-{}", std::process::id()));
+    std::fs::write(&probe, b"")
+        .with_context(|| format!("cannot write in output folder `{}`\n{hint}", out.display()))?;
+    let _ = std::fs::remove_file(probe);
+    Ok(())
+}
+
+fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
+    println!(
+        "rendered {} images ({} already complete, {} failed) in {:.1} s with {} worker(s) x {} thread(s)",
+        r.done,
+        r.skipped,
+        r.failed.len(),
+        r.wall_s,
+        r.workers,
+        r.threads
+    );
+    if r.done > 0 {
+        println!(
+            "  {:.1} s per image, {:.0} images/hour",
+            r.wall_s / r.done as f64,
+            r.done as f64 / r.wall_s.max(1e-9) * 3600.0
+        );
+    }
+    println!("time split (summed over workers):");
+    println!(
+        "  blender start    {:>8.1} s  ({} start(s))",
+        r.blender_start_s, r.worker_starts
+    );
+    println!("  scene build      {:>8.1} s", r.build_s);
+    println!("  visibility pass  {:>8.1} s", r.visibility_s);
+    println!("  render (cycles)  {:>8.1} s", r.render_s);
+    println!(
+        "  bridge other     {:>8.1} s  (writing EXR/PNG in Blender, protocol)",
+        (r.final_request_s - r.render_s - r.build_s).max(0.0)
+    );
+    println!("  post-processing  {:>8.1} s", r.post_s);
+    println!(
+        "  rejects          {:>8.1} s  ({} rejected layout(s); checked after the full render they would have cost ~{:.1} s)",
+        r.reject_s,
+        r.rejects,
+        r.rejects_cost_if_checked_after()
+    );
+    if let Some(ratio) = r.overhead_ratio() {
+        println!("  overhead: wall x workers / cycles render = {ratio:.3}");
+    }
+    println!("output: {}", out.display());
+    if !r.failed.is_empty() {
+        println!(
+            "failures recorded in `{}`; rerun the same command to retry them",
+            ledger.display()
+        );
+    }
 }

@@ -57,7 +57,7 @@ pub enum RenderError {
         /// How long we waited.
         after: Duration,
         /// Output tails.
-        tails: Tails,
+        tails: Box<Tails>,
     },
     /// The worker exited while we waited for it.
     #[error("blender worker `{}` exited ({}) while {doing}\n{tails}hint: the stderr tail above says why; run `clevrtex doctor` to check the Blender install", .program.display(), status_text(.status))]
@@ -69,7 +69,7 @@ pub enum RenderError {
         /// Its exit status, if it could be read.
         status: Option<ExitStatus>,
         /// Output tails.
-        tails: Tails,
+        tails: Box<Tails>,
     },
     /// The worker printed a reply line that is not valid protocol.
     #[error("blender worker `{}` sent a malformed reply while {doing}: `{line}` ({problem})\n{tails}hint: the bridge scripts and this binary disagree; reinstall `clevrtex`", .program.display())]
@@ -83,7 +83,7 @@ pub enum RenderError {
         /// What is wrong with it.
         problem: String,
         /// Output tails.
-        tails: Tails,
+        tails: Box<Tails>,
     },
     /// The bridge reported an error for one request (the worker stays usable).
     #[error("the blender bridge failed while {doing}: {message}\n{traceback}hint: check the scene file; if it came from `clevrtex sample`, this is a bug: please report it with the traceback")]

@@ -16,7 +16,8 @@
 //! use clevrtex_render::{BridgeDir, Mode, Worker, WorkerOptions};
 //!
 //! # fn main() -> Result<(), clevrtex_render::RenderError> {
-//! let bridge = BridgeDir::create(&clevrtex_render::default_materials_json())?;
+//! let materials = clevrtex_render::default_materials_json().expect("valid built-in catalogue");
+//! let bridge = BridgeDir::create(&materials)?;
 //! let mut worker = Worker::start(&WorkerOptions {
 //!     blender: clevrtex_render::blender::locate(None)?,
 //!     script: bridge.worker_script(),
@@ -36,29 +37,22 @@ pub mod blender;
 pub mod bridge;
 mod error;
 pub mod exr_io;
+pub mod metadata;
 pub mod output;
+pub mod pool;
 pub mod post;
 mod worker;
 
 pub use bridge::BridgeDir;
 pub use error::{RenderError, Result, Tails};
+pub use pool::{Job, PoolEvent, PoolOptions, RunReport, SampleStats};
 pub use worker::{BridgeTimings, Mode, Ready, RenderReply, Worker, WorkerOptions};
 
-/// The resolved material catalogue for the bridge (`materials.json`, see
-/// `docs/bridge-protocol.md`): every catalogue material by name.
-pub fn default_materials_json() -> String {
-    let names: Vec<String> =
-        serde_json::from_str::<serde_json::Value>(clevrtex_materials::CATALOGUE_JSON)
-            .ok()
-            .and_then(|v| v.get("materials").cloned())
-            .and_then(|m| m.as_array().cloned())
-            .unwrap_or_default()
-            .iter()
-            .filter_map(|m| m.get("name").and_then(|n| n.as_str()).map(String::from))
-            .collect();
-    let materials: serde_json::Map<String, serde_json::Value> = names
-        .into_iter()
-        .map(|n| (n, serde_json::json!({})))
-        .collect();
-    serde_json::json!({"version": 1, "materials": materials}).to_string()
+/// The resolved built-in material catalogue for the bridge (`materials.json`, see
+/// `docs/bridge-protocol.md`), from `clevrtex-materials`. Fails only if the embedded
+/// catalogue is invalid (a bug), with the catalogue's own message.
+pub fn default_materials_json() -> std::result::Result<String, String> {
+    clevrtex_materials::Catalogue::builtin()
+        .map(|c| c.resolved_json())
+        .map_err(|e| e.to_string())
 }

@@ -90,6 +90,9 @@ pub struct BridgeTimings {
     /// Writing the output files.
     #[serde(default)]
     pub write_s: f64,
+    /// The extra no-shadow render of the shadow pass (0 without it).
+    #[serde(default)]
+    pub noshadow_render_s: f64,
 }
 
 /// The reply to a `render` request.
@@ -349,7 +352,7 @@ impl Worker {
             program: self.program.clone(),
             doing: doing.to_string(),
             status,
-            tails: self.tails(),
+            tails: Box::new(self.tails()),
         })
     }
 
@@ -403,7 +406,7 @@ impl Worker {
             doing: doing.to_string(),
             line,
             problem,
-            tails: self.tails(),
+            tails: Box::new(self.tails()),
         }
     }
 
@@ -422,7 +425,7 @@ impl Worker {
                     program: self.program.clone(),
                     doing: doing.to_string(),
                     after: waited.elapsed(),
-                    tails: self.tails(),
+                    tails: Box::new(self.tails()),
                 });
             }
             match self.events.recv_timeout(POLL.min(deadline - now)) {
@@ -439,7 +442,7 @@ impl Worker {
                         program: self.program.clone(),
                         doing: doing.to_string(),
                         status,
-                        tails: self.tails(),
+                        tails: Box::new(self.tails()),
                     });
                 }
                 Err(RecvTimeoutError::Timeout) => {}
