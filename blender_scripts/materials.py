@@ -1,29 +1,271 @@
 """Builds catalogue materials as Cycles node trees.
 
-PLACEHOLDER until the material issue lands: every material is a principled BSDF whose colour
-is derived from the material name. The interface is final:
-
     build_material(name, recipe, instance, context) -> bpy.types.Material
 
 - name: catalogue name;
-- recipe: the material's entry of materials.json (see docs/bridge-protocol.md), as a dict;
+- recipe: the material's entry of materials.json, resolved by clevrtex-materials (every
+  default filled, colours linear); see docs/materials.md;
 - instance: the scene file's MaterialInstance as a dict (random, color, displacement, scale);
 - context: {"displacement": bool} -- False for the cheap visibility pass, where no
-  displacement or adaptive subdivision may be set up.
-"""
+  displacement may be set up.
 
-import hashlib
+Coordinates: Object coordinates times the object's own scale (read by an Attribute node, so
+one material serves objects of any size), i.e. world units in the object's frame. A large
+cube therefore shows more bricks, not bigger ones; the pattern moves and turns with the
+object, and 3D patterns have no UV seams. Then times recipe `scale` times instance `scale`,
+plus an offset drawn from instance `random`.
+
+A recipe of kind `layers` is a stack of blocks (material_blocks.BLOCKS) composited into
+colour, roughness, metallic and height; height drives a Bump node and, only when the recipe
+displaces, the instance has a displacement strength and the context allows it, a
+Displacement node. A recipe of kind `blend` uses a user node group from a .blend file.
+"""
 
 import bpy
 
+import material_blocks
+from material_nodes import Graph
+
+# Offsets per unit of `random` and per unit of cell id: mostly along x so that wood rings
+# around the x axis keep their curvature, large enough to decorrelate every noise.
+RANDOM_OFFSET = (73.1, 0.61, 0.37)
+CELL_OFFSET = (31.7, 0.43, 0.29)
+
 
 def build_material(name, recipe, instance, context):
+    kind = recipe.get("kind", "layers") if recipe else "layers"
+    if not recipe:
+        recipe = {"kind": "layers", "layers": [], "surface": {}}
     mat = bpy.data.materials.new(name)
     mat.use_nodes = True
-    bsdf = mat.node_tree.nodes["Principled BSDF"]
-    color = instance.get("color")
-    if color is None:
-        h = hashlib.sha256(name.encode()).digest()
-        color = [h[0] / 255.0, h[1] / 255.0, h[2] / 255.0]
-    bsdf.inputs["Base Color"].default_value = (color[0], color[1], color[2], 1.0)
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    out.location = (1600, 0)
+    displace = (
+        bool(recipe.get("displaces"))
+        and bool(context.get("displacement", True))
+        and (instance.get("displacement") or 0.0) > 0.0
+    )
+    if kind == "blend":
+        _build_blend(nt, out, recipe, instance, displace)
+    else:
+        displace = _build_layers(nt, out, recipe, instance, displace)
+    mat.cycles.displacement_method = "BOTH" if displace else "BUMP"
     return mat
+
+
+def _coords(g, recipe, instance):
+    tc = g.node("ShaderNodeTexCoord")
+    attr = g.node("ShaderNodeAttribute", attribute_type="OBJECT", attribute_name="scale")
+    p = g.vmath("MULTIPLY", tc.outputs["Object"], attr.outputs["Vector"])
+    k = float(recipe.get("scale", 1.0)) * float(instance.get("scale") or 1.0)
+    r = float(instance.get("random") or 0.0)
+    off = tuple(r * o for o in RANDOM_OFFSET)
+    # One node: p * k + off.
+    p = g.vmath("MULTIPLY_ADD", p, (k, k, k))
+    p.node.inputs[2].default_value = off
+    return p, tc.outputs["Normal"]
+
+
+def _build_layers(nt, out, recipe, instance, displace):
+    g = Graph(nt)
+    p, normal = _coords(g, recipe, instance)
+    ctx = {"normal": normal, "cell": None, "inside": None, "_normal_xyz": None}
+    ctx["random"] = float(instance.get("random") or 0.0)
+
+    class _LazyXYZ(dict):
+        def __getitem__(self, i):
+            if ctx["_normal_xyz"] is None:
+                ctx["_normal_xyz"] = g.sep(normal)
+            return ctx["_normal_xyz"][i]
+
+    ctx["normal_xyz"] = _LazyXYZ()
+    layers = recipe.get("layers") or []
+    first = layers[0] if layers else {"gap_color": [0.5, 0.5, 0.5], "gap_roughness": 0.5}
+    color = tuple(first.get("gap_color", [0.5, 0.5, 0.5]))
+    rough = first.get("gap_roughness", 0.5)
+    metal = 0.0
+    height = None
+    for L in layers:
+        color, rough, metal, height = _layer(g, p, L, ctx, color, rough, metal, height)
+
+    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"))
+    surf = recipe.get("surface") or {}
+    bsdf = g.node("ShaderNodeBsdfPrincipled")
+    g.set(bsdf.inputs["Base Color"], color)
+    g.set(bsdf.inputs["Roughness"], rough)
+    g.set(bsdf.inputs["Metallic"], metal)
+    g.set(bsdf.inputs["Specular"], surf.get("specular", 0.5))
+    if surf.get("sheen", 0.0) > 0:
+        g.set(bsdf.inputs["Sheen"], surf["sheen"])
+    if surf.get("coat", 0.0) > 0:
+        g.set(bsdf.inputs["Clearcoat"], surf["coat"])
+        g.set(bsdf.inputs["Clearcoat Roughness"], surf.get("coat_roughness", 0.05))
+    if surf.get("subsurface", 0.0) > 0:
+        g.set(bsdf.inputs["Subsurface"], surf["subsurface"])
+        g.set(bsdf.inputs["Subsurface Color"], color)
+        g.set(bsdf.inputs["Subsurface Radius"], (0.05, 0.03, 0.02))
+    bump = surf.get("bump", 0.0)
+    if height is not None and bump > 0 and hasattr(height, "node"):
+        b = g.node("ShaderNodeBump")
+        g.set(b.inputs["Height"], height)
+        g.set(b.inputs["Distance"], bump)
+        g.set(bsdf.inputs["Normal"], b.outputs["Normal"])
+    nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    relief = surf.get("relief", 0.0)
+    if displace and relief > 0 and height is not None and hasattr(height, "node"):
+        d = g.node("ShaderNodeDisplacement", space="OBJECT")
+        g.set(d.inputs["Height"], height)
+        g.set(d.inputs["Midlevel"], 0.5)
+        # Object space, so divide by the object's scale (read per object) to keep world units.
+        g.set(d.inputs["Scale"], relief * float(instance["displacement"]))
+        nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
+        return True
+    return False
+
+
+def _layer(g, p, L, ctx, color, rough, metal, height):
+    q = p
+    if L.get("per_cell") and ctx["cell"] is not None:
+        q = g.vmath("ADD", p, g.vmath("SCALE", CELL_OFFSET, scale=ctx["cell"]))
+    res = material_blocks.BLOCKS[L["block"]](g, q, L, ctx)
+    fac = res["fac"]
+    if L["contrast"] != 1.0:
+        fac = g.math("MULTIPLY_ADD", g.sub(fac, 0.5), L["contrast"], 0.5, clamp=True)
+
+    var = L["variation"]
+    v1 = v2 = None
+    if var > 0:
+        vs = L["variation_scale"]
+        v1, _ = g.noise(q, 1.2 * vs, 2.0, 0.5)
+        v2, _ = g.noise(q, 9.0 * vs, 3.0, 0.6)
+    if "color" in res:
+        col = res["color"]
+    else:
+        pal = L["colors"]
+        pfac = fac
+        if v1 is not None and len(pal) > 1:
+            pfac = g.math("MULTIPLY_ADD", g.sub(v1, 0.5), var * 0.8, fac, clamp=True)
+        col = g.ramp(pfac, pal)
+    if v1 is not None:
+        val = g.add(g.madd(g.sub(v1, 0.5), var * 1.2, 1.0), g.mul(g.sub(v2, 0.5), var * 0.8))
+        col = g.hsv(col, g.madd(g.sub(v2, 0.5), var * 0.06, 0.5),
+                    g.madd(g.sub(v1, 0.5), var * 0.5, 1.0), val)
+    r0, r1 = L["roughness"]
+    rfac = fac if v2 is None else g.math("MULTIPLY_ADD", g.sub(v2, 0.5), var, fac, clamp=True)
+    lrough = g.lerp(r0, r1, rfac) if r0 != r1 else r0
+    lmetal = L["metallic"]
+    gap = res.get("gap")
+    if gap is not None and gap != 0.0:
+        col = g.mix(gap, col, tuple(L["gap_color"]))
+        lrough = g.lerp(lrough, L["gap_roughness"], gap)
+        if lmetal > 0:
+            lmetal = g.mul(lmetal, g.sub(1.0, gap))
+
+    # Where this layer shows: its own mask, coverage patches, inside the last layout.
+    K = res.get("mask")
+    if L["coverage"] < 1.0:
+        n, _ = g.noise(q, L["coverage_scale"], 3.0, 0.55)
+        t = 0.5 + (0.5 - L["coverage"]) * 0.3
+        s = 0.1 * L["coverage_sharpness"]
+        cov = g.smooth(t - s, t + s, n)
+        K = cov if K is None else g.mul(K, cov)
+    if L["inside_only"] and ctx["inside"] is not None:
+        K = ctx["inside"] if K is None else g.mul(K, ctx["inside"])
+
+    h = res.get("height")
+    if h is not None:
+        h = g.mul(h, L["height"]) if L["height"] != 1.0 else h
+        hk = h if K is None else g.mul(h, K)
+        if height is None:
+            height = hk
+        elif L["height_mode"] == "add":
+            height = g.add(height, hk)
+        else:
+            height = g.lerp(height, h, K if K is not None else 1.0)
+
+    if K is None:
+        color, rough, metal = col, lrough, lmetal
+    else:
+        color = g.mix(K, color, col)
+        rough = g.lerp(rough, lrough, K)
+        metal = g.lerp(metal, lmetal, K)
+
+    if "cell" in res:
+        ctx["cell"] = res["cell"]
+        ctx["inside"] = res.get("inside")
+    return color, rough, metal, height
+
+
+def _tint(g, color, tint, inst_color):
+    if inst_color is None or tint == "none":
+        return color
+    c = tuple(float(x) for x in inst_color)
+    if tint == "replace":
+        return c
+    m = max(max(c), 1e-6)
+    return g.mix(1.0, color, tuple(x / m for x in c), blend="MULTIPLY")
+
+
+# --- user node groups --------------------------------------------------------------------
+
+_GROUPS = {}
+
+
+def _load_group(path, group):
+    key = (path, group)
+    if key in _GROUPS and _GROUPS[key].name in bpy.data.node_groups:
+        return _GROUPS[key]
+    with bpy.data.libraries.load(path, link=False) as (src, dst):
+        dst.node_groups = list(src.node_groups)
+    candidates = [ng for ng in dst.node_groups if ng is not None]
+    chosen = None
+    for ng in candidates:
+        outs = {s.name for s in _group_outputs(ng)}
+        if group is not None and ng.name != group:
+            continue
+        if outs & {"Shader", "BSDF"}:
+            chosen = ng
+            break
+    if chosen is None:
+        raise ValueError(
+            "no node group%s with a `Shader` or `BSDF` output in `%s`"
+            % ("" if group is None else " named `%s`" % group, path))
+    for ng in candidates:
+        ng.use_fake_user = True
+    _GROUPS[key] = chosen
+    return chosen
+
+
+def _group_outputs(ng):
+    if hasattr(ng, "outputs"):
+        return list(ng.outputs)
+    return [s for s in ng.interface.items_tree if getattr(s, "in_out", "") == "OUTPUT"]
+
+
+def _build_blend(nt, out, recipe, instance, displace):
+    ng = _load_group(recipe["path"], recipe.get("group"))
+    node = nt.nodes.new("ShaderNodeGroup")
+    node.node_tree = ng
+    c = instance.get("color") or (0.8, 0.8, 0.8)
+    values = {
+        "Color": tuple(c) + (1.0,),
+        "Random": float(instance.get("random") or 0.0),
+        "Displacement": float(instance.get("displacement") or 0.0) if displace else 0.0,
+        "Scale": float(instance.get("scale") or 1.0),
+    }
+    for sock in node.inputs:
+        if sock.name in values:
+            v = values[sock.name]
+            if sock.type == "RGBA":
+                sock.default_value = v if isinstance(v, tuple) else (v, v, v, 1.0)
+            elif sock.type == "VECTOR":
+                sock.default_value = (v, v, v) if not isinstance(v, tuple) else v[:3]
+            else:
+                sock.default_value = v if not isinstance(v, tuple) else v[0]
+    shader = node.outputs.get("Shader") or node.outputs.get("BSDF")
+    nt.links.new(shader, out.inputs["Surface"])
+    disp = node.outputs.get("Displacement")
+    if displace and disp is not None:
+        nt.links.new(disp, out.inputs["Displacement"])

@@ -27,6 +27,7 @@
 
 mod error;
 mod schema;
+pub mod tool;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -87,7 +88,7 @@ impl Set {
 
 impl fmt::Display for Set {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+        f.pad(self.name())
     }
 }
 

@@ -1,0 +1,288 @@
+"""Standalone Blender script behind `clevrtex materials sheet|check|stats|cost`.
+
+    blender -b --factory-startup --python-exit-code 1 --python material_tool.py -- \
+        --mode sheet|tile|check|cost|density --materials materials.json --names a,b \
+        --out-dir DIR [--size 160] [--samples 16] [--tag TAG]
+
+One Blender process handles a whole batch. For every material it writes `DIR/<name>.png`
+(sheet, tile, check, density) and prints one reply line `TAG {json}` (when --tag is given):
+`{"name", "ok", "render_s", "file", "error"}`. A failure of one material is reported and the
+batch goes on.
+
+- sheet: a sphere and a cube of the material on a grey floor, name written underneath;
+- tile: the material on a flat square seen straight down, flat-lit (distinctness stats);
+- check: a small sphere and cube, for the build-and-render test;
+- cost: a sphere filling the frame at --samples, timed (relative cost vs `plain`);
+- density: a small and a large cube side by side, orthographic from the front.
+"""
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+import traceback
+
+import bpy
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import materials  # noqa: E402
+
+
+def parse_args():
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--mode", required=True)
+    ap.add_argument("--materials", required=True)
+    ap.add_argument("--names", default="")
+    ap.add_argument("--out-dir", required=True)
+    ap.add_argument("--size", type=int, default=160)
+    ap.add_argument("--samples", type=int, default=16)
+    ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--tag", default="")
+    ap.add_argument("--displacement", type=float, default=0.0)
+    return ap.parse_args(argv)
+
+
+def reply(tag, obj):
+    line = json.dumps(obj)
+    if tag:
+        print("%s %s" % (tag, line), flush=True)
+    else:
+        print(line, flush=True)
+
+
+def reset_scene():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.use_denoising = False
+    scene.cycles.use_adaptive_sampling = False
+    scene.render.film_transparent = False
+    scene.view_settings.view_transform = "Filmic"
+    scene.view_settings.look = "Medium High Contrast"
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_mode = "RGB"
+    world = bpy.data.worlds.new("world")
+    world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.05, 0.05, 0.05, 1)
+    scene.world = world
+    return scene
+
+
+def add_mesh(kind, scale, location, rotation_z=0.0):
+    if kind == "sphere":
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=1.0)
+        bpy.ops.object.shade_smooth()
+    elif kind == "cube":
+        bpy.ops.mesh.primitive_cube_add(size=2.0)
+    else:
+        bpy.ops.mesh.primitive_plane_add(size=2.0)
+    ob = bpy.context.object
+    ob.scale = (scale, scale, scale)
+    ob.location = location
+    ob.rotation_euler = (0.0, 0.0, rotation_z)
+    return ob
+
+
+def add_camera(location, look_at, lens=50.0, ortho=None):
+    cam = bpy.data.cameras.new("cam")
+    if ortho is not None:
+        cam.type = "ORTHO"
+        cam.ortho_scale = ortho
+    cam.lens = lens
+    ob = bpy.data.objects.new("cam", cam)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.location = location
+    d = [look_at[i] - location[i] for i in range(3)]
+    from mathutils import Vector
+
+    ob.rotation_euler = Vector(d).to_track_quat("-Z", "Y").to_euler()
+    bpy.context.scene.camera = ob
+    return ob
+
+
+def add_light(kind, location, energy, size=2.0, rotation=(0.0, 0.0, 0.0)):
+    light = bpy.data.lights.new(kind, kind)
+    light.energy = energy
+    if kind == "AREA":
+        light.size = size
+    ob = bpy.data.objects.new(kind, light)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.location = location
+    ob.rotation_euler = rotation
+    return ob
+
+
+def aim(ob, target):
+    from mathutils import Vector
+
+    d = Vector(target) - ob.location
+    ob.rotation_euler = d.to_track_quat("-Z", "Y").to_euler()
+
+
+def grey_material():
+    m = bpy.data.materials.new("floor")
+    m.use_nodes = True
+    b = m.node_tree.nodes["Principled BSDF"]
+    b.inputs["Base Color"].default_value = (0.35, 0.35, 0.35, 1)
+    b.inputs["Roughness"].default_value = 0.7
+    return m
+
+
+def label(text, location, size):
+    curve = bpy.data.curves.new("label", "FONT")
+    curve.body = text
+    curve.size = size
+    curve.align_x = "CENTER"
+    ob = bpy.data.objects.new("label", curve)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.location = location
+    m = bpy.data.materials.new("label")
+    m.use_nodes = True
+    nt = m.node_tree
+    nt.nodes.clear()
+    e = nt.nodes.new("ShaderNodeEmission")
+    e.inputs["Color"].default_value = (1, 1, 1, 1)
+    e.inputs["Strength"].default_value = 3.0
+    o = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(e.outputs[0], o.inputs[0])
+    curve.materials.append(m)
+    return ob
+
+
+def instance(name, args, random=0.37):
+    inst = {"name": name, "random": random}
+    if args.displacement > 0:
+        inst["displacement"] = args.displacement
+    return inst
+
+
+def scene_sheet(name, recipe, args):
+    scene = reset_scene()
+    ctx = {"displacement": args.displacement > 0}
+    mat = materials.build_material(name, recipe, instance(name, args), ctx)
+    floor = add_mesh("plane", 6.0, (0, 0, 0))
+    floor.data.materials.append(grey_material())
+    s = add_mesh("sphere", 0.7, (-0.8, 0.3, 0.7))
+    c = add_mesh("cube", 0.55, (0.85, -0.1, 0.55), rotation_z=0.5)
+    for ob in (s, c):
+        ob.data.materials.append(mat)
+    add_camera((0, -4.3, 2.5), (0, 0, 0.5), lens=45)
+    key = add_light("AREA", (3, -3, 4), 220, 3.0)
+    aim(key, (0, 0, 0))
+    fill = add_light("AREA", (-4, -2, 2), 60, 3.0)
+    aim(fill, (0, 0, 0))
+    sun = add_light("SUN", (0, 0, 5), 1.0, rotation=(0.6, 0.2, 0.0))
+    sun.data.angle = 0.1
+    label(name.replace("_", " "), (0, -1.45, 0.02), 0.22)
+    return scene
+
+
+def scene_tile(name, recipe, args):
+    scene = reset_scene()
+    mat = materials.build_material(name, recipe, instance(name, args), {"displacement": False})
+    tile = add_mesh("plane", 1.0, (0, 0, 0))
+    tile.data.materials.append(mat)
+    add_camera((0, 0, 5), (0, 0, 0), ortho=2.0)
+    # Flat, even light: a big emitting world and no sun, so shading does not dominate.
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
+    scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    return scene
+
+
+def scene_check(name, recipe, args):
+    return scene_sheet(name, recipe, args)
+
+
+def scene_cost(name, recipe, args):
+    scene = reset_scene()
+    mat = materials.build_material(name, recipe, instance(name, args), {"displacement": False})
+    s = add_mesh("sphere", 1.0, (0, 0, 0))
+    s.data.materials.append(mat)
+    add_camera((0, -4.2, 0), (0, 0, 0), lens=50)
+    key = add_light("AREA", (3, -3, 3), 500, 2.0)
+    aim(key, (0, 0, 0))
+    return scene
+
+
+def scene_density(name, recipe, args):
+    scene = reset_scene()
+    mat = materials.build_material(name, recipe, instance(name, args, 0.0), {"displacement": False})
+    small = add_mesh("cube", 0.35, (-1.0, 0, 0))
+    large = add_mesh("cube", 0.7, (0.8, 0, 0))
+    for ob in (small, large):
+        ob.data.materials.append(mat)
+    add_camera((0, -10, 0), (0, 0, 0), ortho=4.0)
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    return scene
+
+
+SCENES = {
+    "sheet": scene_sheet,
+    "tile": scene_tile,
+    "check": scene_check,
+    "cost": scene_cost,
+    "density": scene_density,
+}
+
+
+def pink_fraction(path):
+    img = bpy.data.images.load(path)
+    px = img.pixels[:]
+    n = len(px) // 4
+    pink = 0
+    for i in range(0, len(px), 4):
+        r, g, b = px[i], px[i + 1], px[i + 2]
+        if r > 0.9 and b > 0.9 and g < 0.1:
+            pink += 1
+    bpy.data.images.remove(img)
+    return pink / max(n, 1)
+
+
+def main():
+    args = parse_args()
+    with open(args.materials) as f:
+        catalogue = json.load(f)["materials"]
+    names = [n for n in args.names.split(",") if n] or sorted(catalogue)
+    os.makedirs(args.out_dir, exist_ok=True)
+    build = SCENES[args.mode]
+    for name in names:
+        t0 = time.perf_counter()
+        try:
+            if name not in catalogue:
+                raise KeyError("material `%s` is not in materials.json" % name)
+            scene = build(name, catalogue[name], args)
+            square = args.mode in ("tile", "cost")
+            scene.render.resolution_x = args.size
+            scene.render.resolution_y = args.size if square else int(args.size * 0.75)
+            if args.mode == "density":
+                scene.render.resolution_y = args.size // 2
+            scene.render.resolution_percentage = 100
+            scene.cycles.samples = args.samples
+            scene.render.threads_mode = "FIXED" if args.threads else "AUTO"
+            if args.threads:
+                scene.render.threads = args.threads
+            path = os.path.join(args.out_dir, name + ".png")
+            scene.render.filepath = path
+            t1 = time.perf_counter()
+            bpy.ops.render.render(write_still=True)
+            t2 = time.perf_counter()
+            msg = {"name": name, "ok": True, "build_s": t1 - t0, "render_s": t2 - t1,
+                   "file": path}
+            if args.mode == "check":
+                msg["pink"] = pink_fraction(path)
+            reply(args.tag, msg)
+        except Exception as e:  # one bad material must not stop the batch
+            reply(args.tag, {"name": name, "ok": False, "error": "%s: %s" % (type(e).__name__, e),
+                             "traceback": traceback.format_exc()})
+
+
+if __name__ == "__main__":
+    main()
