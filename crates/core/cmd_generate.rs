@@ -67,11 +67,15 @@ pub struct GenerateArgs {
     /// Run seed: with the image index it fixes every random draw.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// First image index; images `START..START+N` are made (splits use START+N as the size).
+    /// First image index; images `START..START+N` are made.
     #[arg(long, default_value_t = 0, value_name = "I")]
     start: u64,
-    /// Make only shard K of N (1-based, contiguous index blocks; every image is in exactly
-    /// one shard).
+    /// Size of the whole dataset, which fixes the splits (first 10% test, next 10% val, rest
+    /// train) [default: START + N].
+    #[arg(long, value_name = "T")]
+    total: Option<u64>,
+    /// Make only the images with `index % N == K` (0 <= K < N), as `clevrtex sample` does:
+    /// N shards together make every image exactly once.
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
     /// Image width in pixels (default 320).
@@ -131,17 +135,22 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     if args.count == 0 {
         bail!("`-n 0` asks for no images\nhint: pass the number of images, e.g. `-n 100`");
     }
-    let total = args
+    let end = args
         .start
         .checked_add(args.count)
         .context("`--start` + `-n` overflows")?;
+    let total = args.total.unwrap_or(end);
+    if total < end {
+        bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset");
+    }
     let range = match &args.shard {
-        Some(s) => shard_range(s, args.start, args.count)?,
-        None => args.start..total,
+        Some(s) => shard_indices(s, args.start..end)?,
+        None => (args.start..end).collect(),
     };
     let config = Arc::new(config);
     let variant = config.name.clone();
     let jobs: Vec<Job> = range
+        .into_iter()
         .map(|index| {
             let config = Arc::clone(&config);
             let seed = args.seed;
@@ -278,25 +287,19 @@ fn parse_passes(list: &[String]) -> anyhow::Result<Vec<Pass>> {
     Ok(out)
 }
 
-/// Indices of shard `K/N` (1-based) of `start..start+count`: contiguous blocks whose sizes
-/// differ by at most one, so no image is dropped.
-fn shard_range(spec: &str, start: u64, count: u64) -> anyhow::Result<std::ops::Range<u64>> {
+/// Indices of `range` in shard `K/N` (0 <= K < N): those with `index % N == K`, as
+/// `clevrtex sample` does, so N shards together make every image exactly once.
+fn shard_indices(spec: &str, range: std::ops::Range<u64>) -> anyhow::Result<Vec<u64>> {
     let bad = || {
-        anyhow::anyhow!(
-            "bad `--shard {spec}`\nhint: write K/N with 1 <= K <= N, e.g. `--shard 2/4`"
-        )
+        anyhow::anyhow!("bad `--shard {spec}`\nhint: write K/N with 0 <= K < N, e.g. `--shard 1/4`")
     };
     let (k, n) = spec.split_once('/').ok_or_else(bad)?;
-    let (k, n): (u64, u64) = (
-        k.trim().parse().map_err(|_| bad())?,
-        n.trim().parse().map_err(|_| bad())?,
-    );
-    if n == 0 || k == 0 || k > n {
+    let k: u64 = k.trim().parse().map_err(|_| bad())?;
+    let n: u64 = n.trim().parse().map_err(|_| bad())?;
+    if n == 0 || k >= n {
         return Err(bad());
     }
-    let lo = (count as u128 * (k - 1) as u128 / n as u128) as u64;
-    let hi = (count as u128 * k as u128 / n as u128) as u64;
-    Ok(start + lo..start + hi)
+    Ok(range.filter(|i| i % n == k).collect())
 }
 
 fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) -> CmdResult {
@@ -347,12 +350,20 @@ fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) 
     let (done, rejects, failures) = (AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0));
     let started = std::time::Instant::now();
     let plain = bar.is_hidden();
+    // A hidden bar swallows `println`: then messages go straight to stderr.
+    let say = |msg: String| {
+        if plain {
+            eprintln!("{msg}");
+        } else {
+            bar.println(msg);
+        }
+    };
     let on_event = |ev: &PoolEvent| {
         match ev {
             PoolEvent::Skipped { .. } => bar.inc(1),
             PoolEvent::WorkerStarted { .. } => {}
             PoolEvent::WorkerRestarted { error } => {
-                bar.println(format!("warning: restarting a Blender worker: {error}"));
+                say(format!("warning: restarting a Blender worker: {error}"));
             }
             PoolEvent::Rejected { .. } => {
                 rejects.fetch_add(1, Ordering::Relaxed);
@@ -373,7 +384,7 @@ fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) 
             PoolEvent::Failed { index, error } => {
                 failures.fetch_add(1, Ordering::Relaxed);
                 bar.inc(1);
-                bar.println(format!(
+                say(format!(
                     "error: image {index} failed (recorded in `{}`): {error}",
                     ledger.display()
                 ));

@@ -95,6 +95,9 @@ pub enum RenderError {
         /// Python traceback (may be empty).
         traceback: String,
     },
+    /// No worker could ever be started in this run (so every scene would fail the same way).
+    #[error(transparent)]
+    WorkerStart(Box<RenderError>),
     /// The run was interrupted (Ctrl-C).
     #[error("interrupted")]
     Interrupted,

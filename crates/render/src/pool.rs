@@ -447,7 +447,10 @@ pub fn default_workers() -> usize {
 fn is_fatal(err: &RenderError) -> bool {
     matches!(
         err,
-        RenderError::BlenderNotFound { .. } | RenderError::Spawn { .. } | RenderError::Io { .. }
+        RenderError::BlenderNotFound { .. }
+            | RenderError::Spawn { .. }
+            | RenderError::WorkerStart(_)
+            | RenderError::Io { .. }
     )
 }
 
@@ -476,14 +479,7 @@ impl Slot<'_, '_> {
                 // A worker that never once started (wrong program, broken install) would fail
                 // every job the same way: stop the run instead of filling the ledger.
                 Err(e) if !self.shared.ever_started.load(Ordering::SeqCst) => {
-                    return Err(if e.is_worker_failure() {
-                        RenderError::Spawn {
-                            program: opts.blender.clone(),
-                            source: std::io::Error::other(e.to_string()),
-                        }
-                    } else {
-                        e
-                    })
+                    return Err(RenderError::WorkerStart(Box::new(e)))
                 }
                 Err(e) => return Err(e),
             };
@@ -505,6 +501,7 @@ impl Slot<'_, '_> {
     /// retries, up to `retries` times.
     fn request(
         &mut self,
+        label: &str,
         scene: &Path,
         mode: Mode,
         dir: &Path,
@@ -514,7 +511,7 @@ impl Slot<'_, '_> {
         loop {
             let result = self
                 .worker()
-                .and_then(|w| w.render(scene, mode, dir, timeout));
+                .and_then(|w| w.render_labelled(label, scene, mode, dir, timeout));
             match result {
                 Err(e) if e.is_worker_failure() && tries < self.opts().retries => {
                     tries += 1;
@@ -574,11 +571,12 @@ impl Slot<'_, '_> {
             post::write_file(&scene_path, text.as_bytes())?;
             let timeout = opts.timeout.unwrap_or_else(|| auto_timeout(&scene));
             let n = scene.objects.len();
+            let label = format!("{} attempt {attempt}", job.stem);
 
             let mut visibility_s = 0.0;
             if job.resample && opts.visibility_check {
                 let t = Instant::now();
-                let reply = self.request(&scene_path, Mode::Visibility, &work, timeout)?;
+                let reply = self.request(&label, &scene_path, Mode::Visibility, &work, timeout)?;
                 let exr = reply_file(&reply, "visibility", &work)?;
                 let ch = Channels::read(&exr)?;
                 let ids = post::instance_ids(ch.get("ViewLayer.IndexOB.X")?, n, &exr)?;
@@ -591,7 +589,7 @@ impl Slot<'_, '_> {
             }
 
             let t = Instant::now();
-            let reply = self.request(&scene_path, Mode::Final, &work, timeout)?;
+            let reply = self.request(&label, &scene_path, Mode::Final, &work, timeout)?;
             let final_request_s = t.elapsed().as_secs_f64();
             let t_post = Instant::now();
             let facts_blender = self

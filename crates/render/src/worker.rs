@@ -128,6 +128,7 @@ pub struct Worker {
     startup: Duration,
     interrupt: Arc<AtomicBool>,
     dead: bool,
+    streams_closed: Arc<AtomicBool>,
 }
 
 impl std::fmt::Debug for Event {
@@ -210,10 +211,13 @@ impl Worker {
                 let _ = tx.send(Event::Eof);
             });
         }
+        let streams_closed = Arc::new(AtomicBool::new(false));
         {
             let tails = Arc::clone(&tails);
+            let closed = Arc::clone(&streams_closed);
             std::thread::spawn(move || {
                 read_lines(stderr, |line| push_tail(&mut tails.lock().unwrap().1, line));
+                closed.store(true, Ordering::SeqCst);
             });
         }
         let stdin = child.stdin.take();
@@ -234,6 +238,7 @@ impl Worker {
             startup: Duration::ZERO,
             interrupt: Arc::clone(&opts.interrupt),
             dead: false,
+            streams_closed,
         };
         let doing = "starting up".to_string();
         let reply = worker.wait_reply(Instant::now() + opts.startup_timeout, &doing)?;
@@ -286,9 +291,23 @@ impl Worker {
         out_dir: &Path,
         timeout: Duration,
     ) -> Result<RenderReply> {
+        let label = scene.display().to_string();
+        self.render_labelled(&label, scene, mode, out_dir, timeout)
+    }
+
+    /// Like [`Worker::render`], naming the scene `label` in error messages (e.g. its stem
+    /// rather than a temporary path).
+    pub fn render_labelled(
+        &mut self,
+        label: &str,
+        scene: &Path,
+        mode: Mode,
+        out_dir: &Path,
+        timeout: Duration,
+    ) -> Result<RenderReply> {
         let id = self.next_id;
         self.next_id += 1;
-        let doing = format!("rendering `{}` ({})", scene.display(), mode.name());
+        let doing = format!("rendering `{label}` ({})", mode.name());
         let request = serde_json::json!({
             "type": "render",
             "id": id,
@@ -324,8 +343,15 @@ impl Worker {
         self.kill();
     }
 
-    /// Current output tails.
+    /// Current output tails. After the process died, waits briefly for its last stderr
+    /// lines (the reader thread may still be draining the pipe).
     pub fn tails(&self) -> Tails {
+        if self.dead {
+            let deadline = Instant::now() + Duration::from_secs(1);
+            while !self.streams_closed.load(Ordering::SeqCst) && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        }
         let t = self.tails.lock().unwrap();
         Tails {
             stdout: t.0.iter().cloned().collect(),
