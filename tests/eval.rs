@@ -1,1 +1,425 @@
-//! Integration tests for `clevrtex eval`.
+//! Integration tests for `clevrtex eval`: the CLI on the fixtures of `tests/data/eval/` and
+//! every error a user can meet. Metric values themselves are tested in `crates/eval/tests/`.
+
+use std::path::Path;
+
+use serde_json::Value;
+
+use crate::util::{data, run, text};
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let p = e.unwrap().path();
+        let dst = to.join(p.file_name().unwrap());
+        if p.is_dir() {
+            copy_dir(&p, &dst);
+        } else {
+            std::fs::copy(&p, &dst).unwrap();
+        }
+    }
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn gt() -> std::path::PathBuf {
+    data("eval/gt")
+}
+
+fn stderr(out: &std::process::Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A `.npy` file of `i32` labels.
+fn npy_i32(shape: &[usize], values: &[i32]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| format!("{d}, ")).collect();
+    let mut header = format!(
+        "{{'descr': '<i4', 'fortran_order': False, 'shape': ({}), }}",
+        dims.concat()
+    );
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut b = b"\x93NUMPY\x01\x00".to_vec();
+    b.extend((header.len() as u16).to_le_bytes());
+    b.extend(header.as_bytes());
+    for v in values {
+        b.extend(v.to_le_bytes());
+    }
+    b
+}
+
+#[test]
+fn eval_reports_table_json_and_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("r.json");
+    let csv = dir.path().join("r.csv");
+    let preds = data("eval/preds/png");
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&gt()),
+        "--split",
+        "all",
+        "--json",
+        s(&json),
+        "--csv",
+        s(&csv),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    for name in [
+        "mIoU_fg",
+        "ARI_FG",
+        "MSE",
+        "95% CI",
+        "by material",
+        "by color",
+        "by ground_material",
+    ] {
+        assert!(stdout.contains(name), "table lacks `{name}`:\n{stdout}");
+    }
+    let r: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let metrics = r["metrics"].as_object().unwrap();
+    let names: Vec<&str> = metrics.keys().map(|k| k.as_str()).collect();
+    let mut want = vec![
+        "mIoU", "mIoU_fg", "mIoU_gt", "ARI", "ARI_FG", "MSE", "DICE", "DICE_fg", "acc", "mSC",
+    ];
+    want.sort();
+    let mut names_sorted = names.clone();
+    names_sorted.sort();
+    assert_eq!(names_sorted, want);
+    assert!(metrics
+        .values()
+        .all(|v| v.as_f64().is_some_and(f64::is_finite)));
+    assert_eq!(r["counts"]["images"], 10);
+    assert_eq!(r["counts"]["missing"], 0);
+    assert_eq!(r["provenance"]["split"], "all");
+    assert_eq!(r["provenance"]["protocol"], "clevrtex");
+    assert_eq!(r["provenance"]["variant"], "vbg");
+    assert_eq!(r["provenance"]["gt_hash_xxh3"].as_str().unwrap().len(), 16);
+    let ci = r["ci95"]["ARI"].as_array().unwrap();
+    let (lo, hi, mean) = (
+        ci[0].as_f64().unwrap(),
+        ci[1].as_f64().unwrap(),
+        metrics["ARI"].as_f64().unwrap(),
+    );
+    assert!(lo <= mean && mean <= hi, "{lo} {mean} {hi}");
+    assert!(r["breakdowns"]["material"]
+        .as_object()
+        .unwrap()
+        .values()
+        .all(|g| g["count"].as_u64().unwrap() > 0));
+
+    let csv = std::fs::read_to_string(&csv).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 11);
+    assert!(lines[0].starts_with("index,stem,mIoU,mIoU_fg,mIoU_gt,ARI,ARI_FG,MSE,DICE,DICE_fg,acc,mSC,true_segments,pred_segments,num_pairs"));
+    assert!(lines[1].starts_with("0,CLEVRTEX_vbg_000000,"));
+
+    // Same seed, same intervals; `--bootstrap 0` skips them.
+    let json2 = dir.path().join("r2.json");
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&gt()),
+        "--split",
+        "all",
+        "--json",
+        s(&json2),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let r2: Value = serde_json::from_slice(&std::fs::read(&json2).unwrap()).unwrap();
+    assert_eq!(r["ci95"], r2["ci95"]);
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&gt()),
+        "--split",
+        "all",
+        "--bootstrap",
+        "0",
+        "--json",
+        s(&json2),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let r3: Value = serde_json::from_slice(&std::fs::read(&json2).unwrap()).unwrap();
+    assert!(r3["ci95"]["ARI"].is_null());
+    assert_eq!(r3["metrics"], r["metrics"]);
+}
+
+#[test]
+fn eval_npz_soft_masks_and_no_background() {
+    let preds = data("eval/preds/npz");
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.json"), dir.path().join("b.json"));
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&gt()),
+        "--split",
+        "all",
+        "--bootstrap",
+        "0",
+        "--json",
+        s(&a),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&gt()),
+        "--split",
+        "all",
+        "--bootstrap",
+        "0",
+        "--no-background",
+        "--json",
+        s(&b),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let ra: Value = serde_json::from_slice(&std::fs::read(&a).unwrap()).unwrap();
+    let rb: Value = serde_json::from_slice(&std::fs::read(&b).unwrap()).unwrap();
+    assert!(ra["metrics"]["MSE"].as_f64().unwrap() > 0.0);
+    assert_ne!(ra["metrics"]["mIoU"], rb["metrics"]["mIoU"]);
+    assert_eq!(rb["provenance"]["no_background"], true);
+}
+
+#[test]
+fn eval_default_split_is_test() {
+    let dir = tempfile::tempdir().unwrap();
+    let j = dir.path().join("r.json");
+    let out = run(&[
+        "eval",
+        s(&data("eval/preds/png")),
+        s(&gt()),
+        "--bootstrap",
+        "0",
+        "--json",
+        s(&j),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let r: Value = serde_json::from_slice(&std::fs::read(&j).unwrap()).unwrap();
+    assert_eq!(r["counts"]["images"], 1); // int(0.1 * 10)
+    assert_eq!(r["provenance"]["split"], "test");
+}
+
+#[test]
+fn eval_native_protocol_perfect_prediction() {
+    // The ground-truth masks themselves, as predictions at native size, score 1.
+    let dir = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(gt().join("clevrtex_vbg/0")).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap().to_string();
+        if let Some(stem) = name.strip_suffix("_flat.png") {
+            std::fs::copy(&p, dir.path().join(format!("{stem}_mask.png"))).unwrap();
+        }
+    }
+    let j = dir.path().join("r.json");
+    let out = run(&[
+        "eval",
+        s(dir.path()),
+        s(&gt()),
+        "--protocol",
+        "native",
+        "--split",
+        "all",
+        "--json",
+        s(&j),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let r: Value = serde_json::from_slice(&std::fs::read(&j).unwrap()).unwrap();
+    for m in ["mIoU", "mIoU_gt", "ARI", "ARI_FG", "DICE", "acc", "mSC"] {
+        assert_eq!(r["metrics"][m].as_f64(), Some(1.0), "{m}");
+    }
+    assert!(
+        r["metrics"]["MSE"].is_null(),
+        "no reconstruction: MSE is not reported"
+    );
+    assert_eq!(r["counts"]["undefined"]["MSE"], 10);
+    // The same masks under the default protocol have the wrong shape.
+    let out = run(&["eval", s(dir.path()), s(&gt()), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("shape mismatch") && err.contains("(30, 40)") && err.contains("(128, 128)"),
+        "{err}"
+    );
+    assert!(err.contains("hint:"), "{err}");
+}
+
+#[test]
+fn eval_missing_predictions() {
+    let dir = tempfile::tempdir().unwrap();
+    copy_dir(&data("eval/preds/png"), dir.path());
+    for i in [2, 4, 7] {
+        std::fs::remove_file(dir.path().join(format!("CLEVRTEX_vbg_00000{i}_mask.png"))).unwrap();
+    }
+    let out = run(&["eval", s(dir.path()), s(&gt()), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let err = stderr(&out);
+    assert!(err.contains("no prediction for 3 of 10"), "{err}");
+    assert!(
+        err.contains("`CLEVRTEX_vbg_000002`") && err.contains("--allow-missing"),
+        "{err}"
+    );
+
+    let j = dir.path().join("r.json");
+    let out = run(&[
+        "eval",
+        s(dir.path()),
+        s(&gt()),
+        "--split",
+        "all",
+        "--allow-missing",
+        "--json",
+        s(&j),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(stderr(&out).contains("3 of 10 predictions were missing"));
+    let r: Value = serde_json::from_slice(&std::fs::read(&j).unwrap()).unwrap();
+    assert_eq!(r["counts"]["missing"], 3);
+    assert_eq!(r["counts"]["undefined"]["MSE"], 3);
+}
+
+#[test]
+fn eval_corrupt_and_unsupported_predictions() {
+    let dir = tempfile::tempdir().unwrap();
+    copy_dir(&data("eval/preds/npy"), dir.path());
+    let bad = dir.path().join("CLEVRTEX_vbg_000001.npy");
+    std::fs::write(&bad, b"\x93NUMPY garbage").unwrap();
+    let out = run(&["eval", s(dir.path()), s(&gt()), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("CLEVRTEX_vbg_000001.npy") && err.contains("cannot decode"),
+        "{err}"
+    );
+
+    // Negative ids are refused with the value.
+    std::fs::write(&bad, npy_i32(&[128, 128], &vec![-1; 128 * 128])).unwrap();
+    let out = run(&["eval", s(dir.path()), s(&gt()), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(stderr(&out).contains("segment id `-1`"), "{}", text(&out));
+
+    // A wrong shape is named, never reshaped.
+    std::fs::write(&bad, npy_i32(&[64, 256], &vec![0; 64 * 256])).unwrap();
+    let out = run(&["eval", s(dir.path()), s(&gt()), "--split", "all"]);
+    assert!(
+        stderr(&out).contains("prediction is (64, 256), ground truth is (128, 128)"),
+        "{}",
+        text(&out)
+    );
+
+    // An RGB PNG is not a segment-id mask.
+    std::fs::remove_file(&bad).unwrap();
+    std::fs::copy(
+        data("eval/preds/png/CLEVRTEX_vbg_000001_recon.png"),
+        dir.path().join("CLEVRTEX_vbg_000001_mask.png"),
+    )
+    .unwrap();
+    let out = run(&["eval", s(dir.path()), s(&gt()), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("must be greyscale or palette"),
+        "{}",
+        text(&out)
+    );
+
+    // Two predictions for one sample.
+    std::fs::copy(data("eval/preds/npy/CLEVRTEX_vbg_000001.npy"), &bad).unwrap();
+    let out = run(&["eval", s(dir.path()), s(&gt()), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("duplicate prediction `CLEVRTEX_vbg_000001`"),
+        "{}",
+        text(&out)
+    );
+}
+
+#[test]
+fn eval_ground_truth_gaps_duplicates_and_holes() {
+    let preds = data("eval/preds/png");
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gt");
+    copy_dir(&gt(), &g);
+    let sample = g.join("clevrtex_vbg/0");
+
+    // Duplicate: the same stem in two folders.
+    std::fs::create_dir_all(g.join("clevrtex_vbg/extra")).unwrap();
+    std::fs::copy(
+        sample.join("CLEVRTEX_vbg_000003.png"),
+        g.join("clevrtex_vbg/extra/CLEVRTEX_vbg_000003.png"),
+    )
+    .unwrap();
+    let out = run(&["eval", s(&preds), s(&g), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("duplicate ground-truth sample `CLEVRTEX_vbg_000003`"),
+        "{}",
+        text(&out)
+    );
+    std::fs::remove_dir_all(g.join("clevrtex_vbg/extra")).unwrap();
+
+    // A sample without its mask.
+    std::fs::rename(
+        sample.join("CLEVRTEX_vbg_000004_flat.png"),
+        dir.path().join("x.png"),
+    )
+    .unwrap();
+    let out = run(&["eval", s(&preds), s(&g), "--split", "all"]);
+    assert!(
+        stderr(&out).contains("`CLEVRTEX_vbg_000004` has no") && stderr(&out).contains("_flat.png"),
+        "{}",
+        text(&out)
+    );
+    std::fs::rename(
+        dir.path().join("x.png"),
+        sample.join("CLEVRTEX_vbg_000004_flat.png"),
+    )
+    .unwrap();
+
+    // A corrupt ground-truth mask is named.
+    std::fs::write(sample.join("CLEVRTEX_vbg_000002_flat.png"), b"not a png").unwrap();
+    let out = run(&["eval", s(&preds), s(&g), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("CLEVRTEX_vbg_000002_flat.png")
+            && stderr(&out).contains("not a valid PNG"),
+        "{}",
+        text(&out)
+    );
+
+    // A gap in the index sequence.
+    std::fs::remove_file(sample.join("CLEVRTEX_vbg_000005.png")).unwrap();
+    let out = run(&["eval", s(&preds), s(&g), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("gap: index `5` is missing"),
+        "{}",
+        text(&out)
+    );
+}
+
+#[test]
+fn eval_variant_and_split_errors() {
+    let preds = data("eval/preds/png");
+    let out = run(&["eval", s(&preds), s(&gt()), "--variant", "camo"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("no ground-truth samples `CLEVRTEX_camo_??????.png`"),
+        "{}",
+        text(&out)
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["eval", s(&preds), s(&dir.path().join("nope"))]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(stderr(&out).contains("cannot read"), "{}", text(&out));
+
+    let out = run(&["eval", s(&preds), s(&gt()), "--split", "sideways"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+}

@@ -145,7 +145,14 @@ pub fn to_table(r: &Report) -> String {
         );
     }
     for (kind, groups) in &r.breakdowns {
-        let _ = writeln!(s, "\nby {kind}: {:>6} {:>8} {:>10}", "count", "mIoU", "MSE");
+        let _ = writeln!(
+            s,
+            "\n{:<30} {:>6} {:>8} {:>10}",
+            format!("by {kind}"),
+            "count",
+            "mIoU",
+            "MSE"
+        );
         for (name, g) in groups {
             let mse = g.mse.map_or("n/a".to_string(), |v| format!("{v:.3}"));
             let _ = writeln!(

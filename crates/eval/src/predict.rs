@@ -95,6 +95,12 @@ impl MaskValue for f64 {
     }
 }
 
+/// Argmax of `f32` soft masks `(K, n)`: first index on ties, NaN counts as the maximum; with
+/// `no_background` a background slot `1 - Σ_k m_k` (summed in k order) is put in front.
+pub fn argmax_masks(data: &[f32], k: usize, n: usize, no_background: bool) -> Vec<u32> {
+    argmax(data, k, n, no_background)
+}
+
 /// Argmax over the K masks (`data` is `(K, n)`), first index on ties, NaN as the maximum.
 /// With `no_background`, a background slot `1 - Σ_k m_k` is put in front.
 fn argmax<T: MaskValue>(data: &[T], k: usize, n: usize, no_background: bool) -> Vec<u32> {

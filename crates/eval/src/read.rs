@@ -357,7 +357,8 @@ pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
     }
     let big = d[0] == b'>';
     let kind = d[1];
-    let size: usize = descr[2..]
+    let size: usize = std::str::from_utf8(&d[2..])
+        .unwrap_or("")
         .parse()
         .map_err(|_| format!("unsupported dtype `{descr}`"))?;
     if !matches!(d[0], b'<' | b'>' | b'|' | b'=') {

@@ -216,7 +216,32 @@ def dataset():
         json.dump(expected, f, indent=1)
 
 
+def fuzz_corpus():
+    """Small valid seeds the fuzz tests mutate (crates/eval/tests/fuzz.rs)."""
+    d = os.path.join(HERE, "fuzz")
+    os.makedirs(d, exist_ok=True)
+    m = rng.integers(0, 4, size=(6, 5)).astype(np.uint8)
+    p = Image.fromarray(m, "P")
+    p.putpalette([0, 0, 0, 255, 0, 0, 0, 255, 0, 0, 0, 255] * 64)
+    p.save(os.path.join(d, "palette.png"))
+    Image.fromarray(m.astype(np.uint16) * 300).save(os.path.join(d, "grey16.png"))
+    Image.fromarray(m > 1).save(os.path.join(d, "bit1.png"))
+    Image.fromarray(rng.integers(0, 256, size=(4, 3, 3)).astype(np.uint8), "RGB").save(os.path.join(d, "rgb.png"))
+    Image.fromarray(rng.integers(0, 256, size=(4, 3, 4)).astype(np.uint8), "RGBA").save(os.path.join(d, "rgba.png"))
+    np.save(os.path.join(d, "labels_i4.npy"), m.astype(np.int32))
+    np.save(os.path.join(d, "masks_f4.npy"), rng.random((3, 6, 5)).astype(np.float32))
+    f8 = rng.random((2, 3, 4))
+    np.save(os.path.join(d, "masks_f8_fortran.npy"), np.asfortranarray(f8))
+    np.save(os.path.join(d, "masks_f8_big_endian.npy"), f8.astype(">f8"))
+    np.save(os.path.join(d, "half.npy"), rng.random((2, 2)).astype(np.float16))
+    np.savez(os.path.join(d, "stored.npz"), labels=m)
+    np.savez_compressed(os.path.join(d, "deflated.npz"), masks=rng.random((2, 6, 5)).astype(np.float32), recon=rng.random((3, 6, 5)))
+    with open(os.path.join(d, "meta.json"), "w") as f:
+        json.dump({"ground_material": "moss", "objects": [{"material": "rope", "shape": "cube", "size": "large", "color": "red"}]}, f)
+
+
 if __name__ == "__main__":
+    fuzz_corpus()
     lsa_ties()
     resize_fixtures()
     reference_cases()
