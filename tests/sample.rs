@@ -1,1 +1,681 @@
-//! Integration tests for `clevrtex sample`.
+//! Integration tests for `clevrtex sample` and the scene sampler behind it.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use clevrtex_scene::config::{Config, Splits};
+use clevrtex_scene::sample::object_count;
+use clevrtex_scene::{sample, SampleRequest, SceneFile};
+use rayon::prelude::*;
+
+use crate::util::{clevrtex, text};
+
+/// Environment variables that select a shard; removed so a CI job array cannot leak in.
+const SHARD_ENV: [&str; 5] = [
+    "SLURM_ARRAY_TASK_ID",
+    "SLURM_ARRAY_TASK_COUNT",
+    "SLURM_ARRAY_TASK_MIN",
+    "JOB_COMPLETION_INDEX",
+    "CLEVRTEX_SHARD_COUNT",
+];
+
+fn sample_cmd(args: &[&str], env: &[(&str, &str)]) -> std::process::Output {
+    let mut cmd = clevrtex();
+    cmd.arg("sample").args(args);
+    for v in SHARD_ENV {
+        cmd.env_remove(v);
+    }
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.output().expect("failed to start clevrtex")
+}
+
+fn run_ok(args: &[&str], env: &[(&str, &str)]) {
+    let out = sample_cmd(args, env);
+    assert!(out.status.success(), "{}", text(&out));
+}
+
+/// Every file under `dir`, as relative path -> bytes.
+fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut files = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let p = entry.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                files.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    files
+}
+
+#[test]
+fn writes_one_valid_scene_file_per_image_in_the_published_layout() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().to_str().unwrap();
+    run_ok(
+        &[
+            "--variant",
+            "camo",
+            "-n",
+            "1005",
+            "--seed",
+            "7",
+            "--out",
+            out,
+        ],
+        &[],
+    );
+    let files = tree(tmp.path());
+    assert_eq!(files.len(), 1005, "no temporary files left behind");
+    for i in [0u64, 999, 1000, 1004] {
+        let rel = format!("clevrtex_camo/{}/CLEVRTEX_camo_{i:06}.json", i / 1000);
+        let scene: SceneFile = serde_json::from_slice(&files[&rel]).unwrap();
+        assert_eq!(scene.index, i);
+        assert_eq!(scene.seed, 7);
+        assert_eq!(scene.stem, format!("CLEVRTEX_camo_{i:06}"));
+    }
+}
+
+#[test]
+fn same_seed_gives_byte_identical_files_and_three_shards_equal_one_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
+    let common = ["--variant", "full", "-n", "301", "--seed", "11"];
+    let run_into = |name: &str, extra: &[&str], env: &[(&str, &str)]| {
+        let d = dir(name);
+        let mut args: Vec<&str> = common.to_vec();
+        args.extend(["--out", &d]);
+        args.extend(extra);
+        run_ok(&args, env);
+    };
+    run_into("a", &[], &[]);
+    run_into("b", &["-j", "1"], &[]);
+    for k in 0..3 {
+        run_into("sharded", &["--shard", &format!("{k}/3")], &[]);
+    }
+    // The same shards from a SLURM job array (ids 1..=3) and a Kubernetes indexed job.
+    for id in 1..=3 {
+        let id = id.to_string();
+        run_into(
+            "slurm",
+            &[],
+            &[
+                ("SLURM_ARRAY_TASK_ID", &id),
+                ("SLURM_ARRAY_TASK_MIN", "1"),
+                ("SLURM_ARRAY_TASK_COUNT", "3"),
+            ],
+        );
+    }
+    for k in 0..3 {
+        run_into(
+            "k8s",
+            &["--shard-count", "3"],
+            &[("JOB_COMPLETION_INDEX", &k.to_string())],
+        );
+    }
+    let a = tree(Path::new(&dir("a")));
+    assert_eq!(a.len(), 301);
+    assert!(a == tree(Path::new(&dir("b"))), "two runs differ");
+    assert!(
+        a == tree(Path::new(&dir("sharded"))),
+        "3 shards != unsharded"
+    );
+    assert!(
+        a == tree(Path::new(&dir("slurm"))),
+        "SLURM shards != unsharded"
+    );
+    assert!(
+        a == tree(Path::new(&dir("k8s"))),
+        "indexed-job shards != unsharded"
+    );
+
+    // A sub-range with the same dataset size reproduces the same images.
+    let d = dir("range2");
+    run_ok(
+        &[
+            "--variant",
+            "full",
+            "-n",
+            "51",
+            "--seed",
+            "11",
+            "--start",
+            "250",
+            "--total",
+            "301",
+            "--out",
+            &d,
+        ],
+        &[],
+    );
+    let part = tree(Path::new(&d));
+    assert_eq!(part.len(), 51);
+    for (rel, bytes) in &part {
+        assert!(a[rel] == *bytes, "{rel} differs when sampled alone");
+    }
+
+    // A different seed gives different scenes.
+    let other = dir("other");
+    run_ok(
+        &[
+            "--variant",
+            "full",
+            "-n",
+            "5",
+            "--seed",
+            "12",
+            "--out",
+            &other,
+        ],
+        &[],
+    );
+    let o = tree(Path::new(&other));
+    let rel = "clevrtex_full/0/CLEVRTEX_full_000000.json";
+    assert!(o[rel] != a[rel]);
+}
+
+#[test]
+fn shard_errors_are_explained() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().to_str().unwrap();
+    let o = sample_cmd(
+        &[
+            "--variant",
+            "camo",
+            "-n",
+            "3",
+            "--out",
+            out,
+            "--shard",
+            "3/3",
+        ],
+        &[],
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("invalid shard `3/3`"));
+    let o = sample_cmd(
+        &["--variant", "camo", "-n", "3", "--out", out],
+        &[("JOB_COMPLETION_INDEX", "1")],
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--shard-count"), "{err}");
+    let o = sample_cmd(&["--variant", "nope", "-n", "3", "--out", out], &[]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown variant"));
+    // Missing required flag: a usage error.
+    let o = sample_cmd(&["--variant", "camo", "--out", out], &[]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+}
+
+fn write_config(
+    dir: &Path,
+    name: &str,
+    base: &str,
+    edit: impl Fn(&mut serde_json::Value),
+) -> String {
+    let text =
+        std::fs::read_to_string(crate::util::repo_root().join("configs").join(base)).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    edit(&mut v);
+    let path = dir.join(name);
+    std::fs::write(&path, serde_json::to_string_pretty(&v).unwrap()).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+#[test]
+fn infeasible_requests_fail_fast_with_the_constraint_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let out = out.to_str().unwrap();
+
+    // Obviously infeasible: refused by the area bound before any draw.
+    let cfg = write_config(tmp.path(), "crowded.json", "full.json", |v| {
+        v["objects"]["count"] = serde_json::json!([60, 60]);
+    });
+    let started = Instant::now();
+    let o = sample_cmd(&["--config", &cfg, "-n", "100", "--out", out], &[]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("cannot place 60 objects"), "{err}");
+    assert!(
+        err.contains("min-dist 0.25") && err.contains("6x6 area"),
+        "{err}"
+    );
+    assert!(err.contains("\nhint: "), "{err}");
+    assert!(started.elapsed() < Duration::from_secs(5));
+    assert!(!Path::new(out).join("clevrtex_full/0").exists() || tree(Path::new(out)).is_empty());
+
+    // Passes the area bound but cannot be placed: gives up after the bounded restarts.
+    let cfg = write_config(tmp.path(), "tight.json", "full.json", |v| {
+        v["objects"]["count"] = serde_json::json!([18, 18]);
+        v["objects"]["shapes"] = serde_json::json!(["cube"]);
+        v["objects"]["sizes"] = serde_json::json!([{"name": "large", "scale": 0.9}]);
+    });
+    let started = Instant::now();
+    let o = sample_cmd(&["--config", &cfg, "-n", "4", "--out", out], &[]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("cannot place 18 objects of size up to 0.9 with min-dist 0.25 and margin 0.4 in the 6x6 area after 1000 restarts"),
+        "{err}"
+    );
+    assert!(err.contains("\nhint: "), "{err}");
+    assert!(
+        started.elapsed() < Duration::from_secs(30),
+        "{:?}",
+        started.elapsed()
+    );
+}
+
+/// An edit applied to a config document.
+type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+
+#[test]
+fn malformed_configs_name_the_file_and_key() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let out = out.to_str().unwrap();
+    let cases: Vec<(&str, Edit, &str)> = vec![
+        (
+            "unknown_key.json",
+            Box::new(|v| v["objects"]["colours"] = serde_json::json!([])),
+            "key `objects.colours`",
+        ),
+        (
+            "bad_shape.json",
+            Box::new(|v| v["objects"]["shapes"][1] = serde_json::json!("pyramid")),
+            "key `objects.shapes[1]` (value `pyramid`): unknown shape",
+        ),
+        (
+            "bad_material.json",
+            Box::new(|v| v["background"]["materials"] = serde_json::json!({"include": ["velvet"]})),
+            "key `background.materials.include[0]` (value `velvet`): unknown material",
+        ),
+        (
+            "empty.json",
+            Box::new(|v| {
+                v["objects"]["materials"] =
+                    serde_json::json!({"sets": ["main"], "exclude": [], "include": []})
+                        .as_object()
+                        .map(|_| serde_json::json!({"include": []}))
+                        .unwrap()
+            }),
+            "key `objects.materials`: selects no material",
+        ),
+        (
+            "bad_base.json",
+            Box::new(|v| v["base_scene"] = serde_json::json!({"render": {"samples": "many"}})),
+            "key `base_scene.render.samples`",
+        ),
+    ];
+    for (name, edit, want) in cases {
+        let cfg = write_config(tmp.path(), name, "full.json", edit);
+        let o = sample_cmd(&["--config", &cfg, "-n", "1", "--out", out], &[]);
+        assert_eq!(o.status.code(), Some(1), "{name}: {}", text(&o));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(&format!("invalid config `{cfg}`")),
+            "{name}: {err}"
+        );
+        assert!(err.contains(want), "{name}: want {want:?} in {err}");
+        assert!(err.contains("\nhint: "), "{name}: {err}");
+    }
+    // Not JSON at all.
+    let path = tmp.path().join("broken.json");
+    std::fs::write(&path, "{\"name\": \"x\",\n  oops").unwrap();
+    let o = sample_cmd(
+        &["--config", path.to_str().unwrap(), "-n", "1", "--out", out],
+        &[],
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("not valid JSON") && err.contains("line 2"),
+        "{err}"
+    );
+}
+
+#[test]
+fn user_config_with_base_scene_override_is_used() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cfg = write_config(tmp.path(), "mine.json", "camo.json", |v| {
+        v["name"] = serde_json::json!("mine");
+        v["base_scene"] =
+            serde_json::json!({"render": {"samples": 256}, "passes": ["rgb", "mask"]});
+    });
+    let out = tmp.path().join("out");
+    run_ok(
+        &["--config", &cfg, "-n", "2", "--out", out.to_str().unwrap()],
+        &[],
+    );
+    let bytes = std::fs::read(out.join("clevrtex_mine/0/CLEVRTEX_mine_000001.json")).unwrap();
+    let scene: SceneFile = serde_json::from_slice(&bytes).unwrap();
+    assert_eq!(scene.variant, "mine");
+    assert_eq!(scene.render.samples, 256);
+    assert_eq!(scene.render.width, 320);
+    assert_eq!(scene.passes.len(), 2);
+}
+
+#[test]
+fn scene_file_snapshot() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().to_str().unwrap();
+    run_ok(
+        &[
+            "--variant",
+            "vbg",
+            "-n",
+            "1",
+            "--start",
+            "12",
+            "--total",
+            "100",
+            "--seed",
+            "7",
+            "--out",
+            out,
+        ],
+        &[],
+    );
+    let text = std::fs::read_to_string(tmp.path().join("clevrtex_vbg/0/CLEVRTEX_vbg_000012.json"))
+        .unwrap();
+    insta::assert_snapshot!("vbg_seed7_index12", text);
+}
+
+// ---- statistics over 10,000 scenes per variant ------------------------------------------
+
+const N: u64 = 10_000;
+const SEED: u64 = 20_240_601;
+
+fn catalogue_sets() -> BTreeMap<String, String> {
+    #[derive(serde::Deserialize)]
+    struct Cat {
+        materials: Vec<Entry>,
+    }
+    #[derive(serde::Deserialize)]
+    struct Entry {
+        name: String,
+        set: String,
+    }
+    let c: Cat = serde_json::from_str(clevrtex_materials::CATALOGUE_JSON).unwrap();
+    c.materials.into_iter().map(|e| (e.name, e.set)).collect()
+}
+
+fn sample_all(config: &Config) -> Vec<SceneFile> {
+    (0..N)
+        .into_par_iter()
+        .map(|index| {
+            let req = SampleRequest {
+                seed: SEED,
+                index,
+                attempt: 0,
+                total: N,
+            };
+            sample(config, &req).unwrap_or_else(|e| panic!("index {index}: {e}"))
+        })
+        .collect()
+}
+
+/// Pearson chi-square statistic of `counts` against a uniform distribution.
+fn chi_square(counts: &[u64]) -> f64 {
+    let total: u64 = counts.iter().sum();
+    let expected = total as f64 / counts.len() as f64;
+    counts
+        .iter()
+        .map(|&c| (c as f64 - expected).powi(2) / expected)
+        .sum()
+}
+
+/// Chi-square critical values at p = 0.001 for 1..=10 degrees of freedom.
+const CHI2_999: [f64; 10] = [
+    10.83, 13.82, 16.27, 18.47, 20.52, 22.46, 24.32, 26.12, 27.88, 29.59,
+];
+
+fn assert_uniform(what: &str, variant: &str, counts: &BTreeMap<String, u64>, keys: &[String]) {
+    let c: Vec<u64> = keys
+        .iter()
+        .map(|k| counts.get(k).copied().unwrap_or(0))
+        .collect();
+    assert!(
+        c.iter().all(|&x| x > 0),
+        "{variant}: some {what} never drawn: {counts:?}"
+    );
+    if keys.len() > 1 && keys.len() <= 11 {
+        let chi = chi_square(&c);
+        assert!(
+            chi < CHI2_999[keys.len() - 2],
+            "{variant}: {what} not uniform (chi-square {chi:.2}): {counts:?}"
+        );
+    }
+}
+
+fn check_variant(variant: &str) {
+    let config = Config::builtin(variant).unwrap();
+    let sets = catalogue_sets();
+    let scenes = sample_all(&config);
+    let base = &config.base;
+    let p = &base.placement;
+
+    // Object count: uniform on the configured range.
+    let [lo, hi] = config.objects.count;
+    assert_eq!([lo, hi], [3, 10], "{variant}");
+    let mut count_hist = vec![0u64; (hi - lo + 1) as usize];
+    let mut shapes = BTreeMap::new();
+    let mut sizes = BTreeMap::new();
+    let mut materials = BTreeMap::new();
+    let mut splits = BTreeMap::new();
+    for s in &scenes {
+        let n = s.objects.len() as u32;
+        assert_eq!(n, object_count(&config, SEED, s.index), "{variant}");
+        count_hist[(n - lo) as usize] += 1;
+        *splits.entry(s.split.clone()).or_insert(0u64) += 1;
+
+        // Camera and lights jittered around the base scene, and aimed at their targets.
+        for (a, b) in s.camera.location.iter().zip(base.camera.location) {
+            assert!((a - b).abs() <= base.camera.jitter, "{variant}: camera");
+        }
+        for (l, rig) in s.lights.iter().zip(&base.lights) {
+            for (a, b) in l.location.iter().zip(rig.location) {
+                assert!((a - b).abs() <= rig.jitter, "{variant}: light {}", l.name);
+            }
+        }
+
+        // Background rules.
+        let bg = &s.backdrop.material;
+        assert!((0.0..1.0).contains(&bg.random));
+        assert!(bg.color.is_none() && bg.color_name.is_none());
+        match variant {
+            "pbg" | "clevr" => {
+                assert_eq!(bg.name, "plain");
+                assert_eq!((bg.displacement, bg.scale), (None, None));
+            }
+            "grassbg" => assert_eq!(bg.name, "mossy_forest_grass"),
+            "outd" => assert_eq!(sets[&bg.name], "ood", "{variant}: {}", bg.name),
+            _ => assert_eq!(sets[&bg.name], "main", "{variant}: {}", bg.name),
+        }
+        if !matches!(variant, "pbg" | "clevr") {
+            assert_eq!(
+                (bg.displacement, bg.scale),
+                (Some(0.35), Some(2.0)),
+                "{variant}"
+            );
+        }
+
+        let dirs = clevrtex_scene::camera::directions(&s.camera);
+        for (i, o) in s.objects.iter().enumerate() {
+            *shapes.entry(o.shape.clone()).or_insert(0u64) += 1;
+            *sizes.entry(o.size.clone()).or_insert(0u64) += 1;
+            *materials.entry(o.material.name.clone()).or_insert(0u64) += 1;
+            let m = &o.material;
+            assert!((0.0..1.0).contains(&m.random));
+            assert_eq!((m.displacement, m.scale), (None, None));
+            match variant {
+                "camo" => assert_eq!(m.name, bg.name, "camo: one material everywhere"),
+                "vbg" | "clevr" => {
+                    assert!(
+                        m.name == "rubber" || m.name == "metal",
+                        "{variant}: {}",
+                        m.name
+                    );
+                    assert!(
+                        m.color_name.is_some() && m.color.is_some(),
+                        "{variant}: colour"
+                    );
+                }
+                "outd" => assert_eq!(sets[&m.name], "ood", "outd: {}", m.name),
+                _ => assert_eq!(sets[&m.name], "main", "{variant}: {}", m.name),
+            }
+            if !matches!(variant, "vbg" | "clevr") {
+                assert!(
+                    m.color.is_none() && m.color_name.is_none(),
+                    "{variant}: colour"
+                );
+            }
+            let want_scale = match (variant, o.size.as_str()) {
+                ("outd", "large") => 1.0,
+                ("outd", "medium") => 0.8,
+                ("outd", "small") => 0.6,
+                (_, "large") => 0.9,
+                (_, "medium") => 0.6,
+                (_, "small") => 0.4,
+                (_, other) => panic!("{variant}: size {other}"),
+            };
+            assert_eq!(o.scale, want_scale, "{variant}");
+            assert_eq!(o.location[2], o.scale, "{variant}: rests on the floor");
+            assert!((0.0..360.0).contains(&o.rotation_deg));
+            for c in &o.location[..2] {
+                assert!(
+                    (p.area[0]..p.area[1]).contains(c),
+                    "{variant}: outside area"
+                );
+            }
+            // Spacing and margin against every earlier object (CLEVR's cube radius quirk).
+            for prev in &s.objects[..i] {
+                let r_prev = if prev.shape == "cube" {
+                    prev.scale / std::f64::consts::SQRT_2
+                } else {
+                    prev.scale
+                };
+                let (dx, dy) = (
+                    o.location[0] - prev.location[0],
+                    o.location[1] - prev.location[1],
+                );
+                let gap = (dx * dx + dy * dy).sqrt() - o.scale - r_prev;
+                assert!(gap >= p.min_dist, "{variant} image {}: gap {gap}", s.index);
+                for d in [dirs.left, dirs.right, dirs.front, dirs.behind] {
+                    let m = dx * d[0] + dy * d[1];
+                    assert!(
+                        !(m > 0.0 && m < p.margin),
+                        "{variant} image {}: margin {m}",
+                        s.index
+                    );
+                }
+            }
+        }
+    }
+
+    let chi = chi_square(&count_hist);
+    assert!(
+        chi < CHI2_999[count_hist.len() - 2],
+        "{variant}: object count not uniform on 3..=10 (chi-square {chi:.2}, df {}): {count_hist:?}",
+        count_hist.len() - 1
+    );
+
+    let shape_keys: Vec<String> = match variant {
+        "outd" => ["cone", "torus", "icosahedron", "teapot"]
+            .map(String::from)
+            .to_vec(),
+        "clevr" => ["cube", "sphere", "cylinder"].map(String::from).to_vec(),
+        _ => ["cube", "sphere", "cylinder", "monkey"]
+            .map(String::from)
+            .to_vec(),
+    };
+    assert_eq!(
+        shapes.keys().cloned().collect::<Vec<_>>().len(),
+        shape_keys.len(),
+        "{variant}: {shapes:?}"
+    );
+    // Shapes are drawn uniformly, but CLEVR's cube quirk (a placed cube records a smaller
+    // radius) makes layouts with cubes succeed more often, so cubes end up over-represented
+    // by a few per cent. The other shapes stay uniform among themselves.
+    let others: Vec<String> = shape_keys
+        .iter()
+        .filter(|k| *k != "cube")
+        .cloned()
+        .collect();
+    assert_uniform("non-cube shapes", variant, &shapes, &others);
+    if let Some(&cubes) = shapes.get("cube") {
+        let share = cubes as f64 / shapes.values().sum::<u64>() as f64;
+        let uniform = 1.0 / shape_keys.len() as f64;
+        assert!(
+            (uniform..uniform * 1.15).contains(&share),
+            "{variant}: cube share {share:.4} vs uniform {uniform:.4}"
+        );
+    }
+    // Sizes: large objects are rejected more often by the spacing rule, so they cannot be
+    // uniform in the output; every size must still appear.
+    let size_keys: Vec<String> = ["large", "medium", "small"].map(String::from).to_vec();
+    assert!(
+        size_keys.iter().all(|k| sizes.contains_key(k)),
+        "{variant}: {sizes:?}"
+    );
+    assert_eq!(sizes.len(), 3, "{variant}: {sizes:?}");
+    let mat_keys: Vec<String> = config.objects.materials.clone();
+    assert_eq!(
+        materials.keys().cloned().collect::<BTreeSet<_>>(),
+        mat_keys.iter().cloned().collect::<BTreeSet<_>>(),
+        "{variant}: every allowed material is drawn, and nothing else"
+    );
+
+    match config.splits {
+        Splits::TestOnly => assert_eq!(splits.get("test"), Some(&N), "{variant}"),
+        Splits::Standard => {
+            assert_eq!(splits.get("test"), Some(&(N / 10)), "{variant}");
+            assert_eq!(splits.get("val"), Some(&(N / 10)), "{variant}");
+            assert_eq!(splits.get("train"), Some(&(N - N / 5)), "{variant}");
+        }
+    }
+}
+
+#[test]
+fn statistics_full() {
+    check_variant("full");
+}
+
+#[test]
+fn statistics_pbg() {
+    check_variant("pbg");
+}
+
+#[test]
+fn statistics_vbg() {
+    check_variant("vbg");
+}
+
+#[test]
+fn statistics_grassbg() {
+    check_variant("grassbg");
+}
+
+#[test]
+fn statistics_camo() {
+    check_variant("camo");
+}
+
+#[test]
+fn statistics_outd() {
+    check_variant("outd");
+}
+
+#[test]
+fn statistics_clevr() {
+    check_variant("clevr");
+}
