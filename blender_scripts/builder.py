@@ -11,7 +11,7 @@ import time
 
 import bpy
 from bpy_extras.object_utils import world_to_camera_view
-from mathutils import Matrix
+from mathutils import Matrix, Vector
 
 import compat
 import passes
@@ -226,7 +226,16 @@ def apply_render_settings(scene, spec, threads):
     scene.render.film_transparent = False
     scene.render.use_compositing = False
     scene.render.use_sequencer = False
+    # Keep Cycles' synced scene between renders: the shadow pass's second render then reuses
+    # the tessellated (displaced) geometry instead of redoing it (measured on full8 at 1 spp:
+    # 1.6 s instead of 3.7-4.6 s). Pixels are identical with and without (checked).
+    scene.render.use_persistent_data = True
     scene.render.dither_intensity = 0.0
+    # No metadata (date, render time, file name...) in the files: identical renders give
+    # byte-identical files.
+    for prop in scene.render.bl_rna.properties:
+        if prop.identifier.startswith("use_stamp"):
+            setattr(scene.render, prop.identifier, False)
     if threads > 0:
         scene.render.threads_mode = "FIXED"
         scene.render.threads = threads
@@ -258,7 +267,9 @@ def apply_render_settings(scene, spec, threads):
     scene.view_settings.gamma = r["gamma"]
     scene.view_settings.use_curve_mapping = False
     scene.sequencer_colorspace_settings.name = "sRGB"
-    scene.frame_set(1)
+    # No frame_set()/view_layer.update(): evaluating the viewport depsgraph (subdivision
+    # modifiers) cost ~0.25 s per scene and the render builds its own depsgraph anyway.
+    scene.frame_current = 1
 
 
 class BuiltScene:
@@ -294,7 +305,6 @@ def build(spec, key, threads):
         obj.pass_index = i + 1
         built.objects.append(obj)
     apply_render_settings(scene, spec, threads)
-    bpy.context.view_layer.update()
     built.build_s = time.perf_counter() - t0
     return built
 
@@ -382,7 +392,8 @@ def _save(path, fmt):
         settings.file_format = "OPEN_EXR_MULTILAYER"
         settings.color_mode = "RGBA"
         settings.color_depth = "32"
-        settings.exr_codec = "ZIP"
+        # RLE: lossless and as fast as no compression (ZIP took 0.1 s per file, RLE 0.016 s).
+        settings.exr_codec = "RLE"
     bpy.data.images["Render Result"].save_render(path, scene=scene)
 
 
@@ -404,8 +415,10 @@ def projected(built):
     scene = bpy.context.scene
     w, h = scene.render.resolution_x, scene.render.resolution_y
     out = []
-    for obj in built.objects:
-        co = world_to_camera_view(scene, built.camera, obj.matrix_world.translation)
+    # From the scene file's locations, not obj.matrix_world, which is only valid after a
+    # depsgraph update that the build skips on purpose.
+    for ospec in built.spec["objects"]:
+        co = world_to_camera_view(scene, built.camera, Vector(ospec["location"]))
         out.append([co.x * w, (1.0 - co.y) * h, co.z])
     return out
 

@@ -1,7 +1,6 @@
 """Minimal EXR reader for checking the bridge's output (plain python3, dev only).
 
-Reads single-part scanline EXRs with NONE, ZIPS or ZIP compression (what Blender writes
-with codec ZIP). `python3 exr_dump.py FILE.exr` prints every channel's min/max/mean, the
+Reads single-part scanline EXRs with NONE, RLE, ZIPS or ZIP compression. `python3 exr_dump.py FILE.exr` prints every channel's min/max/mean, the
 distinct values of IndexOB, and NaN/Inf counts.
 """
 
@@ -11,8 +10,23 @@ import sys
 import zlib
 
 
-def _undo_zip(data, expected):
-    t = bytearray(zlib.decompress(data))
+def _unrle(data):
+    out = bytearray()
+    i = 0
+    while i < len(data):
+        n = struct.unpack_from("b", data, i)[0]
+        i += 1
+        if n < 0:
+            out += data[i:i - n]
+            i -= n
+        else:
+            out += data[i:i + 1] * (n + 1)
+            i += 1
+    return out
+
+
+def _undo_zip(data, expected, rle=False):
+    t = bytearray(_unrle(data) if rle else zlib.decompress(data))
     for i in range(1, len(t)):
         t[i] = (t[i - 1] + t[i] - 128) & 0xFF
     half = (len(t) + 1) // 2
@@ -55,7 +69,7 @@ def read(path):
     comp = header["compression"][1][0]
     xmin, ymin, xmax, ymax = struct.unpack("<4i", header["dataWindow"][1])
     w, h = xmax - xmin + 1, ymax - ymin + 1
-    lines = {0: 1, 2: 1, 3: 16}[comp]
+    lines = {0: 1, 1: 1, 2: 1, 3: 16}[comp]
     nchunks = (h + lines - 1) // lines
     offsets = struct.unpack_from("<%dQ" % nchunks, buf, pos)
     sizes = {0: 4, 1: 2, 2: 4}
@@ -66,7 +80,7 @@ def read(path):
         nl = min(lines, ymax - y + 1)
         expected = nl * w * sum(sizes[t] for _, t in chans)
         if comp != 0 and n < expected:
-            block = _undo_zip(block, expected)
+            block = _undo_zip(block, expected, rle=(comp == 1))
         q = 0
         for line in range(nl):
             row = (y - ymin + line) * w

@@ -119,6 +119,18 @@ def main():
             obj("cylinder", "medium", -0.6, -0.6, 0.0, mat("metal", 0.7, "brown")),
             obj("monkey", "small", 2.6, -2.6, 300.0, mat("rubber", 0.8, "gray")),
         ], mat("plain", 0.0)),
+        # The same layout as a `full` (ClevrTex) scene: textured materials, a displaced
+        # textured backdrop. Material names are the built-in catalogue's.
+        "full8": scene("full", 5, [
+            obj("cube", "large", -2.2, -1.4, 30.0, mat("bricks", 0.1)),
+            obj("sphere", "medium", 0.3, -2.3, 0.0, mat("copper_chainmail", 0.2)),
+            obj("cylinder", "small", 2.4, -0.6, 10.0, mat("denim", 0.3)),
+            obj("monkey", "large", 0.2, 0.6, 200.0, mat("flemish_red_bricks", 0.4)),
+            obj("cube", "small", 2.0, 1.9, 75.0, mat("white_painted_bricks", 0.5)),
+            obj("sphere", "large", -2.0, 2.4, 0.0, mat("cobblestone_arches", 0.6)),
+            obj("cylinder", "medium", -0.6, -0.6, 0.0, mat("denim", 0.7)),
+            obj("monkey", "small", 2.6, -2.6, 300.0, mat("bricks", 0.8)),
+        ], mat("cobblestone_arches", 0.9, displacement=0.35, scale=2.0)),
         # Every shape once (OOD sizes), for a look at the meshes.
         "all_shapes": scene("outd", 1, [
             obj("cube", "small", -2.4, -2.0, 20.0, mat("rubber", 0.1, "red"), OOD_SIZES),
