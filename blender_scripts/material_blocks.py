@@ -121,7 +121,7 @@ def veins(g, p, L, ctx):
     v1 = g.smooth(L["width"], 0.0, w1)
     v2 = g.smooth(L["width"] * 0.6, 0.0, w2)
     fac = g.mx(v1, g.mul(v2, 0.6))
-    return {"fac": fac, "height": g.mul(fac, -0.2)}
+    return {"fac": fac, "height": g.mul(fac, -0.2), "mask": fac}
 
 
 def weave(g, p, L, ctx):
@@ -187,6 +187,11 @@ def waves(g, p, L, ctx):
         h = g.madd(g.sin(g.mul(t, 2.0 * math.pi)), 0.5, 0.5)
         if prof == "square":
             h = g.smooth(0.35, 0.65, h)
+    if L["line"] > 0:
+        # Stripes of duty `line`: where the sine is in its top `line` fraction of phase.
+        th = math.cos(math.pi * L["line"]) * 0.5 + 0.5
+        mask = g.smooth(th - 0.01, th + 0.01, h)
+        return {"fac": h, "height": mask, "mask": mask}
     return {"fac": h, "height": h}
 
 
@@ -236,6 +241,20 @@ def image(g, p, L, ctx):
     return {"fac": lum, "height": lum, "color": col}
 
 
+def _socket(coll, key):
+    """A socket by index (`"1"`), name (first match) or identifier (`Value_001`)."""
+    if key.isdigit():
+        i = int(key)
+        return coll[i] if i < len(coll) else None
+    for s in coll:
+        if s.name == key and s.enabled:
+            return s
+    for s in coll:
+        if s.identifier == key:
+            return s
+    return None
+
+
 def graph(g, p, L, ctx):
     nodes = {}
     for name, spec in L["nodes"].items():
@@ -245,7 +264,7 @@ def graph(g, p, L, ctx):
         nodes[name] = n
     for name, spec in L["nodes"].items():
         for k, v in (spec.get("inputs") or {}).items():
-            sock = nodes[name].inputs.get(k)
+            sock = _socket(nodes[name].inputs, k)
             if sock is None:
                 raise ValueError("graph node `%s` has no input `%s`" % (name, k))
             g.set(sock, v)
@@ -256,14 +275,14 @@ def graph(g, p, L, ctx):
             s = sources[src]
         else:
             node, sock = src.split(".", 1)
-            s = nodes[node].outputs.get(sock)
+            s = _socket(nodes[node].outputs, sock)
             if s is None:
                 raise ValueError("graph node `%s` has no output `%s`" % (node, sock))
         if dst.startswith("out."):
             out[dst[4:]] = s
         else:
             node, sock = dst.split(".", 1)
-            d = nodes[node].inputs.get(sock)
+            d = _socket(nodes[node].inputs, sock)
             if d is None:
                 raise ValueError("graph node `%s` has no input `%s`" % (node, sock))
             g.set(d, s)

@@ -174,6 +174,9 @@ def _layer(g, p, L, ctx, color, rough, metal, height):
     if L["inside_only"] and ctx["inside"] is not None:
         K = ctx["inside"] if K is None else g.mul(K, ctx["inside"])
 
+    if L.get("opacity", 1.0) < 1.0:
+        K = L["opacity"] if K is None else g.mul(K, L["opacity"])
+
     h = res.get("height")
     if h is not None:
         h = g.mul(h, L["height"]) if L["height"] != 1.0 else h
