@@ -1,1 +1,677 @@
-//! Integration tests for `clevrtex generate`.
+//! Integration tests for `clevrtex generate`, `clevrtex render` and `clevrtex doctor`.
+//!
+//! Failure paths use the fake Blender of `tests/fake_blender/` (selected with `--blender`
+//! and `FAKE_BLENDER_MODE`); real paths use the real Blender with tiny images, and skip
+//! visibly without it (see `util::blender_or_skip`).
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, SampleStats};
+use clevrtex_render::post::{self, decode_png};
+use clevrtex_scene::{Pass, SceneFile};
+use serde_json::Value;
+
+use crate::util::{blender_or_skip, clevrtex, data, repo_root, text};
+
+fn fake_blender() -> PathBuf {
+    repo_root().join("tests/fake_blender/blender")
+}
+
+/// `clevrtex generate` of one tiny clevr image with the fake Blender in `mode`.
+fn generate_fake(mode: &str, out: &Path, extra: &[&str]) -> Output {
+    clevrtex()
+        .env("FAKE_BLENDER_MODE", mode)
+        .env_remove("CLEVRTEX_BLENDER")
+        .args([
+            "generate",
+            "--variant",
+            "clevr",
+            "--width",
+            "64",
+            "--height",
+            "48",
+        ])
+        .args(["--samples", "1", "--workers", "1", "--out"])
+        .arg(out)
+        .arg("--blender")
+        .arg(fake_blender())
+        .args(extra)
+        .output()
+        .expect("run clevrtex")
+}
+
+fn ledger_lines(out: &Path) -> Vec<Value> {
+    let path = out.join("clevrtex_clevr/failures.jsonl");
+    std::fs::read_to_string(&path)
+        .unwrap_or_default()
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("ledger lines are JSON"))
+        .collect()
+}
+
+/// Every file under `dir`, relative, sorted.
+fn files_under(dir: &Path) -> Vec<String> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<String>) {
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            for e in entries.flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    walk(root, &p, out);
+                } else {
+                    out.push(p.strip_prefix(root).unwrap().display().to_string());
+                }
+            }
+        }
+    }
+    let mut v = Vec::new();
+    walk(dir, dir, &mut v);
+    v.sort();
+    v
+}
+
+#[test]
+fn pass_enum_and_bridge_pass_table_agree() {
+    let bridge =
+        clevrtex_render::bridge::bridge_pass_names().expect("the bridge has a `PASSES = {` table");
+    let rust: Vec<String> = Pass::ALL.iter().map(|p| p.name().to_string()).collect();
+    assert_eq!(
+        bridge, rust,
+        "blender_scripts/passes.py PASSES vs clevrtex_scene::Pass::ALL"
+    );
+}
+
+#[test]
+fn missing_blender_is_named_with_the_install_hint() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = clevrtex()
+        .args([
+            "generate",
+            "--variant",
+            "clevr",
+            "-n",
+            "1",
+            "--blender",
+            "/no/such/blender",
+            "--out",
+        ])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("`/no/such/blender`"), "{t}");
+    assert!(t.contains("apt-get install blender"), "{t}");
+    assert!(t.contains("--blender"), "{t}");
+}
+
+#[test]
+fn fake_crash_is_retried_then_recorded_in_the_ledger() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = generate_fake("crash", dir.path(), &["-n", "1", "--retries", "1"]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(3), "partial exit code\n{t}");
+    // The report names the program, the exit status and the stderr tail.
+    assert!(t.contains("restarting a Blender worker"), "{t}");
+    assert!(t.contains("SIGSEGV"), "{t}");
+    assert!(t.contains("--- stderr"), "{t}");
+    assert!(t.contains("segmentation fault while rendering"), "{t}");
+    let ledger = ledger_lines(dir.path());
+    assert_eq!(ledger.len(), 1, "{ledger:?}");
+    assert_eq!(ledger[0]["index"], 0);
+    assert_eq!(ledger[0]["stem"], "CLEVRTEX_clevr_000000");
+    assert!(
+        !files_under(dir.path()).iter().any(|f| f.ends_with(".png")),
+        "no image of a failed sample: {:?}",
+        files_under(dir.path())
+    );
+}
+
+#[test]
+fn fake_hang_times_out_and_is_killed() {
+    let dir = tempfile::tempdir().unwrap();
+    let t0 = Instant::now();
+    let out = generate_fake(
+        "hang",
+        dir.path(),
+        &["-n", "1", "--retries", "0", "--timeout", "1.5"],
+    );
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(t.contains("timed out after 1.5 s"), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000000"),
+        "the report names the scene\n{t}"
+    );
+    assert!(
+        t0.elapsed() < Duration::from_secs(30),
+        "took {:?}",
+        t0.elapsed()
+    );
+    assert_eq!(ledger_lines(dir.path()).len(), 1);
+}
+
+#[test]
+fn fake_garbage_is_a_protocol_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = generate_fake("garbage", dir.path(), &["-n", "1", "--retries", "0"]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(t.contains("malformed reply"), "{t}");
+    assert!(t.contains("this is not json"), "{t}");
+}
+
+#[test]
+fn fake_chatter_then_exit_is_a_crash_not_a_reply() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = generate_fake("chatter", dir.path(), &["-n", "1", "--retries", "0"]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(t.contains("exited (exit status: 0)"), "{t}");
+    assert!(
+        t.contains("--- stdout (last 25 lines)"),
+        "chatter is kept as a tail\n{t}"
+    );
+}
+
+#[test]
+fn fake_crash_with_fail_fast_stops_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = generate_fake(
+        "crash",
+        dir.path(),
+        &["-n", "3", "--retries", "0", "--fail-fast"],
+    );
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert_eq!(
+        ledger_lines(dir.path()).len(),
+        1,
+        "stopped after the first failure\n{t}"
+    );
+}
+
+#[test]
+fn broken_blender_stops_the_run_with_its_stderr_tail() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = generate_fake("noready", dir.path(), &["-n", "2"]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("No module named 'bpy'"), "{t}");
+    assert!(
+        ledger_lines(dir.path()).is_empty(),
+        "a broken install is not a per-image failure"
+    );
+}
+
+#[test]
+fn unwritable_output_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("not-a-folder");
+    std::fs::write(&file, b"x").unwrap();
+    let out = generate_fake("crash", &file, &["-n", "1"]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("not-a-folder`"), "{t}");
+    assert!(t.contains("hint:"), "{t}");
+}
+
+#[test]
+fn bad_passes_and_shards_are_usage_errors_with_hints() {
+    let dir = tempfile::tempdir().unwrap();
+    for (args, needle) in [
+        (vec!["--passes", "rgb,sparkle"], "unknown pass `sparkle`"),
+        (vec!["--shard", "4/4"], "bad `--shard 4/4`"),
+    ] {
+        let out = generate_fake(
+            "crash",
+            dir.path(),
+            &[&["-n", "1"], args.as_slice()].concat(),
+        );
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(1), "{t}");
+        assert!(t.contains(needle) && t.contains("hint:"), "{t}");
+    }
+}
+
+// ---- real Blender -------------------------------------------------------------------------
+
+fn read_json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// The mask's ids are all in 0..=N and every object has more than the threshold's pixels.
+fn check_mask(dir: &Path, stem: &str) -> Value {
+    let meta = read_json(&dir.join(format!("{stem}.json")));
+    let n = meta["num_objects"].as_u64().unwrap() as u16;
+    let mask = decode_png(&dir.join(format!("{stem}_flat.png"))).unwrap();
+    assert!(
+        mask.palette && mask.bits == 8,
+        "mask is an 8-bit palette PNG"
+    );
+    assert!(mask.data.iter().all(|&v| v <= n), "ids in 0..={n}");
+    let threshold = meta["visibility_threshold_px"].as_u64().unwrap();
+    for i in 1..=n {
+        let count = mask.data.iter().filter(|&&v| v == i).count() as u64;
+        assert!(
+            count > threshold,
+            "object {i} has {count} px <= {threshold}"
+        );
+        assert_eq!(meta["objects"][(i - 1) as usize]["visible_pixels"], count);
+    }
+    meta
+}
+
+#[test]
+fn generate_writes_every_pass_with_exact_masks_and_resumes() {
+    let Some(blender) = blender_or_skip("generate_writes_every_pass_with_exact_masks_and_resumes")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let run = |extra: &[&str]| {
+        clevrtex()
+            .args(["generate", "--variant", "camo", "-n", "2", "--seed", "3"])
+            .args([
+                "--width",
+                "80",
+                "--height",
+                "60",
+                "--samples",
+                "2",
+                "--workers",
+                "1",
+            ])
+            .arg("--blender")
+            .arg(&blender)
+            .arg("--out")
+            .arg(dir.path())
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = run(&[]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert!(t.contains("time split"), "{t}");
+    let sub = dir.path().join("clevrtex_camo/0");
+    let mut expected = Vec::new();
+    for i in 0..2 {
+        let stem = format!("CLEVRTEX_camo_{i:06}");
+        for suffix in [
+            ".json",
+            ".png",
+            "_albedo_0001.png",
+            "_depth_0001.png",
+            "_flat.png",
+            "_normal_0001.png",
+            "_shadow_0001.png",
+        ] {
+            expected.push(format!("clevrtex_camo/0/{stem}{suffix}"));
+        }
+        let meta = check_mask(&sub, &stem);
+        for key in [
+            "num_objects",
+            "split",
+            "image_index",
+            "image_filename",
+            "ground_material",
+            "directions",
+            "objects",
+            "relationships",
+            "mask_filename",
+            "normal_filename",
+            "albedo_filename",
+            "depth_filename",
+            "shadow_filename",
+            "seed",
+            "attempt",
+            "camera",
+            "passes",
+            "render",
+            "blender_version",
+            "clevrtex_version",
+        ] {
+            assert!(meta.get(key).is_some(), "metadata lacks `{key}`");
+        }
+        assert_eq!(meta["image_filename"], format!("{stem}.png"));
+        assert_eq!(meta["seed"], 3);
+        assert_eq!(meta["render"]["width"], 80);
+        let depth = decode_png(&sub.join(format!("{stem}_depth_0001.png"))).unwrap();
+        assert_eq!(
+            (depth.bits, depth.channels, depth.width, depth.height),
+            (16, 1, 80, 60)
+        );
+        let normal = decode_png(&sub.join(format!("{stem}_normal_0001.png"))).unwrap();
+        assert_eq!((normal.bits, normal.channels), (16, 3));
+        let rgb = decode_png(&sub.join(format!("{stem}.png"))).unwrap();
+        assert_eq!((rgb.bits, rgb.width, rgb.height), (8, 80, 60));
+    }
+    expected.sort();
+    assert_eq!(files_under(dir.path()), expected);
+
+    // Rerun: everything is complete, nothing is rendered again.
+    let out = run(&[]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert!(t.contains("rendered 0 images (2 already complete"), "{t}");
+
+    // A sample with a missing file is incomplete and is redone; the other is kept.
+    let keep = sub.join("CLEVRTEX_camo_000000.json");
+    let before = std::fs::metadata(&keep).unwrap().modified().unwrap();
+    std::fs::remove_file(sub.join("CLEVRTEX_camo_000001_shadow_0001.png")).unwrap();
+    let out = run(&[]);
+    let t = text(&out);
+    assert!(t.contains("rendered 1 images (1 already complete"), "{t}");
+    assert_eq!(
+        std::fs::metadata(&keep).unwrap().modified().unwrap(),
+        before
+    );
+    assert_eq!(files_under(dir.path()), expected);
+}
+
+#[test]
+fn interrupted_run_leaves_no_partial_sample_and_resumes() {
+    let Some(blender) = blender_or_skip("interrupted_run_leaves_no_partial_sample_and_resumes")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cmd = |n: &str| {
+        let mut c = clevrtex();
+        c.args(["generate", "--variant", "clevr", "-n", n])
+            .args([
+                "--width",
+                "64",
+                "--height",
+                "48",
+                "--samples",
+                "1",
+                "--workers",
+                "1",
+            ])
+            .args(["--passes", "rgb,mask,depth"])
+            .arg("--blender")
+            .arg(&blender)
+            .arg("--out")
+            .arg(dir.path());
+        c
+    };
+    let child = cmd("6")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let sub = dir.path().join("clevrtex_clevr/0");
+    let first = sub.join("CLEVRTEX_clevr_000000.json");
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while !first.exists() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(first.exists(), "the first sample never appeared");
+    let status = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(130), "{t}");
+    // Every sample is either complete or absent; no temporary file is left.
+    let files = files_under(dir.path());
+    assert!(!files.iter().any(|f| f.contains("tmp")), "{files:?}");
+    let done = (0..6)
+        .filter(|i| sub.join(format!("CLEVRTEX_clevr_{i:06}.json")).exists())
+        .count();
+    for i in 0..6 {
+        let parts = ["", "_flat", "_depth_0001"]
+            .iter()
+            .filter(|s| sub.join(format!("CLEVRTEX_clevr_{i:06}{s}.png")).exists())
+            .count();
+        let has_json = sub.join(format!("CLEVRTEX_clevr_{i:06}.json")).exists();
+        assert!(
+            (parts == 3 && has_json) || (parts == 0 && !has_json),
+            "sample {i} is partial: {files:?}"
+        );
+    }
+    assert!(
+        done < 6,
+        "the run was not interrupted early enough to test anything"
+    );
+    // Resume the first 3 images only (keeps the test short): finished ones are skipped.
+    let out = cmd("3").output().unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains(&format!("({} already complete", done.min(3))),
+        "resume skips finished samples\n{t}"
+    );
+    for i in 0..3 {
+        assert!(sub.join(format!("CLEVRTEX_clevr_{i:06}.json")).exists());
+    }
+}
+
+#[test]
+fn every_variant_renders_and_only_requested_passes_are_written() {
+    let Some(blender) =
+        blender_or_skip("every_variant_renders_and_only_requested_passes_are_written")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir_all(&scenes).unwrap();
+    let variants = ["full", "pbg", "vbg", "grassbg", "camo", "outd", "clevr"];
+    for (i, v) in variants.iter().enumerate() {
+        let config = clevrtex_scene::Config::builtin(v).unwrap();
+        let mut scene = clevrtex_scene::sample(
+            &config,
+            &clevrtex_scene::SampleRequest {
+                seed: 1,
+                index: i as u64,
+                attempt: 0,
+                total: 10,
+            },
+        )
+        .unwrap();
+        scene.render.width = 64;
+        scene.render.height = 48;
+        scene.render.samples = 1;
+        std::fs::write(
+            scenes.join(format!("{v}.json")),
+            serde_json::to_string(&scene).unwrap(),
+        )
+        .unwrap();
+    }
+    let out_dir = dir.path().join("out");
+    let out = clevrtex()
+        .args([
+            "render",
+            "--passes",
+            "rgb,mask",
+            "--workers",
+            "1",
+            "--blender",
+        ])
+        .arg(&blender)
+        .arg("--out")
+        .arg(&out_dir)
+        .arg(&scenes)
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    let files = files_under(&out_dir);
+    assert_eq!(files.len(), 3 * variants.len(), "{files:?}");
+    for (i, v) in variants.iter().enumerate() {
+        let stem = format!("clevrtex_{v}/0/CLEVRTEX_{v}_{i:06}");
+        for suffix in [".json", ".png", "_flat.png"] {
+            assert!(
+                files.contains(&format!("{stem}{suffix}")),
+                "{stem}{suffix}: {files:?}"
+            );
+        }
+        let meta = read_json(&out_dir.join(format!("{stem}.json")));
+        assert_eq!(meta["depth_filename"], Value::Null);
+        assert_eq!(meta["passes"].as_object().unwrap().len(), 2);
+        let mask = decode_png(&out_dir.join(format!("{stem}_flat.png"))).unwrap();
+        let n = meta["num_objects"].as_u64().unwrap() as u16;
+        assert!(mask.data.iter().all(|&v| v <= n));
+        let rgb = decode_png(&out_dir.join(format!("{stem}.png"))).unwrap();
+        let spread = rgb.data.iter().max().unwrap() - rgb.data.iter().min().unwrap();
+        assert!(spread > 20, "{v}: the image is flat (spread {spread})");
+    }
+}
+
+fn fixture(name: &str, width: u32, height: u32, samples: u32) -> SceneFile {
+    let text = std::fs::read_to_string(data(&format!("scenes/{name}.json"))).unwrap();
+    let mut scene: SceneFile = serde_json::from_str(&text).unwrap();
+    scene.render.width = width;
+    scene.render.height = height;
+    scene.render.samples = samples;
+    scene
+}
+
+/// Render fixture scenes through the library pool (one worker), returning the stats.
+fn render_fixtures(blender: PathBuf, out: &Path, scenes: Vec<SceneFile>) -> Vec<SampleStats> {
+    let jobs = scenes
+        .into_iter()
+        .map(|s| {
+            let s = Arc::new(s);
+            Job {
+                index: s.index,
+                variant: s.variant.clone(),
+                stem: s.stem.clone(),
+                passes: Pass::ALL.to_vec(),
+                scene: {
+                    let s = Arc::clone(&s);
+                    Arc::new(move |_| Ok((*s).clone()))
+                },
+                resample: false,
+            }
+        })
+        .collect();
+    let opts = PoolOptions {
+        blender,
+        materials_json: clevrtex_render::default_materials_json().unwrap(),
+        workers: 1,
+        threads: 0,
+        timeout: None,
+        startup_timeout: Duration::from_secs(120),
+        retries: 0,
+        max_attempts: 1,
+        visibility_check: true,
+        keep_exr: true,
+        overwrite: true,
+        fail_fast: true,
+        out: out.to_path_buf(),
+        ledger: out.join("failures.jsonl"),
+        interrupt: Arc::new(AtomicBool::new(false)),
+    };
+    let stats = Mutex::new(Vec::new());
+    let report = pool::run(&opts, jobs, &|ev| {
+        if let PoolEvent::Done { sample } = ev {
+            stats.lock().unwrap().push((*sample).clone());
+        }
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert!(report.failed.is_empty());
+    let mut stats = stats.into_inner().unwrap();
+    stats.sort_by_key(|s| s.index);
+    stats
+}
+
+#[test]
+fn camera_model_depth_and_shadow_match_blender() {
+    let Some(blender) = blender_or_skip("camera_model_depth_and_shadow_match_blender") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (w, h) = (160, 120);
+    let objects = fixture("tiny3", w, h, 1);
+    let floor = fixture("empty_floor", 64, 48, 8);
+    let stats = render_fixtures(blender, dir.path(), vec![objects.clone(), floor.clone()]);
+    assert_eq!(stats.len(), 2);
+    let sub = dir.path().join("clevrtex_clevr/0");
+
+    // pixel_coords (Rust camera model) within 0.5 px of Blender's own projection.
+    let meta = read_json(&sub.join(format!("{}.json", objects.stem)));
+    for (i, blender_xy) in stats[0].projected.iter().enumerate() {
+        let rust = &meta["objects"][i]["pixel_coords"];
+        let (x, y) = (rust[0].as_f64().unwrap(), rust[1].as_f64().unwrap());
+        assert!(
+            (x - blender_xy[0]).abs() <= 0.5 && (y - blender_xy[1]).abs() <= 0.5,
+            "object {i}: rust ({x}, {y}) vs blender ({}, {})",
+            blender_xy[0],
+            blender_xy[1]
+        );
+        assert!((rust[2].as_f64().unwrap() - blender_xy[2]).abs() < 1e-3);
+    }
+
+    // Depth of the sphere's nearest point: planar depth of the front surface along the ray
+    // through its centre, (|C - O| - r) * cos(angle to the view axis), within 1%.
+    let i = objects
+        .objects
+        .iter()
+        .position(|o| o.shape == "sphere")
+        .unwrap();
+    let sphere = &objects.objects[i];
+    let cam = &objects.camera.matrix_world;
+    let o = [cam[0][3], cam[1][3], cam[2][3]];
+    let fwd = [-cam[0][2], -cam[1][2], -cam[2][2]];
+    let d: Vec<f64> = (0..3).map(|k| sphere.location[k] - o[k]).collect();
+    let dist = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let cos = (0..3).map(|k| d[k] / dist * fwd[k]).sum::<f64>();
+    let expected = (dist - sphere.scale) * cos;
+    let depth = decode_png(&sub.join(format!("{}_depth_0001.png", objects.stem))).unwrap();
+    let px = &meta["objects"][i]["pixel_coords"];
+    let (x, y) = (
+        px[0].as_f64().unwrap() as usize,
+        px[1].as_f64().unwrap() as usize,
+    );
+    let got = depth.data[y * w as usize + x] as f64 * post::DEPTH_SCALE_M;
+    assert!(
+        (got - expected).abs() / expected < 0.01,
+        "sphere depth {got} m vs expected {expected} m"
+    );
+    assert!(depth.data.contains(&post::DEPTH_BACKGROUND) || depth.data.iter().all(|&v| v < 65535));
+
+    // Shadow of an empty, lit floor: defined everywhere and ~0.
+    let shadow = decode_png(&sub.join(format!("{}_shadow_0001.png", floor.stem))).unwrap();
+    let mean = shadow.data.iter().map(|&v| v as f64).sum::<f64>() / shadow.data.len() as f64;
+    let dark = shadow.data.iter().filter(|&&v| v > 25).count();
+    assert!(mean < 2.0, "mean shadow {mean}/255 on an empty floor");
+    assert!(
+        dark * 100 < shadow.data.len(),
+        "{dark} shadowed pixels on an empty floor"
+    );
+    // The float passes themselves are finite where it matters.
+    let exr =
+        clevrtex_render::exr_io::Channels::read(&sub.join(format!("{}_noshadow.exr", floor.stem)))
+            .unwrap();
+    assert!(exr
+        .get("ViewLayer.DiffDir.R")
+        .unwrap()
+        .iter()
+        .all(|v| v.is_finite()));
+}
+
+#[test]
+fn doctor_reports_blender_and_devices() {
+    let Some(blender) = blender_or_skip("doctor_reports_blender_and_devices") else {
+        return;
+    };
+    let out = clevrtex()
+        .arg("doctor")
+        .arg("--blender")
+        .arg(&blender)
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert!(t.contains("version: "), "{t}");
+    assert!(t.contains("cycles devices: ") && t.contains("CPU"), "{t}");
+}

@@ -235,6 +235,74 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
         .map_err(|e| RenderError::write(path, e))
 }
 
+/// A decoded PNG: samples as `u16` (8-bit files keep their 0-255 values), row-major,
+/// interleaved channels; palette files give their indices (one channel).
+#[derive(Debug, Clone)]
+pub struct DecodedPng {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Bits per sample (8 or 16).
+    pub bits: u8,
+    /// Channels per pixel (1 for grey and palette, 3 for RGB, 4 for RGBA).
+    pub channels: usize,
+    /// Whether the file is a palette PNG.
+    pub palette: bool,
+    /// The samples.
+    pub data: Vec<u16>,
+}
+
+/// Read a PNG written by this crate or by Blender, without any conversion (palette indices
+/// stay indices, 16-bit stays 16-bit), for checks and tests.
+pub fn decode_png(path: &Path) -> Result<DecodedPng> {
+    let bad = |problem: String| RenderError::BadOutput {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let bytes = std::fs::read(path).map_err(|e| {
+        RenderError::io(
+            "cannot read",
+            path,
+            e,
+            "check that the file exists and is readable",
+        )
+    })?;
+    let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
+    dec.set_transformations(png::Transformations::IDENTITY);
+    let mut reader = dec
+        .read_info()
+        .map_err(|e| bad(format!("not a PNG: {e}")))?;
+    let size = reader
+        .output_buffer_size()
+        .ok_or_else(|| bad("image too large".into()))?;
+    let mut buf = vec![0; size];
+    let info = reader
+        .next_frame(&mut buf)
+        .map_err(|e| bad(format!("cannot decode PNG: {e}")))?;
+    buf.truncate(info.buffer_size());
+    let bits = match info.bit_depth {
+        png::BitDepth::Eight => 8,
+        png::BitDepth::Sixteen => 16,
+        other => return Err(bad(format!("unsupported bit depth {other:?}"))),
+    };
+    let data = if bits == 16 {
+        buf.chunks_exact(2)
+            .map(|c| u16::from_be_bytes([c[0], c[1]]))
+            .collect()
+    } else {
+        buf.iter().map(|&b| b as u16).collect()
+    };
+    Ok(DecodedPng {
+        width: info.width,
+        height: info.height,
+        bits,
+        channels: info.color_type.samples(),
+        palette: info.color_type == png::ColorType::Indexed,
+        data,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
