@@ -316,7 +316,7 @@ def material_displaces(mat):
     """True if Cycles will displace geometry with `mat` (true displacement, not bump)."""
     if mat is None or not mat.use_nodes:
         return False
-    if mat.cycles.displacement_method not in ("DISPLACEMENT", "BOTH"):
+    if compat.displacement_method(mat) not in ("DISPLACEMENT", "BOTH"):
         return False
     for node in mat.node_tree.nodes:
         if node.type == "OUTPUT_MATERIAL" and node.is_active_output:

@@ -78,6 +78,13 @@ def principled_input(node, name):
     return node.inputs[renamed_4x.get(name, name)]
 
 
+def displacement_method(mat):
+    """`BUMP`, `DISPLACEMENT` or `BOTH`: on `mat.cycles` up to 4.0, on the material since 4.1."""
+    if hasattr(mat, "displacement_method"):
+        return mat.displacement_method
+    return mat.cycles.displacement_method
+
+
 def set_cast_shadow(obj, enabled):
     """Whether an object casts shadows in Cycles (`visible_shadow` since 3.0)."""
     if hasattr(obj, "visible_shadow"):
