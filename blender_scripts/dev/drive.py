@@ -17,6 +17,14 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 SCRIPTS = os.path.dirname(HERE)
 
 
+def cpu_seconds(pid):
+    """User + system CPU time of the worker so far: unlike wall time, not inflated when other
+    processes compete for the cores."""
+    with open("/proc/%d/stat" % pid) as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def main():
     out = os.path.abspath(sys.argv[1])
     os.makedirs(out, exist_ok=True)
@@ -53,6 +61,7 @@ def main():
                    "scene": os.path.abspath(scene) + (".missing" if m == "bad" else ""),
                    "out_dir": d}
             t = time.perf_counter()
+            cpu = cpu_seconds(proc.pid)
             proc.stdin.write((json.dumps(req) + "\n").encode())
             proc.stdin.flush()
             r = reply()
@@ -62,7 +71,8 @@ def main():
                 print(r["traceback"])
             else:
                 print(json.dumps(r))
-            print("  wall %.3f s" % wall)
+            print("  wall %.3f s, worker cpu %.2f s, load %s" % (
+                wall, cpu_seconds(proc.pid) - cpu, os.getloadavg()[0]))
     proc.stdin.write(b'{"type": "quit"}\n')
     proc.stdin.flush()
     t = time.perf_counter()
