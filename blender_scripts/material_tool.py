@@ -42,6 +42,7 @@ def parse_args():
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--tag", default="")
     ap.add_argument("--displacement", type=float, default=0.0)
+    ap.add_argument("--random", type=float, default=0.37)
     return ap.parse_args(argv)
 
 
@@ -153,8 +154,8 @@ def label(text, location, size):
     return ob
 
 
-def instance(name, args, random=0.37):
-    inst = {"name": name, "random": random}
+def instance(name, args, random=None):
+    inst = {"name": name, "random": args.random if random is None else random}
     if args.displacement > 0:
         inst["displacement"] = args.displacement
     return inst
@@ -246,6 +247,33 @@ def pink_fraction(path):
     return pink / max(n, 1)
 
 
+def stripe_periods(path, scene):
+    """Dominant stripe period (world units) along x on the front face of each cube, measured
+    on the middle image row: 2 * span / (number of light/dark transitions)."""
+    img = bpy.data.images.load(path)
+    w, h = img.size
+    px = img.pixels[:]
+    row = h // 2
+    lum = [sum(px[4 * (row * w + x) + c] for c in range(3)) / 3.0 for x in range(w)]
+    bpy.data.images.remove(img)
+    units_per_px = 4.0 / w  # ortho_scale / width
+    out = {}
+    for ob in scene.objects:
+        if ob.type != "MESH":
+            continue
+        cx, s = ob.location.x, ob.scale.x
+        lo = int((cx - 0.8 * s + 2.0) / units_per_px)
+        hi = int((cx + 0.8 * s + 2.0) / units_per_px)
+        seg = lum[lo:hi]
+        mean = sum(seg) / max(len(seg), 1)
+        bits = [v > mean for v in seg]
+        flips = sum(1 for a, b in zip(bits, bits[1:]) if a != b)
+        key = "small" if s < 0.5 else "large"
+        out["period_" + key] = 2.0 * len(seg) * units_per_px / max(flips, 1)
+        out["flips_" + key] = flips
+    return out
+
+
 def main():
     args = parse_args()
     with open(args.materials) as f:
@@ -278,6 +306,8 @@ def main():
                    "file": path}
             if args.mode == "check":
                 msg["pink"] = pink_fraction(path)
+            if args.mode == "density":
+                msg.update(stripe_periods(path, scene))
             reply(args.tag, msg)
         except Exception as e:  # one bad material must not stop the batch
             reply(args.tag, {"name": name, "ok": False, "error": "%s: %s" % (type(e).__name__, e),

@@ -31,6 +31,37 @@ enum Sub {
     Sheet(SheetArgs),
     /// Build and render every material small; fail on Blender errors or pink pixels.
     Check(BatchArgs),
+    /// Distinctness: texture statistics of flat-lit tiles, nearest neighbours, near-copies.
+    Stats(StatsArgs),
+    /// Render time of each material on a sphere, relative to `plain`.
+    Cost(CostArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct StatsArgs {
+    #[command(flatten)]
+    batch: BatchArgs,
+    /// Tile size in pixels.
+    #[arg(long, default_value_t = 128)]
+    size: u32,
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 16)]
+    samples: u32,
+    /// Keep the tiles here (default: a temporary directory).
+    #[arg(long)]
+    out_dir: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+struct CostArgs {
+    #[command(flatten)]
+    batch: BatchArgs,
+    /// Image size in pixels.
+    #[arg(long, default_value_t = 160)]
+    size: u32,
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 64)]
+    samples: u32,
 }
 
 #[derive(Debug, clap::Args)]
@@ -97,6 +128,8 @@ pub fn run(args: Args) -> CmdResult {
         }
         Sub::Sheet(a) => sheet(&cat, a),
         Sub::Check(a) => check(&cat, a),
+        Sub::Stats(a) => stats(&cat, a),
+        Sub::Cost(a) => cost(&cat, a),
     }
 }
 
@@ -199,6 +232,7 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
             threads: a.batch.threads,
             out_dir: tmp.clone(),
             displacement: 0.0,
+            random: 0.37,
         };
         let replies = run.run(cat, &missing)?;
         let mut failed = Vec::new();
@@ -239,6 +273,7 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
         threads: a.threads,
         out_dir: dir.clone(),
         displacement: 0.0,
+        random: 0.37,
     };
     let replies = run.run(cat, &names)?;
     let _ = std::fs::remove_dir_all(&dir);
@@ -266,5 +301,141 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
             replies.len()
         );
     }
+    Ok(OK)
+}
+
+fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
+    use clevrtex_materials::stats::{distance, features};
+    let mut names = select(cat, &a.batch)?;
+    names.retain(|n| !matches!(*n, "rubber" | "metal"));
+    let dir = a.out_dir.clone().unwrap_or_else(|| {
+        std::env::temp_dir().join(format!("clevrtex-stats-{}", std::process::id()))
+    });
+    let mut feats = Vec::new();
+    for (i, random) in [0.37, 0.81].into_iter().enumerate() {
+        let run = ToolRun {
+            blender: blender(&a.batch)?,
+            mode: Mode::Tile,
+            size: a.size,
+            samples: a.samples,
+            threads: a.batch.threads,
+            out_dir: dir.join(format!("r{i}")),
+            displacement: 0.0,
+            random,
+        };
+        let replies = run.run(cat, &names)?;
+        let mut f = Vec::new();
+        for r in &replies {
+            let Some(file) = r.value["file"].as_str() else {
+                bail!(
+                    "material `{}` failed: {}\nhint: run `clevrtex materials check --names {}`",
+                    r.name,
+                    r.value["error"],
+                    r.name
+                );
+            };
+            f.push(features(Path::new(file)).with_context(|| format!("cannot read `{file}`"))?);
+        }
+        feats.push(f);
+    }
+    // The same material with another `random` is the yardstick: two different materials
+    // closer than the farthest pair of instances of one material could pass for one.
+    let intra: Vec<f64> = (0..names.len())
+        .map(|i| distance(&feats[0][i], &feats[1][i]))
+        .collect();
+    let mut sorted = intra.clone();
+    sorted.sort_by(f64::total_cmp);
+    let threshold = sorted[sorted.len() / 2];
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(
+        out,
+        "{:<24} {:<24} {:>8} {:>8}",
+        "material", "nearest", "distance", "self"
+    );
+    let mut near = Vec::new();
+    let mut min_inter = f64::INFINITY;
+    for i in 0..names.len() {
+        let (j, d) = (0..names.len())
+            .filter(|&j| j != i)
+            .map(|j| (j, distance(&feats[0][i], &feats[0][j])))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+            .unwrap_or((i, f64::NAN));
+        min_inter = min_inter.min(d);
+        let _ = writeln!(
+            out,
+            "{:<24} {:<24} {:>8.3} {:>8.3}",
+            names[i], names[j], d, intra[i]
+        );
+        if d < threshold && i < j {
+            near.push(format!("`{}` ~ `{}` ({d:.3})", names[i], names[j]));
+        }
+    }
+    let _ = writeln!(
+        out,
+        "self-distance (same material, random 0.37 vs 0.81): median {threshold:.3}, max {:.3}; smallest distance between different materials {min_inter:.3}",
+        sorted[sorted.len() - 1]
+    );
+    if a.out_dir.is_none() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    if !near.is_empty() {
+        bail!(
+            "{} pair(s) of materials are closer than the median self-distance {threshold:.3}:\n{}\nhint: change the colours or the pattern scale of one of each pair",
+            near.len(),
+            near.join("\n")
+        );
+    }
+    Ok(OK)
+}
+
+fn cost(cat: &Catalogue, a: CostArgs) -> CmdResult {
+    let mut names = select(cat, &a.batch)?;
+    if !names.contains(&"plain") {
+        names.insert(0, "plain");
+    }
+    let dir = std::env::temp_dir().join(format!("clevrtex-cost-{}", std::process::id()));
+    let run = ToolRun {
+        blender: blender(&a.batch)?,
+        mode: Mode::Cost,
+        size: a.size,
+        samples: a.samples,
+        threads: a.batch.threads,
+        out_dir: dir.clone(),
+        displacement: 0.0,
+        random: 0.37,
+    };
+    let replies = run.run(cat, &names)?;
+    let _ = std::fs::remove_dir_all(&dir);
+    let time = |r: &tool::Reply| r.value["render_s"].as_f64().unwrap_or(f64::NAN);
+    let plain = replies
+        .iter()
+        .find(|r| r.name == "plain")
+        .map(time)
+        .unwrap_or(f64::NAN);
+    let mut rel: Vec<f64> = replies.iter().map(|r| time(r) / plain).collect();
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{:<24} {:>8} {:>8}", "material", "seconds", "x plain");
+    for (r, x) in replies.iter().zip(&rel) {
+        let _ = writeln!(out, "{:<24} {:>8.2} {:>8.2}", r.name, time(r), x);
+    }
+    let shown = rel.clone();
+    rel.sort_by(f64::total_cmp);
+    let median = rel[rel.len() / 2];
+    let outliers: Vec<String> = replies
+        .iter()
+        .zip(&shown)
+        .filter(|(_, x)| **x > 3.0 * median)
+        .map(|(r, x)| format!("{} ({x:.2}x plain)", r.name))
+        .collect();
+    let _ = writeln!(
+        out,
+        "median {median:.2}x plain, max {:.2}x plain; over 3x the median: {}",
+        rel[rel.len() - 1],
+        if outliers.is_empty() {
+            "none".to_string()
+        } else {
+            outliers.join(", ")
+        }
+    );
     Ok(OK)
 }

@@ -27,6 +27,7 @@
 
 mod error;
 mod schema;
+pub mod stats;
 pub mod tool;
 
 use std::collections::BTreeMap;

@@ -74,6 +74,8 @@ pub struct ToolRun {
     pub out_dir: PathBuf,
     /// Displacement strength given to every instance (0: none).
     pub displacement: f64,
+    /// The instance `random` value (0.37 unless comparing instances).
+    pub random: f64,
 }
 
 /// The reply for one material.
@@ -148,6 +150,7 @@ impl ToolRun {
             .args(["--samples", &self.samples.to_string()])
             .args(["--threads", &self.threads.to_string()])
             .args(["--displacement", &self.displacement.to_string()])
+            .args(["--random", &self.random.to_string()])
             .args(["--tag", &tag])
             .stdin(Stdio::null())
             .stdout(Stdio::piped())

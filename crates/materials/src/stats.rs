@@ -1,0 +1,87 @@
+//! Texture statistics of flat-lit tile renders, for the distinctness check.
+//!
+//! Features: a 4x4x4 colour histogram, gradient energy at three scales (1, 2 and 4 pixel
+//! boxes) and the share of gradient energy along four orientations. The distance between
+//! two materials is half the L1 distance of the histograms (0..1) plus the mean relative
+//! difference of the texture features (0..1).
+
+use std::path::Path;
+
+/// The features of one tile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Features {
+    /// Normalised 64-bin RGB histogram.
+    pub histogram: Vec<f64>,
+    /// Mean gradient magnitude at three scales, then the orientation shares (4).
+    pub texture: Vec<f64>,
+}
+
+/// Compute the features of a PNG tile.
+pub fn features(path: &Path) -> Result<Features, image::ImageError> {
+    let img = image::open(path)?.to_rgb8();
+    let (w, h) = img.dimensions();
+    let mut histogram = vec![0.0; 64];
+    let mut lum = vec![0.0f64; (w * h) as usize];
+    for (x, y, p) in img.enumerate_pixels() {
+        let [r, g, b] = p.0;
+        let bin = (r as usize / 64) * 16 + (g as usize / 64) * 4 + b as usize / 64;
+        histogram[bin] += 1.0;
+        lum[(y * w + x) as usize] =
+            (0.2126 * r as f64 + 0.7152 * g as f64 + 0.0722 * b as f64) / 255.0;
+    }
+    let n = (w * h) as f64;
+    histogram.iter_mut().for_each(|v| *v /= n);
+    let mut texture = Vec::new();
+    let mut orient = [0.0f64; 4];
+    for scale in [1usize, 2, 4] {
+        let (sw, sh) = (w as usize / scale, h as usize / scale);
+        let mut small = vec![0.0; sw * sh];
+        for y in 0..sh * scale {
+            for x in 0..sw * scale {
+                small[(y / scale) * sw + x / scale] += lum[y * w as usize + x];
+            }
+        }
+        small.iter_mut().for_each(|v| *v /= (scale * scale) as f64);
+        let mut energy = 0.0f64;
+        let mut count = 0.0f64;
+        for y in 0..sh.saturating_sub(1) {
+            for x in 0..sw.saturating_sub(1) {
+                let c = small[y * sw + x];
+                let gx = small[y * sw + x + 1] - c;
+                let gy = small[(y + 1) * sw + x] - c;
+                energy += (gx * gx + gy * gy).sqrt();
+                count += 1.0;
+                if scale == 2 {
+                    let s = std::f64::consts::FRAC_1_SQRT_2;
+                    orient[0] += gx.abs();
+                    orient[1] += ((gx + gy) * s).abs();
+                    orient[2] += gy.abs();
+                    orient[3] += ((gx - gy) * s).abs();
+                }
+            }
+        }
+        texture.push(energy / count.max(1.0));
+    }
+    let total: f64 = orient.iter().sum::<f64>().max(1e-12);
+    texture.extend(orient.iter().map(|o| o / total));
+    Ok(Features { histogram, texture })
+}
+
+/// Distance between two feature sets (0 = identical).
+pub fn distance(a: &Features, b: &Features) -> f64 {
+    let hist: f64 = a
+        .histogram
+        .iter()
+        .zip(&b.histogram)
+        .map(|(x, y)| (x - y).abs())
+        .sum::<f64>()
+        * 0.5;
+    let tex: f64 = a
+        .texture
+        .iter()
+        .zip(&b.texture)
+        .map(|(x, y)| (x - y).abs() / (x + y + 1e-3))
+        .sum::<f64>()
+        / a.texture.len() as f64;
+    hist + tex
+}
