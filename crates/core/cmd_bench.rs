@@ -1,12 +1,626 @@
-//! `clevrtex bench`.
+//! `clevrtex bench render`: error against run time of Cycles settings.
+//!
+//! Renders a fixed set of scenes (several variants, fixed seeds) at a ladder of settings
+//! ([`ladder`]), compares each render with a high-sample reference of the same scene (cached
+//! under `OUT/references/<hash>/`, keyed by the scene, the materials and the reference
+//! settings), and writes a table (stdout), a CSV and a log-log plot of error against time.
+//! See `docs/performance.md`, section `bench`.
 
-use crate::exit::CmdResult;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use clevrtex_render::exr_io::Channels;
+use clevrtex_render::{BridgeDir, Mode, RenderError, Worker, WorkerOptions};
+use clevrtex_scene::quality::Sampling;
+use clevrtex_scene::{Config, Pass, SampleRequest, SceneFile};
+
+use crate::exit::{self, CmdResult};
+
+#[path = "bench/ladder.rs"]
+mod ladder;
+#[path = "bench/metrics.rs"]
+mod metrics;
+#[path = "bench/plot.rs"]
+mod plot;
+
+use ladder::Setting;
+use metrics::Errors;
 
 /// Arguments of `clevrtex bench`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    #[command(subcommand)]
+    what: What,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum What {
+    /// Error against run time of render settings, against a cached high-sample reference.
+    Render(RenderArgs),
+}
+
+/// Arguments of `clevrtex bench render`.
+#[derive(Debug, clap::Args)]
+pub struct RenderArgs {
+    /// A few minutes instead of hours: 160x120, 2 scenes, fewer rungs, 1024-sample
+    /// references. Numbers are for comparing settings, not for the docs' per-image costs.
+    #[arg(long)]
+    quick: bool,
+    /// Number of scenes (default 8, 2 with `--quick`); scene i is image i of the variant
+    /// `full, camo, pbg, vbg, grassbg, outd, clevr, full` (cycling), seed 2024.
+    #[arg(long, value_name = "N")]
+    scenes: Option<usize>,
+    /// Output folder: CSV, plot, renders and the reference cache.
+    #[arg(long, default_value = "bench-out", value_name = "DIR")]
+    out: PathBuf,
+    /// Image width (default 320, 160 with `--quick`).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Image height (default 240, 120 with `--quick`).
+    #[arg(long)]
+    height: Option<u32>,
+    /// Fixed samples of the reference renders (default 4096, 1024 with `--quick`), with the
+    /// original generator's bounces.
+    #[arg(long, value_name = "N")]
+    reference_samples: Option<u32>,
+    /// Skip rungs with more samples than this (e.g. to try the command quickly).
+    #[arg(long, value_name = "N")]
+    max_samples: Option<u32>,
+    /// Only rungs whose label contains one of these (comma-separated), e.g. `original,preset`.
+    #[arg(long, value_delimiter = ',', value_name = "LIST")]
+    only: Option<Vec<String>>,
+    /// Cycles threads (default: Blender's choice, all cores).
+    #[arg(long, default_value_t = 0, value_name = "T")]
+    threads: u32,
+    /// Blender executable (default: `blender` on PATH).
+    #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
+    blender: Option<PathBuf>,
+}
 
 /// Run `clevrtex bench`.
-pub fn run(_args: Args) -> CmdResult {
-    anyhow::bail!("`clevrtex bench` is not implemented yet")
+pub fn run(args: Args) -> CmdResult {
+    match args.what {
+        What::Render(a) => run_render(a),
+    }
+}
+
+/// Variants of the bench scenes, cycled.
+const VARIANTS: [&str; 8] = [
+    "full", "camo", "pbg", "vbg", "grassbg", "outd", "clevr", "full",
+];
+/// Seed of the bench scenes: fixed, so every machine benchmarks the same images.
+const SEED: u64 = 2024;
+
+struct BenchScene {
+    label: String,
+    scene: SceneFile,
+}
+
+/// One measured (setting, scene) pair.
+struct Row {
+    scene: String,
+    variant: String,
+    setting: Setting,
+    wall_s: f64,
+    cycles_s: f64,
+    errors: Errors,
+}
+
+/// The reference of one scene, decoded.
+struct Reference {
+    rgb: Vec<f32>,
+    srgb: Vec<u8>,
+    mask: Vec<f32>,
+    depth: Vec<f32>,
+    mean: f64,
+}
+
+fn bench_scenes(n: usize, width: u32, height: u32) -> anyhow::Result<Vec<BenchScene>> {
+    (0..n)
+        .map(|i| {
+            let variant = VARIANTS[i % VARIANTS.len()];
+            let mut config = Config::builtin(variant)?;
+            config.base.render.width = width;
+            config.base.render.height = height;
+            config.base.passes = vec![Pass::Rgb, Pass::Mask, Pass::Depth];
+            let req = SampleRequest {
+                seed: SEED,
+                index: i as u64,
+                attempt: 0,
+                total: 1000.max(n as u64),
+            };
+            let scene = clevrtex_scene::sample(&config, &req)?;
+            Ok(BenchScene {
+                label: format!("{variant}#{i}"),
+                scene,
+            })
+        })
+        .collect()
+}
+
+/// FNV-1a, 64 bit: a stable hash for cache keys (std's hashers may change between releases).
+fn fnv1a(parts: &[&[u8]]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for part in parts {
+        for &b in *part {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        // Separator, so ("ab", "c") and ("a", "bc") differ.
+        h ^= 0xff;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+fn with_sampling(scene: &SceneFile, s: &Sampling) -> SceneFile {
+    let mut scene = scene.clone();
+    s.apply(&mut scene.render);
+    scene
+}
+
+/// Per-request time limit: generous (the machine may be shared), scaled with the work.
+fn timeout_for(scene: &SceneFile) -> Duration {
+    let r = &scene.render;
+    let work = f64::from(r.samples) * f64::from(r.width) * f64::from(r.height);
+    Duration::from_secs_f64(300.0 + work * 4e-5)
+}
+
+struct Bench {
+    worker: Worker,
+    out: PathBuf,
+}
+
+impl Bench {
+    /// Render `scene` into `dir` (created, emptied of old outputs); returns wall time and
+    /// Cycles' render time.
+    fn render(&mut self, label: &str, scene: &SceneFile, dir: &Path) -> anyhow::Result<(f64, f64)> {
+        std::fs::create_dir_all(dir).with_context(|| {
+            format!(
+                "cannot create `{}`\nhint: pass a writable `--out`",
+                dir.display()
+            )
+        })?;
+        for f in ["rgb.png", "passes.exr"] {
+            let _ = std::fs::remove_file(dir.join(f));
+        }
+        let path = dir.join("scene.json");
+        std::fs::write(&path, clevrtex_scene::to_pretty_json(scene)?)
+            .with_context(|| format!("cannot write `{}`", path.display()))?;
+        let started = Instant::now();
+        let reply = self
+            .worker
+            .render_labelled(label, &path, Mode::Final, dir, timeout_for(scene))
+            .map_err(|e| match e {
+                RenderError::Interrupted => anyhow::Error::new(exit::Interrupted),
+                e => e.into(),
+            })?;
+        Ok((started.elapsed().as_secs_f64(), reply.timings.render_s))
+    }
+}
+
+fn read_outputs(dir: &Path) -> anyhow::Result<Reference> {
+    let ch = Channels::read(&dir.join("passes.exr"))?;
+    let (r, g, b) = (
+        ch.get("ViewLayer.Combined.R")?,
+        ch.get("ViewLayer.Combined.G")?,
+        ch.get("ViewLayer.Combined.B")?,
+    );
+    let rgb: Vec<f32> = (0..r.len()).flat_map(|i| [r[i], g[i], b[i]]).collect();
+    let png = dir.join("rgb.png");
+    let srgb = image::open(&png)
+        .with_context(|| format!("cannot read `{}`", png.display()))?
+        .to_rgb8()
+        .into_raw();
+    Ok(Reference {
+        mean: metrics::mean(&rgb),
+        rgb,
+        srgb,
+        mask: ch.get("ViewLayer.IndexOB.X")?.to_vec(),
+        depth: ch.get("ViewLayer.Depth.Z")?.to_vec(),
+    })
+}
+
+fn compare(got: &Reference, reference: &Reference) -> Errors {
+    let rmse = metrics::rmse(&got.rgb, &reference.rgb);
+    Errors {
+        rmse_linear: rmse,
+        rel_error: metrics::ratio(rmse, reference.mean),
+        bias: metrics::ratio(got.mean - reference.mean, reference.mean),
+        psnr_srgb: metrics::psnr_u8(&got.srgb, &reference.srgb),
+        mask_equal: metrics::bits_equal(&got.mask, &reference.mask),
+        depth_equal: metrics::bits_equal(&got.depth, &reference.depth),
+    }
+}
+
+fn run_render(args: RenderArgs) -> CmdResult {
+    let quick = args.quick;
+    let n = args.scenes.unwrap_or(if quick { 2 } else { 8 });
+    let width = args.width.unwrap_or(if quick { 160 } else { 320 });
+    let height = args.height.unwrap_or(if quick { 120 } else { 240 });
+    let ref_samples = args
+        .reference_samples
+        .unwrap_or(if quick { 1024 } else { 4096 });
+    if n == 0 || width == 0 || height == 0 || ref_samples == 0 {
+        bail!("`--scenes`, `--width`, `--height` and `--reference-samples` must be positive\nhint: e.g. `clevrtex bench render --quick`");
+    }
+    let settings: Vec<Setting> = ladder::ladder(quick)
+        .into_iter()
+        .filter(|s| args.max_samples.is_none_or(|m| s.sampling.samples <= m))
+        .filter(|s| {
+            args.only
+                .as_ref()
+                .is_none_or(|l| l.iter().any(|w| s.label.contains(w.trim())))
+        })
+        .collect();
+    if settings.is_empty() {
+        bail!("no rung of the ladder is left after `--max-samples`/`--only`\nhint: raise `--max-samples` or widen `--only`");
+    }
+    if let Some(big) = settings.iter().find(|s| s.sampling.samples >= ref_samples) {
+        eprintln!(
+            "warning: rung `{}` has {} samples, not fewer than the reference's {ref_samples}: its error is not meaningful",
+            big.label, big.sampling.samples
+        );
+    }
+    let scenes = bench_scenes(n, width, height)?;
+    std::fs::create_dir_all(&args.out).with_context(|| {
+        format!(
+            "cannot create output folder `{}`\nhint: pass a writable folder with `--out`",
+            args.out.display()
+        )
+    })?;
+
+    let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
+    let materials_json = clevrtex_render::default_materials_json()
+        .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
+    let bridge = BridgeDir::create(&materials_json)?;
+    let interrupt = Arc::new(AtomicBool::new(false));
+    {
+        let flag = Arc::clone(&interrupt);
+        let _ = ctrlc::set_handler(move || {
+            if flag.swap(true, Ordering::SeqCst) {
+                std::process::exit(i32::from(exit::INTERRUPTED));
+            }
+            eprintln!("\ninterrupt: stopping Blender (Ctrl-C again to quit at once)");
+        });
+    }
+    let worker = Worker::start(&WorkerOptions {
+        blender,
+        script: bridge.worker_script(),
+        materials: bridge.materials_json(),
+        threads: args.threads,
+        startup_timeout: Duration::from_secs(120),
+        interrupt: Arc::clone(&interrupt),
+    })
+    .map_err(|e| match e {
+        RenderError::Interrupted => anyhow::Error::new(exit::Interrupted),
+        e => e.into(),
+    })?;
+    let blender_version = worker.ready().blender_version.clone();
+    let mut bench = Bench {
+        worker,
+        out: args.out.clone(),
+    };
+
+    println!(
+        "bench render: {n} scene(s) at {width}x{height}, {} setting(s), references at {ref_samples} fixed samples; Blender {blender_version}, {} Cycles thread(s){}",
+        settings.len(),
+        if args.threads == 0 { "auto".to_string() } else { args.threads.to_string() },
+        if quick {
+            "\nquick mode: small frames, 2 scenes and fewer rungs; compare settings with it, take per-image costs from a full run"
+        } else {
+            ""
+        }
+    );
+    let total = scenes.len() * settings.len();
+    let mut rows = Vec::with_capacity(total);
+    let mut done = 0;
+    for (si, bs) in scenes.iter().enumerate() {
+        let ref_scene = with_sampling(
+            &bs.scene,
+            &Sampling {
+                samples: ref_samples,
+                ..Sampling::ORIGINAL
+            },
+        );
+        let ref_json = clevrtex_scene::to_pretty_json(&ref_scene)?;
+        let key = fnv1a(&[
+            ref_json.as_bytes(),
+            materials_json.as_bytes(),
+            blender_version.as_bytes(),
+        ]);
+        let ref_dir = bench.out.join("references").join(format!("{key:016x}"));
+        let reference = match read_outputs(&ref_dir) {
+            Ok(r) => {
+                eprintln!("[{}] reference cached in `{}`", bs.label, ref_dir.display());
+                r
+            }
+            Err(_) => {
+                eprintln!(
+                    "[{}] rendering the reference ({ref_samples} samples) ...",
+                    bs.label
+                );
+                let (wall, cycles) =
+                    bench.render(&format!("{} reference", bs.label), &ref_scene, &ref_dir)?;
+                eprintln!(
+                    "[{}] reference took {wall:.1} s (cycles {cycles:.1} s)",
+                    bs.label
+                );
+                read_outputs(&ref_dir)?
+            }
+        };
+        for setting in &settings {
+            let scene = with_sampling(&bs.scene, &setting.sampling);
+            let dir = bench
+                .out
+                .join("runs")
+                .join(format!("{si:02}-{}", setting.label));
+            let label = format!("{} {}", bs.label, setting.label);
+            let (wall_s, cycles_s) = bench.render(&label, &scene, &dir)?;
+            let errors = compare(&read_outputs(&dir)?, &reference);
+            done += 1;
+            eprintln!(
+                "[{done}/{total}] {label}: {wall_s:.2} s, rel error {:.4}",
+                errors.rel_error
+            );
+            rows.push(Row {
+                scene: bs.label.clone(),
+                variant: bs.scene.variant.clone(),
+                setting: setting.clone(),
+                wall_s,
+                cycles_s,
+                errors,
+            });
+        }
+    }
+    bench.worker.quit();
+
+    let csv = args.out.join("bench-render.csv");
+    std::fs::write(&csv, to_csv(&rows, width, height))
+        .with_context(|| format!("cannot write `{}`", csv.display()))?;
+    let agg = aggregate(&rows);
+    print!("{}", table(&agg));
+    print!("{}", summary(&agg));
+    let curves = curves(&agg);
+    let stem = args.out.join("bench-render");
+    let text = plot::write(
+        &stem,
+        &format!("relative RMSE (linear) vs Cycles time, {n} scene(s) at {width}x{height}"),
+        "Cycles render time per image (s)",
+        "relative RMSE vs reference",
+        &curves,
+    )?;
+    println!("csv: {}", csv.display());
+    println!(
+        "plot: {} and {}{}",
+        stem.with_extension("png").display(),
+        stem.with_extension("svg").display(),
+        if text {
+            ""
+        } else {
+            " (no system font found: drawn without text; install fonts-dejavu-core)"
+        }
+    );
+    Ok(exit::OK)
+}
+
+/// Means over scenes of one setting.
+struct Agg {
+    setting: Setting,
+    scenes: usize,
+    wall_s: f64,
+    cycles_s: f64,
+    rmse_linear: f64,
+    rel_error: f64,
+    bias: f64,
+    psnr_srgb: f64,
+    mask_equal: usize,
+    depth_equal: usize,
+}
+
+fn aggregate(rows: &[Row]) -> Vec<Agg> {
+    let mut order: Vec<String> = Vec::new();
+    let mut by: BTreeMap<String, Vec<&Row>> = BTreeMap::new();
+    for r in rows {
+        if !by.contains_key(&r.setting.label) {
+            order.push(r.setting.label.clone());
+        }
+        by.entry(r.setting.label.clone()).or_default().push(r);
+    }
+    order
+        .into_iter()
+        .map(|label| {
+            let rs = &by[&label];
+            let k = rs.len() as f64;
+            let m = |f: &dyn Fn(&Row) -> f64| rs.iter().map(|r| f(r)).sum::<f64>() / k;
+            Agg {
+                setting: rs[0].setting.clone(),
+                scenes: rs.len(),
+                wall_s: m(&|r| r.wall_s),
+                cycles_s: m(&|r| r.cycles_s),
+                rmse_linear: m(&|r| r.errors.rmse_linear),
+                rel_error: m(&|r| r.errors.rel_error),
+                bias: m(&|r| r.errors.bias),
+                // Mean of PSNR in dB; an identical image (infinite PSNR) would swamp it, so
+                // it counts as 99 dB.
+                psnr_srgb: m(&|r| r.errors.psnr_srgb.min(99.0)),
+                mask_equal: rs.iter().filter(|r| r.errors.mask_equal).count(),
+                depth_equal: rs.iter().filter(|r| r.errors.depth_equal).count(),
+            }
+        })
+        .collect()
+}
+
+fn threshold_text(s: &Sampling) -> String {
+    s.adaptive_threshold
+        .map_or_else(|| "-".to_string(), |t| t.to_string())
+}
+
+fn table(agg: &[Agg]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "\n{:<30} {:>5} {:>6} {:>7} {:>5} {:>8} {:>8} {:>9} {:>8} {:>7} {:>6} {:>5} {:>5}",
+        "setting",
+        "spp",
+        "thresh",
+        "bounce",
+        "clamp",
+        "wall s",
+        "cycles s",
+        "rmse lin",
+        "rel err",
+        "bias",
+        "psnr",
+        "mask",
+        "depth"
+    );
+    for a in agg {
+        let p = &a.setting.sampling;
+        let _ = writeln!(
+            s,
+            "{:<30} {:>5} {:>6} {:>7} {:>5} {:>8.2} {:>8.2} {:>9.5} {:>8.4} {:>+7.4} {:>6.2} {:>5} {:>5}",
+            a.setting.label,
+            p.samples,
+            threshold_text(p),
+            format!("{}/{}/{}", p.max_bounces, p.diffuse_bounces, p.glossy_bounces),
+            p.clamp_indirect,
+            a.wall_s,
+            a.cycles_s,
+            a.rmse_linear,
+            a.rel_error,
+            a.bias,
+            a.psnr_srgb,
+            format!("{}/{}", a.mask_equal, a.scenes),
+            format!("{}/{}", a.depth_equal, a.scenes),
+        );
+    }
+    s.push_str("(means over scenes; bounce = max/diffuse/glossy; rel err = RMSE / mean of the reference, linear light; bias = relative difference of the means; psnr in dB on the 8-bit sRGB PNG; mask/depth = scenes whose pass equals the reference's exactly)\n");
+    s
+}
+
+fn summary(agg: &[Agg]) -> String {
+    let mut s = String::new();
+    let Some(orig) = agg.iter().find(|a| a.setting.label == "original-512") else {
+        return s;
+    };
+    let _ = writeln!(
+        s,
+        "\noriginal (512 fixed samples, its bounces): rel error {:.4}, wall {:.2} s, cycles {:.2} s per image",
+        orig.rel_error, orig.wall_s, orig.cycles_s
+    );
+    let _ = writeln!(
+        s,
+        "settings at most as noisy as the original (rel error <= original's), by wall time:"
+    );
+    let mut better: Vec<&Agg> = agg
+        .iter()
+        .filter(|a| a.setting.label != orig.setting.label && a.rel_error <= orig.rel_error)
+        .collect();
+    better.sort_by(|a, b| a.wall_s.total_cmp(&b.wall_s));
+    if better.is_empty() {
+        let _ = writeln!(s, "  (none)");
+    }
+    for a in better {
+        let _ = writeln!(
+            s,
+            "  {:<30} wall x{:.2} of the original, rel error {:.4}, bias {:+.4}",
+            a.setting.label,
+            a.wall_s / orig.wall_s.max(1e-9),
+            a.rel_error,
+            a.bias
+        );
+    }
+    if let Some(std) = agg.iter().find(|a| a.setting.label == "preset-standard") {
+        let ratio = std.wall_s / orig.wall_s.max(1e-9);
+        let ok = std.rel_error <= orig.rel_error && ratio <= 0.5;
+        let _ = writeln!(
+            s,
+            "preset standard: wall x{ratio:.2} of the original (target <= 0.50), rel error {:.4} vs {:.4}: {}",
+            std.rel_error,
+            orig.rel_error,
+            if ok { "target met" } else { "target NOT met" }
+        );
+    }
+    s
+}
+
+fn curves(agg: &[Agg]) -> Vec<plot::Curve> {
+    let mut by: BTreeMap<&str, Vec<(f64, f64)>> = BTreeMap::new();
+    for a in agg {
+        by.entry(a.setting.mode)
+            .or_default()
+            .push((a.cycles_s, a.rel_error));
+    }
+    by.into_iter().map(|(k, v)| (k.to_string(), v)).collect()
+}
+
+fn to_csv(rows: &[Row], width: u32, height: u32) -> String {
+    let mut s = String::from("scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal\n");
+    for r in rows {
+        let p = &r.setting.sampling;
+        let _ = writeln!(
+            s,
+            "{},{},{},{},{width},{height},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.6},{:.6},{:.6},{},{},{}",
+            r.scene,
+            r.variant,
+            r.setting.label,
+            r.setting.mode,
+            p.samples,
+            p.adaptive_threshold.map_or(String::new(), |t| t.to_string()),
+            p.max_bounces,
+            p.diffuse_bounces,
+            p.glossy_bounces,
+            p.transmission_bounces,
+            p.transparent_max_bounces,
+            p.clamp_indirect,
+            r.wall_s,
+            r.cycles_s,
+            r.errors.rmse_linear,
+            r.errors.rel_error,
+            r.errors.bias,
+            if r.errors.psnr_srgb.is_finite() {
+                format!("{:.3}", r.errors.psnr_srgb)
+            } else {
+                "inf".to_string()
+            },
+            r.errors.mask_equal,
+            r.errors.depth_equal,
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cache_key_changes_with_every_part() {
+        let a = fnv1a(&[b"scene", b"mat"]);
+        assert_eq!(a, fnv1a(&[b"scene", b"mat"]));
+        assert_ne!(a, fnv1a(&[b"scen", b"emat"]));
+        assert_ne!(a, fnv1a(&[b"scene", b"mat2"]));
+    }
+
+    #[test]
+    fn bench_scenes_are_fixed_and_cover_variants() {
+        let a = bench_scenes(3, 64, 48).unwrap();
+        let b = bench_scenes(3, 64, 48).unwrap();
+        assert_eq!(a.len(), 3);
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!(x.scene, y.scene);
+            assert_eq!((x.scene.render.width, x.scene.render.height), (64, 48));
+            assert_eq!(x.scene.passes, vec![Pass::Rgb, Pass::Mask, Pass::Depth]);
+        }
+        assert_eq!(
+            a.iter().map(|s| s.label.as_str()).collect::<Vec<_>>(),
+            ["full#0", "camo#1", "pbg#2"]
+        );
+    }
 }

@@ -24,6 +24,7 @@ pub mod config;
 pub mod json;
 pub mod metadata;
 pub mod naming;
+pub mod quality;
 mod rng;
 pub mod sample;
 pub mod scene_file;

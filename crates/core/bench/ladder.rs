@@ -1,0 +1,132 @@
+//! The ladder of render settings `clevrtex bench render` tries, grouped into curves (one
+//! curve per sampling mode in the plot).
+
+use clevrtex_scene::quality::{Quality, Sampling};
+
+/// One rung: a named setting on a curve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Setting {
+    /// Curve (sampling mode): `fixed`, `adaptive`, `adaptive-lowbounce`, `adaptive-clamp`,
+    /// `preset`.
+    pub mode: &'static str,
+    /// Short unique label, e.g. `fixed-64`, `original-512`, `preset-standard`.
+    pub label: String,
+    /// The settings.
+    pub sampling: Sampling,
+}
+
+/// Bounces cut to what a matte, mostly diffuse ClevrTex scene plausibly needs: a bias
+/// (darker indirect light) traded for time.
+const LOW_BOUNCES: Sampling = Sampling {
+    max_bounces: 4,
+    diffuse_bounces: 2,
+    glossy_bounces: 2,
+    transmission_bounces: 4,
+    transparent_max_bounces: 4,
+    ..Sampling::ORIGINAL
+};
+
+fn fixed(samples: u32) -> Setting {
+    let label = if samples == Sampling::ORIGINAL.samples {
+        format!("original-{samples}")
+    } else {
+        format!("fixed-{samples}")
+    };
+    Setting {
+        mode: "fixed",
+        label,
+        sampling: Sampling {
+            samples,
+            ..Sampling::ORIGINAL
+        },
+    }
+}
+
+fn adaptive(mode: &'static str, base: Sampling, samples: u32, threshold: f32) -> Setting {
+    Setting {
+        mode,
+        label: format!("{mode}-{samples}-t{threshold}"),
+        sampling: Sampling {
+            samples,
+            adaptive_threshold: Some(threshold),
+            ..base
+        },
+    }
+}
+
+fn preset(q: Quality) -> Setting {
+    Setting {
+        mode: "preset",
+        label: format!("preset-{}", q.name()),
+        sampling: q.settings(),
+    }
+}
+
+/// The ladder. `quick` keeps the rungs that decide the presets (the original's 512 fixed
+/// samples, the adaptive curve around it, the presets below `high`), and drops 1024.
+pub fn ladder(quick: bool) -> Vec<Setting> {
+    let o = Sampling::ORIGINAL;
+    let clamp = Sampling {
+        clamp_indirect: 1.0,
+        ..o
+    };
+    let mut out = Vec::new();
+    let fixed_samples: &[u32] = if quick {
+        &[4, 16, 64, 256, 512]
+    } else {
+        &[4, 16, 64, 128, 256, 512, 1024]
+    };
+    out.extend(fixed_samples.iter().map(|&s| fixed(s)));
+    let adaptive_rungs: &[(u32, f32)] = if quick {
+        &[(16, 0.1), (64, 0.05), (256, 0.02)]
+    } else {
+        &[
+            (16, 0.1),
+            (64, 0.05),
+            (256, 0.02),
+            (512, 0.01),
+            (1024, 0.005),
+        ]
+    };
+    out.extend(
+        adaptive_rungs
+            .iter()
+            .map(|&(s, t)| adaptive("adaptive", o, s, t)),
+    );
+    let variant_rungs: &[(u32, f32)] = if quick {
+        &[(256, 0.02)]
+    } else {
+        &[(64, 0.05), (256, 0.02)]
+    };
+    for &(s, t) in variant_rungs {
+        out.push(adaptive("adaptive-lowbounce", LOW_BOUNCES, s, t));
+        out.push(adaptive("adaptive-clamp", clamp, s, t));
+    }
+    let presets: &[Quality] = if quick {
+        &[Quality::Draft, Quality::Standard]
+    } else {
+        &[Quality::Draft, Quality::Standard, Quality::High]
+    };
+    out.extend(presets.iter().map(|&q| preset(q)));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_are_unique_and_the_original_is_a_rung() {
+        for quick in [false, true] {
+            let l = ladder(quick);
+            let mut labels: Vec<&str> = l.iter().map(|s| s.label.as_str()).collect();
+            labels.sort();
+            let n = labels.len();
+            labels.dedup();
+            assert_eq!(labels.len(), n, "duplicate labels in {labels:?}");
+            let orig = l.iter().find(|s| s.label == "original-512").unwrap();
+            assert_eq!(orig.sampling, Sampling::ORIGINAL);
+            assert!(l.iter().any(|s| s.label == "preset-standard"));
+        }
+    }
+}

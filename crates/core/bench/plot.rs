@@ -1,0 +1,159 @@
+//! The error-against-time plot (log-log, one curve per sampling mode) as SVG and PNG.
+//!
+//! Text needs a font: plotters is built without font-kit (no fontconfig), so a TrueType font
+//! is loaded from the usual system places (DejaVu Sans, Liberation Sans). Without one the
+//! plot is drawn without text and the caller is told so.
+
+use std::path::Path;
+
+use anyhow::Context;
+use plotters::prelude::*;
+
+/// One point of a curve: x = seconds, y = relative error.
+pub type Curve = (String, Vec<(f64, f64)>);
+
+const FONT_PATHS: &[&str] = &[
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
+    "/Library/Fonts/Arial.ttf",
+    "C:\\Windows\\Fonts\\arial.ttf",
+];
+
+/// Register a system font for plotters once; `false` when none was found.
+fn font_available() -> bool {
+    static FOUND: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *FOUND.get_or_init(|| {
+        for p in FONT_PATHS {
+            if let Ok(bytes) = std::fs::read(p) {
+                // plotters wants 'static font data; one font per process, so leaking is fine.
+                let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+                if plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_ok() {
+                    return true;
+                }
+            }
+        }
+        false
+    })
+}
+
+const W: u32 = 900;
+const H: u32 = 600;
+
+/// Write `stem.svg` and `stem.png`. Returns whether text (axes, legend) could be drawn.
+pub fn write(
+    stem: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    curves: &[Curve],
+) -> anyhow::Result<bool> {
+    let text = font_available();
+    let svg = stem.with_extension("svg");
+    {
+        let root = SVGBackend::new(&svg, (W, H)).into_drawing_area();
+        draw(&root, title, x_label, y_label, curves, text)?;
+        root.present()
+            .map_err(|e| anyhow::anyhow!("cannot write `{}`: {e}", svg.display()))?;
+    }
+    let png = stem.with_extension("png");
+    let mut buf = vec![255u8; (W * H * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (W, H)).into_drawing_area();
+        draw(&root, title, x_label, y_label, curves, text)?;
+        root.present()
+            .map_err(|e| anyhow::anyhow!("cannot draw the PNG plot: {e}"))?;
+    }
+    let img = image::RgbImage::from_raw(W, H, buf).context("plot buffer has the wrong size")?;
+    img.save(&png).with_context(|| {
+        format!(
+            "cannot write `{}`\nhint: check that the folder is writable",
+            png.display()
+        )
+    })?;
+    Ok(text)
+}
+
+fn bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !lo.is_finite() {
+        return (1e-3, 1.0);
+    }
+    // Half a decade of room on each side keeps end points off the frame.
+    (lo / 1.5, hi * 1.5)
+}
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    curves: &[Curve],
+    text: bool,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("cannot draw the plot: {e}");
+    root.fill(&WHITE).map_err(err)?;
+    let (x0, x1) = bounds(curves.iter().flat_map(|c| c.1.iter().map(|p| p.0)));
+    let (y0, y1) = bounds(curves.iter().flat_map(|c| c.1.iter().map(|p| p.1)));
+    let mut builder = ChartBuilder::on(root);
+    builder.margin(20);
+    if text {
+        builder
+            .caption(title, ("sans-serif", 22))
+            .x_label_area_size(45)
+            .y_label_area_size(70);
+    }
+    let mut chart = builder
+        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+        .map_err(err)?;
+    let mut mesh = chart.configure_mesh();
+    if text {
+        mesh.x_desc(x_label)
+            .y_desc(y_label)
+            .label_style(("sans-serif", 14))
+            .x_label_formatter(&|v| format!("{v:.3}"))
+            .y_label_formatter(&|v| format!("{v:.3}"));
+    } else {
+        mesh.x_labels(0).y_labels(0);
+    }
+    mesh.draw().map_err(err)?;
+    for (i, (name, points)) in curves.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        let mut pts: Vec<(f64, f64)> = points
+            .iter()
+            .copied()
+            .filter(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite())
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let series = chart
+            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+            .map_err(err)?;
+        if text {
+            series.label(name.as_str()).legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        }
+        chart
+            .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+            .map_err(err)?;
+    }
+    if text {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .map_err(err)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,207 @@
+//! Quality presets: named Cycles settings chosen from the error-against-time curve that
+//! `clevrtex bench render` measures (`docs/performance.md`, section `bench`).
+//!
+//! A preset changes only the sampling and light-path fields of [`RenderSettings`]
+//! (samples, adaptive threshold, bounces, indirect clamp); resolution, filter and colour
+//! management stay as the config says.
+//!
+//! ```
+//! use clevrtex_scene::{quality::Quality, Config};
+//!
+//! let mut render = Config::builtin("full").unwrap().base.render;
+//! Quality::Standard.apply(&mut render);
+//! assert_eq!(render.samples, Quality::Standard.settings().samples);
+//! assert_eq!("draft".parse::<Quality>().unwrap(), Quality::Draft);
+//! ```
+
+use crate::scene_file::RenderSettings;
+
+/// A named quality level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Quality {
+    /// Previews and layout checks: visibly noisy.
+    Draft,
+    /// Datasets: reaches the error of the original generator's 512 fixed samples in at
+    /// most half its time (measured, see `docs/performance.md`).
+    Standard,
+    /// Lower noise than the original, at about its cost.
+    High,
+    /// Ground truth for error measurements: many samples, the original's light paths.
+    Reference,
+}
+
+/// The sampling and light-path fields a preset sets.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sampling {
+    /// Samples per pixel (the maximum when adaptive sampling is on).
+    pub samples: u32,
+    /// Adaptive-sampling noise threshold; `None` = fixed samples.
+    pub adaptive_threshold: Option<f32>,
+    /// Total max bounces.
+    pub max_bounces: u32,
+    /// Diffuse bounces.
+    pub diffuse_bounces: u32,
+    /// Glossy bounces.
+    pub glossy_bounces: u32,
+    /// Transmission bounces.
+    pub transmission_bounces: u32,
+    /// Transparent bounces.
+    pub transparent_max_bounces: u32,
+    /// Indirect light clamp (0 = off).
+    pub clamp_indirect: f32,
+}
+
+impl Sampling {
+    /// The original generator's setting (reference §3): 512 fixed samples, max bounces 12
+    /// (diffuse 4, glossy 4, transmission 12, transparent 8), no clamping, no adaptive
+    /// sampling.
+    pub const ORIGINAL: Sampling = Sampling {
+        samples: 512,
+        adaptive_threshold: None,
+        max_bounces: 12,
+        diffuse_bounces: 4,
+        glossy_bounces: 4,
+        transmission_bounces: 12,
+        transparent_max_bounces: 8,
+        clamp_indirect: 0.0,
+    };
+
+    /// Copy these fields into `render`.
+    pub fn apply(&self, render: &mut RenderSettings) {
+        render.samples = self.samples;
+        render.adaptive_threshold = self.adaptive_threshold;
+        render.max_bounces = self.max_bounces;
+        render.diffuse_bounces = self.diffuse_bounces;
+        render.glossy_bounces = self.glossy_bounces;
+        render.transmission_bounces = self.transmission_bounces;
+        render.transparent_max_bounces = self.transparent_max_bounces;
+        render.clamp_indirect = self.clamp_indirect;
+    }
+
+    /// The same fields read from `render`.
+    pub fn of(render: &RenderSettings) -> Sampling {
+        Sampling {
+            samples: render.samples,
+            adaptive_threshold: render.adaptive_threshold,
+            max_bounces: render.max_bounces,
+            diffuse_bounces: render.diffuse_bounces,
+            glossy_bounces: render.glossy_bounces,
+            transmission_bounces: render.transmission_bounces,
+            transparent_max_bounces: render.transparent_max_bounces,
+            clamp_indirect: render.clamp_indirect,
+        }
+    }
+}
+
+impl Quality {
+    /// Every preset, cheapest first.
+    pub const ALL: [Quality; 4] = [
+        Quality::Draft,
+        Quality::Standard,
+        Quality::High,
+        Quality::Reference,
+    ];
+
+    /// The preset's name as used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Draft => "draft",
+            Quality::Standard => "standard",
+            Quality::High => "high",
+            Quality::Reference => "reference",
+        }
+    }
+
+    /// The settings of the preset. Why these values: `docs/performance.md`, section `bench`.
+    pub fn settings(self) -> Sampling {
+        let o = Sampling::ORIGINAL;
+        match self {
+            // Adaptive sampling stops smooth pixels (most of the backdrop) early.
+            Quality::Draft => Sampling {
+                samples: 16,
+                adaptive_threshold: Some(0.1),
+                ..o
+            },
+            Quality::Standard => Sampling {
+                samples: 256,
+                adaptive_threshold: Some(0.02),
+                ..o
+            },
+            Quality::High => Sampling {
+                samples: 1024,
+                adaptive_threshold: Some(0.01),
+                ..o
+            },
+            Quality::Reference => Sampling { samples: 2048, ..o },
+        }
+    }
+
+    /// Set the sampling and light-path fields of `render` to this preset's.
+    pub fn apply(self, render: &mut RenderSettings) {
+        self.settings().apply(render);
+    }
+}
+
+impl std::fmt::Display for Quality {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A quality name that is not a preset.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown quality `{0}`\nhint: use one of draft, standard, high, reference")]
+pub struct UnknownQuality(pub String);
+
+impl std::str::FromStr for Quality {
+    type Err = UnknownQuality;
+
+    fn from_str(s: &str) -> Result<Quality, UnknownQuality> {
+        Quality::ALL
+            .into_iter()
+            .find(|q| q.name() == s.trim())
+            .ok_or_else(|| UnknownQuality(s.to_string()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_unknown_names_are_errors() {
+        for q in Quality::ALL {
+            assert_eq!(q.name().parse::<Quality>(), Ok(q));
+        }
+        let e = "ultra".parse::<Quality>().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "unknown quality `ultra`\nhint: use one of draft, standard, high, reference"
+        );
+    }
+
+    #[test]
+    fn presets_get_more_expensive_and_keep_the_original_light_paths() {
+        let s: Vec<Sampling> = Quality::ALL.iter().map(|q| q.settings()).collect();
+        for w in s.windows(2) {
+            assert!(w[0].samples < w[1].samples);
+        }
+        for p in &s {
+            assert_eq!(p.max_bounces, Sampling::ORIGINAL.max_bounces);
+            assert_eq!(p.diffuse_bounces, Sampling::ORIGINAL.diffuse_bounces);
+            assert_eq!(p.clamp_indirect, 0.0);
+        }
+        assert_eq!(Quality::Reference.settings().adaptive_threshold, None);
+    }
+
+    #[test]
+    fn apply_then_of_gives_the_preset_back() {
+        let mut r = crate::Config::builtin("full").unwrap().base.render;
+        let (w, h) = (r.width, r.height);
+        for q in Quality::ALL {
+            q.apply(&mut r);
+            assert_eq!(Sampling::of(&r), q.settings());
+            assert_eq!((r.width, r.height), (w, h));
+        }
+    }
+}
