@@ -3,13 +3,14 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
 use clevrtex_scene::{config::Config, sample, sample_dir, SampleRequest};
 use rayon::prelude::*;
 
-use crate::exit::{CmdResult, OK};
+use crate::exit::{CmdResult, Interrupted, OK};
 
 /// Arguments of `clevrtex sample`.
 #[derive(Debug, clap::Args)]
@@ -172,12 +173,18 @@ pub fn run(args: Args) -> CmdResult {
         .context("cannot start worker threads")?;
     let progress = indicatif::ProgressBar::new(indices.len() as u64);
     let stop = AtomicBool::new(false);
+    // Ctrl-C: finish the files being written (each appears whole or not at all) and stop.
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let flag = Arc::clone(&interrupted);
+        let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
+    }
     // Results come back in index order, so the error reported is the first one by index.
     let results: Vec<anyhow::Result<()>> = pool.install(|| {
         indices
             .par_iter()
             .map(|&index| {
-                if stop.load(Ordering::Relaxed) {
+                if stop.load(Ordering::Relaxed) || interrupted.load(Ordering::Relaxed) {
                     return Ok(());
                 }
                 let req = SampleRequest {
@@ -198,6 +205,9 @@ pub fn run(args: Args) -> CmdResult {
             .collect()
     });
     progress.finish_and_clear();
+    if interrupted.load(Ordering::SeqCst) {
+        return Err(Interrupted.into());
+    }
     if let Some(err) = results.into_iter().find_map(Result::err) {
         return Err(err);
     }
