@@ -11,7 +11,7 @@ PASSES = {
     "depth": ["use_pass_z"],
     "normal": ["use_pass_normal"],
     "albedo": ["use_pass_diffuse_color"],
-    "shadow": ["use_pass_diffuse_direct"],
+    "shadow": ["use_pass_diffuse_direct", "use_pass_diffuse_color", "use_pass_glossy_direct", "use_pass_glossy_color"],
 }
 
 # Passes whose data lives in the multilayer `passes.exr` (rgb goes to `rgb.png` instead).

@@ -591,7 +591,7 @@ fn camera_model_depth_and_shadow_match_blender() {
     };
     let dir = tempfile::tempdir().unwrap();
     let (w, h) = (160, 120);
-    let objects = fixture("tiny3", w, h, 1);
+    let objects = fixture("tiny3", w, h, 4);
     let floor = fixture("empty_floor", 64, 48, 8);
     let stats = render_fixtures(blender, dir.path(), vec![objects.clone(), floor.clone()]);
     assert_eq!(stats.len(), 2);
@@ -638,6 +638,15 @@ fn camera_model_depth_and_shadow_match_blender() {
         "sphere depth {got} m vs expected {expected} m"
     );
     assert!(depth.data.contains(&post::DEPTH_BACKGROUND) || depth.data.iter().all(|&v| v < 65535));
+
+    // Objects on a lit floor do cast shadows.
+    let shadow = decode_png(&sub.join(format!("{}_shadow_0001.png", objects.stem))).unwrap();
+    let shadowed = shadow.data.iter().filter(|&&v| v > 128).count();
+    assert!(
+        shadowed * 50 > shadow.data.len(),
+        "only {shadowed} of {} pixels are shadowed",
+        shadow.data.len()
+    );
 
     // Shadow of an empty, lit floor: defined everywhere and ~0.
     let shadow = decode_png(&sub.join(format!("{}_shadow_0001.png", floor.stem))).unwrap();

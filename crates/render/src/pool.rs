@@ -694,6 +694,43 @@ fn reply_file(reply: &RenderReply, role: &str, work: &Path) -> Result<PathBuf> {
     Ok(path.clone())
 }
 
+/// The direct light with and without object shadows, per RGB channel: diffuse + glossy
+/// (weighted by the colours of the final render) when the bridge wrote the glossy channels,
+/// else diffuse direct light alone.
+fn shadow_inputs(fin: &Channels, ns: &Channels) -> Result<([Vec<f32>; 3], [Vec<f32>; 3])> {
+    let name = |pass: &str, c: &str| format!("ViewLayer.{pass}.{c}");
+    let has_gloss = ["GlossDir", "GlossCol", "DiffCol"]
+        .iter()
+        .all(|p| fin.channels.contains_key(&name(p, "R")))
+        && ns.channels.contains_key(&name("GlossDir", "R"));
+    let mut lit: [Vec<f32>; 3] = Default::default();
+    let mut un: [Vec<f32>; 3] = Default::default();
+    for (k, c) in ["R", "G", "B"].into_iter().enumerate() {
+        if has_gloss {
+            let (dc, gc) = (
+                fin.get(&name("DiffCol", c))?,
+                fin.get(&name("GlossCol", c))?,
+            );
+            lit[k] = post::direct_light(
+                fin.get(&name("DiffDir", c))?,
+                dc,
+                fin.get(&name("GlossDir", c))?,
+                gc,
+            );
+            un[k] = post::direct_light(
+                ns.get(&name("DiffDir", c))?,
+                dc,
+                ns.get(&name("GlossDir", c))?,
+                gc,
+            );
+        } else {
+            lit[k] = fin.get(&name("DiffDir", c))?.to_vec();
+            un[k] = ns.get(&name("DiffDir", c))?.to_vec();
+        }
+    }
+    Ok((lit, un))
+}
+
 /// Decode the bridge's files, encode every requested pass into `staged`, and return the
 /// per-object visibility measured on the final mask.
 fn write_passes(
@@ -755,10 +792,9 @@ fn write_passes(
                 )?
             }
             Pass::Shadow => {
-                let lit = rgb3(&ch, "ViewLayer.DiffDir", ["R", "G", "B"])?;
                 let ns_path = reply_file(reply, "noshadow", work)?;
                 let ns = Channels::read(&ns_path)?;
-                let un = rgb3(&ns, "ViewLayer.DiffDir", ["R", "G", "B"])?;
+                let (lit, un) = shadow_inputs(&ch, &ns)?;
                 let s = post::encode_shadow([&lit[0], &lit[1], &lit[2]], [&un[0], &un[1], &un[2]]);
                 staged.write(&name, &png(PngKind::Gray8, &s, &[])?)?
             }
