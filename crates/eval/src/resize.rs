@@ -89,12 +89,15 @@ fn bilinear_coeffs(in_size: usize, out_size: usize) -> Vec<(usize, Vec<i32>)> {
         .collect()
 }
 
-fn clip8(v: i64) -> u8 {
+fn clip8(v: i32) -> u8 {
     (v >> PRECISION_BITS).clamp(0, 255) as u8
 }
 
 /// Crop an interleaved 8-bit RGB image with [`crop_box`] and resize it to `out x out` exactly
 /// as Pillow's `Image.resize((out, out), BILINEAR)` does on the cropped RGB image.
+///
+/// Accumulators are `i32` as in Pillow: the weights of a tap sum to `2^22`, so a sum is at most
+/// `255 * 2^22 + 2^21 < 2^31`.
 pub fn crop_resize_bilinear_rgb(
     rgb: &[u8],
     width: usize,
@@ -108,36 +111,39 @@ pub fn crop_resize_bilinear_rgb(
     if c == 0 {
         return None;
     }
-    let hk = bilinear_coeffs(c, out);
-    let vk = bilinear_coeffs(c, out);
+    let coeffs = bilinear_coeffs(c, out);
+    let half = 1i32 << (PRECISION_BITS - 1);
     // Horizontal pass over the crop's rows: c rows x out columns.
     let mut tmp = vec![0u8; c * out * 3];
-    for y in 0..c {
+    for (y, trow) in tmp.chunks_exact_mut(out * 3).enumerate() {
         let row = &rgb[((y0 + y) * width + x0) * 3..][..c * 3];
-        let trow = &mut tmp[y * out * 3..][..out * 3];
-        for (xx, (xmin, k)) in hk.iter().enumerate() {
-            let mut acc = [1i64 << (PRECISION_BITS - 1); 3];
-            for (i, &w) in k.iter().enumerate() {
-                let px = &row[(xmin + i) * 3..][..3];
-                for ch in 0..3 {
-                    acc[ch] += px[ch] as i64 * w as i64;
-                }
+        for ((xmin, k), px_out) in coeffs.iter().zip(trow.chunks_exact_mut(3)) {
+            let src = &row[xmin * 3..][..k.len() * 3];
+            let (mut r, mut g, mut b) = (half, half, half);
+            for (&w, px) in k.iter().zip(src.chunks_exact(3)) {
+                r += px[0] as i32 * w;
+                g += px[1] as i32 * w;
+                b += px[2] as i32 * w;
             }
-            for ch in 0..3 {
-                trow[xx * 3 + ch] = clip8(acc[ch]);
-            }
+            px_out[0] = clip8(r);
+            px_out[1] = clip8(g);
+            px_out[2] = clip8(b);
         }
     }
-    // Vertical pass.
-    let mut res = vec![0u8; out * out * 3];
-    for (yy, (ymin, k)) in vk.iter().enumerate() {
-        let orow = &mut res[yy * out * 3..][..out * 3];
-        for x in 0..out * 3 {
-            let mut acc = 1i64 << (PRECISION_BITS - 1);
-            for (i, &w) in k.iter().enumerate() {
-                acc += tmp[(ymin + i) * out * 3 + x] as i64 * w as i64;
+    // Vertical pass, a whole row at a time so the inner loop vectorises.
+    let width3 = out * 3;
+    let mut res = vec![0u8; out * width3];
+    let mut acc = vec![0i32; width3];
+    for ((ymin, k), orow) in coeffs.iter().zip(res.chunks_exact_mut(width3)) {
+        acc.iter_mut().for_each(|a| *a = half);
+        for (i, &w) in k.iter().enumerate() {
+            let src = &tmp[(ymin + i) * width3..][..width3];
+            for (a, &v) in acc.iter_mut().zip(src) {
+                *a += v as i32 * w;
             }
-            orow[x] = clip8(acc);
+        }
+        for (o, &a) in orow.iter_mut().zip(&acc) {
+            *o = clip8(a);
         }
     }
     Some(res)
