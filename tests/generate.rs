@@ -684,3 +684,47 @@ fn doctor_reports_blender_and_devices() {
     assert!(t.contains("version: "), "{t}");
     assert!(t.contains("cycles devices: ") && t.contains("CPU"), "{t}");
 }
+
+#[test]
+fn a_silent_worker_is_hung_long_before_the_overall_limit() {
+    // A wrapper selects the fake's mode without touching this process's environment.
+    let dir = tempfile::tempdir().unwrap();
+    let wrapper = dir.path().join("blender");
+    std::fs::write(
+        &wrapper,
+        format!(
+            "#!/bin/sh\nFAKE_BLENDER_MODE=hang exec '{}' \"$@\"\n",
+            fake_blender().display()
+        ),
+    )
+    .unwrap();
+    std::process::Command::new("chmod")
+        .arg("+x")
+        .arg(&wrapper)
+        .status()
+        .unwrap();
+    let bridge = clevrtex_render::BridgeDir::create("{}").unwrap();
+    let mut worker = clevrtex_render::Worker::start(&clevrtex_render::WorkerOptions {
+        blender: wrapper,
+        script: bridge.worker_script(),
+        materials: bridge.materials_json(),
+        threads: 1,
+        startup_timeout: Duration::from_secs(30),
+        interrupt: Arc::new(AtomicBool::new(false)),
+    })
+    .unwrap();
+    worker.set_idle_timeout(Some(Duration::from_secs(1)));
+    let t0 = Instant::now();
+    let err = worker
+        .render(
+            &dir.path().join("scene.json"),
+            clevrtex_render::Mode::Final,
+            dir.path(),
+            Duration::from_secs(120),
+        )
+        .unwrap_err();
+    assert!(t0.elapsed() < Duration::from_secs(20), "{:?}", t0.elapsed());
+    assert!(err.is_worker_failure());
+    assert!(err.to_string().contains("silent for"), "{err}");
+    assert!(worker.is_dead());
+}

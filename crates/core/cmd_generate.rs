@@ -34,8 +34,9 @@ pub struct RunArgs {
     /// Cycles threads per Blender process (default: cores / workers).
     #[arg(long, value_name = "T")]
     threads: Option<u32>,
-    /// Time limit per render request, seconds (default: 120 + 1.5 per sample at 320x240,
-    /// doubled with the shadow pass). A worker over it is killed and the scene retried.
+    /// Time limit per render request, seconds; a worker over it is killed and the scene
+    /// retried. Default: 600 + 8 per sample at 320x240 (doubled with the shadow pass), and
+    /// a worker silent for 300 s counts as hung.
     #[arg(long, value_name = "SECONDS")]
     timeout: Option<f64>,
     /// Restarts of a crashed or hung worker per scene before it goes to the failure ledger.

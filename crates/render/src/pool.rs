@@ -91,11 +91,16 @@ pub struct PoolOptions {
     pub interrupt: Arc<AtomicBool>,
 }
 
-/// A sensible per-request time limit for a scene: 2 minutes plus 1.5 s per sample at
-/// 320x240 (about 5x what one CPU thread needs), doubled for the shadow pass's extra render.
+/// Without `--timeout`, a worker that prints nothing at all for this long is hung (Cycles
+/// prints a line per sample; scene builds print too).
+pub const IDLE_TIMEOUT: Duration = Duration::from_secs(300);
+
+/// A generous per-request time limit for a scene: 10 minutes plus 8 s per sample at
+/// 320x240 (about 15x what one CPU thread needs, so a crowded machine does not trip it),
+/// doubled for the shadow pass's extra render. Hangs are caught sooner by [`IDLE_TIMEOUT`].
 pub fn auto_timeout(scene: &SceneFile) -> Duration {
     let pixels = scene.render.width as f64 * scene.render.height as f64 / (320.0 * 240.0);
-    let mut secs = 120.0 + 1.5 * scene.render.samples as f64 * pixels.max(0.05);
+    let mut secs = 600.0 + 8.0 * scene.render.samples as f64 * pixels.max(0.05);
     if scene.passes.contains(&Pass::Shadow) {
         secs *= 2.0;
     }
@@ -483,6 +488,10 @@ impl Slot<'_, '_> {
                 }
                 Err(e) => return Err(e),
             };
+            let mut w = w;
+            // With an explicit `--timeout` that limit is the only one; otherwise silence
+            // for IDLE_TIMEOUT also counts as a hang.
+            w.set_idle_timeout(opts.timeout.is_none().then_some(IDLE_TIMEOUT));
             self.shared.ever_started.store(true, Ordering::SeqCst);
             {
                 let mut r = self.shared.report.lock().unwrap();

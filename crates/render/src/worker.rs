@@ -10,7 +10,7 @@ use std::hash::{BuildHasher, Hasher};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -129,6 +129,10 @@ pub struct Worker {
     interrupt: Arc<AtomicBool>,
     dead: bool,
     streams_closed: Arc<AtomicBool>,
+    /// Milliseconds after `epoch` of the last line Blender printed (on either stream).
+    activity: Arc<AtomicU64>,
+    epoch: Instant,
+    idle_timeout: Option<Duration>,
 }
 
 impl std::fmt::Debug for Event {
@@ -192,14 +196,22 @@ impl Worker {
             }
         })?;
         let tails = Arc::new(Mutex::new((VecDeque::new(), VecDeque::new())));
+        let epoch = Instant::now();
+        let activity = Arc::new(AtomicU64::new(0));
+        let touch = {
+            let activity = Arc::clone(&activity);
+            move || activity.store(epoch.elapsed().as_millis() as u64, Ordering::Relaxed)
+        };
         let (tx, events) = mpsc::channel();
         let stdout = child.stdout.take().expect("piped");
         let stderr = child.stderr.take().expect("piped");
         {
             let tails = Arc::clone(&tails);
             let prefix = format!("{tag} ");
+            let touch = touch.clone();
             std::thread::spawn(move || {
                 read_lines(stdout, |line| {
+                    touch();
                     if let Some(rest) = line.strip_prefix(&prefix) {
                         let _ = tx.send(Event::Reply(rest.to_string()));
                     } else if line.starts_with(prefix.trim_end()) {
@@ -216,7 +228,10 @@ impl Worker {
             let tails = Arc::clone(&tails);
             let closed = Arc::clone(&streams_closed);
             std::thread::spawn(move || {
-                read_lines(stderr, |line| push_tail(&mut tails.lock().unwrap().1, line));
+                read_lines(stderr, |line| {
+                    touch();
+                    push_tail(&mut tails.lock().unwrap().1, line)
+                });
                 closed.store(true, Ordering::SeqCst);
             });
         }
@@ -239,6 +254,9 @@ impl Worker {
             interrupt: Arc::clone(&opts.interrupt),
             dead: false,
             streams_closed,
+            activity,
+            epoch,
+            idle_timeout: None,
         };
         let doing = "starting up".to_string();
         let reply = worker.wait_reply(Instant::now() + opts.startup_timeout, &doing)?;
@@ -258,6 +276,13 @@ impl Worker {
         worker.ready = ready;
         worker.startup = started.elapsed();
         Ok(worker)
+    }
+
+    /// Also give up on a request when Blender prints nothing at all for `idle` (Cycles
+    /// prints a line per sample, so a silent worker is hung even if the request's overall
+    /// time limit is far away). `None` (the default) checks only the overall limit.
+    pub fn set_idle_timeout(&mut self, idle: Option<Duration>) {
+        self.idle_timeout = idle;
     }
 
     /// What the worker reported when it started.
@@ -445,6 +470,21 @@ impl Worker {
                 return Err(RenderError::Interrupted);
             }
             let now = Instant::now();
+            let last = self.epoch + Duration::from_millis(self.activity.load(Ordering::Relaxed));
+            let idle = now.saturating_duration_since(last.max(waited));
+            if let Some(limit) = self.idle_timeout.filter(|l| idle >= *l) {
+                self.kill();
+                return Err(RenderError::Timeout {
+                    program: self.program.clone(),
+                    doing: format!(
+                        "{doing}, silent for {:.0} s (idle limit {:.0} s)",
+                        idle.as_secs_f64(),
+                        limit.as_secs_f64()
+                    ),
+                    after: waited.elapsed(),
+                    tails: Box::new(self.tails()),
+                });
+            }
             if now >= deadline {
                 self.kill();
                 return Err(RenderError::Timeout {
