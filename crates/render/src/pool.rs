@@ -703,17 +703,20 @@ fn reply_file(reply: &RenderReply, role: &str, work: &Path) -> Result<PathBuf> {
     Ok(path.clone())
 }
 
+/// Three planes of float samples (R, G, B).
+type Rgb = [Vec<f32>; 3];
+
 /// The direct light with and without object shadows, per RGB channel: diffuse + glossy
 /// (weighted by the colours of the final render) when the bridge wrote the glossy channels,
 /// else diffuse direct light alone.
-fn shadow_inputs(fin: &Channels, ns: &Channels) -> Result<([Vec<f32>; 3], [Vec<f32>; 3])> {
+fn shadow_inputs(fin: &Channels, ns: &Channels) -> Result<(Rgb, Rgb)> {
     let name = |pass: &str, c: &str| format!("ViewLayer.{pass}.{c}");
     let has_gloss = ["GlossDir", "GlossCol", "DiffCol"]
         .iter()
         .all(|p| fin.channels.contains_key(&name(p, "R")))
         && ns.channels.contains_key(&name("GlossDir", "R"));
-    let mut lit: [Vec<f32>; 3] = Default::default();
-    let mut un: [Vec<f32>; 3] = Default::default();
+    let mut lit: Rgb = Default::default();
+    let mut un: Rgb = Default::default();
     for (k, c) in ["R", "G", "B"].into_iter().enumerate() {
         if has_gloss {
             let (dc, gc) = (
