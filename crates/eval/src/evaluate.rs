@@ -221,11 +221,8 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
         })
         .collect::<Result<Vec<_>, _>>()?;
 
-    let mut summaries = [Summary::default(); 10];
-    for (mi, &m) in Metric::ALL.iter().enumerate() {
-        let vals: Vec<Option<f64>> = images.iter().map(|r| r.scores.get(m)).collect();
-        summaries[mi] = summarise(&vals, opts.bootstrap, opts.seed.wrapping_add(mi as u64));
-    }
+    let values: Vec<[Option<f64>; 10]> = images.iter().map(|r| r.scores.values).collect();
+    let summaries = summarise(&values, opts.bootstrap, opts.seed);
 
     // kind -> value -> (objects, IoU sum, objects with MSE, MSE sum)
     type Sums = BTreeMap<&'static str, BTreeMap<String, (usize, f64, usize, f64)>>;
@@ -287,37 +284,53 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
     })
 }
 
-/// Mean over defined values, and a percentile bootstrap over images.
-pub fn summarise(vals: &[Option<f64>], bootstrap: usize, seed: u64) -> Summary {
-    let defined: Vec<f64> = vals.iter().flatten().copied().collect();
-    if defined.is_empty() {
-        return Summary::default();
+/// Per metric: the mean over images where it is defined, and a 95% percentile bootstrap over
+/// images. Each resample draws image indices once for all metrics; resample `r` uses ChaCha
+/// stream `r` of `seed`, so the intervals do not depend on the number of threads.
+pub fn summarise(values: &[[Option<f64>; 10]], bootstrap: usize, seed: u64) -> [Summary; 10] {
+    let n = values.len();
+    let mut out = [Summary::default(); 10];
+    for (m, s) in out.iter_mut().enumerate() {
+        let defined: Vec<f64> = values.iter().filter_map(|v| v[m]).collect();
+        if !defined.is_empty() {
+            s.mean = Some(defined.iter().sum::<f64>() / defined.len() as f64);
+            s.defined = defined.len();
+        }
     }
-    let mean = defined.iter().sum::<f64>() / defined.len() as f64;
-    let ci = (bootstrap > 0).then(|| {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let n = vals.len();
-        let mut means = Vec::with_capacity(bootstrap);
-        for _ in 0..bootstrap {
-            let (mut s, mut c) = (0.0, 0usize);
+    if bootstrap == 0 || n == 0 {
+        return out;
+    }
+    let resamples: Vec<[Option<f64>; 10]> = (0..bootstrap)
+        .into_par_iter()
+        .map(|r| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(r as u64);
+            let mut sum = [0.0f64; 10];
+            let mut count = [0usize; 10];
             for _ in 0..n {
-                if let Some(v) = vals[rng.random_range(0..n)] {
-                    s += v;
-                    c += 1;
+                let v = &values[rng.random_range(0..n)];
+                for m in 0..10 {
+                    if let Some(x) = v[m] {
+                        sum[m] += x;
+                        count[m] += 1;
+                    }
                 }
             }
-            if c > 0 {
-                means.push(s / c as f64);
-            }
+            std::array::from_fn(|m| (count[m] > 0).then(|| sum[m] / count[m] as f64))
+        })
+        .collect();
+    for (m, s) in out.iter_mut().enumerate() {
+        let mut means: Vec<f64> = resamples.iter().filter_map(|r| r[m]).collect();
+        if means.is_empty() {
+            continue;
         }
         means.sort_by(f64::total_cmp);
-        (percentile(&means, 2.5), percentile(&means, 97.5))
-    });
-    Summary {
-        mean: Some(mean),
-        ci: ci.filter(|(a, b)| a.is_finite() && b.is_finite()),
-        defined: defined.len(),
+        let (lo, hi) = (percentile(&means, 2.5), percentile(&means, 97.5));
+        if lo.is_finite() && hi.is_finite() {
+            s.ci = Some((lo, hi));
+        }
     }
+    out
 }
 
 /// Linear-interpolation percentile of sorted values (numpy's default).

@@ -195,12 +195,14 @@ pub fn score_image(truth: &[u32], pred: &[u32], pred_slots: usize, recon: Option
 
     let (mse, sq_err_per_true) = match recon {
         Some(r) if r.truth_rgb.len() == 3 * n && r.pred_rgb.len() == 3 * n => {
+            // The exact f32 values of `v / 255`, as the reference divides.
+            let lut: [f32; 256] = std::array::from_fn(|v| v as f32 / 255.0);
             let mut per_true = vec![0.0f64; k];
             let mut total = 0.0f64;
             for (i, &t) in truth.iter().enumerate() {
                 let mut e = 0.0f64;
                 for c in 0..3 {
-                    let d = r.pred_rgb[3 * i + c] - r.truth_rgb[3 * i + c] as f32 / 255.0;
+                    let d = r.pred_rgb[3 * i + c] - lut[r.truth_rgb[3 * i + c] as usize];
                     e += (d * d) as f64;
                 }
                 per_true[t as usize] += e;
