@@ -123,13 +123,13 @@ impl Quality {
                 ..o
             },
             Quality::Standard => Sampling {
-                samples: 256,
-                adaptive_threshold: Some(0.02),
+                samples: 512,
+                adaptive_threshold: Some(0.01),
                 ..o
             },
             Quality::High => Sampling {
                 samples: 1024,
-                adaptive_threshold: Some(0.01),
+                adaptive_threshold: Some(0.005),
                 ..o
             },
             Quality::Reference => Sampling { samples: 2048, ..o },
