@@ -88,6 +88,10 @@ pub struct GenerateArgs {
     /// Cycles samples per pixel (default from the config).
     #[arg(long)]
     samples: Option<u32>,
+    /// Quality preset: draft, standard, high or reference (samples, adaptive threshold,
+    /// bounces; see docs/performance.md). `--samples` still overrides the sample count.
+    #[arg(long, value_name = "PRESET")]
+    quality: Option<clevrtex_scene::quality::Quality>,
     /// Layout attempts per image when objects are hidden, before the image fails.
     #[arg(long, default_value_t = 20, value_name = "N")]
     max_attempts: u32,
@@ -124,6 +128,9 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     }
     if let Some(h) = args.height {
         config.base.render.height = positive("--height", h)?;
+    }
+    if let Some(q) = args.quality {
+        q.apply(&mut config.base.render);
     }
     if let Some(s) = args.samples {
         config.base.render.samples = positive("--samples", s)?;
