@@ -1,1 +1,186 @@
-//! Integration tests for `clevrtex bench`.
+//! Integration tests for `clevrtex bench render` and the quality presets of `generate`.
+
+use std::path::Path;
+
+use serde_json::Value;
+
+use crate::util::{blender_or_skip, clevrtex, text};
+
+fn bench(out: &Path, extra: &[&str]) -> std::process::Output {
+    clevrtex()
+        .args(["bench", "render", "--quick", "--scenes", "1"])
+        .args(["--width", "24", "--height", "16"])
+        .args(["--max-samples", "16", "--reference-samples", "32"])
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .output()
+        .expect("run clevrtex")
+}
+
+/// CSV rows as maps from column to value.
+fn read_csv(path: &Path) -> Vec<std::collections::BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    lines
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            assert_eq!(cells.len(), header.len(), "row `{l}`");
+            header
+                .iter()
+                .zip(cells)
+                .map(|(h, c)| (h.to_string(), c.to_string()))
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn bench_render_writes_table_csv_plot_and_caches_references() {
+    let Some(_) = blender_or_skip("bench_render_writes_table_csv_plot_and_caches_references")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = bench(dir.path(), &[]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert!(t.contains("quick mode: small frames"), "{t}");
+    assert!(t.contains("rendering the reference (32 samples)"), "{t}");
+    assert!(
+        t.contains("setting") && t.contains("rel err") && t.contains("psnr"),
+        "{t}"
+    );
+
+    let rows = read_csv(&dir.path().join("bench-render.csv"));
+    let labels: Vec<&str> = rows.iter().map(|r| r["setting"].as_str()).collect();
+    assert_eq!(labels, ["fixed-4", "fixed-16", "adaptive-16-t0.1"], "{t}");
+    for r in &rows {
+        assert_eq!(r["scene"], "full#0");
+        assert_eq!((r["width"].as_str(), r["height"].as_str()), ("24", "16"));
+        for col in [
+            "wall_s",
+            "cycles_s",
+            "rmse_linear",
+            "rel_error",
+            "psnr_srgb",
+        ] {
+            let v: f64 = r[col]
+                .parse()
+                .unwrap_or_else(|_| panic!("{col} = {}", r[col]));
+            assert!(v.is_finite() && v > 0.0, "{col} = {v}");
+        }
+        // Object index and depth come from the first sample of each pixel, so they agree
+        // with the reference exactly whatever the sample count.
+        assert_eq!(r["mask_equal"], "true", "{r:?}");
+        assert_eq!(r["depth_equal"], "true", "{r:?}");
+    }
+    let err = |i: usize| rows[i]["rel_error"].parse::<f64>().unwrap();
+    assert!(err(1) < err(0), "16 samples not better than 4: {rows:?}");
+
+    // The plot, as SVG and PNG.
+    let svg = std::fs::read_to_string(dir.path().join("bench-render.svg")).unwrap();
+    assert!(
+        svg.contains("<svg") && svg.contains("fixed"),
+        "svg without curves"
+    );
+    let png = clevrtex_render::post::decode_png(&dir.path().join("bench-render.png")).unwrap();
+    assert_eq!((png.width, png.height), (900, 600));
+    assert!(png.data.iter().any(|&v| v < 128), "blank plot");
+
+    // A second run reuses the cached reference (one cache entry, keyed by scene hash).
+    let again = bench(dir.path(), &["--only", "fixed-4"]);
+    let t2 = text(&again);
+    assert_eq!(again.status.code(), Some(0), "{t2}");
+    assert!(t2.contains("reference cached"), "{t2}");
+    assert!(!t2.contains("rendering the reference"), "{t2}");
+    let refs = std::fs::read_dir(dir.path().join("references"))
+        .unwrap()
+        .count();
+    assert_eq!(refs, 1);
+    let rows2 = read_csv(&dir.path().join("bench-render.csv"));
+    assert_eq!(rows2.len(), 1);
+    // Same scene, same settings, same seed: the same error, bit for bit.
+    assert_eq!(rows2[0]["rmse_linear"], rows[0]["rmse_linear"]);
+}
+
+#[test]
+fn bench_render_rejects_bad_arguments_with_hints() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = clevrtex()
+        .args(["bench", "render", "--scenes", "0", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("must be positive") && t.contains("hint:"), "{t}");
+
+    let out = bench(dir.path(), &["--only", "no-such-rung"]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("no rung of the ladder is left"), "{t}");
+    assert!(
+        t.contains("hint: raise `--max-samples` or widen `--only`"),
+        "{t}"
+    );
+
+    let out = clevrtex().args(["bench", "nothing"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+}
+
+#[test]
+fn generate_quality_preset_sets_samples_threshold_and_bounces() {
+    let Some(_) = blender_or_skip("generate_quality_preset_sets_samples_threshold_and_bounces")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = clevrtex()
+        .args(["generate", "--variant", "clevr", "-n", "2"])
+        .args(["--width", "32", "--height", "24", "--passes", "rgb,mask"])
+        .args(["--quality", "draft", "--workers", "1", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    let draft = clevrtex_scene::quality::Quality::Draft.settings();
+    let meta: Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            dir.path()
+                .join("clevrtex_clevr/0/CLEVRTEX_clevr_000000.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    let r = &meta["render"];
+    assert_eq!(r["samples"].as_u64(), Some(u64::from(draft.samples)), "{r}");
+    assert_eq!(
+        r["adaptive_threshold"].as_f64().map(|v| v as f32),
+        draft.adaptive_threshold,
+        "{r}"
+    );
+    assert_eq!(
+        r["max_bounces"].as_u64(),
+        Some(u64::from(draft.max_bounces))
+    );
+    assert_eq!(
+        (r["width"].as_u64(), r["height"].as_u64()),
+        (Some(32), Some(24))
+    );
+
+    let out = clevrtex()
+        .args(["generate", "--quality", "ultra", "-n", "1", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(2), "{t}");
+    assert!(t.contains("unknown quality `ultra`"), "{t}");
+    assert!(
+        t.contains("hint: use one of draft, standard, high, reference"),
+        "{t}"
+    );
+}
