@@ -472,7 +472,10 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
         r.blender_start_s, r.worker_starts
     );
     println!("  scene build      {:>8.1} s", r.build_s);
-    println!("  visibility pass  {:>8.1} s", r.visibility_s);
+    println!(
+        "  visibility pass  {:>8.1} s  (all {} passes incl. rejected: build {:.1} s, cycles {:.1} s)",
+        r.visibility_s, r.visibility_passes, r.visibility_build_s, r.visibility_render_s
+    );
     println!("  render (cycles)  {:>8.1} s", r.render_s);
     println!(
         "  bridge other     {:>8.1} s  (writing EXR/PNG in Blender, protocol)",

@@ -161,6 +161,11 @@ pub struct SampleStats {
     pub build_s: f64,
     /// Visibility pass time (whole request), accepted attempt.
     pub visibility_s: f64,
+    /// Of all visibility passes of this image (accepted and rejected): the bridge's
+    /// scene-build time and Cycles time.
+    pub visibility_build_s: f64,
+    /// See [`SampleStats::visibility_build_s`].
+    pub visibility_render_s: f64,
     /// Cycles render time of the final render (including the no-shadow render).
     pub render_s: f64,
     /// Whole final request, as seen from Rust.
@@ -169,6 +174,8 @@ pub struct SampleStats {
     pub post_s: f64,
     /// Rejected attempts of this image.
     pub rejects: u32,
+    /// Visibility passes of this image (accepted and rejected).
+    pub visibility_passes: u64,
     /// Wall time of the rejected attempts.
     pub reject_s: f64,
     /// Blender's projection of each object origin (`[x, y, depth]`).
@@ -196,6 +203,12 @@ pub struct RunReport {
     pub build_s: f64,
     /// Total visibility-pass time (accepted attempts).
     pub visibility_s: f64,
+    /// Bridge scene-build time of all visibility passes (accepted and rejected).
+    pub visibility_build_s: f64,
+    /// Cycles time of all visibility passes (accepted and rejected).
+    pub visibility_render_s: f64,
+    /// Visibility passes run (accepted and rejected).
+    pub visibility_passes: u64,
     /// Total Cycles time of final renders.
     pub render_s: f64,
     /// Total final-request time (build + render + bridge writing), accepted attempts.
@@ -220,6 +233,9 @@ impl RunReport {
         self.rejects += s.rejects as u64;
         self.build_s += s.build_s;
         self.visibility_s += s.visibility_s;
+        self.visibility_build_s += s.visibility_build_s;
+        self.visibility_render_s += s.visibility_render_s;
+        self.visibility_passes += s.visibility_passes;
         self.render_s += s.render_s;
         self.final_request_s += s.final_request_s;
         self.post_s += s.post_s;
@@ -586,6 +602,9 @@ impl Slot<'_, '_> {
             if job.resample && opts.visibility_check {
                 let t = Instant::now();
                 let reply = self.request(&label, &scene_path, Mode::Visibility, &work, timeout)?;
+                stats.visibility_build_s += reply.timings.build_s;
+                stats.visibility_render_s += reply.timings.render_s;
+                stats.visibility_passes += 1;
                 let exr = reply_file(&reply, "visibility", &work)?;
                 let ch = Channels::read(&exr)?;
                 let ids = post::instance_ids(ch.get("ViewLayer.IndexOB.X")?, n, &exr)?;
