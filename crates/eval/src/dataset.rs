@@ -84,12 +84,22 @@ fn parse_stem<'a>(name: &'a str, suffix: &str) -> Option<(&'a str, &'a str, u64)
 /// Every regular file under `dir`, recursively (symlinks followed, depth-limited).
 pub fn walk(dir: &Path) -> Result<Vec<PathBuf>, EvalError> {
     let mut out = Vec::new();
-    walk_into(dir, 0, &mut out)?;
+    let mut seen = std::collections::HashSet::new();
+    walk_into(dir, 0, &mut out, &mut seen)?;
     out.sort();
     Ok(out)
 }
 
-fn walk_into(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) -> Result<(), EvalError> {
+fn walk_into(
+    dir: &Path,
+    depth: usize,
+    out: &mut Vec<PathBuf>,
+    seen: &mut std::collections::HashSet<PathBuf>,
+) -> Result<(), EvalError> {
+    // Symlinked directories are followed once each, so a link cycle cannot blow up the walk.
+    if !seen.insert(std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf())) {
+        return Ok(());
+    }
     let io = |source| EvalError::Io {
         path: dir.to_path_buf(),
         source,
@@ -97,7 +107,7 @@ fn walk_into(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) -> Result<(), Eva
     for entry in std::fs::read_dir(dir).map_err(io)? {
         let path = entry.map_err(io)?.path();
         match std::fs::metadata(&path) {
-            Ok(m) if m.is_dir() && depth < 32 => walk_into(&path, depth + 1, out)?,
+            Ok(m) if m.is_dir() && depth < 32 => walk_into(&path, depth + 1, out, seen)?,
             Ok(m) if m.is_file() => out.push(path),
             _ => {}
         }
@@ -274,6 +284,20 @@ mod tests {
             parse_stem("CLEVRTEX_full_000001_mask.png", "_mask.png"),
             Some(("CLEVRTEX_full_000001", "full", 1))
         );
+    }
+
+    #[test]
+    fn symlink_cycles_are_walked_once() {
+        let d = tempfile::tempdir().unwrap();
+        std::fs::create_dir(d.path().join("a")).unwrap();
+        std::fs::write(d.path().join("a/f.txt"), b"x").unwrap();
+        #[cfg(unix)]
+        {
+            std::os::unix::fs::symlink(d.path(), d.path().join("a/up")).unwrap();
+            std::os::unix::fs::symlink(d.path(), d.path().join("a/up2")).unwrap();
+        }
+        let files = walk(d.path()).unwrap();
+        assert_eq!(files.len(), 1, "{files:?}");
     }
 
     #[test]

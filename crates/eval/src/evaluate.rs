@@ -424,7 +424,7 @@ fn score_sample(
     let recon = match (&truth_rgb, &pred.recon) {
         (Some(t), Some(p)) => Some(Recon {
             truth_rgb: t,
-            pred_rgb: p,
+            pred_rgb: p.as_pred(),
         }),
         _ => None,
     };

@@ -32,4 +32,4 @@ pub mod resize;
 pub use dataset::Split;
 pub use error::EvalError;
 pub use evaluate::{evaluate, Options, Protocol, Report};
-pub use metrics::{score_image, Metric, Recon, Scores};
+pub use metrics::{score_image, Metric, PredRgb, Recon, Scores};

@@ -88,13 +88,58 @@ impl Scores {
     }
 }
 
-/// Reconstruction input for MSE: the true image as 8-bit RGB and the prediction as floats.
+/// A predicted image: floats in [0, 1], or 8-bit values (read as `v / 255` in f32).
+#[derive(Clone, Copy, Debug)]
+pub enum PredRgb<'a> {
+    /// Interleaved RGB floats in [0, 1].
+    Unit(&'a [f32]),
+    /// Interleaved 8-bit RGB, as a `_recon.png` holds it.
+    Bytes(&'a [u8]),
+}
+
+impl PredRgb<'_> {
+    fn len(&self) -> usize {
+        match self {
+            PredRgb::Unit(v) => v.len(),
+            PredRgb::Bytes(v) => v.len(),
+        }
+    }
+}
+
+/// Reconstruction input for MSE: the true image as 8-bit RGB and the prediction.
 #[derive(Clone, Copy, Debug)]
 pub struct Recon<'a> {
     /// True image, interleaved RGB, 8 bits per channel (`/ 255` gives the [0, 1] value).
     pub truth_rgb: &'a [u8],
-    /// Predicted image, interleaved RGB in [0, 1].
-    pub pred_rgb: &'a [f32],
+    /// Predicted image, interleaved RGB.
+    pub pred_rgb: PredRgb<'a>,
+}
+
+/// The exact f32 values of `v / 255`, as the reference divides.
+fn unit_lut() -> [f32; 256] {
+    std::array::from_fn(|v| v as f32 / 255.0)
+}
+
+/// Squared error per true slot and in total; difference and square in f32, sums in f64.
+fn squared_errors(
+    truth: &[u32],
+    k: usize,
+    truth_rgb: &[u8],
+    pred: impl Fn(usize) -> f32,
+) -> (f64, Vec<f64>) {
+    let lut = unit_lut();
+    let mut per_true = vec![0.0f64; k];
+    let mut total = 0.0f64;
+    for (i, &t) in truth.iter().enumerate() {
+        let mut e = 0.0f64;
+        for c in 0..3 {
+            let d = pred(3 * i + c) - lut[truth_rgb[3 * i + c] as usize];
+            e += (d * d) as f64;
+        }
+        per_true[t as usize] += e;
+        total += e;
+    }
+    (total, per_true)
 }
 
 /// Compute every metric of one image from hard labels.
@@ -195,19 +240,13 @@ pub fn score_image(truth: &[u32], pred: &[u32], pred_slots: usize, recon: Option
 
     let (mse, sq_err_per_true) = match recon {
         Some(r) if r.truth_rgb.len() == 3 * n && r.pred_rgb.len() == 3 * n => {
-            // The exact f32 values of `v / 255`, as the reference divides.
-            let lut: [f32; 256] = std::array::from_fn(|v| v as f32 / 255.0);
-            let mut per_true = vec![0.0f64; k];
-            let mut total = 0.0f64;
-            for (i, &t) in truth.iter().enumerate() {
-                let mut e = 0.0f64;
-                for c in 0..3 {
-                    let d = r.pred_rgb[3 * i + c] - lut[r.truth_rgb[3 * i + c] as usize];
-                    e += (d * d) as f64;
+            let (total, per_true) = match r.pred_rgb {
+                PredRgb::Unit(p) => squared_errors(truth, k, r.truth_rgb, |i| p[i]),
+                PredRgb::Bytes(p) => {
+                    let lut = unit_lut();
+                    squared_errors(truth, k, r.truth_rgb, |i| lut[p[i] as usize])
                 }
-                per_true[t as usize] += e;
-                total += e;
-            }
+            };
             (total.is_finite().then_some(total), Some(per_true))
         }
         _ => (None, None),

@@ -14,8 +14,27 @@ pub struct Prediction {
     pub labels: Vec<u32>,
     /// Number of predicted slots (masks, or the largest id + 1).
     pub slots: usize,
-    /// Reconstruction, interleaved RGB in [0, 1], when given.
-    pub recon: Option<Vec<f32>>,
+    /// Reconstruction, when given.
+    pub recon: Option<ReconImage>,
+}
+
+/// A predicted reconstruction, interleaved RGB.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ReconImage {
+    /// Floats in [0, 1] (from `.npz`).
+    Unit(Vec<f32>),
+    /// 8-bit values (from `_recon.png`), scored as `v / 255`.
+    Bytes(Vec<u8>),
+}
+
+impl ReconImage {
+    /// Borrow for [`crate::metrics::Recon`].
+    pub fn as_pred(&self) -> crate::metrics::PredRgb<'_> {
+        match self {
+            ReconImage::Unit(v) => crate::metrics::PredRgb::Unit(v),
+            ReconImage::Bytes(v) => crate::metrics::PredRgb::Bytes(v),
+        }
+    }
 }
 
 /// Bytes of the files read, for the provenance hash.
@@ -275,7 +294,7 @@ pub fn load(
             )
         })?;
         if let Some(r) = arrays.remove("recon") {
-            recon = Some(recon_from_array(seg, &r, hw)?);
+            recon = Some(ReconImage::Unit(recon_from_array(seg, &r, hw)?));
         }
         match (arrays.get("labels"), arrays.get("masks")) {
             (Some(_), Some(_)) => {
@@ -320,7 +339,7 @@ pub fn load(
         if (img.width, img.height) != (w, h) {
             return Err(mismatch(rp, &[img.height, img.width, 3], &[h, w, 3]));
         }
-        recon = Some(img.rgb.iter().map(|&v| v as f32 / 255.0).collect());
+        recon = Some(ReconImage::Bytes(img.rgb));
         read_bytes.push(rb);
     }
     Ok((

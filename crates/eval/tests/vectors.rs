@@ -1,6 +1,6 @@
 //! The twelve test vectors of `docs/eval.md` (expected values from the public evaluator).
 
-use clevrtex_eval::{score_image, Metric, Recon, Scores};
+use clevrtex_eval::{score_image, Metric, PredRgb, Recon, Scores};
 
 fn grid(s: &str) -> Vec<u32> {
     s.split('/')
@@ -210,7 +210,7 @@ fn v10_mse_is_a_sum() {
         2,
         Some(Recon {
             truth_rgb: &truth_rgb,
-            pred_rgb: &pred_rgb,
+            pred_rgb: PredRgb::Unit(&pred_rgb),
         }),
     );
     check(&s, &[(Mse, 12.0)]);
