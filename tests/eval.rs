@@ -423,3 +423,51 @@ fn eval_variant_and_split_errors() {
     let out = run(&["eval", s(&preds), s(&gt()), "--split", "sideways"]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
 }
+
+#[test]
+fn eval_outd_is_test_only() {
+    // The fixture renamed to `outd`: its default split is all of it, and `val` is a usage error.
+    let dir = tempfile::tempdir().unwrap();
+    let (g, p) = (
+        dir.path().join("gt/clevrtex_outd/0"),
+        dir.path().join("preds"),
+    );
+    std::fs::create_dir_all(&g).unwrap();
+    std::fs::create_dir_all(&p).unwrap();
+    for (from, to) in [
+        (gt().join("clevrtex_vbg/0"), &g),
+        (data("eval/preds/png"), &p),
+    ] {
+        for e in std::fs::read_dir(from).unwrap() {
+            let f = e.unwrap().path();
+            let name = f
+                .file_name()
+                .unwrap()
+                .to_str()
+                .unwrap()
+                .replace("_vbg_", "_outd_");
+            std::fs::copy(&f, to.join(name)).unwrap();
+        }
+    }
+    let j = dir.path().join("r.json");
+    let out = run(&[
+        "eval",
+        s(&p),
+        s(&dir.path().join("gt")),
+        "--bootstrap",
+        "0",
+        "--json",
+        s(&j),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let r: Value = serde_json::from_slice(&std::fs::read(&j).unwrap()).unwrap();
+    assert_eq!(r["counts"]["images"], 10);
+    assert_eq!(r["provenance"]["variant"], "outd");
+    let out = run(&["eval", s(&p), s(&dir.path().join("gt")), "--split", "val"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("`outd` is a test-only dataset"),
+        "{}",
+        text(&out)
+    );
+}

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clevrtex_eval::{evaluate, output, Options, Protocol, Split};
 
-use crate::exit::{CmdResult, OK};
+use crate::exit::{CmdResult, OK, USAGE};
 
 /// Arguments of `clevrtex eval`.
 #[derive(Debug, clap::Args)]
@@ -107,7 +107,15 @@ pub fn run(args: Args) -> CmdResult {
         bootstrap: args.bootstrap,
         seed: args.seed,
     };
-    let report = evaluate(&args.preds, &args.gt, &opts)?;
+    let report = match evaluate(&args.preds, &args.gt, &opts) {
+        Ok(r) => r,
+        // A flag that does not fit the dataset (e.g. `--split val` on `outd`) is a usage error.
+        Err(e @ clevrtex_eval::EvalError::Usage { .. }) => {
+            eprintln!("error: {e}");
+            return Ok(USAGE);
+        }
+        Err(e) => return Err(e.into()),
+    };
     if let Some(path) = &args.json {
         let json = output::to_json(&report, env!("CARGO_PKG_VERSION"));
         write_atomic(path, &format!("{json:#}\n"))?;
