@@ -420,6 +420,24 @@ fn eval_variant_and_split_errors() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
     assert!(stderr(&out).contains("cannot read"), "{}", text(&out));
 
+    // Two variants side by side: the user must pick one.
+    let two = dir.path().join("two");
+    copy_dir(&gt(), &two);
+    std::fs::create_dir_all(two.join("clevrtex_camo/0")).unwrap();
+    std::fs::copy(
+        gt().join("clevrtex_vbg/0/CLEVRTEX_vbg_000000.png"),
+        two.join("clevrtex_camo/0/CLEVRTEX_camo_000000.png"),
+    )
+    .unwrap();
+    let out = run(&["eval", s(&preds), s(&two)]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("several variants: `camo`, `vbg`")
+            && stderr(&out).contains("--variant"),
+        "{}",
+        text(&out)
+    );
+
     let out = run(&["eval", s(&preds), s(&gt()), "--split", "sideways"]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
 }
