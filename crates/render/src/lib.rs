@@ -4,8 +4,9 @@
 //! - [`Worker`]: one long-lived Blender process running the embedded bridge
 //!   (`blender_scripts/`, see `docs/bridge-protocol.md`); it renders many scenes, with a
 //!   deadline on every request.
-//! - [`Pool`]: `N` workers rendering jobs in parallel, with the visibility-first check,
-//!   bounded retries, restarts, a failure ledger, resume and crash-safe output.
+//! - [`pool::run`]: `N` workers rendering [`Job`]s in parallel, with the visibility-first
+//!   check, bounded retries, restarts, a failure ledger, resume and crash-safe output; this
+//!   is what `clevrtex generate` and `clevrtex render` call.
 //! - [`output`]: the file layout; [`post`]: the pass encodings.
 //!
 //! Rendering one scene file into a folder (what a contact sheet or a benchmark needs):

@@ -1,5 +1,5 @@
 //! The metadata file of a rendered sample: every key of the published dataset (from
-//! [`clevrtex_scene::metadata`]) plus ours (seed, attempt, camera matrices, visibility per
+//! [`clevrtex_scene::metadata()`]) plus ours (seed, attempt, camera matrices, visibility per
 //! object, pass encodings, render settings, versions).
 
 use clevrtex_scene::{Pass, SceneFile};
