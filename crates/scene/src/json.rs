@@ -6,75 +6,90 @@ use serde::Serialize;
 
 /// Serialise `value` as indented JSON with flat arrays kept on one line, ending in a newline.
 pub fn to_pretty_json<T: Serialize>(value: &T) -> Result<String, serde_json::Error> {
-    let pretty = serde_json::to_string_pretty(value)?;
-    let mut out = String::with_capacity(pretty.len());
+    let pretty = serde_json::to_vec_pretty(value)?;
+    let mut out: Vec<u8> = Vec::with_capacity(pretty.len() + 1);
     // Per open array: where it starts in `out`, and whether it holds only scalars so far.
     let mut arrays: Vec<(usize, bool)> = Vec::new();
     // Per open container: `true` for an array.
     let mut open: Vec<bool> = Vec::new();
-    let mut in_string = false;
-    let mut escaped = false;
-    for c in pretty.chars() {
+    let mut i = 0;
+    while i < pretty.len() {
+        // Copy the run up to the next byte that matters in one go.
+        let run = pretty[i..]
+            .iter()
+            .position(|c| matches!(c, b'"' | b'[' | b']' | b'{' | b'}'))
+            .unwrap_or(pretty.len() - i);
+        out.extend_from_slice(&pretty[i..i + run]);
+        i += run;
+        let Some(&c) = pretty.get(i) else { break };
+        i += 1;
         out.push(c);
-        if in_string {
-            match (escaped, c) {
-                (true, _) => escaped = false,
-                (false, '\\') => escaped = true,
-                (false, '"') => in_string = false,
-                _ => {}
-            }
-            continue;
-        }
         match c {
-            '"' => in_string = true,
-            '[' | '{' => {
+            b'"' => {
+                // Copy the string through its closing quote, skipping escaped characters.
+                while i < pretty.len() {
+                    let s = pretty[i];
+                    out.push(s);
+                    i += 1;
+                    if s == b'\\' {
+                        out.push(pretty[i]);
+                        i += 1;
+                    } else if s == b'"' {
+                        break;
+                    }
+                }
+            }
+            b'[' | b'{' => {
                 if open.last() == Some(&true) {
                     if let Some(parent) = arrays.last_mut() {
                         parent.1 = false;
                     }
                 }
-                open.push(c == '[');
-                if c == '[' {
+                open.push(c == b'[');
+                if c == b'[' {
                     arrays.push((out.len() - 1, true));
                 }
             }
-            '}' => {
+            b'}' => {
                 open.pop();
             }
-            ']' => {
+            _ => {
                 open.pop();
                 if let Some((start, true)) = arrays.pop() {
-                    let collapsed = collapse(&out[start..]);
-                    out.truncate(start);
-                    out.push_str(&collapsed);
+                    collapse(&mut out, start);
                 }
             }
-            _ => {}
         }
     }
-    out.push('\n');
-    Ok(out)
+    out.push(b'\n');
+    // Only ASCII layout bytes were removed or replaced, so the text is still UTF-8.
+    Ok(String::from_utf8(out).expect("serde_json writes UTF-8"))
 }
 
-/// Join the lines of a flat array: a line break after a comma becomes one space, any other
-/// line break (after `[`, before `]`) disappears. JSON strings never hold a raw line break,
-/// so every line break here is layout.
-fn collapse(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    let mut chars = text.chars().peekable();
-    while let Some(c) = chars.next() {
-        if c == '\n' {
-            while chars.peek() == Some(&' ') {
-                chars.next();
+/// Join the lines of the flat array `out[start..]` in place: a line break after a comma
+/// becomes one space, any other line break (after `[`, before `]`) disappears, and the
+/// indentation after a line break goes. JSON strings never hold a raw line break, so every
+/// line break here is layout.
+fn collapse(out: &mut Vec<u8>, start: usize) {
+    let mut w = start;
+    let mut r = start;
+    while r < out.len() {
+        let c = out[r];
+        r += 1;
+        if c == b'\n' {
+            while r < out.len() && out[r] == b' ' {
+                r += 1;
             }
-            if out.ends_with(',') {
-                out.push(' ');
+            if w > start && out[w - 1] == b',' {
+                out[w] = b' ';
+                w += 1;
             }
         } else {
-            out.push(c);
+            out[w] = c;
+            w += 1;
         }
     }
-    out
+    out.truncate(w);
 }
 
 #[cfg(test)]

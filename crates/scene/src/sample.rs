@@ -348,6 +348,9 @@ fn place(
     None
 }
 
+/// The spacing and margin rules of a new object at `(x, y)` with radius `r` against every
+/// placed one. `dirs` are left, right, front, behind; right and front are exact negations of
+/// left and behind, so `0 < m < margin` along a direction or its opposite is `0 < |m| < margin`.
 fn fits(
     x: f64,
     y: f64,
@@ -356,15 +359,15 @@ fn fits(
     p: &Placement,
     dirs: &[[f64; 3]; 4],
 ) -> bool {
+    let (left, behind) = (dirs[0], dirs[3]);
     placed.iter().all(|&(xx, yy, rr)| {
         let (dx, dy) = (x - xx, y - yy);
-        if (dx * dx + dy * dy).sqrt() - r - rr < p.min_dist {
+        let ml = (dx * left[0] + dy * left[1]).abs();
+        let mb = (dx * behind[0] + dy * behind[1]).abs();
+        if (0.0 < ml && ml < p.margin) || (0.0 < mb && mb < p.margin) {
             return false;
         }
-        dirs.iter().all(|d| {
-            let m = dx * d[0] + dy * d[1];
-            !(0.0 < m && m < p.margin)
-        })
+        (dx * dx + dy * dy).sqrt() - r - rr >= p.min_dist
     })
 }
 
