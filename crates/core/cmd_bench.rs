@@ -74,6 +74,9 @@ pub struct RenderArgs {
     /// Only rungs whose label contains one of these (comma-separated), e.g. `original,preset`.
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     only: Option<Vec<String>>,
+    /// Render nothing: redraw the table, summary and plot from `OUT/bench-render.csv`.
+    #[arg(long)]
+    plot_only: bool,
     /// Cycles threads (default: Blender's choice, all cores).
     #[arg(long, default_value_t = 0, value_name = "T")]
     threads: u32,
@@ -102,9 +105,12 @@ struct BenchScene {
 }
 
 /// One measured (setting, scene) pair.
+#[derive(Debug)]
 struct Row {
     scene: String,
     variant: String,
+    width: u32,
+    height: u32,
     setting: Setting,
     wall_s: f64,
     cycles_s: f64,
@@ -249,6 +255,21 @@ fn run_render(args: RenderArgs) -> CmdResult {
     if n == 0 || width == 0 || height == 0 || ref_samples == 0 {
         bail!("`--scenes`, `--width`, `--height` and `--reference-samples` must be positive\nhint: e.g. `clevrtex bench render --quick`");
     }
+    if args.plot_only {
+        let csv = args.out.join("bench-render.csv");
+        let text = std::fs::read_to_string(&csv).with_context(|| {
+            format!(
+                "cannot read `{}`\nhint: run `clevrtex bench render --out {}` first",
+                csv.display(),
+                args.out.display()
+            )
+        })?;
+        let rows = from_csv(&text).with_context(|| format!("bad CSV `{}`", csv.display()))?;
+        let scenes: std::collections::BTreeSet<&str> =
+            rows.iter().map(|r| r.scene.as_str()).collect();
+        let (w, h) = rows.first().map_or((0, 0), |r| (r.width, r.height));
+        return report(&rows, scenes.len(), w, h, &args.out);
+    }
     let settings: Vec<Setting> = ladder::ladder(quick)
         .into_iter()
         .filter(|s| args.max_samples.is_none_or(|m| s.sampling.samples <= m))
@@ -371,6 +392,8 @@ fn run_render(args: RenderArgs) -> CmdResult {
             rows.push(Row {
                 scene: bs.label.clone(),
                 variant: bs.scene.variant.clone(),
+                width,
+                height,
                 setting: setting.clone(),
                 wall_s,
                 cycles_s,
@@ -381,13 +404,18 @@ fn run_render(args: RenderArgs) -> CmdResult {
     bench.worker.quit();
 
     let csv = args.out.join("bench-render.csv");
-    std::fs::write(&csv, to_csv(&rows, width, height))
+    std::fs::write(&csv, to_csv(&rows))
         .with_context(|| format!("cannot write `{}`", csv.display()))?;
-    let agg = aggregate(&rows);
+    report(&rows, n, width, height, &args.out)
+}
+
+/// Table and summary on stdout, plot next to the CSV.
+fn report(rows: &[Row], n: usize, width: u32, height: u32, out: &Path) -> CmdResult {
+    let agg = aggregate(rows);
     print!("{}", table(&agg));
     print!("{}", summary(&agg));
     let curves = curves(&agg);
-    let stem = args.out.join("bench-render");
+    let stem = out.join("bench-render");
     let text = plot::write(
         &stem,
         &format!("relative RMSE (linear) vs Cycles time, {n} scene(s) at {width}x{height}"),
@@ -395,7 +423,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
         "relative RMSE vs reference",
         &curves,
     )?;
-    println!("csv: {}", csv.display());
+    println!("csv: {}", out.join("bench-render.csv").display());
     println!(
         "plot: {} and {}{}",
         stem.with_extension("png").display(),
@@ -569,19 +597,24 @@ fn curves(agg: &[Agg]) -> Vec<plot::Curve> {
     by.into_iter().map(|(k, v)| (k.to_string(), v)).collect()
 }
 
-fn to_csv(rows: &[Row], width: u32, height: u32) -> String {
-    let mut s = String::from("scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal\n");
+const CSV_HEADER: &str = "scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal";
+
+fn to_csv(rows: &[Row]) -> String {
+    let mut s = format!("{CSV_HEADER}\n");
     for r in rows {
         let p = &r.setting.sampling;
         let _ = writeln!(
             s,
-            "{},{},{},{},{width},{height},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.6},{:.6},{:.6},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.6},{:.6},{:.6},{},{},{}",
             r.scene,
             r.variant,
             r.setting.label,
             r.setting.mode,
+            r.width,
+            r.height,
             p.samples,
-            p.adaptive_threshold.map_or(String::new(), |t| t.to_string()),
+            p.adaptive_threshold
+                .map_or(String::new(), |t| t.to_string()),
             p.max_bounces,
             p.diffuse_bounces,
             p.glossy_bounces,
@@ -605,9 +638,115 @@ fn to_csv(rows: &[Row], width: u32, height: u32) -> String {
     s
 }
 
+/// Rows back from [`to_csv`]'s output.
+fn from_csv(text: &str) -> anyhow::Result<Vec<Row>> {
+    let mut lines = text.lines();
+    if lines.next() != Some(CSV_HEADER) {
+        bail!("unexpected header\nhint: the CSV must come from this version's `clevrtex bench render`");
+    }
+    lines
+        .enumerate()
+        .map(|(i, line)| {
+            let c: Vec<&str> = line.split(',').collect();
+            if c.len() != 22 {
+                bail!("line {}: {} cells, expected 22", i + 2, c.len());
+            }
+            let f = |k: usize| -> anyhow::Result<f64> {
+                if c[k] == "inf" {
+                    return Ok(f64::INFINITY);
+                }
+                c[k].parse()
+                    .with_context(|| format!("line {}: bad number `{}`", i + 2, c[k]))
+            };
+            let u = |k: usize| f(k).map(|v| v as u32);
+            let mode = [
+                "fixed",
+                "adaptive",
+                "adaptive-lowbounce",
+                "adaptive-clamp",
+                "preset",
+            ]
+            .into_iter()
+            .find(|m| *m == c[3])
+            .unwrap_or("other");
+            Ok(Row {
+                scene: c[0].to_string(),
+                variant: c[1].to_string(),
+                width: u(4)?,
+                height: u(5)?,
+                setting: Setting {
+                    mode,
+                    label: c[2].to_string(),
+                    sampling: Sampling {
+                        samples: u(6)?,
+                        adaptive_threshold: if c[7].is_empty() {
+                            None
+                        } else {
+                            Some(f(7)? as f32)
+                        },
+                        max_bounces: u(8)?,
+                        diffuse_bounces: u(9)?,
+                        glossy_bounces: u(10)?,
+                        transmission_bounces: u(11)?,
+                        transparent_max_bounces: u(12)?,
+                        clamp_indirect: f(13)? as f32,
+                    },
+                },
+                wall_s: f(14)?,
+                cycles_s: f(15)?,
+                errors: Errors {
+                    rmse_linear: f(16)?,
+                    rel_error: f(17)?,
+                    bias: f(18)?,
+                    psnr_srgb: f(19)?,
+                    mask_equal: c[20] == "true",
+                    depth_equal: c[21] == "true",
+                },
+            })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn csv_round_trips() {
+        let s = ladder::ladder(true).remove(5);
+        let row = Row {
+            scene: "full#0".into(),
+            variant: "full".into(),
+            width: 160,
+            height: 120,
+            setting: s.clone(),
+            wall_s: 1.5,
+            cycles_s: 1.25,
+            errors: Errors {
+                rmse_linear: 0.125,
+                rel_error: 0.5,
+                bias: -0.25,
+                psnr_srgb: f64::INFINITY,
+                mask_equal: true,
+                depth_equal: false,
+            },
+        };
+        let text = to_csv(std::slice::from_ref(&row));
+        let back = from_csv(&text).unwrap();
+        assert_eq!(back.len(), 1);
+        let b = &back[0];
+        assert_eq!(b.setting, s);
+        assert_eq!(
+            (b.width, b.height, b.wall_s, b.cycles_s),
+            (160, 120, 1.5, 1.25)
+        );
+        assert_eq!(b.errors, row.errors);
+        assert_eq!(to_csv(&back), text);
+        assert!(from_csv("nope\n")
+            .unwrap_err()
+            .to_string()
+            .contains("hint:"));
+    }
 
     #[test]
     fn cache_key_changes_with_every_part() {

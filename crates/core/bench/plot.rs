@@ -75,6 +75,20 @@ pub fn write(
     Ok(text)
 }
 
+/// A tick label with about two significant digits: `0.034`, `1.5`, `120`.
+fn short(v: f64) -> String {
+    let a = v.abs();
+    if a >= 10.0 {
+        format!("{v:.0}")
+    } else if a >= 1.0 {
+        format!("{v:.1}")
+    } else if a >= 0.1 {
+        format!("{v:.2}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
 fn bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values
         .filter(|v| v.is_finite() && *v > 0.0)
@@ -119,8 +133,10 @@ where
         mesh.x_desc(x_label)
             .y_desc(y_label)
             .label_style(("sans-serif", 14))
-            .x_label_formatter(&|v| format!("{v:.3}"))
-            .y_label_formatter(&|v| format!("{v:.3}"));
+            .x_labels(8)
+            .y_labels(8)
+            .x_label_formatter(&|v| short(*v))
+            .y_label_formatter(&|v| short(*v));
     } else {
         mesh.x_labels(0).y_labels(0);
     }
