@@ -401,7 +401,7 @@ fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) 
         let d = done.load(Ordering::Relaxed);
         let per_hour = d as f64 / started.elapsed().as_secs_f64().max(1e-9) * 3600.0;
         bar.set_message(format!(
-            "{per_hour:.0} img/h, rejects {}, failures {}",
+            "{per_hour:.0} img/h, {} rejects, {} failed",
             rejects.load(Ordering::Relaxed),
             failures.load(Ordering::Relaxed)
         ));
@@ -430,9 +430,10 @@ fn progress_bar(total: u64) -> ProgressBar {
     };
     let bar = ProgressBar::with_draw_target(Some(total), target);
     bar.set_style(
-        ProgressStyle::with_template("{bar:30} {pos}/{len} images, {msg}, ETA {eta}")
+        ProgressStyle::with_template("{bar:24} {pos}/{len} images, {msg}, ETA {eta}")
             .expect("valid template"),
     );
+    bar.set_message("0 img/h, 0 rejects, 0 failed");
     bar.enable_steady_tick(Duration::from_millis(500));
     bar
 }
