@@ -15,9 +15,10 @@ pub struct Errors {
     pub bias: f64,
     /// PSNR of the 8-bit sRGB PNG against the reference's, dB; infinite when identical.
     pub psnr_srgb: f64,
-    /// The mask (object index) equals the reference's exactly.
+    /// The mask (object index) equals that of a 1-sample render at the same Cycles seed
+    /// exactly (both come from each pixel's first sample).
     pub mask_equal: bool,
-    /// The depth equals the reference's exactly.
+    /// The depth equals that of the same 1-sample render exactly.
     pub depth_equal: bool,
 }
 

@@ -134,6 +134,15 @@ pub struct RenderSettings {
     pub exposure: f32,
     /// Gamma.
     pub gamma: f32,
+    /// Cycles sampling seed (absent = 0). Renders of one scene with the same seed share
+    /// their first samples, so their noise is correlated: `clevrtex bench` renders its
+    /// references with another seed.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub cycles_seed: u32,
+}
+
+fn is_zero(v: &u32) -> bool {
+    *v == 0
 }
 
 /// A perspective camera. `matrix_world` is authoritative; the other pose fields restate it.
