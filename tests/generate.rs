@@ -131,6 +131,57 @@ fn fake_crash_is_retried_then_recorded_in_the_ledger() {
 }
 
 #[test]
+fn render_finds_the_scene_files_of_a_sample_output_folder() {
+    // `clevrtex sample --out scenes` nests its files as `clevrtex_<variant>/<k>/`; `clevrtex
+    // render scenes` must find them (the fake crashes, so each found scene is in the ledger).
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    let out = clevrtex()
+        .args(["sample", "--variant", "clevr", "-n", "2", "--out"])
+        .arg(&scenes)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let data = dir.path().join("data");
+    let out = clevrtex()
+        .env("FAKE_BLENDER_MODE", "crash")
+        .env_remove("CLEVRTEX_BLENDER")
+        .args(["render", "--workers", "1", "--retries", "0", "--blender"])
+        .arg(fake_blender())
+        .arg("--out")
+        .arg(&data)
+        .arg(&scenes)
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    let ledger = ledger_lines(&data);
+    let indices: Vec<u64> = ledger
+        .iter()
+        .map(|l| l["index"].as_u64().unwrap())
+        .collect();
+    assert_eq!(indices.len(), 2, "{ledger:?}");
+    assert!(indices.contains(&0) && indices.contains(&1), "{ledger:?}");
+}
+
+#[test]
+fn render_of_an_empty_folder_names_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = clevrtex()
+        .args(["render", "--out"])
+        .arg(dir.path().join("data"))
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains(&format!("`{}`", dir.path().display())) && t.contains("hint:"),
+        "{t}"
+    );
+}
+
+#[test]
 fn fake_hang_times_out_and_is_killed() {
     let dir = tempfile::tempdir().unwrap();
     let t0 = Instant::now();

@@ -102,7 +102,8 @@ pub struct GenerateArgs {
 /// Arguments of `clevrtex render`.
 #[derive(Debug, clap::Args)]
 pub struct RenderArgs {
-    /// Scene files, or folders searched (not recursively) for `*.json` scene files.
+    /// Scene files, or folders searched (recursively, as `clevrtex sample --out` lays them
+    /// out) for `*.json` scene files.
     #[arg(required = true, value_name = "SCENES")]
     scenes: Vec<PathBuf>,
     #[command(flatten)]
@@ -192,12 +193,8 @@ pub fn run_render(args: RenderArgs) -> CmdResult {
     let mut files = Vec::new();
     for p in &args.scenes {
         if p.is_dir() {
-            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                .with_context(|| format!("cannot read folder `{}`", p.display()))?
-                .flatten()
-                .map(|e| e.path())
-                .filter(|f| f.extension().is_some_and(|e| e == "json") && f.is_file())
-                .collect();
+            let mut found = Vec::new();
+            find_scene_files(p, &mut found)?;
             found.sort();
             files.extend(found);
         } else if p.is_file() {
@@ -210,7 +207,15 @@ pub fn run_render(args: RenderArgs) -> CmdResult {
         }
     }
     if files.is_empty() {
-        bail!("no `*.json` scene files found\nhint: make some with `clevrtex sample`");
+        let searched: Vec<String> = args
+            .scenes
+            .iter()
+            .map(|p| format!("`{}`", p.display()))
+            .collect();
+        bail!(
+            "no `*.json` scene files found in {}\nhint: make some with `clevrtex sample --out DIR` and pass that `DIR`",
+            searched.join(", ")
+        );
     }
     let override_passes = match &args.run.passes {
         Some(list) => Some(parse_passes(list)?),
@@ -241,6 +246,26 @@ pub fn run_render(args: RenderArgs) -> CmdResult {
         _ => args.run.out.join("failures.jsonl"),
     };
     run_jobs(&args.run, jobs, ledger, 1)
+}
+
+/// Collect the `*.json` files under `dir`, recursively: `clevrtex sample --out DIR` writes
+/// them to `DIR/clevrtex_<variant>/<index / 1000>/`, and `clevrtex render DIR` must find them.
+fn find_scene_files(dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+    let entries = std::fs::read_dir(dir).map_err(|e| {
+        anyhow::anyhow!(
+            "cannot read folder `{}`: {e}\nhint: pass a readable folder of scene files",
+            dir.display()
+        )
+    })?;
+    for entry in entries.flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            find_scene_files(&path, found)?;
+        } else if path.extension().is_some_and(|e| e == "json") && path.is_file() {
+            found.push(path);
+        }
+    }
+    Ok(())
 }
 
 fn read_scene(path: &Path) -> anyhow::Result<SceneFile> {
