@@ -365,6 +365,85 @@ fn user_config_with_base_scene_override_is_used() {
 }
 
 #[test]
+fn objects_displacement_marks_only_displacing_materials_and_changes_nothing_else() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = |name: &str| tmp.path().join(name).to_str().unwrap().to_string();
+    let args = |out: &str| -> Vec<String> {
+        ["-n", "40", "--seed", "3", "--out", out]
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+    };
+    let run = |mut a: Vec<String>, extra: &[&str]| {
+        a.extend(extra.iter().map(|s| s.to_string()));
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        run_ok(&a, &[]);
+    };
+    run(args(&dir("builtin")), &["--variant", "full"]);
+    // The key absent (a copy of the built-in config) gives the built-in's bytes.
+    let plain = write_config(tmp.path(), "plain.json", "full.json", |_| {});
+    run(args(&dir("plain")), &["--config", &plain]);
+    assert_eq!(
+        tree(&tmp.path().join("builtin")),
+        tree(&tmp.path().join("plain"))
+    );
+
+    let disp = write_config(tmp.path(), "disp.json", "full.json", |v| {
+        v["objects"]["displacement"] = serde_json::json!(0.05);
+    });
+    run(args(&dir("disp")), &["--config", &disp]);
+    let displacing: BTreeSet<String> = clevrtex_materials::Catalogue::builtin()
+        .unwrap()
+        .iter()
+        .filter(|m| m.displaces)
+        .map(|m| m.name.clone())
+        .collect();
+    let base = tree(&tmp.path().join("builtin"));
+    let with = tree(&tmp.path().join("disp"));
+    assert_eq!(
+        base.keys().collect::<Vec<_>>(),
+        with.keys().collect::<Vec<_>>()
+    );
+    let (mut on, mut off) = (0, 0);
+    for (path, bytes) in &with {
+        let mut scene: SceneFile = serde_json::from_slice(bytes).unwrap();
+        for o in &mut scene.objects {
+            if displacing.contains(&o.material.name) {
+                assert_eq!(
+                    o.material.displacement,
+                    Some(0.05),
+                    "{path}: {}",
+                    o.material.name
+                );
+                on += 1;
+            } else {
+                assert_eq!(o.material.displacement, None, "{path}: {}", o.material.name);
+                off += 1;
+            }
+            o.material.displacement = None;
+        }
+        // Apart from the new field, the scene is exactly the default one: no draw moved.
+        let default: SceneFile = serde_json::from_slice(&base[path]).unwrap();
+        assert_eq!(scene, default, "{path}");
+    }
+    assert!(
+        on > 0 && off > 0,
+        "{on} displacing, {off} not: the test needs both"
+    );
+
+    let bad = write_config(tmp.path(), "bad.json", "full.json", |v| {
+        v["objects"]["displacement"] = serde_json::json!(-1.0);
+    });
+    let out = sample_cmd(&["--config", &bad, "-n", "1", "--out", &dir("bad")], &[]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("`objects.displacement`") && err.contains("hint:"),
+        "{err}"
+    );
+}
+
+#[test]
 fn scene_file_snapshot() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().to_str().unwrap();

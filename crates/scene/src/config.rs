@@ -114,6 +114,19 @@ pub struct ObjectRules {
     pub materials: Vec<String>,
     /// Colours, drawn uniformly; empty when the variant does not colour objects.
     pub colors: Vec<ColorRule>,
+    /// Displacement strength recorded on object materials that displace (`objects.displacement`);
+    /// `None` (the default) = objects use bump only.
+    pub displacement: Option<f64>,
+    /// Catalogue materials that set up true displacement; filled only when `displacement` is
+    /// set, so the default configuration never reads the material recipes.
+    pub displacing: BTreeSet<String>,
+}
+
+impl ObjectRules {
+    /// The displacement strength to record on an object instance of material `name`.
+    pub fn displacement_for(&self, name: &str) -> Option<f64> {
+        self.displacement.filter(|_| self.displacing.contains(name))
+    }
 }
 
 /// Background rules of a variant.
@@ -271,6 +284,7 @@ struct ObjectsFile {
     sizes: Vec<SizeRule>,
     materials: MaterialSelect,
     colors: Option<Vec<ColorRule>>,
+    displacement: Option<f64>,
 }
 
 #[derive(Deserialize)]
@@ -507,6 +521,7 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
         (Some(sel), false) => resolve(sel, "background.materials", &catalogue, &err)?,
     };
     for (key, v) in [
+        ("objects.displacement", file.objects.displacement),
         ("background.displacement", file.background.displacement),
         ("background.scale", file.background.scale),
     ] {
@@ -521,6 +536,17 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
             }
         }
     }
+
+    // Only read the material recipes when asked, so the default path stays as it was.
+    let displacing: BTreeSet<String> = match file.objects.displacement {
+        None => BTreeSet::new(),
+        Some(_) => clevrtex_materials::Catalogue::builtin()
+            .expect("built-in material catalogue is valid")
+            .iter()
+            .filter(|m| m.displaces)
+            .map(|m| m.name.clone())
+            .collect(),
+    };
 
     // Base scene checks.
     let r = &base.render;
@@ -599,6 +625,8 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
             sizes: file.objects.sizes,
             materials,
             colors,
+            displacement: file.objects.displacement,
+            displacing,
         },
         background: BackgroundRules {
             materials: bg_materials,

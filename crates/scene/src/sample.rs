@@ -272,11 +272,11 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
                 location: [x, y, size.scale],
                 rotation_deg,
                 material: MaterialInstance {
+                    displacement: config.objects.displacement_for(&name),
                     name,
                     random: unit(&mut rng),
                     color_name,
                     color,
-                    displacement: None,
                     scale: None,
                 },
             }
