@@ -267,7 +267,40 @@ fn unwritable_output_is_named() {
     let t = text(&out);
     assert_eq!(out.status.code(), Some(1), "{t}");
     assert!(t.contains("not-a-folder`"), "{t}");
-    assert!(t.contains("hint:"), "{t}");
+    assert_hint_is_last(&t);
+}
+
+/// The `hint:` line ends the message: the OS error comes before it, once.
+fn assert_hint_is_last(t: &str) {
+    let last = t.trim_end().lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("hint:"),
+        "the hint is not the last line:\n{t}"
+    );
+    assert!(
+        !last.contains("os error"),
+        "the cause is printed after the hint:\n{t}"
+    );
+    assert!(
+        t.matches("os error").count() <= 1,
+        "the cause is printed twice:\n{t}"
+    );
+}
+
+#[test]
+fn missing_config_is_named_with_its_cause_before_the_hint() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = clevrtex()
+        .args(["generate", "-n", "1", "--config"])
+        .arg(dir.path().join("nope.json"))
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("nope.json`") && t.contains("os error 2"), "{t}");
+    assert_hint_is_last(&t);
 }
 
 #[test]

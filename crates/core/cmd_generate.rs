@@ -114,9 +114,9 @@ pub struct RenderArgs {
 pub fn run_generate(args: GenerateArgs) -> CmdResult {
     let mut config = match &args.config {
         Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| {
-                format!(
-                    "cannot read config `{}`\nhint: pass an existing JSON file, e.g. one of `configs/`",
+            let text = std::fs::read_to_string(path).map_err(|e| {
+                anyhow::anyhow!(
+                    "cannot read config `{}`: {e}\nhint: pass an existing JSON file, e.g. one of `configs/`",
                     path.display()
                 )
             })?;
@@ -147,7 +147,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     let end = args
         .start
         .checked_add(args.count)
-        .context("`--start` + `-n` overflows")?;
+        .context("`--start` + `-n` overflows\nhint: pass smaller numbers")?;
     let total = args.total.unwrap_or(end);
     if total < end {
         bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset");
@@ -269,8 +269,12 @@ fn find_scene_files(dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> 
 }
 
 fn read_scene(path: &Path) -> anyhow::Result<SceneFile> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read scene file `{}`", path.display()))?;
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        anyhow::anyhow!(
+            "cannot read scene file `{}`: {e}\nhint: pass scene files written by `clevrtex sample`",
+            path.display()
+        )
+    })?;
     let scene: SceneFile = serde_json::from_str(&text).map_err(|e| {
         anyhow::anyhow!(
             "bad scene file `{}`: {e}\nhint: regenerate it with `clevrtex sample`",
@@ -466,11 +470,19 @@ fn progress_bar(total: u64) -> ProgressBar {
 /// Make sure the output root exists and a file can be created in it, before any rendering.
 fn check_output_writable(out: &Path) -> anyhow::Result<()> {
     let hint = "hint: pass a writable folder with `--out`";
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("cannot create output folder `{}`\n{hint}", out.display()))?;
+    std::fs::create_dir_all(out).map_err(|e| {
+        anyhow::anyhow!(
+            "cannot create output folder `{}`: {e}\n{hint}",
+            out.display()
+        )
+    })?;
     let probe = out.join(format!(".clevrtex-write-test-{}", std::process::id()));
-    std::fs::write(&probe, b"")
-        .with_context(|| format!("cannot write in output folder `{}`\n{hint}", out.display()))?;
+    std::fs::write(&probe, b"").map_err(|e| {
+        anyhow::anyhow!(
+            "cannot write in output folder `{}`: {e}\n{hint}",
+            out.display()
+        )
+    })?;
     let _ = std::fs::remove_file(probe);
     Ok(())
 }

@@ -46,7 +46,7 @@ pub fn version_line(blender: &Path) -> Result<String> {
         .output()
         .map_err(|source| RenderError::Spawn {
             program: blender.to_path_buf(),
-            source,
+            cause: source,
         })?;
     let text = String::from_utf8_lossy(&out.stdout);
     Ok(text

@@ -40,12 +40,13 @@ pub enum RenderError {
         tried: Option<PathBuf>,
     },
     /// The Blender process could not be started.
-    #[error("could not start `{}`: {source}\nhint: check that the file is an executable Blender (`{} --version`), or pass another with `--blender PATH`", .program.display(), .program.display())]
+    #[error("could not start `{}`: {cause}\nhint: check that the file is an executable Blender (`{} --version`), or pass another with `--blender PATH`", .program.display(), .program.display())]
     Spawn {
         /// The program.
         program: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
+        /// The OS error. Not named `source`: the message already shows it, and as the error's
+        /// source it would be printed a second time, after the `hint:` line.
+        cause: std::io::Error,
     },
     /// The worker did not answer within the time limit; it was killed.
     #[error("blender worker `{}` timed out after {:.1} s while {doing}; it was killed\n{tails}hint: raise `--timeout` (seconds) if renders are just slow, or lower `--samples`", .program.display(), .after.as_secs_f64())]
@@ -102,14 +103,15 @@ pub enum RenderError {
     #[error("interrupted")]
     Interrupted,
     /// Reading or writing a file failed.
-    #[error("{what} `{}`: {source}\nhint: {hint}", .path.display())]
+    #[error("{what} `{}`: {cause}\nhint: {hint}", .path.display())]
     Io {
         /// What we were doing, e.g. `cannot write`.
         what: &'static str,
         /// The file.
         path: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
+        /// The OS error. Not named `source`: the message already shows it, and as the error's
+        /// source it would be printed a second time, after the `hint:` line.
+        cause: std::io::Error,
         /// What to do about it.
         hint: String,
     },
@@ -170,7 +172,7 @@ impl RenderError {
         RenderError::Io {
             what,
             path: path.into(),
-            source,
+            cause: source,
             hint: hint.into(),
         }
     }
@@ -195,3 +197,25 @@ fn status_text(status: &Option<ExitStatus>) -> String {
 
 /// Result alias of this crate.
 pub type Result<T, E = RenderError> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn io_errors_show_their_cause_once_before_the_hint() {
+        let e = RenderError::write(
+            "/x/a.png",
+            std::io::Error::new(std::io::ErrorKind::Other, "no space left"),
+        );
+        // A source would be printed again after the hint by `{:#}` reporters (anyhow).
+        assert!(std::error::Error::source(&e).is_none());
+        let text = e.to_string();
+        assert!(text.contains("`/x/a.png`: no space left\nhint: "), "{text}");
+        let spawn = RenderError::Spawn {
+            program: "/bin/b".into(),
+            cause: std::io::Error::new(std::io::ErrorKind::Other, "denied"),
+        };
+        assert!(std::error::Error::source(&spawn).is_none());
+    }
+}

@@ -191,7 +191,7 @@ impl Worker {
             } else {
                 RenderError::Spawn {
                     program: opts.blender.clone(),
-                    source,
+                    cause: source,
                 }
             }
         })?;
