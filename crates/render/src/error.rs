@@ -204,17 +204,14 @@ mod tests {
 
     #[test]
     fn io_errors_show_their_cause_once_before_the_hint() {
-        let e = RenderError::write(
-            "/x/a.png",
-            std::io::Error::new(std::io::ErrorKind::Other, "no space left"),
-        );
+        let e = RenderError::write("/x/a.png", std::io::Error::other("no space left"));
         // A source would be printed again after the hint by `{:#}` reporters (anyhow).
         assert!(std::error::Error::source(&e).is_none());
         let text = e.to_string();
         assert!(text.contains("`/x/a.png`: no space left\nhint: "), "{text}");
         let spawn = RenderError::Spawn {
             program: "/bin/b".into(),
-            cause: std::io::Error::new(std::io::ErrorKind::Other, "denied"),
+            cause: std::io::Error::other("denied"),
         };
         assert!(std::error::Error::source(&spawn).is_none());
     }
