@@ -489,3 +489,117 @@ fn eval_outd_is_test_only() {
         text(&out)
     );
 }
+
+/// End to end on a dataset made by `clevrtex generate` with the real Blender: the ground-truth
+/// masks with their labels permuted score perfectly, the image itself as a reconstruction has
+/// zero error, and an all-background prediction scores what it should.
+#[test]
+fn eval_scores_a_real_generated_dataset() {
+    let Some(blender) = crate::util::blender_or_skip("eval_scores_a_real_generated_dataset") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let gt = dir.path().join("gt");
+    let out = crate::util::clevrtex()
+        .args(["generate", "--variant", "full", "-n", "2", "--seed", "1"])
+        .args(["--width", "64", "--height", "48", "--samples", "1"])
+        .arg("--blender")
+        .arg(&blender)
+        .arg("--out")
+        .arg(&gt)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+
+    let perm = dir.path().join("perm");
+    let zero = dir.path().join("zero");
+    std::fs::create_dir_all(&perm).unwrap();
+    std::fs::create_dir_all(&zero).unwrap();
+    let mut stems = Vec::new();
+    for e in std::fs::read_dir(gt.join("clevrtex_full/0")).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap().to_string();
+        let Some(stem) = name.strip_suffix("_flat.png") else {
+            continue;
+        };
+        let mask = clevrtex_eval::read::png_labels(&std::fs::read(&p).unwrap()).unwrap();
+        let shape = [mask.height, mask.width];
+        // A relabelling that moves the background too: id -> (id * 7 + 3) % 11 on 0..=10.
+        let permuted: Vec<i32> = mask
+            .labels
+            .iter()
+            .map(|&v| ((v * 7 + 3) % 11) as i32)
+            .collect();
+        assert!(mask.labels.iter().all(|&v| v <= 10), "{name}: ids above 10");
+        std::fs::write(perm.join(format!("{stem}.npy")), npy_i32(&shape, &permuted)).unwrap();
+        std::fs::copy(
+            gt.join(format!("clevrtex_full/0/{stem}.png")),
+            perm.join(format!("{stem}_recon.png")),
+        )
+        .unwrap();
+        let zeros = vec![0; mask.labels.len()];
+        std::fs::write(zero.join(format!("{stem}.npy")), npy_i32(&shape, &zeros)).unwrap();
+        stems.push(stem.to_string());
+    }
+    assert_eq!(stems.len(), 2);
+
+    let eval = |preds: &Path, name: &str| -> (Value, String) {
+        let j = dir.path().join(format!("{name}.json"));
+        let c = dir.path().join(format!("{name}.csv"));
+        let out = run(&[
+            "eval",
+            s(preds),
+            s(&gt),
+            "--protocol",
+            "native",
+            "--split",
+            "all",
+            "--json",
+            s(&j),
+            "--csv",
+            s(&c),
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+        let r: Value = serde_json::from_slice(&std::fs::read(&j).unwrap()).unwrap();
+        (r, std::fs::read_to_string(&c).unwrap())
+    };
+
+    let (r, csv) = eval(&perm, "perm");
+    for m in [
+        "mIoU", "mIoU_fg", "mIoU_gt", "ARI", "ARI_FG", "DICE", "DICE_fg", "acc", "mSC",
+    ] {
+        assert_eq!(r["metrics"][m].as_f64(), Some(1.0), "{m}: {r}");
+    }
+    assert_eq!(r["metrics"]["MSE"].as_f64(), Some(0.0), "{r}");
+    assert_eq!(r["counts"]["images"], 2);
+    assert_eq!(r["counts"]["missing"], 0);
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    for stem in &stems {
+        assert!(csv.contains(stem.as_str()), "{csv}");
+    }
+    // The breakdown covers every object of the metadata.
+    let objects: u64 = r["breakdowns"]["shape"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|g| g["count"].as_u64().unwrap())
+        .sum();
+    let expected: u64 = stems
+        .iter()
+        .map(|stem| {
+            let meta: Value = serde_json::from_slice(
+                &std::fs::read(gt.join(format!("clevrtex_full/0/{stem}.json"))).unwrap(),
+            )
+            .unwrap();
+            meta["objects"].as_array().unwrap().len() as u64
+        })
+        .sum();
+    assert_eq!(objects, expected, "{r}");
+
+    let (r, _) = eval(&zero, "zero");
+    for m in ["mIoU_fg", "ARI", "ARI_FG", "DICE_fg", "acc"] {
+        assert_eq!(r["metrics"][m].as_f64(), Some(0.0), "{m}: {r}");
+    }
+    let miou = r["metrics"]["mIoU"].as_f64().unwrap();
+    assert!(miou > 0.0 && miou < 0.5, "only the background matches: {r}");
+}
