@@ -165,6 +165,43 @@ fn render_finds_the_scene_files_of_a_sample_output_folder() {
 }
 
 #[test]
+fn render_into_the_scene_folder_keeps_the_scene_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = clevrtex()
+        .args(["sample", "--variant", "clevr", "-n", "1", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let scene = dir
+        .path()
+        .join("clevrtex_clevr/0/CLEVRTEX_clevr_000000.json");
+    let before = std::fs::read(&scene).unwrap();
+    let out = clevrtex()
+        .env("FAKE_BLENDER_MODE", "crash")
+        .env_remove("CLEVRTEX_BLENDER")
+        .args(["render", "--retries", "0", "--blender"])
+        .arg(fake_blender())
+        .arg("--out")
+        .arg(dir.path())
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000000.json`") && t.contains("--out"),
+        "{t}"
+    );
+    assert_hint_is_last(&t);
+    assert_eq!(
+        std::fs::read(&scene).unwrap(),
+        before,
+        "the scene file changed"
+    );
+}
+
+#[test]
 fn render_of_an_empty_folder_names_it() {
     let dir = tempfile::tempdir().unwrap();
     let out = clevrtex()

@@ -225,6 +225,18 @@ pub fn run_render(args: RenderArgs) -> CmdResult {
     let mut variants = std::collections::BTreeSet::new();
     for f in files {
         let scene = read_scene(&f)?;
+        // The metadata has the scene file's name: rendering into the folder the scenes came
+        // from would replace each scene file with its metadata.
+        let meta = output::sample_dir(&args.run.out, &scene.variant, scene.index)
+            .join(output::metadata_file(&scene.stem));
+        if let (Ok(a), Ok(b)) = (f.canonicalize(), meta.canonicalize()) {
+            if a == b {
+                bail!(
+                    "rendering scene file `{}` would overwrite it with its metadata (same name)\nhint: pass another `--out` than the folder the scenes are in",
+                    f.display()
+                );
+            }
+        }
         let passes = override_passes
             .clone()
             .unwrap_or_else(|| scene.passes.clone());
