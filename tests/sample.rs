@@ -443,6 +443,81 @@ fn objects_displacement_marks_only_displacing_materials_and_changes_nothing_else
     );
 }
 
+/// Each message is lowercase, names the value in backticks and ends with its `hint:` line;
+/// an OS error comes before the hint, not after it.
+#[test]
+fn error_messages_read_well() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let out = out.to_str().unwrap();
+    let check = |args: &[&str], first: &str| {
+        let o = sample_cmd(args, &[]);
+        assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        let lines: Vec<&str> = err.trim_end().lines().collect();
+        assert_eq!(lines.len(), 2, "{err}");
+        assert!(lines[0].starts_with(first), "expected `{first}`:\n{err}");
+        assert!(lines[1].starts_with("hint:"), "{err}");
+        assert!(
+            !lines[1].contains("os error"),
+            "cause after the hint:\n{err}"
+        );
+        err
+    };
+    check(
+        &["--variant", "nope", "-n", "1", "--out", out],
+        "error: unknown variant `nope`",
+    );
+    let bad = tmp.path().join("bad.json");
+    std::fs::write(&bad, "{").unwrap();
+    let err = check(
+        &["--config", bad.to_str().unwrap(), "-n", "1", "--out", out],
+        "error: invalid config `",
+    );
+    assert!(
+        err.contains("not valid JSON") && !err.contains("key `.`"),
+        "{err}"
+    );
+    let missing = tmp.path().join("missing.json");
+    let err = check(
+        &[
+            "--config",
+            missing.to_str().unwrap(),
+            "-n",
+            "1",
+            "--out",
+            out,
+        ],
+        "error: cannot read config `",
+    );
+    assert!(err.contains("os error"), "{err}");
+    let mat = write_config(tmp.path(), "mat.json", "full.json", |v| {
+        v["objects"]["materials"]["include"] = serde_json::json!(["velvet"]);
+    });
+    let err = check(
+        &["--config", &mat, "-n", "1", "--out", out],
+        "error: invalid config `",
+    );
+    assert!(
+        err.contains("`velvet`") && err.contains("`clevrtex materials list`"),
+        "{err}"
+    );
+    let file = tmp.path().join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    let err = check(
+        &[
+            "--variant",
+            "camo",
+            "-n",
+            "1",
+            "--out",
+            file.to_str().unwrap(),
+        ],
+        "error: cannot create `",
+    );
+    assert!(err.contains("os error"), "{err}");
+}
+
 #[test]
 fn scene_file_snapshot() {
     let tmp = tempfile::tempdir().unwrap();

@@ -116,9 +116,10 @@ fn resolve_shard(args: &Args) -> anyhow::Result<Shard> {
 fn load_config(args: &Args) -> anyhow::Result<Config> {
     match (&args.config, &args.variant) {
         (Some(path), _) => {
-            let text = std::fs::read_to_string(path).with_context(|| {
-                format!(
-                    "cannot read config `{}`\nhint: check the path; built-in configs are listed in `configs/`",
+            // The cause goes before the hint, which is the message's last line.
+            let text = std::fs::read_to_string(path).map_err(|e| {
+                anyhow::anyhow!(
+                    "cannot read config `{}`: {e}\nhint: check the path; built-in configs are listed in `configs/`",
                     path.display()
                 )
             })?;
@@ -159,9 +160,9 @@ pub fn run(args: Args) -> CmdResult {
         .collect();
     dirs.dedup();
     for d in &dirs {
-        std::fs::create_dir_all(d).with_context(|| {
-            format!(
-                "cannot create `{}`\nhint: check that `--out` is writable",
+        std::fs::create_dir_all(d).map_err(|e| {
+            anyhow::anyhow!(
+                "cannot create `{}`: {e}\nhint: check that `--out` is a writable folder",
                 d.display()
             )
         })?;

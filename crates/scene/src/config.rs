@@ -42,8 +42,10 @@ pub const KNOWN_SHAPES: [&str; 8] = [
 ];
 
 /// A config that failed to load: the file, the key and the value at fault, and what to do.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("invalid config `{file}`: key `{key}`{}: {problem}\nhint: {hint}", value.as_ref().map(|v| format!(" (value `{v}`)")).unwrap_or_default())]
+///
+/// An unknown `--variant` (file `--variant`) reads `unknown variant `x``; an error in the whole
+/// document (key `.`, e.g. bad JSON) names no key.
+#[derive(Debug, Clone, PartialEq)]
 pub struct ConfigError {
     /// The file (or built-in name) the config came from.
     pub file: String,
@@ -56,6 +58,29 @@ pub struct ConfigError {
     /// What to do about it.
     pub hint: String,
 }
+
+impl std::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let value = self
+            .value
+            .as_ref()
+            .map(|v| format!(" (value `{v}`)"))
+            .unwrap_or_default();
+        let (file, key, problem, hint) = (&self.file, &self.key, &self.problem, &self.hint);
+        match (file.as_str(), key.as_str()) {
+            ("--variant", _) => write!(
+                f,
+                "{problem} `{}`",
+                self.value.as_deref().unwrap_or_default()
+            )?,
+            (_, ".") => write!(f, "invalid config `{file}`: {problem}")?,
+            _ => write!(f, "invalid config `{file}`: key `{key}`{value}: {problem}")?,
+        }
+        write!(f, "\nhint: {hint}")
+    }
+}
+
+impl std::error::Error for ConfigError {}
 
 /// Which images go to which split.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -676,7 +701,7 @@ fn resolve(
                     &format!("{key}.{field}[{i}]"),
                     Some(n.clone()),
                     "unknown material",
-                    "run `clevrtex materials` to list the catalogue",
+                    "run `clevrtex materials list` to see the catalogue",
                 ));
             }
         }
