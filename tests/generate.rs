@@ -849,3 +849,29 @@ fn a_silent_worker_is_hung_long_before_the_overall_limit() {
     assert!(err.to_string().contains("silent for"), "{err}");
     assert!(worker.is_dead());
 }
+
+#[test]
+fn render_warns_about_hidden_objects_of_fixed_scenes() {
+    let Some(blender) = blender_or_skip("render_warns_about_hidden_objects_of_fixed_scenes") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = fixture("tiny3", 64, 48, 1);
+    // Deep under the floor: no pixel of object 1 can be seen.
+    scene.objects[0].location = [0.0, 0.0, -50.0];
+    scene.passes = vec![Pass::Rgb, Pass::Mask];
+    let file = dir.path().join("hidden.json");
+    std::fs::write(&file, serde_json::to_string(&scene).unwrap()).unwrap();
+    let out = clevrtex()
+        .args(["render", "--workers", "1", "--blender"])
+        .arg(&blender)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .arg(&file)
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert!(t.contains("warning: object(s) 1 of `"), "{t}");
+    assert!(!t.contains("object(s) 1, "), "only object 1 is hidden: {t}");
+}

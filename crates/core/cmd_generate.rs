@@ -428,6 +428,20 @@ fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) 
                         sample.metadata.display()
                     );
                 }
+                // Only fixed scene files (`render`) can get here with a hidden object:
+                // `generate` resamples such layouts.
+                let hidden: Vec<String> = (1..)
+                    .zip(&sample.objects)
+                    .filter(|(_, o)| o.pixels == 0)
+                    .map(|(i, _)| i.to_string())
+                    .collect();
+                if !hidden.is_empty() {
+                    say(format!(
+                        "warning: object(s) {} of `{}` are hidden (not in the mask)\nhint: `clevrtex render` cannot resample fixed scene files; use `clevrtex generate` for layouts with every object visible",
+                        hidden.join(", "),
+                        sample.metadata.display()
+                    ));
+                }
                 let _ = d;
             }
             PoolEvent::Failed { index, error } => {
