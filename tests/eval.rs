@@ -603,3 +603,64 @@ fn eval_scores_a_real_generated_dataset() {
     let miou = r["metrics"]["mIoU"].as_f64().unwrap();
     assert!(miou > 0.0 && miou < 0.5, "only the background matches: {r}");
 }
+
+/// I/O errors name the path and their cause once, before the `hint:` line, which ends the
+/// message; a report that cannot be written leaves no temporary file.
+#[test]
+fn eval_io_errors_name_the_cause_once_before_the_hint() {
+    let dir = tempfile::tempdir().unwrap();
+    let check = |args: &[&str], first: &str, cause: &str| {
+        let out = run(args);
+        assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+        let err = stderr(&out);
+        let lines: Vec<&str> = err.trim_end().lines().collect();
+        assert_eq!(lines.len(), 2, "{err}");
+        assert!(lines[0].starts_with(first), "expected `{first}`:\n{err}");
+        assert!(lines[0].contains(cause), "expected `{cause}`:\n{err}");
+        assert!(lines[1].starts_with("hint:"), "{err}");
+        assert!(
+            !lines[1].contains(cause),
+            "the cause is repeated after the hint:\n{err}"
+        );
+    };
+    let nowhere = dir.path().join("nowhere");
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    let preds = data("eval/preds/png");
+    check(
+        &["eval", s(&nowhere), s(&gt()), "--split", "all"],
+        "error: cannot read `",
+        "no such directory",
+    );
+    check(
+        &["eval", s(&preds), s(&file), "--split", "all"],
+        "error: cannot read `",
+        "not a directory",
+    );
+    // `--json` naming a directory: the rename fails after the temporary was written.
+    let target = dir.path().join("taken");
+    std::fs::create_dir(&target).unwrap();
+    check(
+        &[
+            "eval",
+            s(&preds),
+            s(&gt()),
+            "--split",
+            "all",
+            "--bootstrap",
+            "0",
+            "--json",
+            s(&target),
+        ],
+        "error: cannot write `",
+        "os error",
+    );
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    assert!(
+        left.iter().all(|n| !n.ends_with(".tmp")),
+        "a temporary file was left: {left:?}"
+    );
+}

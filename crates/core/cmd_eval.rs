@@ -2,7 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use clevrtex_eval::{evaluate, output, Options, Protocol, Split};
 
 use crate::exit::{CmdResult, OK, USAGE};
@@ -80,9 +79,11 @@ fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
     let tmp = PathBuf::from(tmp);
     std::fs::write(&tmp, text)
         .and_then(|()| std::fs::rename(&tmp, path))
-        .with_context(|| {
-            format!(
-                "cannot write `{}`\nhint: check that its directory exists and is writable",
+        .map_err(|e| {
+            // A failed rename (e.g. FILE is a directory) must not leave the temporary behind.
+            let _ = std::fs::remove_file(&tmp);
+            anyhow::anyhow!(
+                "cannot write `{}`: {e}\nhint: check that FILE is not a directory and that its directory exists and is writable",
                 path.display()
             )
         })

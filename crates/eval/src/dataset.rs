@@ -100,9 +100,9 @@ fn walk_into(
     if !seen.insert(std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf())) {
         return Ok(());
     }
-    let io = |source| EvalError::Io {
+    let io = |cause| EvalError::Io {
         path: dir.to_path_buf(),
-        source,
+        cause,
     };
     for entry in std::fs::read_dir(dir).map_err(io)? {
         let path = entry.map_err(io)?.path();
@@ -127,10 +127,7 @@ pub fn discover_gt(
     variant: Option<&str>,
 ) -> Result<(String, Vec<GtSample>), EvalError> {
     if !dir.is_dir() {
-        return Err(EvalError::Io {
-            path: dir.to_path_buf(),
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
-        });
+        return Err(EvalError::not_a_dir(dir));
     }
     let files = walk(dir)?;
     let mut by_variant: BTreeMap<String, Vec<(u64, String, PathBuf)>> = BTreeMap::new();
@@ -228,10 +225,7 @@ pub struct PredFiles {
 /// error naming both.
 pub fn index_preds(dir: &Path, variant: &str) -> Result<HashMap<String, PredFiles>, EvalError> {
     if !dir.is_dir() {
-        return Err(EvalError::Io {
-            path: dir.to_path_buf(),
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a directory"),
-        });
+        return Err(EvalError::not_a_dir(dir));
     }
     let mut out: HashMap<String, PredFiles> = HashMap::new();
     for f in walk(dir)? {

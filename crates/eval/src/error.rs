@@ -11,12 +11,15 @@ pub const MAX_SLOTS: usize = 1024;
 #[derive(Debug, thiserror::Error)]
 pub enum EvalError {
     /// A file or directory could not be read.
-    #[error("cannot read `{}`: {source}\nhint: check that the path exists and is readable", path.display())]
+    ///
+    /// The cause is a plain field, not an error `source`, so it is printed once, before the
+    /// hint, and not again after it by an error-chain printer.
+    #[error("cannot read `{}`: {cause}\nhint: check that the path exists and is readable", path.display())]
     Io {
         /// The path.
         path: PathBuf,
         /// The cause.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// A file is damaged or not what its name says.
     #[error("cannot decode `{}`: {reason}\nhint: {hint}", path.display())]
@@ -106,6 +109,21 @@ pub enum EvalError {
         /// What to do.
         hint: String,
     },
+}
+
+impl EvalError {
+    /// `path` is not a readable directory: says whether it is missing or something else.
+    pub fn not_a_dir(path: &std::path::Path) -> EvalError {
+        let (kind, what) = if path.exists() {
+            (std::io::ErrorKind::InvalidInput, "not a directory")
+        } else {
+            (std::io::ErrorKind::NotFound, "no such directory")
+        };
+        EvalError::Io {
+            path: path.to_path_buf(),
+            cause: std::io::Error::new(kind, what),
+        }
+    }
 }
 
 fn missing_message(count: usize, total: usize, first: &[String]) -> String {

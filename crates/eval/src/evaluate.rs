@@ -171,9 +171,9 @@ impl Report {
 }
 
 fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
-    std::fs::read(path).map_err(|source| EvalError::Io {
+    std::fs::read(path).map_err(|cause| EvalError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
     })
 }
 

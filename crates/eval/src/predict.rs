@@ -41,9 +41,9 @@ impl ReconImage {
 pub type ReadBytes = Vec<Vec<u8>>;
 
 fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
-    std::fs::read(path).map_err(|source| EvalError::Io {
+    std::fs::read(path).map_err(|cause| EvalError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
     })
 }
 
