@@ -30,12 +30,35 @@ pub struct RgbImage {
     pub rgb: Vec<u8>,
 }
 
+/// The decoder's message without the `Debug` dump of a chunk type it may hold
+/// (`ChunkType { type: garb, critical: false, ... }` becomes `` `garb` ``).
+fn png_reason(e: &png::DecodingError) -> String {
+    let text = e.to_string();
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text.as_str();
+    while let Some(at) = rest.find("ChunkType { type: ") {
+        out.push_str(&rest[..at]);
+        let after = &rest[at + "ChunkType { type: ".len()..];
+        let Some(end) = after.find('}') else {
+            rest = &rest[at..];
+            break;
+        };
+        let name = after[..end].split(',').next().unwrap_or_default().trim();
+        out.push_str(&format!("chunk `{name}`"));
+        rest = after[end + 1..]
+            .strip_prefix(" chunk")
+            .unwrap_or(&after[end + 1..]);
+    }
+    out.push_str(rest);
+    out
+}
+
 fn png_reader(bytes: &[u8]) -> Result<png::Reader<Cursor<&[u8]>>, String> {
     let mut dec =
         png::Decoder::new_with_limits(Cursor::new(bytes), png::Limits { bytes: MAX_BYTES });
     dec.set_transformations(png::Transformations::IDENTITY);
     dec.read_info()
-        .map_err(|e| format!("not a valid PNG ({e})"))
+        .map_err(|e| format!("not a valid PNG ({})", png_reason(&e)))
 }
 
 fn png_frame(
@@ -48,7 +71,7 @@ fn png_frame(
     let mut buf = vec![0u8; size];
     let info = reader
         .next_frame(&mut buf)
-        .map_err(|e| format!("not a valid PNG ({e})"))?;
+        .map_err(|e| format!("not a valid PNG ({})", png_reason(&e)))?;
     buf.truncate(info.buffer_size());
     Ok((buf, info))
 }
@@ -111,7 +134,7 @@ pub fn png_rgb(bytes: &[u8]) -> Result<RgbImage, String> {
     dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
     let mut reader = dec
         .read_info()
-        .map_err(|e| format!("not a valid PNG ({e})"))?;
+        .map_err(|e| format!("not a valid PNG ({})", png_reason(&e)))?;
     let (buf, info) = png_frame(&mut reader)?;
     let (w, h) = (info.width as usize, info.height as usize);
     let channels = match info.color_type {
@@ -515,4 +538,20 @@ pub fn npz_names(bytes: &[u8]) -> Vec<String> {
                 .collect()
         })
         .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod reason_tests {
+    use super::*;
+
+    #[test]
+    fn a_bad_chunk_is_named_without_a_debug_dump() {
+        let err = png_labels(b"\x89PNG\r\n\x1a\nXXXXgarbage").unwrap_err();
+        assert!(err.starts_with("not a valid PNG ("), "{err}");
+        assert!(
+            !err.contains("ChunkType") && !err.contains("critical"),
+            "{err}"
+        );
+        assert!(err.contains("chunk `"), "{err}");
+    }
 }
