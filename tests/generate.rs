@@ -202,6 +202,25 @@ fn render_into_the_scene_folder_keeps_the_scene_files() {
 }
 
 #[test]
+fn doctor_names_a_broken_blender_with_its_stderr_tail() {
+    let out = clevrtex()
+        .env("FAKE_BLENDER_MODE", "noready")
+        .env_remove("CLEVRTEX_BLENDER")
+        .args(["doctor", "--blender"])
+        .arg(fake_blender())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("No module named 'bpy'"), "{t}");
+    assert!(
+        !t.contains("run `clevrtex doctor`"),
+        "doctor points to itself: {t}"
+    );
+    assert!(t.contains("apt-get install blender"), "{t}");
+}
+
+#[test]
 fn render_of_an_empty_folder_names_it() {
     let dir = tempfile::tempdir().unwrap();
     let out = clevrtex()

@@ -85,7 +85,15 @@ pub fn run(args: Args) -> CmdResult {
             }
             worker.quit();
         }
-        Err(e) => problems.push(format!("the bridge does not start in this Blender: {e}")),
+        Err(e) => {
+            // The worker error's own hint sends the user to `clevrtex doctor`: drop it here.
+            let text = e.to_string();
+            let text = match text.rfind("\nhint: ") {
+                Some(i) => text[..i].to_string(),
+                None => text,
+            };
+            problems.push(format!("the bridge does not start in this Blender: {text}"))
+        }
     }
     if problems.is_empty() {
         println!("ok: everything `clevrtex generate` needs is here");
