@@ -12,10 +12,11 @@ use rayon::prelude::*;
 use crate::util::{clevrtex, text};
 
 /// Environment variables that select a shard; removed so a CI job array cannot leak in.
-const SHARD_ENV: [&str; 5] = [
+const SHARD_ENV: [&str; 6] = [
     "SLURM_ARRAY_TASK_ID",
     "SLURM_ARRAY_TASK_COUNT",
     "SLURM_ARRAY_TASK_MIN",
+    "SLURM_ARRAY_TASK_STEP",
     "JOB_COMPLETION_INDEX",
     "CLEVRTEX_SHARD_COUNT",
 ];
@@ -439,6 +440,46 @@ fn objects_displacement_marks_only_displacing_materials_and_changes_nothing_else
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("`objects.displacement`") && err.contains("hint:"),
+        "{err}"
+    );
+}
+
+/// A stepped SLURM array (`--array=1-9:4`: ids 1, 5, 9) shards by position in the sequence,
+/// and a task id without a task count is an error rather than a silent full run.
+#[test]
+fn slurm_stepped_arrays_and_a_missing_count() {
+    let tmp = tempfile::tempdir().unwrap();
+    let one = tmp.path().join("one");
+    let arr = tmp.path().join("arr");
+    let base = |out: &Path| -> Vec<String> {
+        ["--variant", "camo", "-n", "10", "--seed", "5", "--out"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain([out.to_str().unwrap().to_string()])
+            .collect()
+    };
+    let a = base(&one);
+    run_ok(&a.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+    let a = base(&arr);
+    let a: Vec<&str> = a.iter().map(String::as_str).collect();
+    for id in ["1", "5", "9"] {
+        run_ok(
+            &a,
+            &[
+                ("SLURM_ARRAY_TASK_ID", id),
+                ("SLURM_ARRAY_TASK_COUNT", "3"),
+                ("SLURM_ARRAY_TASK_MIN", "1"),
+                ("SLURM_ARRAY_TASK_STEP", "4"),
+            ],
+        );
+    }
+    assert_eq!(tree(&one), tree(&arr));
+
+    let o = sample_cmd(&a, &[("SLURM_ARRAY_TASK_ID", "1")]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("SLURM_ARRAY_TASK_COUNT") && err.contains("hint:"),
         "{err}"
     );
 }

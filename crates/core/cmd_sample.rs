@@ -17,7 +17,8 @@ use crate::exit::{CmdResult, Interrupted, OK};
 #[command(
     after_help = "Sharding: `--shard K/N` keeps the indices with `index % N == K`, so \
 N shards together write every index exactly once. Without `--shard`, the shard comes from \
-SLURM_ARRAY_TASK_ID (minus SLURM_ARRAY_TASK_MIN when set) and SLURM_ARRAY_TASK_COUNT, or \
+SLURM_ARRAY_TASK_ID (minus SLURM_ARRAY_TASK_MIN, divided by SLURM_ARRAY_TASK_STEP, when set) \
+and SLURM_ARRAY_TASK_COUNT, or \
 from JOB_COMPLETION_INDEX (Kubernetes indexed jobs) with the count from `--shard-count`."
 )]
 pub struct Args {
@@ -93,16 +94,28 @@ fn resolve_shard(args: &Args) -> anyhow::Result<Shard> {
     if let Some(s) = &args.shard {
         return parse_shard(s, "`--shard`");
     }
-    if let (Some(id), Some(count)) = (
+    match (
         env_u64("SLURM_ARRAY_TASK_ID")?,
         env_u64("SLURM_ARRAY_TASK_COUNT")?,
     ) {
-        let min = env_u64("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
-        let k = id.checked_sub(min).unwrap_or(u64::MAX);
-        return parse_shard(
-            &format!("{k}/{count}"),
-            "SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN / SLURM_ARRAY_TASK_COUNT",
-        );
+        (Some(id), Some(count)) => {
+            // Task ids run min, min + step, ... (`--array=0-10:2`), so the shard is the
+            // position in that sequence, not `id - min`.
+            let min = env_u64("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+            let step = env_u64("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1).max(1);
+            let k = match id.checked_sub(min) {
+                Some(d) if d % step == 0 => d / step,
+                _ => u64::MAX,
+            };
+            return parse_shard(
+                &format!("{k}/{count}"),
+                "(SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN) / SLURM_ARRAY_TASK_STEP and SLURM_ARRAY_TASK_COUNT",
+            );
+        }
+        (Some(id), None) => bail!(
+            "SLURM_ARRAY_TASK_ID is `{id}` but SLURM_ARRAY_TASK_COUNT is not set, so the number of shards is unknown\nhint: pass `--shard K/N`, or unset SLURM_ARRAY_TASK_ID to write every index"
+        ),
+        _ => {}
     }
     if let Some(k) = env_u64("JOB_COMPLETION_INDEX")? {
         let Some(n) = args.shard_count else {
