@@ -83,6 +83,17 @@ for i in range(4):
         assert meta["objects"][k - 1]["visible_pixels"] == counts[k]
     for suffix, bits in [("_depth_0001.png", 16), ("_normal_0001.png", 16), (".png", 8)]:
         assert png(stem + suffix)[2] == bits, f"{stem}{suffix}: not {bits}-bit"
+    assert png(stem + ".png")[3] in (2, 6), f"{stem}.png: not an RGB(A) image"
+    assert meta["image_filename"] == os.path.basename(stem) + ".png"
+    assert meta["mask_filename"] == os.path.basename(stem) + "_flat.png"
     print(f"smoke: {os.path.basename(stem)} ok: {n} objects, ids exact")
+
+# The public loader's rules (reference section 4): its glob finds the RGB images only (not
+# `_flat.png` or the pass PNGs, nor temporaries), with no gaps in the indices.
+import glob
+found = sorted(glob.glob(os.path.join(sys.argv[1], "**", "CLEVRTEX_camo_??????.png"), recursive=True))
+assert [os.path.basename(f) for f in found] == ["CLEVRTEX_camo_%06d.png" % i for i in range(4)], found
+leftovers = [f for f in glob.glob(os.path.join(sys.argv[1], "**", "*"), recursive=True) if "clevrtex-tmp" in f]
+assert not leftovers, f"temporary files left: {leftovers}"
 print("smoke: ok")
 PY
