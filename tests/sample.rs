@@ -519,6 +519,15 @@ fn error_messages_read_well() {
         err.contains("not valid JSON") && !err.contains("key `.`"),
         "{err}"
     );
+    std::fs::write(&bad, "[]").unwrap();
+    let err = check(
+        &["--config", bad.to_str().unwrap(), "-n", "1", "--out", out],
+        "error: invalid config `",
+    );
+    assert!(
+        err.contains("must be a JSON object") && !err.contains("VariantFile"),
+        "{err}"
+    );
     let missing = tmp.path().join("missing.json");
     let err = check(
         &[

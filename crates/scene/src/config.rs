@@ -384,6 +384,14 @@ impl Config {
                 "fix the JSON syntax at the line and column given",
             )
         })?;
+        if !doc.is_object() {
+            return Err(err(
+                ".",
+                None,
+                "must be a JSON object, not a list or a single value".into(),
+                "start from a copy of one of the built-in configs in `configs/`",
+            ));
+        }
         let mut base: Value =
             serde_json::from_str(BASE_SCENE_JSON).expect("built-in base scene is valid JSON");
         if let Some(obj) = doc.as_object_mut() {
