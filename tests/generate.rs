@@ -894,3 +894,48 @@ fn render_warns_about_hidden_objects_of_fixed_scenes() {
     assert!(t.contains("warning: object(s) 1 of `"), "{t}");
     assert!(!t.contains("object(s) 1, "), "only object 1 is hidden: {t}");
 }
+
+#[test]
+fn a_rewritten_sample_keeps_no_pass_files_of_an_earlier_run() {
+    let Some(blender) = blender_or_skip("a_rewritten_sample_keeps_no_pass_files_of_an_earlier_run")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let sub = dir.path().join("clevrtex_clevr/0");
+    std::fs::create_dir_all(&sub).unwrap();
+    // An earlier run with all passes (e.g. another seed): its depth would not match the new
+    // image.
+    let stale = sub.join("CLEVRTEX_clevr_000000_depth_0001.png");
+    std::fs::write(&stale, b"old").unwrap();
+    let out = clevrtex()
+        .args([
+            "generate",
+            "--variant",
+            "clevr",
+            "-n",
+            "1",
+            "--passes",
+            "rgb,mask",
+        ])
+        .args([
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--samples",
+            "1",
+            "--workers",
+            "1",
+        ])
+        .arg("--blender")
+        .arg(&blender)
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert!(sub.join("CLEVRTEX_clevr_000000.png").is_file(), "{t}");
+    assert!(!stale.exists(), "the stale depth file is still there");
+}

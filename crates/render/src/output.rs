@@ -68,6 +68,17 @@ pub fn is_complete(dir: &Path, stem: &str, passes: &[Pass], keep_exr: bool) -> b
         .all(|f| dir.join(f).is_file())
 }
 
+/// Remove the files of `stem` that a sample written with `passes` does not have: left by an
+/// earlier run with other passes (or `--keep-exr`), they would sit beside the new image
+/// without matching it.
+pub fn remove_other_outputs(dir: &Path, stem: &str, passes: &[Pass], keep_exr: bool) {
+    let keep = expected_files(stem, passes, keep_exr);
+    let all = expected_files(stem, &Pass::ALL, true);
+    for f in all.iter().filter(|f| !keep.contains(f)) {
+        let _ = std::fs::remove_file(dir.join(f));
+    }
+}
+
 /// Remove temporary files a killed run left in `dir` (not recursive).
 pub fn remove_stale_temps(dir: &Path) {
     if let Ok(entries) = std::fs::read_dir(dir) {
@@ -167,6 +178,34 @@ mod tests {
                 "CLEVRTEX_camo_012345.png",
                 "CLEVRTEX_camo_012345_depth_0001.png",
                 "CLEVRTEX_camo_012345.json"
+            ]
+        );
+    }
+
+    #[test]
+    fn other_outputs_of_the_stem_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let stem = "CLEVRTEX_camo_000000";
+        let all = expected_files(stem, &Pass::ALL, true);
+        for f in all
+            .iter()
+            .chain(["CLEVRTEX_camo_000001_depth_0001.png".to_string()].iter())
+        {
+            std::fs::write(dir.path().join(f), b"x").unwrap();
+        }
+        remove_other_outputs(dir.path(), stem, &[Pass::Rgb, Pass::Mask], false);
+        let mut left: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(
+            left,
+            [
+                "CLEVRTEX_camo_000000.json",
+                "CLEVRTEX_camo_000000.png",
+                "CLEVRTEX_camo_000000_flat.png",
+                "CLEVRTEX_camo_000001_depth_0001.png",
             ]
         );
     }

@@ -662,6 +662,7 @@ impl Slot<'_, '_> {
                 return Err(RenderError::Interrupted);
             }
             staged.commit()?;
+            output::remove_other_outputs(&dir, &job.stem, &job.passes, opts.keep_exr);
             let _ = std::fs::remove_dir_all(&work);
             stats.attempt = attempt;
             stats.metadata = dir.join(meta_name);
