@@ -560,6 +560,7 @@ fn interrupted_run_leaves_no_partial_sample_and_resumes() {
     let out = child.wait_with_output().unwrap();
     let t = text(&out);
     assert_eq!(out.status.code(), Some(130), "{t}");
+    assert!(t.contains("hint: rerun the same command"), "{t}");
     // Every sample is either complete or absent; no temporary file is left.
     let files = files_under(dir.path());
     assert!(!files.iter().any(|f| f.contains("tmp")), "{files:?}");

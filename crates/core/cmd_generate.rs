@@ -472,7 +472,13 @@ fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) 
                 exit::PARTIAL
             })
         }
-        Err(RenderError::Interrupted) => Err(exit::Interrupted.into()),
+        Err(RenderError::Interrupted) => {
+            eprintln!(
+                "error: {}\nhint: rerun the same command to go on; complete samples are skipped",
+                exit::Interrupted
+            );
+            Ok(exit::INTERRUPTED)
+        }
         Err(e) => Err(e.into()),
     }
 }
