@@ -940,3 +940,61 @@ fn a_rewritten_sample_keeps_no_pass_files_of_an_earlier_run() {
     assert!(sub.join("CLEVRTEX_clevr_000000.png").is_file(), "{t}");
     assert!(!stale.exists(), "the stale depth file is still there");
 }
+
+#[test]
+fn a_retried_failure_leaves_the_ledger() {
+    let Some(blender) = blender_or_skip("a_retried_failure_leaves_the_ledger") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let ledger = dir.path().join("clevrtex_clevr/failures.jsonl");
+    std::fs::create_dir_all(ledger.parent().unwrap()).unwrap();
+    // An earlier run failed on images 0 and 5; this one redoes image 0 only.
+    let line = |i: u64| {
+        format!(
+            "{{\"index\":{i},\"stem\":\"CLEVRTEX_clevr_{i:06}\",\"variant\":\"clevr\",\"error\":\"x\",\"time_unix\":0}}\n"
+        )
+    };
+    std::fs::write(&ledger, line(0) + &line(5)).unwrap();
+    let run = || {
+        clevrtex()
+            .args([
+                "generate",
+                "--variant",
+                "clevr",
+                "-n",
+                "1",
+                "--passes",
+                "rgb,mask",
+            ])
+            .args([
+                "--width",
+                "64",
+                "--height",
+                "48",
+                "--samples",
+                "1",
+                "--workers",
+                "1",
+            ])
+            .arg("--blender")
+            .arg(&blender)
+            .arg("--out")
+            .arg(dir.path())
+            .output()
+            .unwrap()
+    };
+    let out = run();
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let left = ledger_lines(dir.path());
+    assert_eq!(left.len(), 1, "{left:?}");
+    assert_eq!(left[0]["index"], 5);
+    // Once nothing is missing, the ledger goes.
+    std::fs::write(&ledger, line(0)).unwrap();
+    let out = run();
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(
+        !ledger.exists(),
+        "the ledger of a complete run is still there"
+    );
+}

@@ -282,6 +282,7 @@ pub fn run(
     on_event: &(dyn Fn(&PoolEvent) + Sync),
 ) -> Result<RunReport> {
     let started = Instant::now();
+    let stems: std::collections::BTreeSet<String> = jobs.iter().map(|j| j.stem.clone()).collect();
     let bridge = BridgeDir::create(&opts.materials_json)?;
     let mut todo = VecDeque::new();
     let mut report = RunReport {
@@ -333,7 +334,43 @@ pub fn run(
     if opts.interrupt.load(Ordering::SeqCst) {
         return Err(RenderError::Interrupted);
     }
+    prune_ledger(&opts.ledger, &stems, &report)?;
     Ok(report)
+}
+
+/// After a finished run, drop the ledger entries of this run's samples that are complete
+/// now (a rerun retried them), so the ledger lists only what is still missing; remove it
+/// when nothing is.
+fn prune_ledger(
+    ledger: &Path,
+    stems: &std::collections::BTreeSet<String>,
+    report: &RunReport,
+) -> Result<()> {
+    let Ok(text) = std::fs::read_to_string(ledger) else {
+        return Ok(());
+    };
+    let failed: std::collections::BTreeSet<u64> = report.failed.iter().map(|f| f.0).collect();
+    let keep: Vec<&str> = text
+        .lines()
+        .filter(|line| {
+            let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
+                return true;
+            };
+            let ran = v["stem"].as_str().is_some_and(|s| stems.contains(s));
+            let failed_now = v["index"].as_u64().is_some_and(|i| failed.contains(&i));
+            !ran || failed_now
+        })
+        .collect();
+    if keep.len() == text.lines().count() {
+        return Ok(());
+    }
+    if keep.is_empty() {
+        return std::fs::remove_file(ledger).map_err(|e| RenderError::write(ledger, e));
+    }
+    let tmp = ledger.with_extension(format!("jsonl{}", output::TMP_SUFFIX));
+    let body: String = keep.iter().map(|l| format!("{l}\n")).collect();
+    std::fs::write(&tmp, body).map_err(|e| RenderError::write(&tmp, e))?;
+    std::fs::rename(&tmp, ledger).map_err(|e| RenderError::write(ledger, e))
 }
 
 impl Shared<'_> {
