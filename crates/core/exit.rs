@@ -4,7 +4,7 @@
 //! |------|---------|
 //! | 0    | success |
 //! | 1    | error (bad input, failed render, I/O); the message says what and what to do |
-//! | 2    | usage error (bad flags) |
+//! | 2    | usage error: the command line could not be parsed (unknown flag, missing or malformed argument) |
 //! | 3    | finished, but some items failed (see the ledger / report) |
 //! | 130  | interrupted by Ctrl-C; finished outputs are kept, no partial output is left |
 
