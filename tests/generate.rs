@@ -998,3 +998,58 @@ fn a_retried_failure_leaves_the_ledger() {
         "the ledger of a complete run is still there"
     );
 }
+
+/// `generate` takes its shard from a SLURM array job like `sample` does: task 1 of 2 makes
+/// exactly the odd indices (seen in the ledger of a fake Blender that always crashes).
+#[test]
+fn generate_reads_the_slurm_array_shard() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = clevrtex()
+        .env("FAKE_BLENDER_MODE", "crash")
+        .env("SLURM_ARRAY_TASK_ID", "1")
+        .env("SLURM_ARRAY_TASK_COUNT", "2")
+        .env_remove("SLURM_ARRAY_TASK_MIN")
+        .env_remove("SLURM_ARRAY_TASK_STEP")
+        .args([
+            "generate",
+            "--variant",
+            "clevr",
+            "-n",
+            "4",
+            "--retries",
+            "0",
+        ])
+        .args(["--width", "64", "--height", "48", "--samples", "1"])
+        .args(["--workers", "1", "--out"])
+        .arg(dir.path())
+        .arg("--blender")
+        .arg(fake_blender())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    let mut indices: Vec<u64> = ledger_lines(dir.path())
+        .iter()
+        .map(|l| l["index"].as_u64().unwrap())
+        .collect();
+    indices.sort();
+    assert_eq!(indices, vec![1, 3], "{t}");
+
+    // A task id without a task count is refused before anything starts.
+    let out = clevrtex()
+        .env("SLURM_ARRAY_TASK_ID", "1")
+        .env_remove("SLURM_ARRAY_TASK_COUNT")
+        .args(["generate", "--variant", "clevr", "-n", "4", "--out"])
+        .arg(dir.path().join("other"))
+        .arg("--blender")
+        .arg(fake_blender())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("SLURM_ARRAY_TASK_COUNT") && t.contains("hint:"),
+        "{t}"
+    );
+    assert!(!dir.path().join("other").exists(), "{t}");
+}

@@ -55,6 +55,7 @@ pub struct RunArgs {
 
 /// Arguments of `clevrtex generate`.
 #[derive(Debug, clap::Args)]
+#[command(after_help = crate::shard::SHARD_HELP)]
 pub struct GenerateArgs {
     /// Built-in variant: full, pbg, vbg, grassbg, camo, outd, clevr.
     #[arg(long, default_value = "full", conflicts_with = "config")]
@@ -79,6 +80,9 @@ pub struct GenerateArgs {
     /// N shards together make every image exactly once.
     #[arg(long, value_name = "K/N")]
     shard: Option<String>,
+    /// Number of shards when the shard index comes from JOB_COMPLETION_INDEX.
+    #[arg(long, value_name = "N", env = "CLEVRTEX_SHARD_COUNT")]
+    shard_count: Option<u64>,
     /// Image width in pixels (default 320).
     #[arg(long)]
     width: Option<u32>,
@@ -152,10 +156,8 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     if total < end {
         bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset");
     }
-    let range = match &args.shard {
-        Some(s) => shard_indices(s, args.start..end)?,
-        None => (args.start..end).collect(),
-    };
+    let range =
+        crate::shard::resolve(args.shard.as_deref(), args.shard_count)?.indices(args.start, end);
     let config = Arc::new(config);
     let variant = config.name.clone();
     let jobs: Vec<Job> = range
@@ -334,21 +336,6 @@ fn parse_passes(list: &[String]) -> anyhow::Result<Vec<Pass>> {
     }
     out.sort();
     Ok(out)
-}
-
-/// Indices of `range` in shard `K/N` (0 <= K < N): those with `index % N == K`, as
-/// `clevrtex sample` does, so N shards together make every image exactly once.
-fn shard_indices(spec: &str, range: std::ops::Range<u64>) -> anyhow::Result<Vec<u64>> {
-    let bad = || {
-        anyhow::anyhow!("bad `--shard {spec}`\nhint: write K/N with 0 <= K < N, e.g. `--shard 1/4`")
-    };
-    let (k, n) = spec.split_once('/').ok_or_else(bad)?;
-    let k: u64 = k.trim().parse().map_err(|_| bad())?;
-    let n: u64 = n.trim().parse().map_err(|_| bad())?;
-    if n == 0 || k >= n {
-        return Err(bad());
-    }
-    Ok(range.filter(|i| i % n == k).collect())
 }
 
 fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) -> CmdResult {

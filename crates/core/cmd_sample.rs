@@ -14,13 +14,7 @@ use crate::exit::{CmdResult, Interrupted, OK};
 
 /// Arguments of `clevrtex sample`.
 #[derive(Debug, clap::Args)]
-#[command(
-    after_help = "Sharding: `--shard K/N` keeps the indices with `index % N == K`, so \
-N shards together write every index exactly once. Without `--shard`, the shard comes from \
-SLURM_ARRAY_TASK_ID (minus SLURM_ARRAY_TASK_MIN, divided by SLURM_ARRAY_TASK_STEP, when set) \
-and SLURM_ARRAY_TASK_COUNT, or \
-from JOB_COMPLETION_INDEX (Kubernetes indexed jobs) with the count from `--shard-count`."
-)]
+#[command(after_help = crate::shard::SHARD_HELP)]
 pub struct Args {
     /// Built-in variant: full, pbg, vbg, grassbg, camo, outd or clevr.
     #[arg(
@@ -60,72 +54,6 @@ pub struct Args {
     pub jobs: Option<usize>,
 }
 
-/// Which share of the indices this process writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Shard {
-    k: u64,
-    n: u64,
-}
-
-/// Parse `K/N`.
-fn parse_shard(text: &str, origin: &str) -> anyhow::Result<Shard> {
-    let parsed = text
-        .split_once('/')
-        .and_then(|(k, n)| Some((k.trim().parse().ok()?, n.trim().parse().ok()?)));
-    match parsed {
-        Some((k, n)) if n > 0 && k < n => Ok(Shard { k, n }),
-        _ => bail!(
-            "invalid shard `{text}` from {origin}\nhint: give `K/N` with 0 <= K < N, e.g. `--shard 0/4`"
-        ),
-    }
-}
-
-fn env_u64(name: &str) -> anyhow::Result<Option<u64>> {
-    match std::env::var(name) {
-        Ok(v) => v.trim().parse().map(Some).map_err(|_| {
-            anyhow::anyhow!("environment variable `{name}` is `{v}`, not a whole number\nhint: unset it or pass `--shard K/N`")
-        }),
-        Err(_) => Ok(None),
-    }
-}
-
-/// `--shard`, else SLURM array variables, else JOB_COMPLETION_INDEX, else everything.
-fn resolve_shard(args: &Args) -> anyhow::Result<Shard> {
-    if let Some(s) = &args.shard {
-        return parse_shard(s, "`--shard`");
-    }
-    match (
-        env_u64("SLURM_ARRAY_TASK_ID")?,
-        env_u64("SLURM_ARRAY_TASK_COUNT")?,
-    ) {
-        (Some(id), Some(count)) => {
-            // Task ids run min, min + step, ... (`--array=0-10:2`), so the shard is the
-            // position in that sequence, not `id - min`.
-            let min = env_u64("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
-            let step = env_u64("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1).max(1);
-            let k = match id.checked_sub(min) {
-                Some(d) if d % step == 0 => d / step,
-                _ => u64::MAX,
-            };
-            return parse_shard(
-                &format!("{k}/{count}"),
-                "(SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN) / SLURM_ARRAY_TASK_STEP and SLURM_ARRAY_TASK_COUNT",
-            );
-        }
-        (Some(id), None) => bail!(
-            "SLURM_ARRAY_TASK_ID is `{id}` but SLURM_ARRAY_TASK_COUNT is not set, so the number of shards is unknown\nhint: pass `--shard K/N`, or unset SLURM_ARRAY_TASK_ID to write every index"
-        ),
-        _ => {}
-    }
-    if let Some(k) = env_u64("JOB_COMPLETION_INDEX")? {
-        let Some(n) = args.shard_count else {
-            bail!("JOB_COMPLETION_INDEX is `{k}` but the number of shards is unknown\nhint: pass `--shard-count N` or set CLEVRTEX_SHARD_COUNT to the job's completion count");
-        };
-        return parse_shard(&format!("{k}/{n}"), "JOB_COMPLETION_INDEX / --shard-count");
-    }
-    Ok(Shard { k: 0, n: 1 })
-}
-
 fn load_config(args: &Args) -> anyhow::Result<Config> {
     match (&args.config, &args.variant) {
         (Some(path), _) => {
@@ -149,7 +77,7 @@ fn load_config(args: &Args) -> anyhow::Result<Config> {
 pub fn run(args: Args) -> CmdResult {
     let started = Instant::now();
     let config = load_config(&args)?;
-    let shard = resolve_shard(&args)?;
+    let shard = crate::shard::resolve(args.shard.as_deref(), args.shard_count)?;
     let end = args.start.checked_add(args.count).with_context(|| {
         format!(
             "`--start {}` plus `-n {}` overflows",
@@ -164,8 +92,7 @@ pub fn run(args: Args) -> CmdResult {
     clevrtex_scene::sample::check_feasible(&config)?;
 
     // First index >= start with index % n == k, then every n-th.
-    let first = args.start + (shard.k + shard.n - args.start % shard.n) % shard.n;
-    let indices: Vec<u64> = (first..end).step_by(shard.n as usize).collect();
+    let indices = shard.indices(args.start, end);
 
     let mut dirs: Vec<PathBuf> = indices
         .iter()

@@ -12,6 +12,7 @@ mod cmd_generate;
 mod cmd_materials;
 mod cmd_sample;
 mod exit;
+mod shard;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object
 /// segmentation, in the style of ClevrTex.

@@ -1,0 +1,130 @@
+//! Sharding shared by `clevrtex sample` and `clevrtex generate`: which indices this process
+//! makes, from `--shard K/N` or the cluster's array-job variables.
+
+use anyhow::bail;
+
+/// Shown in `--help` of every command that shards.
+pub const SHARD_HELP: &str = "Sharding: `--shard K/N` keeps the indices with `index % N == K`, so \
+N shards together make every index exactly once. Without `--shard`, the shard comes from \
+SLURM_ARRAY_TASK_ID (minus SLURM_ARRAY_TASK_MIN, divided by SLURM_ARRAY_TASK_STEP, when set) \
+and SLURM_ARRAY_TASK_COUNT, or \
+from JOB_COMPLETION_INDEX (Kubernetes indexed jobs) with the count from `--shard-count`.";
+
+/// Which share of the indices this process makes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    /// This shard, `0 <= k < n`.
+    pub k: u64,
+    /// Number of shards.
+    pub n: u64,
+}
+
+impl Shard {
+    /// The indices of `start..end` in this shard, in order.
+    pub fn indices(self, start: u64, end: u64) -> Vec<u64> {
+        if start >= end {
+            return Vec::new();
+        }
+        let first = start + (self.k + self.n - start % self.n) % self.n;
+        (first..end).step_by(self.n as usize).collect()
+    }
+}
+
+/// Parse `K/N`.
+fn parse_shard(text: &str, origin: &str) -> anyhow::Result<Shard> {
+    let parsed = text
+        .split_once('/')
+        .and_then(|(k, n)| Some((k.trim().parse().ok()?, n.trim().parse().ok()?)));
+    match parsed {
+        Some((k, n)) if n > 0 && k < n => Ok(Shard { k, n }),
+        _ => bail!(
+            "invalid shard `{text}` from {origin}\nhint: give `K/N` with 0 <= K < N, e.g. `--shard 0/4`"
+        ),
+    }
+}
+
+fn env_u64(name: &str) -> anyhow::Result<Option<u64>> {
+    match std::env::var(name) {
+        Ok(v) => v.trim().parse().map(Some).map_err(|_| {
+            anyhow::anyhow!("environment variable `{name}` is `{v}`, not a whole number\nhint: unset it or pass `--shard K/N`")
+        }),
+        Err(_) => Ok(None),
+    }
+}
+
+/// `--shard`, else SLURM array variables, else JOB_COMPLETION_INDEX, else everything.
+pub fn resolve(shard: Option<&str>, shard_count: Option<u64>) -> anyhow::Result<Shard> {
+    if let Some(s) = shard {
+        return parse_shard(s, "`--shard`");
+    }
+    match (
+        env_u64("SLURM_ARRAY_TASK_ID")?,
+        env_u64("SLURM_ARRAY_TASK_COUNT")?,
+    ) {
+        (Some(id), Some(count)) => {
+            // Task ids run min, min + step, ... (`--array=0-10:2`), so the shard is the
+            // position in that sequence, not `id - min`.
+            let min = env_u64("SLURM_ARRAY_TASK_MIN")?.unwrap_or(0);
+            let step = env_u64("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1).max(1);
+            let k = match id.checked_sub(min) {
+                Some(d) if d % step == 0 => d / step,
+                _ => u64::MAX,
+            };
+            return parse_shard(
+                &format!("{k}/{count}"),
+                "(SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN) / SLURM_ARRAY_TASK_STEP and SLURM_ARRAY_TASK_COUNT",
+            );
+        }
+        (Some(id), None) => bail!(
+            "SLURM_ARRAY_TASK_ID is `{id}` but SLURM_ARRAY_TASK_COUNT is not set, so the number of shards is unknown\nhint: pass `--shard K/N`, or unset SLURM_ARRAY_TASK_ID to make every index"
+        ),
+        _ => {}
+    }
+    if let Some(k) = env_u64("JOB_COMPLETION_INDEX")? {
+        let Some(n) = shard_count else {
+            bail!("JOB_COMPLETION_INDEX is `{k}` but the number of shards is unknown\nhint: pass `--shard-count N` or set CLEVRTEX_SHARD_COUNT to the job's completion count");
+        };
+        return parse_shard(&format!("{k}/{n}"), "JOB_COMPLETION_INDEX / --shard-count");
+    }
+    Ok(Shard { k: 0, n: 1 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_partition_any_range() {
+        for (start, end) in [(0, 10), (3, 17), (5, 5), (7, 8), (1000, 1031)] {
+            for n in 1..5 {
+                let mut all: Vec<u64> = (0..n)
+                    .flat_map(|k| Shard { k, n }.indices(start, end))
+                    .collect();
+                all.sort();
+                assert_eq!(
+                    all,
+                    (start..end).collect::<Vec<_>>(),
+                    "{start}..{end} in {n}"
+                );
+                for k in 0..n {
+                    assert!(Shard { k, n }
+                        .indices(start, end)
+                        .iter()
+                        .all(|i| i % n == k));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn explicit_shard_is_parsed_and_checked() {
+        assert_eq!(resolve(Some("2/3"), None).unwrap(), Shard { k: 2, n: 3 });
+        for bad in ["3/3", "1/0", "x/2", "1"] {
+            let err = resolve(Some(bad), None).unwrap_err().to_string();
+            assert!(
+                err.contains(&format!("`{bad}`")) && err.contains("hint:"),
+                "{err}"
+            );
+        }
+    }
+}
