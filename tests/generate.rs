@@ -44,6 +44,37 @@ fn generate_fake(mode: &str, out: &Path, extra: &[&str]) -> Output {
         .expect("run clevrtex")
 }
 
+/// `clevrtex generate` of image 0 of `clevr` at 64x48, 1 sample, rgb and mask, with the real
+/// Blender.
+fn generate_tiny_rgb_mask(blender: &Path, out: &Path) -> Output {
+    clevrtex()
+        .args([
+            "generate",
+            "--variant",
+            "clevr",
+            "-n",
+            "1",
+            "--passes",
+            "rgb,mask",
+        ])
+        .args([
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--samples",
+            "1",
+            "--workers",
+            "1",
+        ])
+        .arg("--blender")
+        .arg(blender)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("run clevrtex")
+}
+
 fn ledger_lines(out: &Path) -> Vec<Value> {
     let path = out.join("clevrtex_clevr/failures.jsonl");
     std::fs::read_to_string(&path)
@@ -364,7 +395,7 @@ fn bad_passes_and_shards_are_usage_errors_with_hints() {
     let dir = tempfile::tempdir().unwrap();
     for (args, needle) in [
         (vec!["--passes", "rgb,sparkle"], "unknown pass `sparkle`"),
-        (vec!["--shard", "4/4"], "bad `--shard 4/4`"),
+        (vec!["--shard", "4/4"], "invalid shard `4/4` from `--shard`"),
     ] {
         let out = generate_fake(
             "crash",
@@ -909,32 +940,7 @@ fn a_rewritten_sample_keeps_no_pass_files_of_an_earlier_run() {
     // image.
     let stale = sub.join("CLEVRTEX_clevr_000000_depth_0001.png");
     std::fs::write(&stale, b"old").unwrap();
-    let out = clevrtex()
-        .args([
-            "generate",
-            "--variant",
-            "clevr",
-            "-n",
-            "1",
-            "--passes",
-            "rgb,mask",
-        ])
-        .args([
-            "--width",
-            "64",
-            "--height",
-            "48",
-            "--samples",
-            "1",
-            "--workers",
-            "1",
-        ])
-        .arg("--blender")
-        .arg(&blender)
-        .arg("--out")
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let out = generate_tiny_rgb_mask(&blender, dir.path());
     let t = text(&out);
     assert_eq!(out.status.code(), Some(0), "{t}");
     assert!(sub.join("CLEVRTEX_clevr_000000.png").is_file(), "{t}");
@@ -956,34 +962,7 @@ fn a_retried_failure_leaves_the_ledger() {
         )
     };
     std::fs::write(&ledger, line(0) + &line(5)).unwrap();
-    let run = || {
-        clevrtex()
-            .args([
-                "generate",
-                "--variant",
-                "clevr",
-                "-n",
-                "1",
-                "--passes",
-                "rgb,mask",
-            ])
-            .args([
-                "--width",
-                "64",
-                "--height",
-                "48",
-                "--samples",
-                "1",
-                "--workers",
-                "1",
-            ])
-            .arg("--blender")
-            .arg(&blender)
-            .arg("--out")
-            .arg(dir.path())
-            .output()
-            .unwrap()
-    };
+    let run = || generate_tiny_rgb_mask(&blender, dir.path());
     let out = run();
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let left = ledger_lines(dir.path());
