@@ -22,18 +22,21 @@ pub struct Errors {
     pub depth_equal: bool,
 }
 
+/// Sum of squared differences of two equally long buffers, in f64.
+fn sum_sq_diff<T: Copy + Into<f64>>(a: &[T], b: &[T]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(&x, &y)| {
+            let d = x.into() - y.into();
+            d * d
+        })
+        .sum()
+}
+
 /// RMSE of `a` against `b` (same length, at least one value).
 pub fn rmse(a: &[f32], b: &[f32]) -> f64 {
     assert_eq!(a.len(), b.len(), "buffers of different sizes");
-    let sum: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(&x, &y)| {
-            let d = f64::from(x) - f64::from(y);
-            d * d
-        })
-        .sum();
-    (sum / a.len().max(1) as f64).sqrt()
+    (sum_sq_diff(a, b) / a.len().max(1) as f64).sqrt()
 }
 
 /// Mean of `a` (0 for an empty slice).
@@ -55,14 +58,7 @@ pub fn ratio(x: f64, d: f64) -> f64 {
 /// when they are identical.
 pub fn psnr_u8(a: &[u8], b: &[u8]) -> f64 {
     assert_eq!(a.len(), b.len(), "images of different sizes");
-    let sum: f64 = a
-        .iter()
-        .zip(b)
-        .map(|(&x, &y)| {
-            let d = f64::from(x) - f64::from(y);
-            d * d
-        })
-        .sum();
+    let sum = sum_sq_diff(a, b);
     if sum == 0.0 {
         return f64::INFINITY;
     }
