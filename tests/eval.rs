@@ -28,6 +28,26 @@ fn gt() -> std::path::PathBuf {
     data("eval/gt")
 }
 
+/// `clevrtex eval PREDS GT --split all --bootstrap 0 EXTRA --json JSON`: asserts success and
+/// returns the JSON report.
+fn eval_all_json(preds: &Path, extra: &[&str], json: &Path) -> Value {
+    let gt = gt();
+    let mut args = vec![
+        "eval",
+        s(preds),
+        s(&gt),
+        "--split",
+        "all",
+        "--bootstrap",
+        "0",
+    ];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--json", s(json)]);
+    let out = run(&args);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    serde_json::from_slice(&std::fs::read(json).unwrap()).unwrap()
+}
+
 fn stderr(out: &std::process::Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
@@ -134,19 +154,7 @@ fn eval_reports_table_json_and_csv() {
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let r2: Value = serde_json::from_slice(&std::fs::read(&json2).unwrap()).unwrap();
     assert_eq!(r["ci95"], r2["ci95"]);
-    let out = run(&[
-        "eval",
-        s(&preds),
-        s(&gt()),
-        "--split",
-        "all",
-        "--bootstrap",
-        "0",
-        "--json",
-        s(&json2),
-    ]);
-    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
-    let r3: Value = serde_json::from_slice(&std::fs::read(&json2).unwrap()).unwrap();
+    let r3 = eval_all_json(&preds, &[], &json2);
     assert!(r3["ci95"]["ARI"].is_null());
     assert_eq!(r3["metrics"], r["metrics"]);
 }
@@ -156,33 +164,8 @@ fn eval_npz_soft_masks_and_no_background() {
     let preds = data("eval/preds/npz");
     let dir = tempfile::tempdir().unwrap();
     let (a, b) = (dir.path().join("a.json"), dir.path().join("b.json"));
-    let out = run(&[
-        "eval",
-        s(&preds),
-        s(&gt()),
-        "--split",
-        "all",
-        "--bootstrap",
-        "0",
-        "--json",
-        s(&a),
-    ]);
-    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
-    let out = run(&[
-        "eval",
-        s(&preds),
-        s(&gt()),
-        "--split",
-        "all",
-        "--bootstrap",
-        "0",
-        "--no-background",
-        "--json",
-        s(&b),
-    ]);
-    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
-    let ra: Value = serde_json::from_slice(&std::fs::read(&a).unwrap()).unwrap();
-    let rb: Value = serde_json::from_slice(&std::fs::read(&b).unwrap()).unwrap();
+    let ra = eval_all_json(&preds, &[], &a);
+    let rb = eval_all_json(&preds, &["--no-background"], &b);
     assert!(ra["metrics"]["MSE"].as_f64().unwrap() > 0.0);
     assert_ne!(ra["metrics"]["mIoU"], rb["metrics"]["mIoU"]);
     assert_eq!(rb["provenance"]["no_background"], true);
