@@ -1,59 +1,24 @@
 //! A pool of Blender workers rendering a list of jobs into the dataset layout.
 //!
-//! Per job: sample the scene (attempt 0), render the cheap visibility pass, count each
-//! object's pixels and, if one is at or under the threshold, resample with the next attempt
-//! number (deterministic: the attempt goes into the seed) before paying for the full render.
-//! The final mask confirms the counts. A crashed, hung or babbling worker is killed and
-//! restarted, and the request retried up to `retries` times; then the job is written to the
-//! failure ledger and the run goes on (or stops, with `fail_fast`).
+//! `N` threads each own a [`Slot`]: a (re)startable Blender worker and a scratch folder. They
+//! take jobs from one queue and run them (see [`crate::job`] for the attempt and visibility
+//! policy of one job). A crashed, hung or babbling worker is killed and restarted, and the
+//! request retried up to `retries` times; then the job is written to the failure ledger
+//! ([`crate::ledger`]) and the run goes on (or stops, with `fail_fast`).
 
 use std::collections::VecDeque;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use clevrtex_scene::{Pass, SceneFile};
-
 use crate::bridge::BridgeDir;
 use crate::error::{RenderError, Result};
-use crate::exr_io::Channels;
-use crate::metadata::{self, RenderFacts};
-use crate::output::{self, Staged};
-use crate::post::{self, ObjectPixels, PngKind};
+use crate::ledger;
+use crate::output;
 use crate::worker::{Mode, RenderReply, Worker, WorkerOptions};
 
-/// Makes the scene of a job for a given attempt number.
-pub type SceneMaker = Arc<dyn Fn(u32) -> std::result::Result<SceneFile, String> + Send + Sync>;
-
-/// One image to produce.
-#[derive(Clone)]
-pub struct Job {
-    /// Image index (the number in the stem).
-    pub index: u64,
-    /// Variant name (the output folder `clevrtex_<variant>`).
-    pub variant: String,
-    /// File stem, e.g. `CLEVRTEX_camo_000012`.
-    pub stem: String,
-    /// Passes written for this job (the scene file's `passes` are replaced by these, plus
-    /// `mask`, which visibility needs; the mask file is written only when asked for).
-    pub passes: Vec<Pass>,
-    /// Produces the scene for attempt `n`.
-    pub scene: SceneMaker,
-    /// Whether a failed visibility check may resample (false for fixed scene files, whose
-    /// visibility is only measured and recorded).
-    pub resample: bool,
-}
-
-impl std::fmt::Debug for Job {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Job")
-            .field("index", &self.index)
-            .field("stem", &self.stem)
-            .finish_non_exhaustive()
-    }
-}
+pub use crate::job::{auto_timeout, Job, SampleStats, SceneMaker};
 
 /// How a run behaves.
 #[derive(Debug, Clone)]
@@ -95,18 +60,6 @@ pub struct PoolOptions {
 /// prints a line per sample; scene builds print too).
 pub const IDLE_TIMEOUT: Duration = Duration::from_secs(300);
 
-/// A generous per-request time limit for a scene: 10 minutes plus 8 s per sample at
-/// 320x240 (about 15x what one CPU thread needs, so a crowded machine does not trip it),
-/// doubled for the shadow pass's extra render. Hangs are caught sooner by [`IDLE_TIMEOUT`].
-pub fn auto_timeout(scene: &SceneFile) -> Duration {
-    let pixels = scene.render.width as f64 * scene.render.height as f64 / (320.0 * 240.0);
-    let mut secs = 600.0 + 8.0 * scene.render.samples as f64 * pixels.max(0.05);
-    if scene.passes.contains(&Pass::Shadow) {
-        secs *= 2.0;
-    }
-    Duration::from_secs_f64(secs)
-}
-
 /// Progress reports, sent while the run goes.
 #[derive(Debug)]
 pub enum PoolEvent<'a> {
@@ -146,42 +99,6 @@ pub enum PoolEvent<'a> {
         /// Why.
         error: &'a RenderError,
     },
-}
-
-/// What one finished sample cost.
-#[derive(Debug, Clone, Default)]
-pub struct SampleStats {
-    /// Image index.
-    pub index: u64,
-    /// Accepted attempt.
-    pub attempt: u32,
-    /// Where the metadata file went.
-    pub metadata: PathBuf,
-    /// Scene build time (bridge), accepted attempt.
-    pub build_s: f64,
-    /// Visibility pass time (whole request), accepted attempt.
-    pub visibility_s: f64,
-    /// Of all visibility passes of this image (accepted and rejected): the bridge's
-    /// scene-build time and Cycles time.
-    pub visibility_build_s: f64,
-    /// See [`SampleStats::visibility_build_s`].
-    pub visibility_render_s: f64,
-    /// Cycles render time of the final render (including the no-shadow render).
-    pub render_s: f64,
-    /// Whole final request, as seen from Rust.
-    pub final_request_s: f64,
-    /// Rust post-processing and writing.
-    pub post_s: f64,
-    /// Rejected attempts of this image.
-    pub rejects: u32,
-    /// Visibility passes of this image (accepted and rejected).
-    pub visibility_passes: u64,
-    /// Wall time of the rejected attempts.
-    pub reject_s: f64,
-    /// Blender's projection of each object origin (`[x, y, depth]`).
-    pub projected: Vec<[f64; 3]>,
-    /// Per-object visibility in the final mask.
-    pub objects: Vec<ObjectPixels>,
 }
 
 /// Totals of a run.
@@ -259,8 +176,8 @@ impl RunReport {
     }
 }
 
-struct Shared<'a> {
-    opts: &'a PoolOptions,
+pub(crate) struct Shared<'a> {
+    pub(crate) opts: &'a PoolOptions,
     bridge: BridgeDir,
     queue: Mutex<VecDeque<Job>>,
     report: Mutex<RunReport>,
@@ -269,7 +186,7 @@ struct Shared<'a> {
     ever_started: AtomicBool,
     threads: u32,
     ledger: Mutex<()>,
-    on_event: &'a (dyn Fn(&PoolEvent) + Sync),
+    pub(crate) on_event: &'a (dyn Fn(&PoolEvent) + Sync),
 }
 
 /// Render every job with `opts.workers` workers. Complete samples are skipped unless
@@ -334,47 +251,12 @@ pub fn run(
     if opts.interrupt.load(Ordering::SeqCst) {
         return Err(RenderError::Interrupted);
     }
-    prune_ledger(&opts.ledger, &stems, &report)?;
+    ledger::prune(&opts.ledger, &stems, &report.failed)?;
     Ok(report)
 }
 
-/// After a finished run, drop the ledger entries of this run's samples that are complete
-/// now (a rerun retried them), so the ledger lists only what is still missing; remove it
-/// when nothing is.
-fn prune_ledger(
-    ledger: &Path,
-    stems: &std::collections::BTreeSet<String>,
-    report: &RunReport,
-) -> Result<()> {
-    let Ok(text) = std::fs::read_to_string(ledger) else {
-        return Ok(());
-    };
-    let failed: std::collections::BTreeSet<u64> = report.failed.iter().map(|f| f.0).collect();
-    let keep: Vec<&str> = text
-        .lines()
-        .filter(|line| {
-            let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
-                return true;
-            };
-            let ran = v["stem"].as_str().is_some_and(|s| stems.contains(s));
-            let failed_now = v["index"].as_u64().is_some_and(|i| failed.contains(&i));
-            !ran || failed_now
-        })
-        .collect();
-    if keep.len() == text.lines().count() {
-        return Ok(());
-    }
-    if keep.is_empty() {
-        return std::fs::remove_file(ledger).map_err(|e| RenderError::write(ledger, e));
-    }
-    let tmp = ledger.with_extension(format!("jsonl{}", output::TMP_SUFFIX));
-    let body: String = keep.iter().map(|l| format!("{l}\n")).collect();
-    std::fs::write(&tmp, body).map_err(|e| RenderError::write(&tmp, e))?;
-    std::fs::rename(&tmp, ledger).map_err(|e| RenderError::write(ledger, e))
-}
-
 impl Shared<'_> {
-    fn stopping(&self) -> bool {
+    pub(crate) fn stopping(&self) -> bool {
         self.stop.load(Ordering::SeqCst) || self.opts.interrupt.load(Ordering::SeqCst)
     }
 
@@ -388,33 +270,15 @@ impl Shared<'_> {
 
     fn record_failure(&self, job: &Job, err: &RenderError) -> Result<()> {
         let _guard = self.ledger.lock().unwrap();
-        let line = serde_json::json!({
-            "index": job.index,
-            "stem": job.stem,
-            "variant": job.variant,
-            "error": err.to_string(),
-            "time_unix": std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map(|d| d.as_secs())
-                .unwrap_or(0),
-        });
-        if let Some(parent) = self.opts.ledger.parent() {
-            std::fs::create_dir_all(parent).map_err(|e| RenderError::write(parent, e))?;
-        }
-        let mut f = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&self.opts.ledger)
-            .map_err(|e| RenderError::write(&self.opts.ledger, e))?;
-        writeln!(f, "{line}").map_err(|e| RenderError::write(&self.opts.ledger, e))
+        ledger::record(&self.opts.ledger, job, err)
     }
 }
 
 /// One worker slot: a (re)startable Blender process and its scratch folder.
-struct Slot<'s, 'a> {
-    shared: &'s Shared<'a>,
-    worker: Option<Worker>,
-    scratch: tempfile::TempDir,
+pub(crate) struct Slot<'s, 'a> {
+    pub(crate) shared: &'s Shared<'a>,
+    pub(crate) worker: Option<Worker>,
+    pub(crate) scratch: tempfile::TempDir,
 }
 
 fn worker_thread(shared: &Shared) {
@@ -513,7 +377,7 @@ fn is_fatal(err: &RenderError) -> bool {
 }
 
 impl Slot<'_, '_> {
-    fn opts(&self) -> &PoolOptions {
+    pub(crate) fn opts(&self) -> &PoolOptions {
         self.shared.opts
     }
 
@@ -561,7 +425,7 @@ impl Slot<'_, '_> {
 
     /// One request with restarts: a crash, hang or garbage kills the worker; a fresh one
     /// retries, up to `retries` times.
-    fn request(
+    pub(crate) fn request(
         &mut self,
         label: &str,
         scene: &Path,
@@ -593,288 +457,4 @@ impl Slot<'_, '_> {
             }
         }
     }
-
-    fn run_job(&mut self, job: &Job) -> Result<SampleStats> {
-        let mut stats = SampleStats {
-            index: job.index,
-            ..SampleStats::default()
-        };
-        let opts = self.opts().clone();
-        let attempts = if job.resample {
-            opts.max_attempts.max(1)
-        } else {
-            1
-        };
-        let mut threshold = 0;
-        for attempt in 0..attempts {
-            if self.shared.stopping() {
-                return Err(RenderError::Interrupted);
-            }
-            let t_attempt = Instant::now();
-            let mut scene = (job.scene)(attempt).map_err(|message| RenderError::Sample {
-                index: job.index,
-                attempt,
-                message,
-            })?;
-            // The bridge always renders the object-index pass: visibility and the metadata's
-            // per-object pixel counts need it. Only requested passes become files.
-            let mut bridge_passes = job.passes.clone();
-            if !bridge_passes.contains(&Pass::Mask) {
-                bridge_passes.push(Pass::Mask);
-            }
-            bridge_passes.sort();
-            scene.passes = bridge_passes;
-            threshold = post::visibility_threshold(scene.render.width, scene.render.height);
-            let work = self.scratch.path().join(format!("{}-{attempt}", job.stem));
-            let _ = std::fs::remove_dir_all(&work);
-            std::fs::create_dir_all(&work).map_err(|e| RenderError::write(&work, e))?;
-            let scene_path = work.join("scene.json");
-            let text = serde_json::to_string_pretty(&scene).expect("scene serialises");
-            post::write_file(&scene_path, text.as_bytes())?;
-            let timeout = opts.timeout.unwrap_or_else(|| auto_timeout(&scene));
-            let n = scene.objects.len();
-            let label = format!("{} attempt {attempt}", job.stem);
-
-            let mut visibility_s = 0.0;
-            if job.resample && opts.visibility_check {
-                let t = Instant::now();
-                let reply = self.request(&label, &scene_path, Mode::Visibility, &work, timeout)?;
-                stats.visibility_build_s += reply.timings.build_s;
-                stats.visibility_render_s += reply.timings.render_s;
-                stats.visibility_passes += 1;
-                let exr = reply_file(&reply, "visibility", &work)?;
-                let ch = Channels::read(&exr)?;
-                let ids = post::instance_ids(ch.get("ViewLayer.IndexOB.X")?, n, &exr)?;
-                let px = post::object_pixels(&ids, ch.width, n);
-                visibility_s = t.elapsed().as_secs_f64();
-                if px.iter().any(|p| p.pixels <= threshold) {
-                    self.reject(job, attempt, t_attempt, &mut stats, &work);
-                    continue;
-                }
-            }
-
-            let t = Instant::now();
-            let reply = self.request(&label, &scene_path, Mode::Final, &work, timeout)?;
-            let final_request_s = t.elapsed().as_secs_f64();
-            let t_post = Instant::now();
-            let facts_blender = self
-                .worker
-                .as_ref()
-                .map(|w| w.ready().blender_version.clone())
-                .unwrap_or_default();
-            let dir = output::sample_dir(&opts.out, &job.variant, job.index);
-            let mut staged = Staged::new(&dir)?;
-            let objects = write_passes(
-                &reply,
-                &work,
-                &scene,
-                &job.passes,
-                &job.stem,
-                opts.keep_exr,
-                &mut staged,
-            )?;
-            if job.resample && objects.iter().any(|p| p.pixels <= threshold) {
-                // The final mask disagrees with the cheap pass (e.g. displacement hides an
-                // object): reject this layout too.
-                drop(staged);
-                self.reject(job, attempt, t_attempt, &mut stats, &work);
-                continue;
-            }
-            let mut meta_scene = scene.clone();
-            meta_scene.passes = job.passes.clone();
-            let doc = metadata::build(
-                &meta_scene,
-                &RenderFacts {
-                    objects: objects.clone(),
-                    blender_version: facts_blender,
-                    passes: job.passes.clone(),
-                },
-            );
-            let meta_name = output::metadata_file(&job.stem);
-            let text = serde_json::to_string_pretty(&doc).expect("metadata serialises");
-            staged.write(&meta_name, text.as_bytes())?;
-            // The last check before the point of no return: an interrupt now drops the staged
-            // files, so no partial sample is left.
-            if opts.interrupt.load(Ordering::SeqCst) {
-                return Err(RenderError::Interrupted);
-            }
-            staged.commit()?;
-            output::remove_other_outputs(&dir, &job.stem, &job.passes, opts.keep_exr);
-            let _ = std::fs::remove_dir_all(&work);
-            stats.attempt = attempt;
-            stats.metadata = dir.join(meta_name);
-            stats.build_s = reply.timings.build_s;
-            stats.visibility_s = visibility_s;
-            stats.render_s = reply.timings.render_s + reply.timings.noshadow_render_s;
-            stats.final_request_s = final_request_s;
-            stats.post_s = t_post.elapsed().as_secs_f64();
-            stats.projected = reply.projected.clone();
-            stats.objects = objects;
-            return Ok(stats);
-        }
-        Err(RenderError::TooManyRejects {
-            index: job.index,
-            attempts,
-            threshold,
-        })
-    }
-
-    fn reject(
-        &self,
-        job: &Job,
-        attempt: u32,
-        since: Instant,
-        stats: &mut SampleStats,
-        work: &Path,
-    ) {
-        let cost = since.elapsed();
-        stats.rejects += 1;
-        stats.reject_s += cost.as_secs_f64();
-        let _ = std::fs::remove_dir_all(work);
-        (self.shared.on_event)(&PoolEvent::Rejected {
-            index: job.index,
-            attempt,
-            cost,
-        });
-    }
-}
-
-/// A file the bridge says it wrote, which must lie in our scratch folder.
-fn reply_file(reply: &RenderReply, role: &str, work: &Path) -> Result<PathBuf> {
-    let path = reply
-        .files
-        .get(role)
-        .ok_or_else(|| RenderError::BadOutput {
-            path: work.to_path_buf(),
-            problem: format!(
-                "the bridge reported no `{role}` file (got: {})",
-                reply.files.keys().cloned().collect::<Vec<_>>().join(", ")
-            ),
-        })?;
-    if !path.is_file() {
-        return Err(RenderError::BadOutput {
-            path: path.clone(),
-            problem: format!("the `{role}` file the bridge reported does not exist"),
-        });
-    }
-    Ok(path.clone())
-}
-
-/// Three planes of float samples (R, G, B).
-type Rgb = [Vec<f32>; 3];
-
-/// The direct light with and without object shadows, per RGB channel: diffuse + glossy
-/// (weighted by the colours of the final render) when the bridge wrote the glossy channels,
-/// else diffuse direct light alone.
-fn shadow_inputs(fin: &Channels, ns: &Channels) -> Result<(Rgb, Rgb)> {
-    let name = |pass: &str, c: &str| format!("ViewLayer.{pass}.{c}");
-    let has_gloss = ["GlossDir", "GlossCol", "DiffCol"]
-        .iter()
-        .all(|p| fin.channels.contains_key(&name(p, "R")))
-        && ns.channels.contains_key(&name("GlossDir", "R"));
-    let mut lit: Rgb = Default::default();
-    let mut un: Rgb = Default::default();
-    for (k, c) in ["R", "G", "B"].into_iter().enumerate() {
-        if has_gloss {
-            let (dc, gc) = (
-                fin.get(&name("DiffCol", c))?,
-                fin.get(&name("GlossCol", c))?,
-            );
-            lit[k] = post::direct_light(
-                fin.get(&name("DiffDir", c))?,
-                dc,
-                fin.get(&name("GlossDir", c))?,
-                gc,
-            );
-            un[k] = post::direct_light(
-                ns.get(&name("DiffDir", c))?,
-                dc,
-                ns.get(&name("GlossDir", c))?,
-                gc,
-            );
-        } else {
-            lit[k] = fin.get(&name("DiffDir", c))?.to_vec();
-            un[k] = ns.get(&name("DiffDir", c))?.to_vec();
-        }
-    }
-    Ok((lit, un))
-}
-
-/// Decode the bridge's files, encode every requested pass into `staged`, and return the
-/// per-object visibility measured on the final mask.
-fn write_passes(
-    reply: &RenderReply,
-    work: &Path,
-    scene: &SceneFile,
-    passes: &[Pass],
-    stem: &str,
-    keep_exr: bool,
-    staged: &mut Staged,
-) -> Result<Vec<ObjectPixels>> {
-    let exr_path = reply_file(reply, "passes", work)?;
-    let ch = Channels::read(&exr_path)?;
-    let (w, h) = (ch.width as u32, ch.height as u32);
-    if (w, h) != (scene.render.width, scene.render.height) {
-        return Err(RenderError::BadOutput {
-            path: exr_path,
-            problem: format!(
-                "size {w}x{h} but the scene asks for {}x{}",
-                scene.render.width, scene.render.height
-            ),
-        });
-    }
-    let n = scene.objects.len();
-    let ids = post::instance_ids(ch.get("ViewLayer.IndexOB.X")?, n, &exr_path)?;
-    let objects = post::object_pixels(&ids, ch.width, n);
-    let png = |kind, d8: &[u8], d16: &[u16]| {
-        post::encode_png(kind, w, h, d8, d16).map_err(|e| RenderError::BadOutput {
-            path: exr_path.clone(),
-            problem: format!("cannot encode PNG: {e}"),
-        })
-    };
-    let rgb3 = |c: &Channels, base: &str, names: [&str; 3]| -> Result<[Vec<f32>; 3]> {
-        Ok([
-            c.get(&format!("{base}.{}", names[0]))?.to_vec(),
-            c.get(&format!("{base}.{}", names[1]))?.to_vec(),
-            c.get(&format!("{base}.{}", names[2]))?.to_vec(),
-        ])
-    };
-    for &pass in passes {
-        let name = output::pass_file(stem, pass);
-        match pass {
-            Pass::Rgb => staged.copy(&name, &reply_file(reply, "rgb", work)?)?,
-            Pass::Mask => staged.write(&name, &png(PngKind::Palette8, &ids, &[])?)?,
-            Pass::Depth => {
-                let d = post::encode_depth(ch.get("ViewLayer.Depth.Z")?);
-                staged.write(&name, &png(PngKind::Gray16, &[], &d)?)?
-            }
-            Pass::Normal => {
-                let [x, y, z] = rgb3(&ch, "ViewLayer.Normal", ["X", "Y", "Z"])?;
-                let d = post::encode_normal(&x, &y, &z);
-                staged.write(&name, &png(PngKind::Rgb16, &[], &d)?)?
-            }
-            Pass::Albedo => {
-                let [r, g, b] = rgb3(&ch, "ViewLayer.DiffCol", ["R", "G", "B"])?;
-                staged.write(
-                    &name,
-                    &png(PngKind::Rgb8, &post::encode_albedo(&r, &g, &b), &[])?,
-                )?
-            }
-            Pass::Shadow => {
-                let ns_path = reply_file(reply, "noshadow", work)?;
-                let ns = Channels::read(&ns_path)?;
-                let (lit, un) = shadow_inputs(&ch, &ns)?;
-                let s = post::encode_shadow([&lit[0], &lit[1], &lit[2]], [&un[0], &un[1], &un[2]]);
-                staged.write(&name, &png(PngKind::Gray8, &s, &[])?)?
-            }
-        }
-    }
-    if keep_exr {
-        let names = output::exr_files(stem, passes.contains(&Pass::Shadow));
-        staged.copy(&names[0], &exr_path)?;
-        if let Some(ns) = names.get(1) {
-            staged.copy(ns, &reply_file(reply, "noshadow", work)?)?;
-        }
-    }
-    Ok(objects)
 }
