@@ -1,27 +1,31 @@
 """The one table of render passes on the Blender side.
 
-Keys are the pass names of the scene file (the Rust `Pass` enum, which a Rust test checks
-against this table); values are the view-layer `use_pass_*` flags the pass needs. Adding a
-pass is one line here plus one variant there. Keep it a plain literal, one pass per line.
+Keys are the pass names of the scene file; values give the view-layer `use_pass_*` flags the
+pass needs (`flags`) and the layers it puts into the multilayer `passes.exr` as
+{layer: channel letters} (`exr`; the files hold `ViewLayer.<layer>.<letter>`). The Rust pass
+table (`crates/scene/src/passes.rs`) lists the same passes with the same EXR layers; the test
+`generate::pass_table_rust_and_bridge_agree` checks both, in Blender's own Python. Adding a
+pass is one entry here plus one there. Keep it a plain literal.
 """
 
 PASSES = {
-    "rgb": ["use_pass_combined"],
-    "mask": ["use_pass_object_index"],
-    "depth": ["use_pass_z"],
-    "normal": ["use_pass_normal"],
-    "albedo": ["use_pass_diffuse_color"],
-    "shadow": ["use_pass_diffuse_direct", "use_pass_diffuse_color", "use_pass_glossy_direct", "use_pass_glossy_color"],
+    "rgb": {"flags": ["use_pass_combined"], "exr": {}},
+    "mask": {"flags": ["use_pass_object_index"], "exr": {"IndexOB": "X"}},
+    "depth": {"flags": ["use_pass_z"], "exr": {"Depth": "Z"}},
+    "normal": {"flags": ["use_pass_normal"], "exr": {"Normal": "XYZ"}},
+    "albedo": {"flags": ["use_pass_diffuse_color"], "exr": {"DiffCol": "RGB"}},
+    "shadow": {"flags": ["use_pass_diffuse_direct", "use_pass_diffuse_color", "use_pass_glossy_direct", "use_pass_glossy_color"],
+               "exr": {"DiffDir": "RGB", "DiffCol": "RGB", "GlossDir": "RGB", "GlossCol": "RGB"}},
 }
 
 # Passes whose data lives in the multilayer `passes.exr` (rgb goes to `rgb.png` instead).
-EXR_PASSES = ("mask", "depth", "normal", "albedo", "shadow")
+EXR_PASSES = tuple(name for name, p in PASSES.items() if p["exr"])
 
 
 def all_flags():
     flags = set()
-    for needed in PASSES.values():
-        flags.update(needed)
+    for p in PASSES.values():
+        flags.update(p["flags"])
     return sorted(flags)
 
 
@@ -32,7 +36,7 @@ def enable(view_layer, pass_names):
         raise ValueError("unknown pass `%s`; known: %s" % (unknown[0], ", ".join(PASSES)))
     wanted = set()
     for name in pass_names:
-        wanted.update(PASSES[name])
+        wanted.update(PASSES[name]["flags"])
     for flag in all_flags():
         # Combined cannot really be skipped by Cycles; leaving it on costs nothing extra.
         setattr(view_layer, flag, flag in wanted or flag == "use_pass_combined")

@@ -14,9 +14,9 @@ use std::time::Duration;
 
 use clevrtex_eval::{score_image, Metric};
 use clevrtex_render::exr_io::Channels;
-use clevrtex_render::output;
 use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, SampleStats};
 use clevrtex_render::post::{self, decode_png, DecodedPng};
+use clevrtex_scene::layout;
 use clevrtex_scene::sample::{max_objects_bound, SampleError};
 use clevrtex_scene::{look_at_matrix, project, Config, Pass, SampleRequest, SceneFile};
 use serde_json::Value;
@@ -436,10 +436,10 @@ struct Outputs {
 
 fn outputs(r: &Rendered, index: usize) -> Outputs {
     let s = &r.scenes[index];
-    let dir = output::sample_dir(&r.out, &s.variant, s.index);
-    let f = |p: Pass| decode_png(&dir.join(output::pass_file(&s.stem, p))).unwrap();
+    let dir = layout::sample_dir(&r.out, &s.variant, s.index);
+    let f = |p: Pass| decode_png(&dir.join(layout::pass_file(&s.stem, p))).unwrap();
     let meta: Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.join(output::metadata_file(&s.stem))).unwrap(),
+        &std::fs::read_to_string(dir.join(layout::metadata_file(&s.stem))).unwrap(),
     )
     .unwrap();
     Outputs {
@@ -690,14 +690,14 @@ fn render_1920x1440_at_one_sample() {
     let mut s = sized(fixture("tiny3"), 0, 1920, 1440, 1);
     s.passes = vec![Pass::Rgb, Pass::Mask];
     render(blender, dir.path(), std::slice::from_ref(&s));
-    let sub = output::sample_dir(dir.path(), &s.variant, 0);
-    let mask = decode_png(&sub.join(output::pass_file(&s.stem, Pass::Mask))).unwrap();
+    let sub = layout::sample_dir(dir.path(), &s.variant, 0);
+    let mask = decode_png(&sub.join(layout::pass_file(&s.stem, Pass::Mask))).unwrap();
     assert_eq!((mask.width, mask.height), (1920, 1440));
     assert!(mask.data.iter().all(|&v| v <= 3));
     for id in 1..=3 {
         assert!(mask.data.contains(&id), "object {id} missing");
     }
-    let rgb = decode_png(&sub.join(output::pass_file(&s.stem, Pass::Rgb))).unwrap();
+    let rgb = decode_png(&sub.join(layout::pass_file(&s.stem, Pass::Rgb))).unwrap();
     assert_eq!(rgb.data.len(), 1920 * 1440 * 3);
 }
 

@@ -104,14 +104,50 @@ fn files_under(dir: &Path) -> Vec<String> {
     v
 }
 
+/// The Rust pass table (`clevrtex_scene::passes`) and the bridge's (`blender_scripts/passes.py`)
+/// list the same passes, in the same order, with the same EXR layers: read in Blender's own
+/// Python, the interpreter that runs the bridge.
 #[test]
-fn pass_enum_and_bridge_pass_table_agree() {
-    let bridge =
-        clevrtex_render::bridge::bridge_pass_names().expect("the bridge has a `PASSES = {` table");
-    let rust: Vec<String> = Pass::ALL.iter().map(|p| p.name().to_string()).collect();
+fn pass_table_rust_and_bridge_agree() {
+    let Some(blender) = blender_or_skip("pass_table_rust_and_bridge_agree") else {
+        return;
+    };
+    let scripts = repo_root().join("blender_scripts");
+    let expr = format!(
+        "import json, sys; sys.path.insert(0, {scripts:?}); import passes; \
+         print('@@PASSES@@' + json.dumps([[n, list(p['exr'].items())] for n, p in passes.PASSES.items()]))",
+        scripts = scripts.display().to_string()
+    );
+    let out = std::process::Command::new(&blender)
+        .args([
+            "-b",
+            "--factory-startup",
+            "--python-exit-code",
+            "1",
+            "--python-expr",
+            &expr,
+        ])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let line = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("@@PASSES@@"))
+        .unwrap_or_else(|| panic!("no pass table printed: {stdout}\n{}", text(&out)));
+    let bridge: Vec<(String, Vec<(String, String)>)> = serde_json::from_str(line).unwrap();
+    let rust: Vec<(String, Vec<(String, String)>)> = Pass::ALL
+        .iter()
+        .map(|p| {
+            let layers = p.spec().exr_layers.iter();
+            let layers = layers
+                .map(|(l, c)| (l.to_string(), c.to_string()))
+                .collect();
+            (p.name().to_string(), layers)
+        })
+        .collect();
     assert_eq!(
         bridge, rust,
-        "blender_scripts/passes.py PASSES vs clevrtex_scene::Pass::ALL"
+        "blender_scripts/passes.py PASSES vs clevrtex_scene::passes (names and EXR layers)"
     );
 }
 

@@ -9,8 +9,8 @@ use std::time::Duration;
 
 use anyhow::{bail, Context};
 use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, RunReport};
-use clevrtex_render::{output, RenderError};
-use clevrtex_scene::{Config, Pass, SampleRequest, SceneFile};
+use clevrtex_render::RenderError;
+use clevrtex_scene::{layout, Config, Pass, SampleRequest, SceneFile};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::exit::{self, CmdResult};
@@ -186,7 +186,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
             }
         })
         .collect();
-    let ledger = output::variant_dir(&args.run.out, &variant).join("failures.jsonl");
+    let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
     run_jobs(&args.run, jobs, ledger, args.max_attempts)
 }
 
@@ -229,8 +229,8 @@ pub fn run_render(args: RenderArgs) -> CmdResult {
         let scene = read_scene(&f)?;
         // The metadata has the scene file's name: rendering into the folder the scenes came
         // from would replace each scene file with its metadata.
-        let meta = output::sample_dir(&args.run.out, &scene.variant, scene.index)
-            .join(output::metadata_file(&scene.stem));
+        let meta = layout::sample_dir(&args.run.out, &scene.variant, scene.index)
+            .join(layout::metadata_file(&scene.stem));
         if let (Ok(a), Ok(b)) = (f.canonicalize(), meta.canonicalize()) {
             if a == b {
                 bail!(
@@ -255,7 +255,7 @@ pub fn run_render(args: RenderArgs) -> CmdResult {
     }
     let ledger = match variants.iter().next() {
         Some(v) if variants.len() == 1 => {
-            output::variant_dir(&args.run.out, v).join("failures.jsonl")
+            layout::variant_dir(&args.run.out, v).join("failures.jsonl")
         }
         _ => args.run.out.join("failures.jsonl"),
     };

@@ -96,7 +96,7 @@ pub fn run(args: Args) -> CmdResult {
 
     let mut dirs: Vec<PathBuf> = indices
         .iter()
-        .map(|&i| args.out.join(sample_dir(&config.name, i)))
+        .map(|&i| sample_dir(&args.out, &config.name, i))
         .collect();
     dirs.dedup();
     for d in &dirs {
@@ -167,7 +167,7 @@ pub fn run(args: Args) -> CmdResult {
 
 /// Write one scene file atomically: to a temporary name in the same folder, then rename.
 fn write_scene(out: &Path, variant: &str, scene: &clevrtex_scene::SceneFile) -> anyhow::Result<()> {
-    let dir = out.join(sample_dir(variant, scene.index));
+    let dir = sample_dir(out, variant, scene.index);
     let path = dir.join(format!("{}.json", scene.stem));
     let tmp = dir.join(format!(".{}.json.tmp{}", scene.stem, std::process::id()));
     let text = clevrtex_scene::to_pretty_json(scene).context("cannot serialise scene")?;

@@ -10,7 +10,7 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use clevrtex_scene::{Pass, SceneFile};
+use clevrtex_scene::{layout, Pass, SceneFile};
 
 use crate::error::{RenderError, Result};
 use crate::exr_io::Channels;
@@ -151,7 +151,7 @@ impl Slot<'_, '_> {
                 stats.visibility_passes += 1;
                 let exr = reply_file(&reply, "visibility", &work)?;
                 let ch = Channels::read(&exr)?;
-                let ids = post::instance_ids(ch.get("ViewLayer.IndexOB.X")?, n, &exr)?;
+                let ids = post::instance_ids(ch.get(&crate::passes::index_channel())?, n, &exr)?;
                 let px = post::object_pixels(&ids, ch.width, n);
                 visibility_s = t.elapsed().as_secs_f64();
                 if px.iter().any(|p| p.pixels <= threshold) {
@@ -169,7 +169,7 @@ impl Slot<'_, '_> {
                 .as_ref()
                 .map(|w| w.ready().blender_version.clone())
                 .unwrap_or_default();
-            let dir = output::sample_dir(&opts.out, &job.variant, job.index);
+            let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
             let mut staged = Staged::new(&dir)?;
             let objects = write_passes(
                 &reply,
@@ -197,8 +197,8 @@ impl Slot<'_, '_> {
                     passes: job.passes.clone(),
                 },
             );
-            let meta_name = output::metadata_file(&job.stem);
-            let text = serde_json::to_string_pretty(&doc).expect("metadata serialises");
+            let meta_name = layout::metadata_file(&job.stem);
+            let text = doc.to_json_pretty();
             staged.write(&meta_name, text.as_bytes())?;
             // The last check before the point of no return: an interrupt now drops the staged
             // files, so no partial sample is left.

@@ -2,8 +2,13 @@
 //! [`clevrtex_scene::metadata()`]) plus ours (seed, attempt, camera matrices, visibility per
 //! object, pass encodings, render settings, versions).
 
-use clevrtex_scene::{Pass, SceneFile};
-use serde_json::{json, Value};
+use std::collections::BTreeMap;
+
+use clevrtex_scene::metadata::Visibility;
+use clevrtex_scene::passes::Encoding;
+use clevrtex_scene::scene_file::RenderSettings;
+use clevrtex_scene::{ClevrMetadata, Pass, SceneFile};
+use serde::Serialize;
 
 use crate::post::{self, ObjectPixels};
 
@@ -50,85 +55,100 @@ pub fn extrinsics_opencv(scene: &SceneFile) -> [[f64; 4]; 4] {
     e
 }
 
-/// How each pass is encoded: written into every metadata file.
-pub fn pass_encodings(passes: &[Pass]) -> Value {
-    let mut map = serde_json::Map::new();
-    for &p in passes {
-        let v = match p {
-            Pass::Rgb => json!({"format": "png", "bits": 8, "channels": "RGB",
-                "encoding": "colour-managed render (view transform and look of `render`), sRGB"}),
-            Pass::Mask => json!({"format": "png", "bits": 8, "channels": "palette index",
-                "encoding": "instance id: 0 = background, i = objects[i-1]; exact object-index pass, never anti-aliased"}),
-            Pass::Depth => json!({"format": "png", "bits": 16, "channels": "gray",
-                "encoding": "planar depth (distance along the camera's view axis, metres) = value * scale",
-                "scale": post::DEPTH_SCALE_M, "background": post::DEPTH_BACKGROUND}),
-            Pass::Normal => json!({"format": "png", "bits": 16, "channels": "RGB = XYZ",
-                "space": "world", "encoding": "n = value / 65535 * 2 - 1",
-                "background": [32768, 32768, 32768]}),
-            Pass::Albedo => json!({"format": "png", "bits": 8, "channels": "RGB",
-                "encoding": "diffuse colour pass, linear values encoded with the sRGB transfer curve"}),
-            Pass::Shadow => json!({"format": "png", "bits": 8, "channels": "gray",
-                "encoding": "shadow = value / 255 = 1 - direct diffuse light / the same with objects casting no shadows (luminance)",
-                "undefined": post::SHADOW_UNDEFINED,
-                "undefined_when": format!("unshadowed direct light luminance < {}", post::SHADOW_EPS)}),
-        };
-        map.insert(p.name().to_string(), v);
-    }
-    Value::Object(map)
+/// The camera, in both conventions (`camera` of the metadata).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CameraMetadata {
+    /// Intrinsics `K`, see [`intrinsics`].
+    pub intrinsics: [[f64; 3]; 3],
+    /// World to camera, OpenCV axes, see [`extrinsics_opencv`].
+    pub extrinsics: [[f64; 4]; 4],
+    /// How to read `extrinsics`.
+    pub extrinsics_convention: &'static str,
+    /// Camera to world, Blender axes (the scene file's matrix).
+    pub matrix_world: [[f64; 4]; 4],
+    /// How to read `matrix_world`.
+    pub matrix_world_convention: &'static str,
+    /// Focal length.
+    pub focal_length_mm: f64,
+    /// Sensor width.
+    pub sensor_width_mm: f64,
+    /// Blender's sensor fit.
+    pub sensor_fit: &'static str,
+    /// Clip start and end.
+    pub clip: [f64; 2],
 }
 
-/// The full metadata document of a rendered scene.
-pub fn build(scene: &SceneFile, facts: &RenderFacts) -> Value {
+/// The metadata file of a rendered sample: every key of the published dataset (the
+/// flattened [`ClevrMetadata`], with each object's visibility) plus ours.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SampleMetadata {
+    /// The published keys.
+    #[serde(flatten)]
+    pub clevr: ClevrMetadata,
+    /// Variant name.
+    pub variant: String,
+    /// File stem.
+    pub stem: String,
+    /// Run seed.
+    pub seed: u64,
+    /// Accepted layout attempt.
+    pub attempt: u32,
+    /// The camera.
+    pub camera: CameraMetadata,
+    /// Objects at or under this many visible pixels were rejected.
+    pub visibility_threshold_px: u64,
+    /// How each written pass is encoded, by pass name (from the pass table).
+    pub passes: BTreeMap<&'static str, Encoding>,
+    /// The render settings.
+    pub render: RenderSettings,
+    /// Blender's version string.
+    pub blender_version: String,
+    /// This tool's version.
+    pub clevrtex_version: &'static str,
+}
+
+impl SampleMetadata {
+    /// The file's text: pretty JSON with every object's keys sorted (a canonical form, so
+    /// equal metadata is equal bytes).
+    pub fn to_json_pretty(&self) -> String {
+        let value = serde_json::to_value(self).expect("metadata serialises");
+        serde_json::to_string_pretty(&value).expect("metadata serialises")
+    }
+}
+
+/// The full metadata of a rendered scene.
+pub fn build(scene: &SceneFile, facts: &RenderFacts) -> SampleMetadata {
     let mut shown = scene.clone();
     shown.passes = facts.passes.clone();
-    let base = clevrtex_scene::metadata(&shown);
-    let mut doc = serde_json::to_value(&base).expect("metadata serialises");
-    let threshold = post::visibility_threshold(scene.render.width, scene.render.height);
-    if let Some(objects) = doc.get_mut("objects").and_then(Value::as_array_mut) {
-        for (o, px) in objects.iter_mut().zip(&facts.objects) {
-            if let Some(o) = o.as_object_mut() {
-                o.insert("visible_pixels".into(), json!(px.pixels));
-                o.insert("bbox".into(), json!(px.bbox));
-            }
-        }
+    let mut clevr = clevrtex_scene::metadata(&shown);
+    for (o, px) in clevr.objects.iter_mut().zip(&facts.objects) {
+        o.visibility = Some(Visibility {
+            visible_pixels: px.pixels,
+            bbox: px.bbox,
+        });
     }
-    let obj = doc.as_object_mut().expect("metadata is an object");
-    // Reference loaders read every `*_filename` key: unrequested passes are `null`.
-    for key in [
-        "image_filename",
-        "mask_filename",
-        "normal_filename",
-        "albedo_filename",
-        "depth_filename",
-        "shadow_filename",
-    ] {
-        obj.entry(key).or_insert(Value::Null);
+    let cam = &scene.camera;
+    SampleMetadata {
+        clevr,
+        variant: scene.variant.clone(),
+        stem: scene.stem.clone(),
+        seed: scene.seed,
+        attempt: scene.attempt,
+        camera: CameraMetadata {
+            intrinsics: intrinsics(scene),
+            extrinsics: extrinsics_opencv(scene),
+            extrinsics_convention: "world to camera, OpenCV axes (x right, y down, z forward); pixel = K * (E * X) / z, origin at the top-left image corner",
+            matrix_world: cam.matrix_world,
+            matrix_world_convention: "camera to world, Blender axes (x right, y up, looking along -z)",
+            focal_length_mm: cam.focal_length_mm,
+            sensor_width_mm: cam.sensor_width_mm,
+            sensor_fit: "AUTO",
+            clip: [cam.clip_start, cam.clip_end],
+        },
+        visibility_threshold_px: post::visibility_threshold(scene.render.width, scene.render.height),
+        passes: facts.passes.iter().map(|p| (p.name(), p.spec().encoding)).collect(),
+        render: scene.render.clone(),
+        blender_version: facts.blender_version.clone(),
+        clevrtex_version: env!("CARGO_PKG_VERSION"),
     }
-    obj.insert("variant".into(), json!(scene.variant));
-    obj.insert("stem".into(), json!(scene.stem));
-    obj.insert("seed".into(), json!(scene.seed));
-    obj.insert("attempt".into(), json!(scene.attempt));
-    obj.insert(
-        "camera".into(),
-        json!({
-            "intrinsics": intrinsics(scene),
-            "extrinsics": extrinsics_opencv(scene),
-            "extrinsics_convention": "world to camera, OpenCV axes (x right, y down, z forward); pixel = K * (E * X) / z, origin at the top-left image corner",
-            "matrix_world": scene.camera.matrix_world,
-            "matrix_world_convention": "camera to world, Blender axes (x right, y up, looking along -z)",
-            "focal_length_mm": scene.camera.focal_length_mm,
-            "sensor_width_mm": scene.camera.sensor_width_mm,
-            "sensor_fit": "AUTO",
-            "clip": [scene.camera.clip_start, scene.camera.clip_end],
-        }),
-    );
-    obj.insert("visibility_threshold_px".into(), json!(threshold));
-    obj.insert("passes".into(), pass_encodings(&facts.passes));
-    obj.insert(
-        "render".into(),
-        serde_json::to_value(&scene.render).expect("serialises"),
-    );
-    obj.insert("blender_version".into(), json!(facts.blender_version));
-    obj.insert("clevrtex_version".into(), json!(env!("CARGO_PKG_VERSION")));
-    doc
 }

@@ -1,54 +1,18 @@
-//! The published dataset layout (reference §4) and crash-safe writing of a sample's files.
+//! Crash-safe writing of a sample's files into the published layout (whose names and
+//! folders live in [`clevrtex_scene::layout`]).
 //!
-//! `OUT/clevrtex_<variant>/<index / 1000>/CLEVRTEX_<variant>_<index:06>{.png, _flat.png,
-//! _depth_0001.png, _normal_0001.png, _albedo_0001.png, _shadow_0001.png, .json}`.
 //! Each file is written under a temporary name and renamed once every file of the sample
 //! is ready, metadata last; a sample is complete only when all its files exist.
 
 use std::path::{Path, PathBuf};
 
+use clevrtex_scene::layout::{exr_files, metadata_file, pass_file};
 use clevrtex_scene::Pass;
 
 use crate::error::{RenderError, Result};
 
 /// Suffix of temporary files (never matched by the public loader's `*.png` glob).
 pub const TMP_SUFFIX: &str = ".clevrtex-tmp";
-
-/// Folder of one variant: `OUT/clevrtex_<variant>`.
-pub fn variant_dir(out: &Path, variant: &str) -> PathBuf {
-    out.join(format!("clevrtex_{variant}"))
-}
-
-/// Folder of one sample: `OUT/clevrtex_<variant>/<index / 1000>`.
-pub fn sample_dir(out: &Path, variant: &str, index: u64) -> PathBuf {
-    variant_dir(out, variant).join((index / 1000).to_string())
-}
-
-/// File name of a pass's output for `stem`.
-pub fn pass_file(stem: &str, pass: Pass) -> String {
-    match pass {
-        Pass::Rgb => format!("{stem}.png"),
-        Pass::Mask => format!("{stem}_flat.png"),
-        Pass::Depth => format!("{stem}_depth_0001.png"),
-        Pass::Normal => format!("{stem}_normal_0001.png"),
-        Pass::Albedo => format!("{stem}_albedo_0001.png"),
-        Pass::Shadow => format!("{stem}_shadow_0001.png"),
-    }
-}
-
-/// File name of the metadata.
-pub fn metadata_file(stem: &str) -> String {
-    format!("{stem}.json")
-}
-
-/// File names of the float EXRs kept with `--keep-exr`.
-pub fn exr_files(stem: &str, shadow: bool) -> Vec<String> {
-    let mut v = vec![format!("{stem}_passes.exr")];
-    if shadow {
-        v.push(format!("{stem}_noshadow.exr"));
-    }
-    v
-}
 
 /// Every file a complete sample has: one per requested pass, the metadata, and the EXRs
 /// when kept.
@@ -165,11 +129,6 @@ mod tests {
 
     #[test]
     fn layout_matches_the_reference() {
-        let out = Path::new("data");
-        assert_eq!(
-            sample_dir(out, "camo", 12345),
-            Path::new("data/clevrtex_camo/12")
-        );
         let stem = "CLEVRTEX_camo_012345";
         assert_eq!(pass_file(stem, Pass::Mask), "CLEVRTEX_camo_012345_flat.png");
         assert_eq!(

@@ -17,6 +17,7 @@ use crate::error::{RenderError, Result};
 use crate::ledger;
 use crate::output;
 use crate::worker::{Mode, RenderReply, Worker, WorkerOptions};
+use clevrtex_scene::layout;
 
 pub use crate::job::{auto_timeout, Job, SampleStats, SceneMaker};
 
@@ -208,7 +209,7 @@ pub fn run(
     };
     let mut cleaned = std::collections::BTreeSet::new();
     for job in jobs {
-        let dir = output::sample_dir(&opts.out, &job.variant, job.index);
+        let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
         if cleaned.insert(dir.clone()) {
             output::remove_stale_temps(&dir);
         }

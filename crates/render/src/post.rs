@@ -1,22 +1,17 @@
 //! Turning Blender's float passes into the final 8- and 16-bit PNG files.
 //!
-//! The encodings are documented in `docs/output-format.md`; the constants here are the
-//! single source of the numbers written into each sample's metadata.
+//! The encodings are documented in `docs/output-format.md`; the constants come from the
+//! pass table (`clevrtex_scene::passes`), the single source of the numbers written into each
+//! sample's metadata.
 
 use std::io::Write;
 use std::path::Path;
 
 use crate::error::{RenderError, Result};
 
-/// Depth PNG: metres per unit (1 mm), so 16 bits cover 0 to 65.534 m.
-pub const DEPTH_SCALE_M: f64 = 0.001;
-/// Depth PNG value of pixels that hit nothing (the black world) or lie beyond the range.
-pub const DEPTH_BACKGROUND: u16 = 65535;
-/// Shadow value where the unshadowed direct light is ~0 (unlit or back-facing): the
-/// shadow ratio is undefined there, and we call it "not shadowed".
-pub const SHADOW_UNDEFINED: u8 = 0;
-/// Unshadowed direct-light luminance below which the shadow ratio counts as undefined.
-pub const SHADOW_EPS: f32 = 1e-4;
+pub use clevrtex_scene::passes::{
+    PngKind, DEPTH_BACKGROUND, DEPTH_SCALE_M, NORMAL_BACKGROUND, SHADOW_EPS, SHADOW_UNDEFINED,
+};
 
 /// Per-object visibility measured on a mask.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
@@ -188,21 +183,6 @@ fn palette() -> Vec<u8> {
         p[i * 3 + 2] = ((b + m) * 255.0).round() as u8;
     }
     p
-}
-
-/// PNG colour layouts we write.
-#[derive(Debug, Clone, Copy)]
-pub enum PngKind {
-    /// 8-bit palette (the instance mask).
-    Palette8,
-    /// 8-bit greyscale.
-    Gray8,
-    /// 8-bit RGB.
-    Rgb8,
-    /// 16-bit greyscale.
-    Gray16,
-    /// 16-bit RGB.
-    Rgb16,
 }
 
 /// Encode a PNG into memory. `data8` is used for 8-bit kinds, `data16` for 16-bit ones.

@@ -1,5 +1,7 @@
 //! Poses and the pinhole camera model, matching Blender's.
 
+use serde::Serialize;
+
 use crate::scene_file::Camera;
 
 /// A row-major 4x4 matrix (`m[row][col]`), as stored in scene files.
@@ -90,14 +92,31 @@ fn ground_axis(camera: &Camera, c: usize, s: f64) -> [f64; 3] {
     normalize([s * a[0], s * a[1], 0.0])
 }
 
+/// The six ground-plane directions (unit vectors) from the camera.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Directions {
+    /// Away from the camera.
+    pub behind: [f64; 3],
+    /// Towards the camera.
+    pub front: [f64; 3],
+    /// The camera's left.
+    pub left: [f64; 3],
+    /// The camera's right.
+    pub right: [f64; 3],
+    /// World up.
+    pub above: [f64; 3],
+    /// World down.
+    pub below: [f64; 3],
+}
+
 /// The six CLEVR directions from the camera: `behind` is the view direction projected on the
 /// ground, `left` the camera's -X projected on the ground, `above` world +Z; the others are
 /// their opposites.
-pub fn directions(camera: &Camera) -> crate::metadata::Directions {
+pub fn directions(camera: &Camera) -> Directions {
     let behind = ground_axis(camera, 2, -1.0);
     let left = ground_axis(camera, 0, -1.0);
     let neg = |a: [f64; 3]| [-a[0], -a[1], -a[2]];
-    crate::metadata::Directions {
+    Directions {
         behind,
         front: neg(behind),
         left,

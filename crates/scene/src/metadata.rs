@@ -2,29 +2,14 @@
 
 use serde::Serialize;
 
+pub use crate::camera::Directions;
 use crate::camera::{directions, dot, project};
+use crate::layout;
 use crate::scene_file::{Pass, SceneFile};
 
 /// Threshold of the relationships: `j` is `behind` `i` when
 /// `dot(pos_j - pos_i, behind) > RELATION_EPS`.
 pub const RELATION_EPS: f64 = 0.2;
-
-/// The six ground-plane directions (unit vectors) from the camera.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Directions {
-    /// Away from the camera.
-    pub behind: [f64; 3],
-    /// Towards the camera.
-    pub front: [f64; 3],
-    /// The camera's left.
-    pub left: [f64; 3],
-    /// The camera's right.
-    pub right: [f64; 3],
-    /// World up.
-    pub above: [f64; 3],
-    /// World down.
-    pub below: [f64; 3],
-}
 
 /// For each relation and each object `i`, the sorted 0-based indices `j` in that relation.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -60,6 +45,19 @@ pub struct ObjectMetadata {
     pub color: Option<String>,
     /// Material name.
     pub material: String,
+    /// Visibility in the rendered mask (`visible_pixels`, `bbox`); absent before rendering.
+    #[serde(flatten)]
+    pub visibility: Option<Visibility>,
+}
+
+/// One object's visibility in a rendered mask.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Visibility {
+    /// Visible pixels.
+    pub visible_pixels: u64,
+    /// 2D bounding box `[x_min, y_min, x_max, y_max]`, inclusive pixel coordinates, y down;
+    /// `null` when the object is not visible at all.
+    pub bbox: Option<[u32; 4]>,
 }
 
 /// The metadata file of one image.
@@ -71,8 +69,8 @@ pub struct ClevrMetadata {
     pub split: String,
     /// Image index.
     pub image_index: u64,
-    /// `<stem>.png`, when the RGB pass is produced.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// `<stem>.png`, `null` unless the RGB pass is produced (reference loaders read every
+    /// `*_filename` key).
     pub image_filename: Option<String>,
     /// Backdrop material name.
     pub ground_material: String,
@@ -82,30 +80,16 @@ pub struct ClevrMetadata {
     pub objects: Vec<ObjectMetadata>,
     /// Spatial relationships.
     pub relationships: Relationships,
-    /// `<stem>_flat.png`, when the mask pass is produced.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// `<stem>_flat.png`, `null` unless the mask pass is produced.
     pub mask_filename: Option<String>,
-    /// `<stem>_normal_0001.png`, when produced.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// `<stem>_normal_0001.png`, `null` unless produced.
     pub normal_filename: Option<String>,
-    /// `<stem>_albedo_0001.png`, when produced.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// `<stem>_albedo_0001.png`, `null` unless produced.
     pub albedo_filename: Option<String>,
-    /// `<stem>_depth_0001.png`, when produced.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// `<stem>_depth_0001.png`, `null` unless produced.
     pub depth_filename: Option<String>,
-    /// `<stem>_shadow_0001.png`, when produced.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// `<stem>_shadow_0001.png`, `null` unless produced.
     pub shadow_filename: Option<String>,
-}
-
-/// File name of `pass` for the image with file stem `stem` (reference §4).
-pub fn pass_filename(stem: &str, pass: Pass) -> String {
-    match pass {
-        Pass::Rgb => format!("{stem}.png"),
-        Pass::Mask => format!("{stem}_flat.png"),
-        other => format!("{stem}_{}_0001.png", other.name()),
-    }
 }
 
 /// Relationships of points `pos` along the four ground directions.
@@ -141,7 +125,7 @@ pub fn metadata(scene: &SceneFile) -> ClevrMetadata {
         scene
             .passes
             .contains(&pass)
-            .then(|| pass_filename(&scene.stem, pass))
+            .then(|| layout::pass_file(&scene.stem, pass))
     };
     ClevrMetadata {
         num_objects: scene.objects.len(),
@@ -163,6 +147,7 @@ pub fn metadata(scene: &SceneFile) -> ClevrMetadata {
                 index: i + 1,
                 color: o.material.color_name.clone(),
                 material: o.material.name.clone(),
+                visibility: None,
             })
             .collect(),
         relationships: relationships(&pos, &dirs),
@@ -194,12 +179,5 @@ mod tests {
         assert_eq!(r.front, vec![vec![], vec![0, 2], vec![]]);
         assert_eq!(r.right, vec![vec![2], vec![2], vec![]]);
         assert_eq!(r.left, vec![vec![], vec![], vec![0, 1]]);
-    }
-
-    #[test]
-    fn pass_filenames_match_the_published_layout() {
-        assert_eq!(pass_filename("S", Pass::Rgb), "S.png");
-        assert_eq!(pass_filename("S", Pass::Mask), "S_flat.png");
-        assert_eq!(pass_filename("S", Pass::Depth), "S_depth_0001.png");
     }
 }

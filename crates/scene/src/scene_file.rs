@@ -7,6 +7,8 @@
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::passes::Pass;
+
 /// Value of [`SceneFile::format`]: lets tools recognise a scene file.
 pub const SCENE_FORMAT: &str = "clevrtex-scene";
 /// Current value of [`SceneFile::version`]. Bump on any incompatible change.
@@ -46,53 +48,6 @@ pub struct SceneFile {
     pub backdrop: Backdrop,
     /// Objects in metadata order: object `i` gets instance id `i + 1` in the mask.
     pub objects: Vec<SceneObject>,
-}
-
-/// A render pass. The same names key the bridge's pass table (`blender_scripts/`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Pass {
-    /// Colour-managed RGB image.
-    Rgb,
-    /// Instance ids from the object-index pass.
-    Mask,
-    /// Metric depth.
-    Depth,
-    /// Surface normals.
-    Normal,
-    /// Diffuse colour.
-    Albedo,
-    /// Computed shadow amount.
-    Shadow,
-}
-
-impl Pass {
-    /// Every pass, in canonical order.
-    pub const ALL: [Pass; 6] = [
-        Pass::Rgb,
-        Pass::Mask,
-        Pass::Depth,
-        Pass::Normal,
-        Pass::Albedo,
-        Pass::Shadow,
-    ];
-
-    /// The pass's name as used on the command line and in files.
-    pub fn name(self) -> &'static str {
-        match self {
-            Pass::Rgb => "rgb",
-            Pass::Mask => "mask",
-            Pass::Depth => "depth",
-            Pass::Normal => "normal",
-            Pass::Albedo => "albedo",
-            Pass::Shadow => "shadow",
-        }
-    }
-
-    /// Parse a pass name; `None` for an unknown name.
-    pub fn from_name(name: &str) -> Option<Pass> {
-        Pass::ALL.into_iter().find(|p| p.name() == name)
-    }
 }
 
 /// Cycles and colour-management settings.

@@ -1,0 +1,308 @@
+//! The pass table: every render pass and everything about it that is data.
+//!
+//! One entry per [`Pass`] in [`Pass::spec`]: its name (scene files, `--passes`, the bridge's
+//! `PASSES` table in `blender_scripts/passes.py`), the EXR layers the bridge writes for it,
+//! the file suffix of the published layout, the PNG it becomes and the encoding written into
+//! every sample's metadata. The numbers of the encodings are constants here too, so the
+//! encoders (`clevrtex_render::post`) and the metadata cannot disagree.
+//!
+//! Adding a pass: a variant of [`Pass`] and its entry in [`Pass::spec`], its entry in
+//! `blender_scripts/passes.py` (a test checks both tables agree, names and EXR layers), its
+//! encoder (`clevrtex_render::passes::encode`) and a test of it.
+
+use serde::{Deserialize, Serialize};
+
+/// Depth PNG: metres per unit (1 mm), so 16 bits cover 0 to 65.534 m.
+pub const DEPTH_SCALE_M: f64 = 0.001;
+/// Depth PNG value of pixels that hit nothing (the black world) or lie beyond the range.
+pub const DEPTH_BACKGROUND: u16 = 65535;
+/// Normal PNG value of pixels that hit nothing (the zero vector).
+pub const NORMAL_BACKGROUND: [u16; 3] = [32768, 32768, 32768];
+/// Shadow value where the unshadowed direct light is ~0 (unlit or back-facing): the
+/// shadow ratio is undefined there, and we call it "not shadowed".
+pub const SHADOW_UNDEFINED: u8 = 0;
+/// Unshadowed direct-light luminance below which the shadow ratio counts as undefined.
+pub const SHADOW_EPS: f32 = 1e-4;
+
+/// A render pass. The same names key the bridge's pass table (`blender_scripts/passes.py`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Pass {
+    /// Colour-managed RGB image.
+    Rgb,
+    /// Instance ids from the object-index pass.
+    Mask,
+    /// Metric depth.
+    Depth,
+    /// Surface normals.
+    Normal,
+    /// Diffuse colour.
+    Albedo,
+    /// Computed shadow amount.
+    Shadow,
+}
+
+/// Where the bridge puts a pass's data (the keys of the `files` of its reply).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// The colour-managed `rgb.png`, copied as it is.
+    RgbPng,
+    /// Layers of the multilayer `passes.exr` of the final render.
+    PassesExr,
+    /// Layers of `passes.exr`, and the same light layers of `noshadow.exr` (the final render
+    /// again with objects casting no shadows).
+    PassesAndNoShadowExr,
+}
+
+/// The colour layout of a published PNG.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PngKind {
+    /// 8-bit palette (the instance mask).
+    Palette8,
+    /// 8-bit greyscale.
+    Gray8,
+    /// 8-bit RGB.
+    Rgb8,
+    /// 16-bit greyscale.
+    Gray16,
+    /// 16-bit RGB.
+    Rgb16,
+}
+
+/// The value a pass's PNG holds where the camera sees nothing.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Background {
+    /// One grey value.
+    Gray(u16),
+    /// One RGB value.
+    Rgb([u16; 3]),
+}
+
+/// How a pass is encoded, as written under `passes.<name>` into every metadata file.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Encoding {
+    /// File format.
+    pub format: &'static str,
+    /// Bits per channel.
+    pub bits: u8,
+    /// What the channels hold.
+    pub channels: &'static str,
+    /// Coordinate space of vectors.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub space: Option<&'static str>,
+    /// How to turn values back into quantities.
+    pub encoding: &'static str,
+    /// Quantity per unit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
+    /// Value where the camera sees nothing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub background: Option<Background>,
+    /// Value where the quantity is undefined.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub undefined: Option<u8>,
+    /// When the quantity is undefined.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub undefined_when: Option<&'static str>,
+}
+
+/// Everything about one pass that is data (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PassSpec {
+    /// The pass.
+    pub pass: Pass,
+    /// Its name in scene files, on the command line and in the bridge's table.
+    pub name: &'static str,
+    /// Where its data comes from.
+    pub source: Source,
+    /// EXR layers read, as (layer, channel letters): `("Normal", "XYZ")` is the channels
+    /// `ViewLayer.Normal.X`, `.Y` and `.Z`. Empty for passes that are not EXR data.
+    pub exr_layers: &'static [(&'static str, &'static str)],
+    /// File name suffix after the stem: `<stem><suffix>.png`.
+    pub file_suffix: &'static str,
+    /// The PNG written.
+    pub png: PngKind,
+    /// The encoding written into the metadata.
+    pub encoding: Encoding,
+}
+
+const fn encoding(bits: u8, channels: &'static str, encoding: &'static str) -> Encoding {
+    Encoding {
+        format: "png",
+        bits,
+        channels,
+        space: None,
+        encoding,
+        scale: None,
+        background: None,
+        undefined: None,
+        undefined_when: None,
+    }
+}
+
+/// The table, in [`Pass::ALL`] order.
+const SPECS: [PassSpec; 6] = [
+    PassSpec {
+        pass: Pass::Rgb,
+        name: "rgb",
+        source: Source::RgbPng,
+        exr_layers: &[],
+        file_suffix: "",
+        png: PngKind::Rgb8,
+        encoding: encoding(
+            8,
+            "RGB",
+            "colour-managed render (view transform and look of `render`), sRGB",
+        ),
+    },
+    PassSpec {
+        pass: Pass::Mask,
+        name: "mask",
+        source: Source::PassesExr,
+        exr_layers: &[("IndexOB", "X")],
+        file_suffix: "_flat",
+        png: PngKind::Palette8,
+        encoding: encoding(
+            8,
+            "palette index",
+            "instance id: 0 = background, i = objects[i-1]; exact object-index pass, never anti-aliased",
+        ),
+    },
+    PassSpec {
+        pass: Pass::Depth,
+        name: "depth",
+        source: Source::PassesExr,
+        exr_layers: &[("Depth", "Z")],
+        file_suffix: "_depth_0001",
+        png: PngKind::Gray16,
+        encoding: Encoding {
+            scale: Some(DEPTH_SCALE_M),
+            background: Some(Background::Gray(DEPTH_BACKGROUND)),
+            ..encoding(
+                16,
+                "gray",
+                "planar depth (distance along the camera's view axis, metres) = value * scale",
+            )
+        },
+    },
+    PassSpec {
+        pass: Pass::Normal,
+        name: "normal",
+        source: Source::PassesExr,
+        exr_layers: &[("Normal", "XYZ")],
+        file_suffix: "_normal_0001",
+        png: PngKind::Rgb16,
+        encoding: Encoding {
+            space: Some("world"),
+            background: Some(Background::Rgb(NORMAL_BACKGROUND)),
+            ..encoding(16, "RGB = XYZ", "n = value / 65535 * 2 - 1")
+        },
+    },
+    PassSpec {
+        pass: Pass::Albedo,
+        name: "albedo",
+        source: Source::PassesExr,
+        exr_layers: &[("DiffCol", "RGB")],
+        file_suffix: "_albedo_0001",
+        png: PngKind::Rgb8,
+        encoding: encoding(
+            8,
+            "RGB",
+            "diffuse colour pass, linear values encoded with the sRGB transfer curve",
+        ),
+    },
+    PassSpec {
+        pass: Pass::Shadow,
+        name: "shadow",
+        source: Source::PassesAndNoShadowExr,
+        exr_layers: &[
+            ("DiffDir", "RGB"),
+            ("DiffCol", "RGB"),
+            ("GlossDir", "RGB"),
+            ("GlossCol", "RGB"),
+        ],
+        file_suffix: "_shadow_0001",
+        png: PngKind::Gray8,
+        encoding: Encoding {
+            undefined: Some(SHADOW_UNDEFINED),
+            // `SHADOW_EPS` written out (a test checks they agree).
+            undefined_when: Some("unshadowed direct light luminance < 0.0001"),
+            ..encoding(
+                8,
+                "gray",
+                "shadow = value / 255 = 1 - direct diffuse light / the same with objects casting no shadows (luminance)",
+            )
+        },
+    },
+];
+
+impl Pass {
+    /// Every pass, in canonical order.
+    pub const ALL: [Pass; 6] = [
+        Pass::Rgb,
+        Pass::Mask,
+        Pass::Depth,
+        Pass::Normal,
+        Pass::Albedo,
+        Pass::Shadow,
+    ];
+
+    /// The pass's entry in the pass table.
+    pub fn spec(self) -> &'static PassSpec {
+        &SPECS[self as usize]
+    }
+
+    /// The pass's name as used on the command line and in files.
+    pub fn name(self) -> &'static str {
+        self.spec().name
+    }
+
+    /// The pass called `name`, if any.
+    pub fn from_name(name: &str) -> Option<Pass> {
+        Pass::ALL.into_iter().find(|p| p.name() == name)
+    }
+}
+
+impl PassSpec {
+    /// The full EXR channel names this pass reads, layer by layer (`ViewLayer.<layer>.<c>`).
+    pub fn exr_channels(&self) -> Vec<Vec<String>> {
+        self.exr_layers
+            .iter()
+            .map(|(layer, cs)| {
+                cs.chars()
+                    .map(|c| format!("ViewLayer.{layer}.{c}"))
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_table_is_in_canonical_order() {
+        for (i, p) in Pass::ALL.into_iter().enumerate() {
+            assert_eq!(SPECS[i].pass, p);
+            assert_eq!(Pass::from_name(p.name()), Some(p));
+        }
+    }
+
+    #[test]
+    fn written_out_constants_agree() {
+        assert_eq!(
+            Pass::Shadow.spec().encoding.undefined_when,
+            Some(format!("unshadowed direct light luminance < {SHADOW_EPS}").as_str())
+        );
+        assert_eq!(
+            Pass::Normal.spec().exr_channels(),
+            vec![vec![
+                "ViewLayer.Normal.X".to_string(),
+                "ViewLayer.Normal.Y".into(),
+                "ViewLayer.Normal.Z".into()
+            ]]
+        );
+    }
+}
