@@ -883,3 +883,88 @@ fn statistics_outd() {
 fn statistics_clevr() {
     check_variant("clevr");
 }
+
+/// The `split` that `clevrtex sample` writes (and so every metadata file), and the splits
+/// `clevrtex eval` scores, agree with the public loader's rule for every total 1..=41: test =
+/// the first `int(0.1 * n)`, val up to `int(0.2 * n)`, evaluated by Python itself (its float
+/// products and truncation), not by a Rust copy of the rule.
+#[test]
+fn splits_agree_with_the_public_loaders_rule_for_totals_1_to_41() {
+    let py = std::process::Command::new("python3")
+        .args([
+            "-c",
+            "print(' '.join('%d,%d' % (int(0.1 * n), int(0.2 * n)) for n in range(1, 42)))",
+        ])
+        .output();
+    let Ok(py) = py else {
+        if std::env::var("CLEVRTEX_REQUIRE_BLENDER").as_deref() == Ok("1") {
+            panic!("python3 is required (CLEVRTEX_REQUIRE_BLENDER=1) but could not be run");
+        }
+        eprintln!(
+            "SKIPPED splits_agree_with_the_public_loaders_rule_for_totals_1_to_41: no python3"
+        );
+        return;
+    };
+    let rule: Vec<(u64, u64)> = String::from_utf8(py.stdout)
+        .unwrap()
+        .split_whitespace()
+        .map(|p| {
+            let (t, v) = p.split_once(',').unwrap();
+            (t.parse().unwrap(), v.parse().unwrap())
+        })
+        .collect();
+    assert_eq!(rule.len(), 41);
+    let tmp = tempfile::tempdir().unwrap();
+    let mut val_differs_from_ceil = 0;
+    for (n, &(t, v)) in (1u64..=41).zip(&rule) {
+        let loader = |i: u64| match i {
+            i if i < t => "test",
+            i if i < v => "val",
+            _ => "train",
+        };
+        let out = tmp.path().join(n.to_string());
+        let n_text = n.to_string();
+        run_ok(
+            &[
+                "--variant",
+                "clevr",
+                "-n",
+                &n_text,
+                "--seed",
+                "5",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &[],
+        );
+        for (rel, bytes) in tree(&out) {
+            let scene: SceneFile = serde_json::from_slice(&bytes).unwrap();
+            assert_eq!(scene.split, loader(scene.index), "n = {n}, {rel}");
+        }
+        // What the old rule (`10 i < n`) got wrong: e.g. n = 15, index 1.
+        val_differs_from_ceil += (t..n).filter(|&i| i * 10 < n).count();
+        let range = |s: clevrtex_eval::dataset::Split, variant: &str| {
+            s.range(n as usize, variant)
+                .map(|r| (r.start as u64, r.end as u64))
+        };
+        use clevrtex_eval::dataset::Split as EvalSplit;
+        assert_eq!(range(EvalSplit::Test, "full").unwrap(), (0, t), "n = {n}");
+        assert_eq!(
+            range(EvalSplit::Val, "full").unwrap(),
+            (t, v.max(t)),
+            "n = {n}"
+        );
+        assert_eq!(
+            range(EvalSplit::Train, "full").unwrap(),
+            (v.max(t), n),
+            "n = {n}"
+        );
+        // `outd` is test-only by its config (`"splits": "test_only"`), not by its name.
+        assert_eq!(range(EvalSplit::Test, "outd").unwrap(), (0, n), "n = {n}");
+        assert!(range(EvalSplit::Val, "outd").is_err());
+    }
+    assert!(
+        val_differs_from_ceil > 0,
+        "the totals cover the old rule's mistake"
+    );
+}

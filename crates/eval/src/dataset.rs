@@ -3,6 +3,9 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
+use clevrtex_scene::config::Splits;
+use clevrtex_scene::layout::{self, parse_stem};
+
 use crate::error::EvalError;
 
 /// One ground-truth sample: `CLEVRTEX_<variant>_<index:06>{.png,_flat.png,.json}`.
@@ -44,41 +47,29 @@ impl Split {
         }
     }
 
-    /// The positions `start..end` of this split among `n` samples of `variant` (`outd` is a
-    /// test-only dataset: its test split is all of it).
+    /// The positions `start..end` of this split among `n` samples of `variant`, by the
+    /// dataset layout's rule ([`clevrtex_scene::layout::Split`]); a variant whose config says
+    /// `"splits": "test_only"` (`outd`) has only a test split, all of it.
     pub fn range(self, n: usize, variant: &str) -> Result<std::ops::Range<usize>, EvalError> {
-        let t = (0.1 * n as f64) as usize;
-        let v = (0.2 * n as f64) as usize;
-        if variant == "outd" {
-            return match self {
-                Split::Test | Split::All => Ok(0..n),
-                _ => Err(EvalError::Usage {
-                    message: format!(
-                        "`outd` is a test-only dataset, it has no `{}` split",
-                        self.name()
-                    ),
-                    hint: "use `--split test` (the default) or `--split all`".into(),
-                }),
-            };
+        let splits = layout::variant_splits(variant);
+        let part = match self {
+            Split::All => return Ok(0..n),
+            Split::Test => layout::Split::Test,
+            Split::Val => layout::Split::Val,
+            Split::Train => layout::Split::Train,
+        };
+        if splits == Splits::TestOnly && part != layout::Split::Test {
+            return Err(EvalError::Usage {
+                message: format!(
+                    "`{variant}` is a test-only dataset, it has no `{}` split",
+                    self.name()
+                ),
+                hint: "use `--split test` (the default) or `--split all`".into(),
+            });
         }
-        Ok(match self {
-            Split::Test => 0..t,
-            Split::Val => t..v.max(t),
-            Split::Train => v.max(t)..n,
-            Split::All => 0..n,
-        })
+        let r = part.range(splits, n as u64);
+        Ok(r.start as usize..r.end as usize)
     }
-}
-
-/// Parse `CLEVRTEX_<variant>_<index:06>` + `suffix` from a file name.
-fn parse_stem<'a>(name: &'a str, suffix: &str) -> Option<(&'a str, &'a str, u64)> {
-    let stem = name.strip_suffix(suffix)?;
-    let rest = stem.strip_prefix("CLEVRTEX_")?;
-    let (variant, digits) = rest.rsplit_once('_')?;
-    if variant.is_empty() || digits.len() != 6 || !digits.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    Some((stem, variant, digits.parse().ok()?))
 }
 
 /// Every regular file under `dir`, recursively (symlinks followed, depth-limited).

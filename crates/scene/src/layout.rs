@@ -1,11 +1,14 @@
-//! The published dataset layout (reference §4), in one place: folders, stems and file names. Used by `sample`, `generate`/`render` and `eval`.
+//! The published dataset layout (reference §4), in one place: folders, stems, file names and
+//! which split an index belongs to. Used by `sample`, `generate`/`render` and `eval`.
 //!
 //! `OUT/clevrtex_<variant>/<index / 1000>/CLEVRTEX_<variant>_<index:06>{.png, _flat.png,
 //! _depth_0001.png, _normal_0001.png, _albedo_0001.png, _shadow_0001.png, .json}`; the pass
 //! suffixes come from the pass table ([`crate::passes`]).
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
+use crate::config::{Config, Splits};
 use crate::passes::Pass;
 
 /// File stem of image `index`: `CLEVRTEX_<variant>_<index:06>`.
@@ -55,6 +58,62 @@ pub fn exr_files(stem: &str, shadow: bool) -> Vec<String> {
     v
 }
 
+/// A split of the published dataset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Split {
+    /// The first `int(0.1 N)` images.
+    Test,
+    /// The next `int(0.2 N) - int(0.1 N)`.
+    Val,
+    /// The rest.
+    Train,
+}
+
+impl Split {
+    /// `test`, `val` or `train`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Test => "test",
+            Split::Val => "val",
+            Split::Train => "train",
+        }
+    }
+
+    /// The positions of this split among `total` images with the rule `splits`, exactly as
+    /// the public loader cuts them: test `[0, int(0.1 N))`, val `[int(0.1 N), int(0.2 N))`,
+    /// train the rest (Python's float products, truncated). A test-only set is all test.
+    pub fn range(self, splits: Splits, total: u64) -> Range<u64> {
+        let (t, v) = match splits {
+            Splits::TestOnly => (total, total),
+            Splits::Standard => {
+                let t = (0.1 * total as f64) as u64;
+                (t, ((0.2 * total as f64) as u64).max(t))
+            }
+        };
+        match self {
+            Split::Test => 0..t,
+            Split::Val => t..v,
+            Split::Train => v..total,
+        }
+    }
+
+    /// The split of image `index` in a dataset of `total` images (see [`Split::range`]).
+    pub fn of(splits: Splits, index: u64, total: u64) -> Split {
+        [Split::Test, Split::Val]
+            .into_iter()
+            .find(|s| s.range(splits, total).contains(&index))
+            .unwrap_or(Split::Train)
+    }
+}
+
+/// The split rule of a variant: its built-in config's `splits`, or [`Splits::Standard`] for a
+/// variant that is not built in (a `--config` of the user's).
+pub fn variant_splits(variant: &str) -> Splits {
+    Config::builtin(variant)
+        .map(|c| c.splits)
+        .unwrap_or(Splits::Standard)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -99,5 +158,20 @@ mod tests {
             parse_stem(&format!("{big}.json"), ".json"),
             Some((big.as_str(), "full", 1_234_567))
         );
+    }
+
+    #[test]
+    fn splits_follow_the_index() {
+        let s = Splits::Standard;
+        assert_eq!(Split::of(s, 0, 100), Split::Test);
+        assert_eq!(Split::of(s, 9, 100), Split::Test);
+        assert_eq!(Split::of(s, 10, 100), Split::Val);
+        assert_eq!(Split::of(s, 19, 100), Split::Val);
+        assert_eq!(Split::of(s, 20, 100), Split::Train);
+        assert_eq!(Split::of(Splits::TestOnly, 99, 100), Split::Test);
+        // The public loader's int(0.1 * 15) = 1: index 1 is `val`.
+        assert_eq!(Split::of(s, 1, 15), Split::Val);
+        assert_eq!(Split::Val.range(s, 15), 1..3);
+        assert_eq!(Split::Train.range(Splits::TestOnly, 7), 7..7);
     }
 }

@@ -1,8 +1,8 @@
 //! The sampler: one seeded, pure function from (config, request) to a scene file.
 
 use crate::camera::{directions, look_at_matrix, normalize, track_matrix};
-use crate::config::{Config, Placement, Splits};
-use crate::layout::stem;
+use crate::config::{Config, Placement};
+use crate::layout::{stem, Split};
 use crate::rng::{below, choose, scene_rng, uniform, unit, Purpose, SceneRng};
 use crate::scene_file::{
     AreaLight, Backdrop, Camera, MaterialInstance, SceneFile, SceneObject, Sun, SCENE_FORMAT,
@@ -67,23 +67,6 @@ pub enum SampleError {
         /// Restarts made.
         restarts: u32,
     },
-}
-
-/// Split name of image `index` in a dataset of `total` images.
-pub fn split(splits: Splits, index: u64, total: u64) -> &'static str {
-    match splits {
-        Splits::TestOnly => "test",
-        Splits::Standard => {
-            let (i, t) = (u128::from(index) * 10, u128::from(total));
-            if i < t {
-                "test"
-            } else if i < 2 * t {
-                "val"
-            } else {
-                "train"
-            }
-        }
-    }
 }
 
 /// The object count of image `index`: drawn from its own stream, so it is the same for every
@@ -288,7 +271,9 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
         version: SCENE_VERSION,
         variant: config.name.clone(),
         index: req.index,
-        split: split(config.splits, req.index, req.total).to_string(),
+        split: Split::of(config.splits, req.index, req.total)
+            .name()
+            .to_string(),
         seed: req.seed,
         attempt: req.attempt,
         stem: stem(&config.name, req.index),
@@ -399,16 +384,6 @@ mod tests {
         .unwrap();
         assert_ne!(a.camera, b.camera);
         assert_eq!(a.objects.len(), b.objects.len());
-    }
-
-    #[test]
-    fn splits_follow_the_index() {
-        assert_eq!(split(Splits::Standard, 0, 100), "test");
-        assert_eq!(split(Splits::Standard, 9, 100), "test");
-        assert_eq!(split(Splits::Standard, 10, 100), "val");
-        assert_eq!(split(Splits::Standard, 19, 100), "val");
-        assert_eq!(split(Splits::Standard, 20, 100), "train");
-        assert_eq!(split(Splits::TestOnly, 99, 100), "test");
     }
 
     #[test]
