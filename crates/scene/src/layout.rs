@@ -153,6 +153,10 @@ mod tests {
         );
         assert_eq!(parse_stem("CLEVRTEX_full_000123_flat.png", ".png"), None);
         assert_eq!(parse_stem("CLEVRTEX_full_12345.png", ".png"), None);
+        assert_eq!(
+            parse_stem("CLEVRTEX_full_000001_mask.png", "_mask.png"),
+            Some(("CLEVRTEX_full_000001", "full", 1))
+        );
         let big = stem("full", 1_234_567);
         assert_eq!(
             parse_stem(&format!("{big}.json"), ".json"),

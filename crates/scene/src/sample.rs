@@ -101,9 +101,14 @@ pub fn max_objects_bound(config: &Config) -> u32 {
 /// Fail when the largest object count of `config` exceeds [`max_objects_bound`]: such a
 /// config can never sample its largest scenes, so a run should stop before it starts.
 pub fn check_feasible(config: &Config) -> Result<(), SampleError> {
+    count_fits(config, config.objects.count[1])
+}
+
+/// Fail when `count` objects of `config` can never be placed (more than
+/// [`max_objects_bound`]).
+fn count_fits(config: &Config, count: u32) -> Result<(), SampleError> {
     let p = &config.base.placement;
     let bound = max_objects_bound(config);
-    let count = config.objects.count[1];
     if count > bound {
         return Err(SampleError::Infeasible {
             count,
@@ -148,16 +153,7 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
     }
     let p = &config.base.placement;
     let count = object_count(config, req.seed, req.index);
-    let bound = max_objects_bound(config);
-    if count > bound {
-        return Err(SampleError::Infeasible {
-            count,
-            min_size: min_size(config),
-            min_dist: p.min_dist,
-            side: p.area[1] - p.area[0],
-            bound,
-        });
-    }
+    count_fits(config, count)?;
 
     let mut rng = scene_rng(req.seed, req.attempt, Purpose::Layout, req.index);
     let base = &config.base;
