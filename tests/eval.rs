@@ -647,3 +647,197 @@ fn eval_io_errors_name_the_cause_once_before_the_hint() {
         "a temporary file was left: {left:?}"
     );
 }
+
+/// A `.npy` header for `descr` and `shape` (the data follows it).
+fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| format!("{d}, ")).collect();
+    let mut header = format!(
+        "{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}), }}",
+        dims.concat()
+    );
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut b = b"\x93NUMPY\x01\x00".to_vec();
+    b.extend((header.len() as u16).to_le_bytes());
+    b.extend(header.as_bytes());
+    b
+}
+
+/// Write an `.npz` of `(name, npy bytes, extra zero bytes after them)` members, deflated.
+fn write_npz(path: &Path, members: &[(&str, Vec<u8>, usize)]) {
+    use std::io::Write;
+    let mut z = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
+    let opts = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated)
+        .large_file(true);
+    for (name, bytes, zeros) in members {
+        z.start_file(format!("{name}.npy"), opts).unwrap();
+        z.write_all(bytes).unwrap();
+        let chunk = vec![0u8; 1 << 20];
+        let mut left = *zeros;
+        while left > 0 {
+            let n = left.min(chunk.len());
+            z.write_all(&chunk[..n]).unwrap();
+            left -= n;
+        }
+    }
+    z.finish().unwrap();
+}
+
+/// A copy of the npz predictions of the fixture, to spoil one of.
+fn npz_preds(dir: &Path) -> std::path::PathBuf {
+    let preds = dir.join("preds");
+    copy_dir(&data("eval/preds/npz"), &preds);
+    preds
+}
+
+#[test]
+fn eval_bootstrap_above_the_cap_is_refused_at_once() {
+    let t = std::time::Instant::now();
+    let out = run(&[
+        "eval",
+        s(&data("eval/preds/png")),
+        s(&gt()),
+        "--bootstrap",
+        "1000000000",
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("`--bootstrap 1000000000` is more than the 100000"),
+        "{}",
+        text(&out)
+    );
+    assert!(t.elapsed() < std::time::Duration::from_secs(30));
+}
+
+/// A 256 MiB `masks` member that deflates to a few hundred KB, declaring far more masks than
+/// a 40x30 image can have: refused from its header, before its data is inflated.
+#[test]
+fn eval_npz_bomb_is_rejected_from_its_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let preds = npz_preds(dir.path());
+    let shape = [55_924, 30, 40];
+    let bomb = preds.join("clevrtex_vbg/0/CLEVRTEX_vbg_000000.npz");
+    let _ = std::fs::remove_file(&bomb);
+    let bomb = preds.join("CLEVRTEX_vbg_000000.npz");
+    write_npz(
+        &bomb,
+        &[("masks", npy_header("<f4", &shape), 55_924 * 1200 * 4)],
+    );
+    assert!(std::fs::metadata(&bomb).unwrap().len() < 4 << 20);
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&gt()),
+        "--split",
+        "all",
+        "--bootstrap",
+        "0",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("declares shape [55924, 30, 40] (67108800 values), more than the"),
+        "{}",
+        text(&out)
+    );
+}
+
+#[test]
+fn eval_empty_default_split_is_an_error_not_a_usage_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = dir.path().join("gt");
+    copy_dir(&gt(), &small);
+    for i in 5..10 {
+        for suffix in [".png", "_flat.png", ".json"] {
+            let f = small.join(format!("clevrtex_vbg/0/CLEVRTEX_vbg_00000{i}{suffix}"));
+            std::fs::remove_file(f).unwrap();
+        }
+    }
+    let out = run(&[
+        "eval",
+        s(&data("eval/preds/png")),
+        s(&small),
+        "--bootstrap",
+        "0",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("the `test` split of")
+            && stderr(&out).contains("is empty: it has 5 samples in all")
+            && stderr(&out).contains("--split all"),
+        "{}",
+        text(&out)
+    );
+}
+
+#[test]
+fn eval_uint64_ids_too_large_are_named_as_they_are() {
+    let dir = tempfile::tempdir().unwrap();
+    let preds = dir.path().join("preds");
+    std::fs::create_dir_all(&preds).unwrap();
+    let mut b = npy_header("<u8", &[30, 40]);
+    for i in 0..1200u64 {
+        b.extend(if i == 7 { u64::MAX } else { 0 }.to_le_bytes());
+    }
+    std::fs::write(preds.join("CLEVRTEX_vbg_000000.npy"), b).unwrap();
+    let out = run(&["eval", s(&preds), s(&gt()), "--bootstrap", "0"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("value 18446744073709551615 of `<u8` is too large"),
+        "{}",
+        text(&out)
+    );
+    assert!(
+        !stderr(&out).contains("9223372036854775807"),
+        "{}",
+        text(&out)
+    );
+}
+
+/// NaN, 1e30 and out-of-range reconstructions: MSE undefined (said, counted, left out of the
+/// mean), or scored as given with a warning.
+#[test]
+fn eval_nan_huge_and_out_of_range_reconstructions_are_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let preds = npz_preds(dir.path());
+    // The evaluation shape under `--protocol clevrtex` (the default): 128x128.
+    let labels = npy_i32(&[128, 128], &[0; 128 * 128]);
+    let recon = |v: f32| {
+        let mut b = npy_header("<f4", &[3, 128, 128]);
+        for _ in 0..3 * 128 * 128 {
+            b.extend(v.to_le_bytes());
+        }
+        b
+    };
+    for (i, v) in [(0, f32::NAN), (1, 1e30), (2, 1.5)] {
+        let f = preds.join(format!("CLEVRTEX_vbg_00000{i}.npz"));
+        let _ = std::fs::remove_file(&f);
+        write_npz(&f, &[("labels", labels.clone(), 0), ("recon", recon(v), 0)]);
+    }
+    let j = dir.path().join("r.json");
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&gt()),
+        "--split",
+        "all",
+        "--bootstrap",
+        "0",
+        "--json",
+        s(&j),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let r: Value = serde_json::from_slice(&std::fs::read(&j).unwrap()).unwrap();
+    assert_eq!(r["counts"]["recon_undefined"], 2, "{r}");
+    assert_eq!(r["counts"]["recon_out_of_range"], 1, "{r}");
+    assert!(r["metrics"]["MSE"].as_f64().unwrap().is_finite());
+    let err = stderr(&out);
+    assert!(
+        err.contains("2 of 10 reconstructions hold NaN or infinite values")
+            && err.contains("1 of 10 reconstructions hold values outside [0, 1]"),
+        "{}",
+        text(&out)
+    );
+}

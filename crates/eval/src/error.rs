@@ -101,6 +101,16 @@ pub enum EvalError {
         /// The missing file.
         path: PathBuf,
     },
+    /// The chosen split holds no sample.
+    #[error("the `{split}` split of `{}` is empty: it has {total} samples in all\nhint: a split is a share of the samples (test the first int(0.1 N), val up to int(0.2 N), train the rest); use `--split all` for small datasets", gt.display())]
+    EmptySplit {
+        /// The split.
+        split: &'static str,
+        /// The ground-truth folder.
+        gt: PathBuf,
+        /// Samples in all.
+        total: usize,
+    },
     /// A bad combination of options.
     #[error("{message}\nhint: {hint}")]
     Usage {

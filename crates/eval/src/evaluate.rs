@@ -95,6 +95,41 @@ pub struct ImageResult {
     pub gt_hash: u64,
     /// Hash of the prediction files read (0 when missing).
     pub pred_hash: u64,
+    /// What was wrong with the reconstruction, if anything.
+    pub recon_issue: Option<ReconIssue>,
+}
+
+/// A reconstruction that is not plain values in [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ReconIssue {
+    /// NaN or infinite values (`nonfinite` of them), or errors too large to sum: its MSE (and
+    /// its objects' squared errors) are undefined, left out of the means and counted.
+    Undefined {
+        /// Non-finite values (0 when the values are finite but their squared error is not).
+        nonfinite: usize,
+    },
+    /// Finite values outside [0, 1]: scored as given (the benchmark does not clip), and
+    /// warned about.
+    OutOfRange {
+        /// Smallest value.
+        min: f32,
+        /// Largest value.
+        max: f32,
+    },
+}
+
+/// Check float reconstruction values: non-finite, or outside [0, 1].
+fn recon_issue(values: &[f32]) -> Option<ReconIssue> {
+    let nonfinite = values.iter().filter(|v| !v.is_finite()).count();
+    if nonfinite > 0 {
+        return Some(ReconIssue::Undefined { nonfinite });
+    }
+    let (min, max) = values
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    (min < 0.0 || max > 1.0).then_some(ReconIssue::OutOfRange { min, max })
 }
 
 /// Mean, confidence interval and count of one metric over the dataset.
@@ -159,6 +194,18 @@ impl Report {
         self.images.iter().filter(|i| i.missing).count()
     }
 
+    /// Images whose reconstruction made MSE undefined (NaN, infinite or overflowing).
+    pub fn recon_undefined(&self) -> usize {
+        let bad = |i: &&ImageResult| matches!(i.recon_issue, Some(ReconIssue::Undefined { .. }));
+        self.images.iter().filter(bad).count()
+    }
+
+    /// Images whose reconstruction held values outside [0, 1].
+    pub fn recon_out_of_range(&self) -> usize {
+        let bad = |i: &&ImageResult| matches!(i.recon_issue, Some(ReconIssue::OutOfRange { .. }));
+        self.images.iter().filter(bad).count()
+    }
+
     /// Metadata objects whose label did not occur.
     pub fn objects_skipped(&self) -> usize {
         self.images.iter().map(|i| i.objects_skipped).sum()
@@ -179,20 +226,36 @@ fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
 
 const GT_HINT: &str = "the ground truth is damaged: regenerate or re-download this sample";
 
+/// Most bootstrap resamples (each costs one pass over the images and 80 bytes).
+pub const MAX_BOOTSTRAP: usize = 100_000;
+
 /// Evaluate the predictions under `preds` against the dataset under `gt`.
 pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalError> {
+    if opts.bootstrap > MAX_BOOTSTRAP {
+        return Err(EvalError::Usage {
+            message: format!(
+                "`--bootstrap {}` is more than the {MAX_BOOTSTRAP} resamples allowed",
+                opts.bootstrap
+            ),
+            hint: "1000 (the default) gives stable 95% intervals; use at most 100000".into(),
+        });
+    }
     let (variant, samples) = discover_gt(gt, opts.variant.as_deref())?;
-    let split = opts.split.unwrap_or(if variant == "outd" {
-        Split::All
-    } else {
-        Split::Test
-    });
-    let range = split.range(samples.len(), &variant)?;
+    // A test-only variant (its config says `"splits": "test_only"`) is scored whole.
+    let split = opts
+        .split
+        .unwrap_or(match clevrtex_scene::layout::variant_splits(&variant) {
+            clevrtex_scene::config::Splits::TestOnly => Split::All,
+            clevrtex_scene::config::Splits::Standard => Split::Test,
+        });
+    let samples_len = samples.len();
+    let range = split.range(samples_len, &variant)?;
     let samples = &samples[range];
     if samples.is_empty() {
-        return Err(EvalError::Usage {
-            message: format!("the `{}` split of `{}` is empty", split.name(), gt.display()),
-            hint: "a split is a share of the samples (test 10%, val 10%, train 80%); use `--split all` for small datasets".into(),
+        return Err(EvalError::EmptySplit {
+            split: split.name(),
+            gt: gt.to_path_buf(),
+            total: samples_len,
         });
     }
     let pred_index = index_preds(preds, &variant)?;
@@ -428,7 +491,23 @@ fn score_sample(
         }),
         _ => None,
     };
-    let scores = score_image(&truth, &pred.labels, pred.slots, recon);
+    let mut recon_issue = match &pred.recon {
+        Some(predict::ReconImage::Unit(v)) => recon_issue(v),
+        _ => None,
+    };
+    let mut scores = score_image(&truth, &pred.labels, pred.slots, recon);
+    let mse = Metric::ALL.iter().position(|&m| m == Metric::Mse);
+    let mse = mse.expect("MSE is a metric");
+    if pred.recon.is_some() && scores.values[mse].is_none() {
+        // Finite values whose squared error overflows (e.g. 1e30) are undefined too.
+        if !matches!(recon_issue, Some(ReconIssue::Undefined { .. })) {
+            recon_issue = Some(ReconIssue::Undefined { nonfinite: 0 });
+        }
+    }
+    if let Some(ReconIssue::Undefined { .. }) = recon_issue {
+        scores.values[mse] = None;
+        scores.sq_err_per_true = None;
+    }
 
     // Per-object breakdown: object i has label i + 1; the background goes by ground material.
     let mut objects = Vec::new();
@@ -483,5 +562,6 @@ fn score_sample(
         objects_skipped: skipped,
         gt_hash: xxh3_64(&gh_bytes),
         pred_hash,
+        recon_issue,
     })
 }

@@ -45,6 +45,8 @@ pub fn to_json(r: &Report, tool_version: &str) -> Value {
             "missing": r.missing(),
             "undefined": undefined,
             "objects_skipped": r.objects_skipped(),
+            "recon_undefined": r.recon_undefined(),
+            "recon_out_of_range": r.recon_out_of_range(),
         },
         "breakdowns": breakdowns,
         "provenance": {

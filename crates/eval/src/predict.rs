@@ -286,13 +286,23 @@ pub fn load(
         };
         segmentation_from_array(seg, &arr, kind, hw, no_background)?
     } else {
-        let mut arrays = read::npz(&bytes, &["labels", "masks", "recon"]).map_err(|r| {
-            corrupt(
-                seg,
-                r,
-                "write it with `numpy.savez` or `numpy.savez_compressed`",
-            )
-        })?;
+        // Bounds before inflating: labels (H, W), masks at most MAX_SLOTS x (H, W), recon 3 x (H, W).
+        let max_elements = |name: &str| {
+            let per = match name {
+                "masks" => MAX_SLOTS,
+                "recon" => 3,
+                _ => 1,
+            };
+            per.saturating_mul(w).saturating_mul(h)
+        };
+        let mut arrays =
+            read::npz(&bytes, &["labels", "masks", "recon"], &max_elements).map_err(|r| {
+                corrupt(
+                    seg,
+                    r,
+                    "write it with `numpy.savez` or `numpy.savez_compressed`",
+                )
+            })?;
         if let Some(r) = arrays.remove("recon") {
             recon = Some(ReconImage::Unit(recon_from_array(seg, &r, hw)?));
         }

@@ -315,9 +315,28 @@ impl LitParser<'_> {
     }
 }
 
-/// Parse a `.npy` file (format versions 1-3; bool, integer and float dtypes of either byte
-/// order; C or Fortran order).
-pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
+/// What a `.npy` header declares.
+struct NpyHeader {
+    descr: String,
+    fortran: bool,
+    shape: Vec<usize>,
+    big: bool,
+    kind: u8,
+    size: usize,
+    count: usize,
+    /// Offset of the data after the header.
+    data_start: usize,
+}
+
+impl NpyHeader {
+    /// Bytes of the data the header declares.
+    fn nbytes(&self) -> usize {
+        self.count * self.size
+    }
+}
+
+/// Parse the header of a `.npy` file: everything up to its data (the data need not be there).
+fn npy_header(bytes: &[u8]) -> Result<NpyHeader, String> {
     if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
         return Err("not a `.npy` file (bad magic)".into());
     }
@@ -336,7 +355,7 @@ pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
     };
     let header = bytes
         .get(start..start.saturating_add(hlen))
-        .ok_or("truncated header")?;
+        .ok_or("truncated header (or a header larger than 64 KiB)")?;
     let mut p = LitParser {
         s: header,
         pos: 0,
@@ -391,7 +410,34 @@ pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
     if nbytes > MAX_BYTES || count > MAX_BYTES / 4 {
         return Err("array too large".into());
     }
-    let body = &bytes[start + hlen..];
+    Ok(NpyHeader {
+        descr,
+        fortran,
+        shape,
+        big,
+        kind,
+        size,
+        count,
+        data_start: start + hlen,
+    })
+}
+
+/// Parse a `.npy` file (format versions 1-3; bool, integer and float dtypes of either byte
+/// order; C or Fortran order).
+pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
+    let header = npy_header(bytes)?;
+    let nbytes = header.nbytes();
+    let NpyHeader {
+        descr,
+        fortran,
+        shape,
+        big,
+        kind,
+        size,
+        count: _,
+        data_start,
+    } = header;
+    let body = &bytes[data_start..];
     if body.len() < nbytes {
         return Err(format!(
             "truncated data: {} bytes for shape {shape:?} of `{descr}` ({nbytes} needed)",
@@ -434,8 +480,11 @@ pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
         ),
         (b'u', 8) => NpyData::Int(
             chunks
-                .map(|c| i64::try_from(u64::from_le_bytes(word(c, big))).unwrap_or(i64::MAX))
-                .collect(),
+                .map(|c| {
+                    let v = u64::from_le_bytes(word(c, big));
+                    i64::try_from(v).map_err(|_| format!("value {v} of `{descr}` is too large"))
+                })
+                .collect::<Result<_, _>>()?,
         ),
         (b'i', 8) => NpyData::Int(chunks.map(|c| i64::from_le_bytes(word(c, big))).collect()),
         (b'f', 2) => NpyData::F32(
@@ -503,8 +552,19 @@ fn f16_to_f32(h: u16) -> f32 {
     f32::from_bits(bits)
 }
 
+/// Most bytes of a `.npy` header read before its shape is known.
+const NPY_HEADER_MAX: u64 = 64 * 1024;
+
 /// Read the named members (`<name>.npy`) of a `.npz` archive; absent names are left out.
-pub fn npz(bytes: &[u8], names: &[&str]) -> Result<BTreeMap<String, NpyArray>, String> {
+/// `max_elements(name)` bounds each member's element count: the header is inflated and
+/// checked first, so a member declaring more (a "zip bomb", or a prediction far larger than
+/// the ground truth) is rejected before its data is inflated; at most the declared data is
+/// ever read.
+pub fn npz(
+    bytes: &[u8],
+    names: &[&str],
+    max_elements: &dyn Fn(&str) -> usize,
+) -> Result<BTreeMap<String, NpyArray>, String> {
     let mut zip = zip::ZipArchive::new(Cursor::new(bytes))
         .map_err(|e| format!("not a valid `.npz` (zip) archive ({e})"))?;
     let mut out = BTreeMap::new();
@@ -515,13 +575,26 @@ pub fn npz(bytes: &[u8], names: &[&str]) -> Result<BTreeMap<String, NpyArray>, S
             Err(zip::result::ZipError::FileNotFound) => continue,
             Err(e) => return Err(format!("cannot open member `{member}` ({e})")),
         };
+        let read_err = |e: std::io::Error| format!("cannot read member `{member}` ({e})");
         let mut buf = Vec::new();
         (&mut file)
-            .take(MAX_BYTES as u64 + 1)
+            .take(NPY_HEADER_MAX)
             .read_to_end(&mut buf)
-            .map_err(|e| format!("cannot read member `{member}` ({e})"))?;
-        if buf.len() > MAX_BYTES {
-            return Err(format!("member `{member}` is too large"));
+            .map_err(read_err)?;
+        let header = npy_header(&buf).map_err(|e| format!("member `{member}`: {e}"))?;
+        let limit = max_elements(name);
+        if header.count > limit {
+            return Err(format!(
+                "member `{member}` declares shape {:?} ({} values), more than the {limit} a prediction for this image can have",
+                header.shape, header.count
+            ));
+        }
+        let total = (header.data_start + header.nbytes()) as u64;
+        if (buf.len() as u64) < total {
+            (&mut file)
+                .take(total - buf.len() as u64)
+                .read_to_end(&mut buf)
+                .map_err(read_err)?;
         }
         let arr = npy(&buf).map_err(|e| format!("member `{member}`: {e}"))?;
         out.insert(name.to_string(), arr);
