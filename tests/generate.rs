@@ -197,6 +197,69 @@ fn fake_crash_is_retried_then_recorded_in_the_ledger() {
     );
 }
 
+/// The ledger keeps one entry per image however often it fails, drops a truncated line (from a
+/// run killed mid-write) with a warning, and keeps other images' entries.
+#[test]
+fn ledger_has_one_entry_per_image_and_drops_truncated_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let ledger = dir.path().join("clevrtex_clevr/failures.jsonl");
+    std::fs::create_dir_all(ledger.parent().unwrap()).unwrap();
+    let other =
+        r#"{"index":7,"stem":"CLEVRTEX_clevr_000007","variant":"clevr","error":"x","time_unix":0}"#;
+    std::fs::write(
+        &ledger,
+        format!("{other}\n{{\"index\":0,\"stem\":\"CLEVRTE"),
+    )
+    .unwrap();
+    for run in 0..2 {
+        let out = generate_fake("crash", dir.path(), &["-n", "1", "--retries", "0"]);
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(3), "{t}");
+        assert_eq!(
+            t.contains("dropped 1 unreadable line(s) of the failure ledger"),
+            run == 0,
+            "run {run}: {t}"
+        );
+    }
+    let lines = ledger_lines(dir.path());
+    let stems: Vec<&str> = lines.iter().map(|l| l["stem"].as_str().unwrap()).collect();
+    assert_eq!(
+        stems,
+        ["CLEVRTEX_clevr_000000", "CLEVRTEX_clevr_000007"],
+        "{lines:?}"
+    );
+}
+
+/// A ledger that cannot be written (here: its temporary name is taken by a folder, as a full
+/// disk would fail the write) stops the run with a message that says the failure was NOT
+/// recorded, and leaves the ledger on disk as it was (no 0-byte file).
+#[test]
+fn unwritable_ledger_says_so_and_keeps_the_old_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let ledger = dir.path().join("clevrtex_clevr/failures.jsonl");
+    std::fs::create_dir_all(ledger.parent().unwrap()).unwrap();
+    let old =
+        r#"{"index":7,"stem":"CLEVRTEX_clevr_000007","variant":"clevr","error":"x","time_unix":0}"#;
+    std::fs::write(&ledger, format!("{old}\n")).unwrap();
+    std::fs::create_dir_all(
+        dir.path()
+            .join("clevrtex_clevr/failures.jsonl.clevrtex-tmp"),
+    )
+    .unwrap();
+    let out = generate_fake("crash", dir.path(), &["-n", "1", "--retries", "0"]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(!t.contains("recorded in `"), "{t}");
+    assert!(
+        t.contains("image 0 failed and its failure could not be recorded in the ledger"),
+        "{t}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&ledger).unwrap(),
+        format!("{old}\n")
+    );
+}
+
 #[test]
 fn render_finds_the_scene_files_of_a_sample_output_folder() {
     // `clevrtex sample --out scenes` nests its files as `clevrtex_<variant>/<k>/`; `clevrtex
@@ -1067,4 +1130,94 @@ fn generate_reads_the_slurm_array_shard() {
         "{t}"
     );
     assert!(!dir.path().join("other").exists(), "{t}");
+}
+
+/// Bad requests fail before any Blender starts (here there is none), exit 1, naming the flag
+/// or key: sizes out of bounds, `--max-attempts 0`, a config that can never fit its objects,
+/// and scene files with an impossible size, a far-away object or an absurd number.
+#[test]
+fn bad_sizes_attempts_configs_and_scene_files_fail_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen = |extra: &[&str]| {
+        let mut args = vec!["generate", "--variant", "clevr", "-n", "1"];
+        args.extend_from_slice(extra);
+        args.extend(["--blender", "/no/such/blender", "--out"]);
+        let out = clevrtex()
+            .args(&args)
+            .arg(dir.path().join("out"))
+            .output()
+            .unwrap();
+        (out.status.code(), text(&out))
+    };
+    let (code, t) = gen(&["--width", "100000", "--height", "100000"]);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(
+        t.contains("`--width 100000` is more than the 8192 allowed"),
+        "{t}"
+    );
+    let (code, t) = gen(&["--max-attempts", "0"]);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(t.contains("`--max-attempts 0` is not allowed"), "{t}");
+
+    let mut cfg: Value = serde_json::from_str(
+        &std::fs::read_to_string(repo_root().join("configs/full.json")).unwrap(),
+    )
+    .unwrap();
+    cfg["objects"]["count"] = serde_json::json!([60, 60]);
+    let cfg_path = dir.path().join("crowded.json");
+    std::fs::write(&cfg_path, cfg.to_string()).unwrap();
+    let out = clevrtex()
+        .args([
+            "generate",
+            "-n",
+            "3",
+            "--blender",
+            "/no/such/blender",
+            "--config",
+        ])
+        .arg(&cfg_path)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("cannot place 60 objects"), "{t}");
+    assert!(!dir.path().join("out/clevrtex_full/failures.jsonl").exists());
+
+    let scene: Value =
+        serde_json::from_str(&std::fs::read_to_string(data("scenes/tiny3.json")).unwrap()).unwrap();
+    for (edit, want) in [
+        (
+            ("/render/width", serde_json::json!(0)),
+            "`render.width` = 0: must be between 1 and 8192",
+        ),
+        (
+            ("/objects/1/location/0", serde_json::json!(1e308)),
+            "`objects[1].location[0]` = 1e308: numbers must be finite",
+        ),
+        (
+            ("/objects/0/location/1", serde_json::json!(5000.0)),
+            "`objects[0].location` = [",
+        ),
+    ] {
+        let mut s = scene.clone();
+        *s.pointer_mut(edit.0).unwrap() = edit.1;
+        let file = dir.path().join("scenes/bad.json");
+        std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+        std::fs::write(&file, s.to_string()).unwrap();
+        let out = clevrtex()
+            .args(["render", "--blender", "/no/such/blender", "--out"])
+            .arg(dir.path().join("rendered"))
+            .arg(&file)
+            .output()
+            .unwrap();
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(1), "{t}");
+        assert!(
+            t.contains(&format!("bad scene file `{}`", file.display())),
+            "{t}"
+        );
+        assert!(t.contains(want), "{want}: {t}");
+    }
 }

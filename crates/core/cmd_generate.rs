@@ -114,6 +114,9 @@ pub struct RenderArgs {
     run: RunArgs,
 }
 
+/// Layouts drawn by `generate` before any Blender starts, to refuse impossible configs.
+const PREFLIGHT_LAYOUTS: usize = 20;
+
 /// Run `clevrtex generate`.
 pub fn run_generate(args: GenerateArgs) -> CmdResult {
     let mut config = match &args.config {
@@ -128,18 +131,22 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         }
         None => Config::builtin(&args.variant)?,
     };
+    use clevrtex_scene::scene_file::{MAX_IMAGE_SIDE, MAX_SAMPLES};
     if let Some(w) = args.width {
-        config.base.render.width = positive("--width", w)?;
+        config.base.render.width = within("--width", w, MAX_IMAGE_SIDE)?;
     }
     if let Some(h) = args.height {
-        config.base.render.height = positive("--height", h)?;
+        config.base.render.height = within("--height", h, MAX_IMAGE_SIDE)?;
     }
     if let Some(q) = args.quality {
         q.apply(&mut config.base.render);
     }
     if let Some(s) = args.samples {
-        config.base.render.samples = positive("--samples", s)?;
+        config.base.render.samples = within("--samples", s, MAX_SAMPLES)?;
     }
+    positive("--max-attempts", args.max_attempts)?;
+    // Fail before starting Blender when no layout could ever be drawn, as `sample` does.
+    clevrtex_scene::sample::check_feasible(&config)?;
     let passes = match &args.run.passes {
         Some(list) => parse_passes(list)?,
         None => Pass::ALL.to_vec(),
@@ -158,6 +165,17 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     }
     let range =
         crate::shard::resolve(args.shard.as_deref(), args.shard_count)?.indices(args.start, end);
+    // Draw the first layouts before starting Blender: a config whose objects can never be
+    // placed fails here once (exit 1), as in `sample`, not once per image into the ledger.
+    for &index in range.iter().take(PREFLIGHT_LAYOUTS) {
+        let req = SampleRequest {
+            seed: args.seed,
+            index,
+            attempt: 0,
+            total,
+        };
+        clevrtex_scene::sample(&config, &req)?;
+    }
     let config = Arc::new(config);
     let variant = config.name.clone();
     let jobs: Vec<Job> = range
@@ -306,6 +324,12 @@ fn read_scene(path: &Path) -> anyhow::Result<SceneFile> {
             scene.version
         );
     }
+    if let Err(problem) = scene.validate() {
+        bail!(
+            "bad scene file `{}`: {problem}\nhint: fix that key, or regenerate the file with `clevrtex sample`",
+            path.display()
+        );
+    }
     Ok(scene)
 }
 
@@ -314,6 +338,13 @@ fn positive(flag: &str, v: u32) -> anyhow::Result<u32> {
         bail!("`{flag} 0` is not allowed\nhint: pass a positive number");
     }
     Ok(v)
+}
+
+fn within(flag: &str, v: u32, max: u32) -> anyhow::Result<u32> {
+    if v > max {
+        bail!("`{flag} {v}` is more than the {max} allowed\nhint: pass 1 to {max}");
+    }
+    positive(flag, v)
 }
 
 fn parse_passes(list: &[String]) -> anyhow::Result<Vec<Pass>> {
@@ -549,6 +580,13 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
         println!("  overhead: wall x workers / cycles render = {ratio:.3}");
     }
     println!("output: {}", out.display());
+    if r.ledger_unreadable > 0 {
+        eprintln!(
+            "warning: dropped {} unreadable line(s) of the failure ledger `{}` (left by a run killed while writing it); rerun without `--overwrite` to find what is still missing",
+            r.ledger_unreadable,
+            ledger.display()
+        );
+    }
     if !r.failed.is_empty() {
         println!(
             "failures recorded in `{}`; rerun the same command to retry them",

@@ -91,28 +91,14 @@ pub fn run(args: Args) -> CmdResult {
     // Fail before writing anything when no draw could ever succeed.
     clevrtex_scene::sample::check_feasible(&config)?;
 
-    // First index >= start with index % n == k, then every n-th.
-    let indices = shard.indices(args.start, end);
-
-    let mut dirs: Vec<PathBuf> = indices
-        .iter()
-        .map(|&i| sample_dir(&args.out, &config.name, i))
-        .collect();
-    dirs.dedup();
-    for d in &dirs {
-        std::fs::create_dir_all(d).map_err(|e| {
-            anyhow::anyhow!(
-                "cannot create `{}`: {e}\nhint: check that `--out` is a writable folder",
-                d.display()
-            )
-        })?;
-    }
-
+    // First index >= start with index % n == k, then every n-th, streamed in chunks: memory
+    // stays bounded whatever `-n` is, and files appear in index order chunk by chunk.
+    let mut indices = shard.iter(args.start, end).peekable();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.jobs.unwrap_or(0))
         .build()
         .context("cannot start worker threads")?;
-    let progress = indicatif::ProgressBar::new(indices.len() as u64);
+    let progress = indicatif::ProgressBar::new(end.saturating_sub(args.start).div_ceil(shard.n));
     let stop = AtomicBool::new(false);
     // Ctrl-C: finish the files being written (each appears whole or not at all) and stop.
     let interrupted = Arc::new(AtomicBool::new(false));
@@ -120,41 +106,61 @@ pub fn run(args: Args) -> CmdResult {
         let flag = Arc::clone(&interrupted);
         let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
     }
-    // Results come back in index order, so the error reported is the first one by index.
-    let results: Vec<anyhow::Result<()>> = pool.install(|| {
-        indices
-            .par_iter()
-            .map(|&index| {
-                if stop.load(Ordering::Relaxed) || interrupted.load(Ordering::Relaxed) {
-                    return Ok(());
-                }
-                let req = SampleRequest {
-                    seed: args.seed,
-                    index,
-                    attempt: 0,
-                    total,
-                };
-                let result = sample(&config, &req)
-                    .map_err(anyhow::Error::from)
-                    .and_then(|scene| write_scene(&args.out, &config.name, &scene));
-                if result.is_err() {
-                    stop.store(true, Ordering::Relaxed);
-                }
-                progress.inc(1);
-                result
-            })
-            .collect()
-    });
+    let mut written = 0u64;
+    let mut last_dir = None;
+    while indices.peek().is_some() {
+        let chunk: Vec<u64> = indices.by_ref().take(SAMPLE_CHUNK).collect();
+        for &i in &chunk {
+            let d = sample_dir(&args.out, &config.name, i);
+            if last_dir.as_ref() != Some(&d) {
+                std::fs::create_dir_all(&d).map_err(|e| {
+                    anyhow::anyhow!(
+                        "cannot create `{}`: {e}\nhint: check that `--out` is a writable folder",
+                        d.display()
+                    )
+                })?;
+                last_dir = Some(d);
+            }
+        }
+        // Results come back in index order, so the error reported is the first one by index.
+        let results: Vec<anyhow::Result<()>> = pool.install(|| {
+            chunk
+                .par_iter()
+                .map(|&index| {
+                    if stop.load(Ordering::Relaxed) || interrupted.load(Ordering::Relaxed) {
+                        return Ok(());
+                    }
+                    let req = SampleRequest {
+                        seed: args.seed,
+                        index,
+                        attempt: 0,
+                        total,
+                    };
+                    let result = sample(&config, &req)
+                        .map_err(anyhow::Error::from)
+                        .and_then(|scene| write_scene(&args.out, &config.name, &scene));
+                    if result.is_err() {
+                        stop.store(true, Ordering::Relaxed);
+                    }
+                    progress.inc(1);
+                    result
+                })
+                .collect()
+        });
+        if interrupted.load(Ordering::SeqCst) {
+            progress.finish_and_clear();
+            return Err(Interrupted.into());
+        }
+        if let Some(err) = results.into_iter().find_map(Result::err) {
+            progress.finish_and_clear();
+            return Err(err);
+        }
+        written += chunk.len() as u64;
+    }
     progress.finish_and_clear();
-    if interrupted.load(Ordering::SeqCst) {
-        return Err(Interrupted.into());
-    }
-    if let Some(err) = results.into_iter().find_map(Result::err) {
-        return Err(err);
-    }
     eprintln!(
         "wrote {} scene files (indices {}..{end}, shard {}/{}, seed {}) under `{}` in {:.2} s",
-        indices.len(),
+        written,
         args.start,
         shard.k,
         shard.n,
@@ -164,6 +170,9 @@ pub fn run(args: Args) -> CmdResult {
     );
     Ok(OK)
 }
+
+/// Indices sampled and written per batch (bounds memory for any `-n`).
+const SAMPLE_CHUNK: usize = 1 << 16;
 
 /// Write one scene file atomically: to a temporary name in the same folder, then rename.
 fn write_scene(out: &Path, variant: &str, scene: &clevrtex_scene::SceneFile) -> anyhow::Result<()> {

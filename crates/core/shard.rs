@@ -22,11 +22,18 @@ pub struct Shard {
 impl Shard {
     /// The indices of `start..end` in this shard, in order.
     pub fn indices(self, start: u64, end: u64) -> Vec<u64> {
-        if start >= end {
-            return Vec::new();
-        }
-        let first = start + (self.k + self.n - start % self.n) % self.n;
-        (first..end).step_by(self.n as usize).collect()
+        self.iter(start, end).collect()
+    }
+
+    /// The indices of `start..end` in this shard, in order, one at a time (a billion of them
+    /// cost no memory).
+    pub fn iter(self, start: u64, end: u64) -> impl Iterator<Item = u64> {
+        let first = if start >= end {
+            end
+        } else {
+            start + (self.k + self.n - start % self.n) % self.n
+        };
+        (first..end).step_by(self.n as usize)
     }
 }
 

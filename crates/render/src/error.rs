@@ -115,6 +115,19 @@ pub enum RenderError {
         /// What to do about it.
         hint: String,
     },
+    /// An image failed and its failure could not be written to the failure ledger (e.g. the
+    /// disk is full): the run stops, since it could not say what is missing.
+    #[error("image {index} failed and its failure could not be recorded in the ledger `{}`: {cause}\nthe image's error: {failure}\nhint: free disk space (or make the folder writable) and rerun the same command: finished samples are kept and the ledger on disk is unchanged", .path.display())]
+    LedgerWrite {
+        /// The ledger.
+        path: PathBuf,
+        /// The image.
+        index: u64,
+        /// Why the image failed.
+        failure: String,
+        /// Why the ledger could not be written.
+        cause: std::io::Error,
+    },
     /// A file Blender wrote could not be decoded or lacks what we asked for.
     #[error("bad render output `{}`: {problem}\nhint: the bridge and this binary disagree about the pass layout; run `clevrtex doctor`", .path.display())]
     BadOutput {

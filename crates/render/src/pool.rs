@@ -6,7 +6,7 @@
 //! request retried up to `retries` times; then the job is written to the failure ledger
 //! ([`crate::ledger`]) and the run goes on (or stops, with `fail_fast`).
 
-use std::collections::VecDeque;
+use std::collections::{BTreeSet, VecDeque};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use crate::bridge::BridgeDir;
 use crate::error::{RenderError, Result};
-use crate::ledger;
+use crate::ledger::Ledger;
 use crate::output;
 use crate::worker::{Mode, RenderReply, Worker, WorkerOptions};
 use clevrtex_scene::layout;
@@ -51,7 +51,7 @@ pub struct PoolOptions {
     pub fail_fast: bool,
     /// Output root (`OUT` of `OUT/clevrtex_<variant>/...`).
     pub out: PathBuf,
-    /// The failure ledger (JSON lines, appended).
+    /// The failure ledger (JSON lines, one per failed image, rewritten atomically).
     pub ledger: PathBuf,
     /// Set by a Ctrl-C handler: stop at once, keep finished samples, leave no partial one.
     pub interrupt: Arc<AtomicBool>,
@@ -143,6 +143,8 @@ pub struct RunReport {
     pub threads: u32,
     /// Whether the run was interrupted.
     pub interrupted: bool,
+    /// Lines of the existing failure ledger that could not be read (dropped).
+    pub ledger_unreadable: usize,
 }
 
 impl RunReport {
@@ -186,7 +188,8 @@ pub(crate) struct Shared<'a> {
     fatal: Mutex<Option<RenderError>>,
     ever_started: AtomicBool,
     threads: u32,
-    ledger: Mutex<()>,
+    ledger: Mutex<Ledger>,
+    failed_stems: Mutex<BTreeSet<String>>,
     pub(crate) on_event: &'a (dyn Fn(&PoolEvent) + Sync),
 }
 
@@ -200,14 +203,16 @@ pub fn run(
     on_event: &(dyn Fn(&PoolEvent) + Sync),
 ) -> Result<RunReport> {
     let started = Instant::now();
-    let stems: std::collections::BTreeSet<String> = jobs.iter().map(|j| j.stem.clone()).collect();
+    let stems: BTreeSet<String> = jobs.iter().map(|j| j.stem.clone()).collect();
     let bridge = BridgeDir::create(&opts.materials_json)?;
+    let ledger = Ledger::open(&opts.ledger);
     let mut todo = VecDeque::new();
     let mut report = RunReport {
         workers: opts.workers.max(1),
+        ledger_unreadable: ledger.unreadable(),
         ..RunReport::default()
     };
-    let mut cleaned = std::collections::BTreeSet::new();
+    let mut cleaned = BTreeSet::new();
     for job in jobs {
         let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
         if cleaned.insert(dir.clone()) {
@@ -234,7 +239,8 @@ pub fn run(
         } else {
             (available_cores() / n_workers).max(1) as u32
         },
-        ledger: Mutex::new(()),
+        ledger: Mutex::new(ledger),
+        failed_stems: Mutex::new(BTreeSet::new()),
         on_event,
     };
     std::thread::scope(|s| {
@@ -252,7 +258,8 @@ pub fn run(
     if opts.interrupt.load(Ordering::SeqCst) {
         return Err(RenderError::Interrupted);
     }
-    ledger::prune(&opts.ledger, &stems, &report.failed)?;
+    let failed = shared.failed_stems.into_inner().unwrap();
+    shared.ledger.into_inner().unwrap().prune(&stems, &failed)?;
     Ok(report)
 }
 
@@ -270,8 +277,16 @@ impl Shared<'_> {
     }
 
     fn record_failure(&self, job: &Job, err: &RenderError) -> Result<()> {
-        let _guard = self.ledger.lock().unwrap();
-        ledger::record(&self.opts.ledger, job, err)
+        let mut ledger = self.ledger.lock().unwrap();
+        self.failed_stems.lock().unwrap().insert(job.stem.clone());
+        ledger
+            .record(job, err)
+            .map_err(|cause| RenderError::LedgerWrite {
+                path: ledger.path().to_path_buf(),
+                index: job.index,
+                failure: err.to_string(),
+                cause,
+            })
     }
 }
 
@@ -318,14 +333,16 @@ fn worker_thread(shared: &Shared) {
                 break;
             }
             Err(err) => {
-                (shared.on_event)(&PoolEvent::Failed {
-                    index: job.index,
-                    error: &err,
-                });
+                // Record first: the event (and the CLI's "recorded in" message) only follows a
+                // failure that really is in the ledger.
                 if let Err(ledger_err) = shared.record_failure(&job, &err) {
                     shared.set_fatal(ledger_err);
                     break;
                 }
+                (shared.on_event)(&PoolEvent::Failed {
+                    index: job.index,
+                    error: &err,
+                });
                 shared
                     .report
                     .lock()

@@ -583,11 +583,16 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
 
     // Base scene checks.
     let r = &base.render;
-    if r.width == 0 || r.height == 0 || r.samples == 0 {
+    use crate::scene_file::{MAX_IMAGE_SIDE, MAX_SAMPLES};
+    let side = 1..=MAX_IMAGE_SIDE;
+    if !side.contains(&r.width)
+        || !side.contains(&r.height)
+        || !(1..=MAX_SAMPLES).contains(&r.samples)
+    {
         return Err(err(
             "base_scene.render",
             Some(format!("{}x{}, {} samples", r.width, r.height, r.samples)),
-            "width, height and samples must be positive",
+            &format!("width and height must be 1 to {MAX_IMAGE_SIDE}, samples 1 to {MAX_SAMPLES}"),
             "the reference uses 320x240",
         ));
     }

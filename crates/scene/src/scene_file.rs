@@ -206,3 +206,105 @@ pub struct MaterialInstance {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale: Option<f64>,
 }
+
+/// Largest image side accepted anywhere (flags, configs, scene files): 8192 px.
+pub const MAX_IMAGE_SIDE: u32 = 8192;
+/// Most samples per pixel accepted.
+pub const MAX_SAMPLES: u32 = 1 << 16;
+/// Most objects in a scene: instance ids `1..=N` must fit the 8-bit mask.
+pub const MAX_OBJECTS: usize = 255;
+/// Largest magnitude of any real number in a scene file (positions, sizes, energies...).
+pub const MAX_MAGNITUDE: f64 = 1e6;
+/// Farthest an object may be from the world origin, in metres.
+pub const MAX_OBJECT_DISTANCE_M: f64 = 1000.0;
+
+impl SceneFile {
+    /// Check what the bridge cannot check cheaply, before a scene is sent to Blender: the
+    /// format and version, image size and samples within bounds, every real number finite and
+    /// of sane magnitude, at most [`MAX_OBJECTS`] objects, each with a positive scale and near
+    /// the origin. The error names the key (`objects[2].location[0]`), its value and the rule.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.format != SCENE_FORMAT || self.version != SCENE_VERSION {
+            return Err(format!(
+                "not a version {SCENE_VERSION} clevrtex scene file (format `{}`, version {})",
+                self.format, self.version
+            ));
+        }
+        let r = &self.render;
+        for (key, v, max) in [
+            ("render.width", r.width, MAX_IMAGE_SIDE),
+            ("render.height", r.height, MAX_IMAGE_SIDE),
+            ("render.samples", r.samples, MAX_SAMPLES),
+        ] {
+            if v == 0 || v > max {
+                return Err(format!("`{key}` = {v}: must be between 1 and {max}"));
+            }
+        }
+        if self.objects.len() > MAX_OBJECTS {
+            return Err(format!(
+                "`objects` has {} entries: at most {MAX_OBJECTS} fit the 8-bit instance mask",
+                self.objects.len()
+            ));
+        }
+        let value = serde_json::to_value(self).map_err(|e| e.to_string())?;
+        check_numbers(&value, &mut String::new())?;
+        for (i, o) in self.objects.iter().enumerate() {
+            if o.scale <= 0.0 {
+                return Err(format!(
+                    "`objects[{i}].scale` = {}: must be positive",
+                    o.scale
+                ));
+            }
+            let d = o.location.iter().map(|c| c * c).sum::<f64>().sqrt();
+            if d > MAX_OBJECT_DISTANCE_M {
+                return Err(format!(
+                    "`objects[{i}].location` = {:?}: {d:.3e} m from the origin, more than {MAX_OBJECT_DISTANCE_M} m (the camera could never see it)",
+                    o.location
+                ));
+            }
+        }
+        if !(self.camera.clip_start > 0.0 && self.camera.clip_end > self.camera.clip_start) {
+            return Err(format!(
+                "`camera.clip_start`/`clip_end` = {}/{}: need 0 < clip_start < clip_end",
+                self.camera.clip_start, self.camera.clip_end
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Every real number under `v` finite and at most [`MAX_MAGNITUDE`]; `path` is the key so far.
+fn check_numbers(v: &serde_json::Value, path: &mut String) -> Result<(), String> {
+    use serde_json::Value;
+    match v {
+        Value::Number(n) if n.is_f64() => {
+            let x = n.as_f64().unwrap_or(f64::NAN);
+            if !x.is_finite() || x.abs() > MAX_MAGNITUDE {
+                return Err(format!(
+                    "`{path}` = {x:e}: numbers must be finite and at most {MAX_MAGNITUDE:e} in magnitude"
+                ));
+            }
+        }
+        Value::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                let len = path.len();
+                path.push_str(&format!("[{i}]"));
+                check_numbers(item, path)?;
+                path.truncate(len);
+            }
+        }
+        Value::Object(map) => {
+            for (k, item) in map {
+                let len = path.len();
+                if !path.is_empty() {
+                    path.push('.');
+                }
+                path.push_str(k);
+                check_numbers(item, path)?;
+                path.truncate(len);
+            }
+        }
+        _ => {}
+    }
+    Ok(())
+}
