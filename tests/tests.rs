@@ -9,3 +9,4 @@ mod extreme;
 mod generate;
 mod materials;
 mod sample;
+mod verify;

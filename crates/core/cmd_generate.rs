@@ -205,7 +205,78 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         })
         .collect();
     let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
-    run_jobs(&args.run, jobs, ledger, args.max_attempts)
+    let shard = crate::shard::resolve(args.shard.as_deref(), args.shard_count)?;
+    let plan = ManifestPlan {
+        variant: variant.clone(),
+        seed: args.seed,
+        config_hash: clevrtex_render::manifest::hash_hex(format!("{config:?}").as_bytes()),
+        start: args.start,
+        end,
+        total,
+        shard: [shard.k, shard.n],
+        passes: passes.clone(),
+        keep_exr: args.run.keep_exr,
+    };
+    run_jobs(&args.run, jobs, ledger, args.max_attempts, Some(plan))
+}
+
+/// What `generate` records in its run manifest (`clevrtex_render::manifest`).
+struct ManifestPlan {
+    variant: String,
+    seed: u64,
+    config_hash: String,
+    start: u64,
+    end: u64,
+    total: u64,
+    shard: [u64; 2],
+    passes: Vec<Pass>,
+    keep_exr: bool,
+}
+
+impl ManifestPlan {
+    /// Write the manifest of the run's complete samples (hashing their files).
+    fn write(&self, out: &Path) -> anyhow::Result<PathBuf> {
+        let vdir = layout::variant_dir(out, &self.variant);
+        let shard = crate::shard::Shard {
+            k: self.shard[0],
+            n: self.shard[1],
+        };
+        let mut files = Vec::new();
+        let mut blender_version = String::new();
+        for index in shard.iter(self.start, self.end) {
+            let stem = layout::stem(&self.variant, index);
+            let dir = layout::sample_dir(out, &self.variant, index);
+            let names = clevrtex_render::output::expected_files(&stem, &self.passes, self.keep_exr);
+            if !names.iter().all(|n| dir.join(n).is_file()) {
+                continue;
+            }
+            if blender_version.is_empty() {
+                let meta =
+                    std::fs::read(dir.join(layout::metadata_file(&stem))).unwrap_or_default();
+                let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap_or_default();
+                blender_version = meta["blender_version"].as_str().unwrap_or("").to_string();
+            }
+            let sub = (index / 1000).to_string();
+            files.extend(names.into_iter().map(|n| format!("{sub}/{n}")));
+        }
+        let manifest = clevrtex_render::manifest::Manifest {
+            format: clevrtex_render::manifest::MANIFEST_FORMAT.into(),
+            version: clevrtex_render::manifest::MANIFEST_VERSION,
+            variant: self.variant.clone(),
+            seed: self.seed,
+            config_hash: self.config_hash.clone(),
+            start: self.start,
+            end: self.end,
+            total: self.total,
+            shard: self.shard,
+            passes: self.passes.iter().map(|p| p.name().to_string()).collect(),
+            tool_version: env!("CARGO_PKG_VERSION").into(),
+            blender_version,
+            command: std::env::args().collect(),
+            files: clevrtex_render::manifest::hash_files(&vdir, &files)?,
+        };
+        Ok(manifest.write(&vdir)?)
+    }
 }
 
 /// Run `clevrtex render`.
@@ -277,7 +348,7 @@ pub fn run_render(args: RenderArgs) -> CmdResult {
         }
         _ => args.run.out.join("failures.jsonl"),
     };
-    run_jobs(&args.run, jobs, ledger, 1)
+    run_jobs(&args.run, jobs, ledger, 1, None)
 }
 
 /// Collect the `*.json` files under `dir`, recursively: `clevrtex sample --out DIR` writes
@@ -369,7 +440,13 @@ fn parse_passes(list: &[String]) -> anyhow::Result<Vec<Pass>> {
     Ok(out)
 }
 
-fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) -> CmdResult {
+fn run_jobs(
+    args: &RunArgs,
+    jobs: Vec<Job>,
+    ledger: PathBuf,
+    max_attempts: u32,
+    manifest: Option<ManifestPlan>,
+) -> CmdResult {
     let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
     check_output_writable(&args.out)?;
     let materials_json = clevrtex_render::default_materials_json()
@@ -484,6 +561,14 @@ fn run_jobs(args: &RunArgs, jobs: Vec<Job>, ledger: PathBuf, max_attempts: u32) 
     match result {
         Ok(report) => {
             print_summary(&report, &args.out, &ledger);
+            if let Some(plan) = manifest {
+                let path = plan.write(&args.out)?;
+                println!(
+                    "manifest: {} (check with `clevrtex verify {}`)",
+                    path.display(),
+                    args.out.display()
+                );
+            }
             Ok(if report.failed.is_empty() {
                 exit::OK
             } else {

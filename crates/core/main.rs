@@ -11,6 +11,7 @@ mod cmd_eval;
 mod cmd_generate;
 mod cmd_materials;
 mod cmd_sample;
+mod cmd_verify;
 mod exit;
 mod shard;
 
@@ -39,6 +40,8 @@ enum Command {
     Bench(cmd_bench::Args),
     /// Report the Blender found, its version, Cycles devices, and what is missing.
     Doctor(cmd_doctor::Args),
+    /// Check that a dataset (or the union of shards) is complete and intact.
+    Verify(cmd_verify::Args),
 }
 
 fn main() -> ExitCode {
@@ -61,6 +64,7 @@ fn main() -> ExitCode {
         Command::Materials(args) => cmd_materials::run(args),
         Command::Bench(args) => cmd_bench::run(args),
         Command::Doctor(args) => cmd_doctor::run(args),
+        Command::Verify(args) => cmd_verify::run(args),
     };
     ExitCode::from(exit::report(result))
 }

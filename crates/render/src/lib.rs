@@ -40,11 +40,13 @@ mod error;
 pub mod exr_io;
 mod job;
 mod ledger;
+pub mod manifest;
 pub mod metadata;
 pub mod output;
 mod passes;
 pub mod pool;
 pub mod post;
+pub mod verify;
 mod worker;
 
 pub use bridge::BridgeDir;

@@ -250,10 +250,6 @@ pub struct DecodedPng {
 /// Read a PNG written by this crate or by Blender, without any conversion (palette indices
 /// stay indices, 16-bit stays 16-bit), for checks and tests.
 pub fn decode_png(path: &Path) -> Result<DecodedPng> {
-    let bad = |problem: String| RenderError::BadOutput {
-        path: path.to_path_buf(),
-        problem,
-    };
     let bytes = std::fs::read(path).map_err(|e| {
         RenderError::io(
             "cannot read",
@@ -262,6 +258,15 @@ pub fn decode_png(path: &Path) -> Result<DecodedPng> {
             "check that the file exists and is readable",
         )
     })?;
+    decode_png_bytes(&bytes, path)
+}
+
+/// [`decode_png`] of bytes already read; `path` names them in errors.
+pub fn decode_png_bytes(bytes: &[u8], path: &Path) -> Result<DecodedPng> {
+    let bad = |problem: String| RenderError::BadOutput {
+        path: path.to_path_buf(),
+        problem,
+    };
     let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
     dec.set_transformations(png::Transformations::IDENTITY);
     let mut reader = dec

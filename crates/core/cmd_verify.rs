@@ -1,0 +1,212 @@
+//! `clevrtex verify`: completeness and integrity of a dataset, or of the union of shards.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clevrtex_render::verify::{self, VariantReport, VerifyOptions};
+
+use crate::exit::{self, CmdResult};
+
+/// Arguments of `clevrtex verify`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Output folders of `clevrtex generate` (`--out`), or `clevrtex_<variant>` folders; give
+    /// every shard's folder to check their union.
+    #[arg(required = true, value_name = "DIR")]
+    dirs: Vec<PathBuf>,
+    /// Check only this variant.
+    #[arg(long)]
+    variant: Option<String>,
+    /// Delete the files of broken samples and stray temporary files, so that rerunning the
+    /// run's `generate` command remakes them (duplicates are only reported).
+    #[arg(long)]
+    remove_broken: bool,
+    /// Write the full report as JSON to FILE.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// Threads (default: all cores).
+    #[arg(long, value_name = "N")]
+    jobs: Option<usize>,
+}
+
+/// Indices as compact ranges: `0, 3..=5, 9`.
+fn ranges(v: &[u64]) -> String {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < v.len() {
+        let mut j = i;
+        while j + 1 < v.len() && v[j + 1] == v[j] + 1 {
+            j += 1;
+        }
+        out.push(if i == j {
+            v[i].to_string()
+        } else {
+            format!("{}..={}", v[i], v[j])
+        });
+        i = j + 1;
+    }
+    let shown = out.len().min(20);
+    let mut s = out[..shown].join(", ");
+    if out.len() > shown {
+        let _ = write!(s, ", ... ({} more ranges)", out.len() - shown);
+    }
+    s
+}
+
+fn print_report(r: &VariantReport, dirs: &[PathBuf]) {
+    println!(
+        "{}: {} of {} expected samples whole ({})",
+        r.variant, r.ok, r.expected, r.expected_from
+    );
+    if !r.missing.is_empty() {
+        println!("  missing ({}): {}", r.missing.len(), ranges(&r.missing));
+    }
+    if !r.duplicates.is_empty() {
+        println!("  duplicated indices ({}):", r.duplicates.len());
+        for (i, places) in r.duplicates.iter().take(20) {
+            let p: Vec<String> = places
+                .iter()
+                .map(|p| format!("`{}`", p.display()))
+                .collect();
+            println!("    {i} in {}", p.join(" and "));
+        }
+    }
+    if !r.broken.is_empty() {
+        println!("  broken samples ({}):", r.broken.len());
+        for b in r.broken.iter().take(20) {
+            println!("    {} (`{}`):", b.stem, b.dir.display());
+            for p in &b.problems {
+                println!("      {p}");
+            }
+        }
+        if r.broken.len() > 20 {
+            println!("    ... {} more (see --json)", r.broken.len() - 20);
+        }
+    }
+    if !r.unexpected.is_empty() {
+        println!(
+            "  outside the run's indices ({}, not counted as errors): {}",
+            r.unexpected.len(),
+            ranges(&r.unexpected)
+        );
+    }
+    if !r.temp_files.is_empty() {
+        println!(
+            "  temporary files left by killed runs ({}):",
+            r.temp_files.len()
+        );
+        for t in r.temp_files.iter().take(10) {
+            println!("    {}", t.display());
+        }
+    }
+    for p in &r.manifest_problems {
+        println!("  manifest: {p}");
+    }
+    if !r.ledger.is_empty() {
+        let idx: Vec<u64> = r.ledger.keys().copied().collect();
+        println!(
+            "  failure ledger: {} image(s) recorded as failed: {}",
+            idx.len(),
+            ranges(&idx)
+        );
+        if let Some((i, e)) = r.ledger.iter().next() {
+            println!("    e.g. {i}: {e}");
+        }
+    }
+    if !r.is_whole() {
+        let dirs: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+        let rerun = match r.commands.as_slice() {
+            [] => {
+                "rerun the `clevrtex generate` command that made it (complete samples are skipped)"
+                    .to_string()
+            }
+            cmds => cmds
+                .iter()
+                .map(|c| shell_words(c))
+                .collect::<Vec<_>>()
+                .join("\n    "),
+        };
+        println!(
+            "  to repair: clevrtex verify {} --variant {} --remove-broken, then rerun:\n    {rerun}",
+            dirs.join(" "),
+            r.variant
+        );
+    }
+}
+
+/// A command line as a shell would read it back.
+fn shell_words(args: &[String]) -> String {
+    args.iter()
+        .map(|a| {
+            if !a.is_empty()
+                && a.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c))
+            {
+                a.clone()
+            } else {
+                format!("'{}'", a.replace('\'', "'\\''"))
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Run `clevrtex verify`.
+pub fn run(args: Args) -> CmdResult {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.jobs.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")?;
+    let started = std::time::Instant::now();
+    let opts = VerifyOptions {
+        variant: args.variant.clone(),
+    };
+    let reports = pool
+        .install(|| verify::verify(&args.dirs, &opts))
+        .map_err(|e| {
+            anyhow::anyhow!("{e}\nhint: pass the `--out` folder of `clevrtex generate`")
+        })?;
+    if reports.is_empty() {
+        anyhow::bail!(
+            "no `clevrtex_<variant>` folder{} under {}\nhint: pass the `--out` folder of `clevrtex generate`",
+            args.variant
+                .as_ref()
+                .map(|v| format!(" for `{v}`"))
+                .unwrap_or_default(),
+            args.dirs
+                .iter()
+                .map(|d| format!("`{}`", d.display()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let samples: u64 = reports.iter().map(|r| r.ok + r.broken.len() as u64).sum();
+    for r in &reports {
+        print_report(r, &args.dirs);
+    }
+    let secs = started.elapsed().as_secs_f64();
+    eprintln!(
+        "checked {samples} samples in {secs:.1} s ({:.0} samples/s)",
+        samples as f64 / secs.max(1e-9)
+    );
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&reports)? + "\n";
+        let tmp = path.with_extension("json.clevrtex-tmp");
+        std::fs::write(&tmp, text)
+            .and_then(|()| std::fs::rename(&tmp, path))
+            .with_context(|| format!("cannot write `{}`", path.display()))?;
+    }
+    if args.remove_broken {
+        let mut removed = 0;
+        for r in &reports {
+            removed += verify::remove_broken(r).context("cannot remove a broken sample's file")?;
+        }
+        println!("removed {removed} file(s) of broken samples and temporary files");
+    }
+    Ok(if reports.iter().all(VariantReport::is_whole) {
+        exit::OK
+    } else {
+        exit::PARTIAL
+    })
+}

@@ -1,0 +1,138 @@
+//! The run manifest: what one `clevrtex generate` run (or one shard of it) made, with the size
+//! and xxh3 hash of every file, so `clevrtex verify` can check the bytes later (after a copy,
+//! on another machine, for the union of shards).
+//!
+//! `OUT/clevrtex_<variant>/MANIFEST-<k>of<n>.json`, one per shard (`0of1` unsharded), written
+//! atomically at the end of a run that was not interrupted. Paths are relative to the variant
+//! folder, e.g. `0/CLEVRTEX_full_000000.png`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{RenderError, Result};
+
+/// Value of [`Manifest::format`].
+pub const MANIFEST_FORMAT: &str = "clevrtex-manifest";
+/// Current value of [`Manifest::version`].
+pub const MANIFEST_VERSION: u32 = 1;
+
+/// One file of the manifest.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileEntry {
+    /// Size in bytes.
+    pub size: u64,
+    /// xxh3-64 of the bytes, 16 hex digits.
+    pub xxh3: String,
+}
+
+/// What one run (or shard) made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`MANIFEST_FORMAT`].
+    pub format: String,
+    /// Always [`MANIFEST_VERSION`] for files this version writes.
+    pub version: u32,
+    /// Variant name.
+    pub variant: String,
+    /// Run seed.
+    pub seed: u64,
+    /// xxh3 of the resolved variant config (render settings and passes included), hex.
+    pub config_hash: String,
+    /// First index of the run.
+    pub start: u64,
+    /// One past the last index of the run (before sharding).
+    pub end: u64,
+    /// Size of the whole dataset (fixes the splits).
+    pub total: u64,
+    /// This shard `[k, n]`: the run made the indices of `start..end` with `index % n == k`.
+    pub shard: [u64; 2],
+    /// Passes written.
+    pub passes: Vec<String>,
+    /// `clevrtex` version.
+    pub tool_version: String,
+    /// Blender version of the samples (from their metadata).
+    pub blender_version: String,
+    /// The command line that made the run (rerunning it resumes and repairs).
+    pub command: Vec<String>,
+    /// Every file of the run's complete samples, by path relative to the variant folder.
+    pub files: BTreeMap<String, FileEntry>,
+}
+
+/// xxh3-64 of `bytes` as 16 hex digits: the one content hash of the project (manifests,
+/// eval provenance, material caches).
+pub fn hash_hex(bytes: &[u8]) -> String {
+    format!("{:016x}", xxhash_rust::xxh3::xxh3_64(bytes))
+}
+
+/// The manifest's file name for shard `k` of `n`.
+pub fn file_name(k: u64, n: u64) -> String {
+    format!("MANIFEST-{k}of{n}.json")
+}
+
+/// Size and hash of each of `files` (paths relative to `root`), in parallel.
+pub fn hash_files(root: &Path, files: &[String]) -> Result<BTreeMap<String, FileEntry>> {
+    files
+        .par_iter()
+        .map(|rel| {
+            let path = root.join(rel);
+            let bytes = std::fs::read(&path).map_err(|e| {
+                RenderError::io(
+                    "cannot read",
+                    &path,
+                    e,
+                    "a finished sample's file vanished while the manifest was written; rerun",
+                )
+            })?;
+            Ok((
+                rel.clone(),
+                FileEntry {
+                    size: bytes.len() as u64,
+                    xxh3: hash_hex(&bytes),
+                },
+            ))
+        })
+        .collect()
+}
+
+impl Manifest {
+    /// Write to `variant_dir/MANIFEST-<k>of<n>.json` through a temporary file and a rename.
+    pub fn write(&self, variant_dir: &Path) -> Result<PathBuf> {
+        let path = variant_dir.join(file_name(self.shard[0], self.shard[1]));
+        let tmp = path.with_extension(format!("json{}", crate::output::TMP_SUFFIX));
+        let text = serde_json::to_string_pretty(self).expect("manifest serialises") + "\n";
+        crate::post::write_file(&tmp, text.as_bytes())?;
+        std::fs::rename(&tmp, &path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            RenderError::write(&path, e)
+        })?;
+        Ok(path)
+    }
+
+    /// Read a manifest file.
+    pub fn read(path: &Path) -> std::result::Result<Manifest, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+        let m: Manifest = serde_json::from_str(&text).map_err(|e| e.to_string())?;
+        if m.format != MANIFEST_FORMAT || m.version != MANIFEST_VERSION {
+            return Err(format!(
+                "not a version {MANIFEST_VERSION} clevrtex manifest (format `{}`, version {})",
+                m.format, m.version
+            ));
+        }
+        Ok(m)
+    }
+
+    /// The indices this manifest's run was asked to make.
+    pub fn indices(&self) -> impl Iterator<Item = u64> {
+        let [k, n] = self.shard;
+        let n = n.max(1);
+        let first = if self.start >= self.end {
+            self.end
+        } else {
+            self.start + (k + n - self.start % n) % n
+        };
+        (first..self.end).step_by(n as usize)
+    }
+}
