@@ -1,14 +1,38 @@
 #!/usr/bin/env bash
 # Installs what clevrtex needs on Debian 12 besides Rust: Debian's headless-capable Blender
 # (3.4.1) and the rustfmt/clippy components the test command uses. Needs root (or sudo).
+#
+#   ./scripts/setup.sh               Blender (apt) and the Rust components
+#   ./scripts/setup.sh --test-venv   also `.venv-test/`: a Python venv with the libraries the
+#                                    tests read our files with (webdataset)
 set -euo pipefail
+cd "$(dirname "$0")/.."
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
-if ! command -v blender >/dev/null 2>&1; then
+test_venv=0
+for arg in "$@"; do
+  case "$arg" in
+    --test-venv) test_venv=1 ;;
+    *) echo "setup.sh: unknown option \`$arg\` (known: --test-venv)" >&2; exit 2 ;;
+  esac
+done
+need=()
+command -v blender >/dev/null 2>&1 || need+=(blender)
+if [ "$test_venv" = 1 ] && ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
+  need+=(python3-venv)
+fi
+if [ ${#need[@]} -gt 0 ]; then
   $SUDO apt-get update
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y blender
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y "${need[@]}"
 fi
 if command -v rustup >/dev/null 2>&1; then
   rustup component add rustfmt clippy >/dev/null 2>&1 || true
+fi
+if [ "$test_venv" = 1 ]; then
+  if ! .venv-test/bin/python -c 'import webdataset' >/dev/null 2>&1; then
+    python3 -m venv .venv-test
+    .venv-test/bin/pip install --quiet --disable-pip-version-check 'webdataset>=0.2,<2'
+  fi
+  echo "test venv: $(.venv-test/bin/python -c 'import webdataset, sys; print(sys.version.split()[0], "webdataset", getattr(webdataset, "__version__", "?"))')"
 fi
 echo "blender: $(blender --version 2>/dev/null | head -n 1)"

@@ -5,6 +5,7 @@ mod util;
 
 mod bench;
 mod eval;
+mod export;
 mod extreme;
 mod generate;
 mod materials;

@@ -68,3 +68,25 @@ fn find_on_path(name: &str) -> Option<PathBuf> {
 fn is_file(p: &Path) -> bool {
     p.is_file()
 }
+
+/// A Python interpreter with the libraries the format round-trip tests read our files with
+/// (`webdataset`): `CLEVRTEX_TEST_PYTHON`, else the `.venv-test` that `.ci/run` (and
+/// `scripts/setup.sh --test-venv`) makes. `None` (a visible skip) when absent, unless
+/// `CLEVRTEX_REQUIRE_BLENDER=1` makes it required.
+pub fn test_python_or_skip(test: &str, module: &str) -> Option<PathBuf> {
+    let candidate = std::env::var_os("CLEVRTEX_TEST_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo_root().join(".venv-test/bin/python"));
+    let ok = std::process::Command::new(&candidate)
+        .args(["-c", &format!("import {module}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok {
+        return Some(candidate);
+    }
+    if std::env::var("CLEVRTEX_REQUIRE_BLENDER").as_deref() == Ok("1") {
+        panic!("{test}: a Python with `{module}` is required (CLEVRTEX_REQUIRE_BLENDER=1) but `{}` cannot import it; run `./scripts/setup.sh --test-venv` or set CLEVRTEX_TEST_PYTHON", candidate.display());
+    }
+    eprintln!("SKIPPED {test}: no Python with `{module}` (run `./scripts/setup.sh --test-venv` or set CLEVRTEX_TEST_PYTHON; set CLEVRTEX_REQUIRE_BLENDER=1 to make this a failure)");
+    None
+}

@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 mod cmd_bench;
 mod cmd_doctor;
 mod cmd_eval;
+mod cmd_export;
 mod cmd_generate;
 mod cmd_materials;
 mod cmd_sample;
@@ -42,6 +43,8 @@ enum Command {
     Doctor(cmd_doctor::Args),
     /// Check that a dataset (or the union of shards) is complete and intact.
     Verify(cmd_verify::Args),
+    /// Export a dataset as WebDataset tar shards.
+    Export(cmd_export::Args),
 }
 
 fn main() -> ExitCode {
@@ -65,6 +68,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => cmd_bench::run(args),
         Command::Doctor(args) => cmd_doctor::run(args),
         Command::Verify(args) => cmd_verify::run(args),
+        Command::Export(args) => cmd_export::run(args),
     };
     ExitCode::from(exit::report(result))
 }
