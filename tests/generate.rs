@@ -620,6 +620,8 @@ fn generate_writes_every_pass_with_exact_masks_and_resumes() {
         let rgb = decode_png(&sub.join(format!("{stem}.png"))).unwrap();
         assert_eq!((rgb.bits, rgb.width, rgb.height), (8, 80, 60));
     }
+    // The run's manifest (sizes and hashes of these files, for `clevrtex verify`).
+    expected.push("clevrtex_camo/MANIFEST-0of1.json".to_string());
     expected.sort();
     assert_eq!(files_under(dir.path()), expected);
 
