@@ -10,4 +10,5 @@ mod extreme;
 mod generate;
 mod materials;
 mod sample;
+mod slurm;
 mod verify;
