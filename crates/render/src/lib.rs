@@ -4,6 +4,8 @@
 //! - [`Worker`]: one long-lived Blender process running the embedded bridge
 //!   (`blender_scripts/`, see `docs/bridge-protocol.md`); it renders many scenes, with a
 //!   deadline on every request.
+//! - [`Session`]: a restartable worker: the one restart-and-retry policy (timeouts, crashes,
+//!   Ctrl-C) shared by the pool, `clevrtex bench` and `clevrtex materials`.
 //! - [`pool::run`]: `N` workers rendering [`Job`]s in parallel, with the visibility-first
 //!   check, bounded retries, restarts, a failure ledger, resume and crash-safe output; this
 //!   is what `clevrtex generate` and `clevrtex render` call.
@@ -46,12 +48,14 @@ pub mod output;
 mod passes;
 pub mod pool;
 pub mod post;
+mod session;
 pub mod verify;
 mod worker;
 
 pub use bridge::BridgeDir;
 pub use error::{RenderError, Result, Tails};
 pub use pool::{Job, PoolEvent, PoolOptions, RunReport, SampleStats};
+pub use session::{Hooks, Session};
 pub use worker::{BridgeTimings, Mode, Ready, RenderReply, Worker, WorkerOptions};
 
 /// The resolved built-in material catalogue for the bridge (`materials.json`, see
