@@ -151,21 +151,6 @@ fn bench_scenes(n: usize, width: u32, height: u32) -> anyhow::Result<Vec<BenchSc
         .collect()
 }
 
-/// FNV-1a, 64 bit: a stable hash for cache keys (std's hashers may change between releases).
-fn fnv1a(parts: &[&[u8]]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for part in parts {
-        for &b in *part {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-        // Separator, so ("ab", "c") and ("a", "bc") differ.
-        h ^= 0xff;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
-}
-
 fn with_sampling(scene: &SceneFile, s: &Sampling) -> SceneFile {
     let mut scene = scene.clone();
     s.apply(&mut scene.render);
@@ -361,7 +346,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
         let used = std::iter::once(bs.scene.backdrop.material.name.as_str())
             .chain(bs.scene.objects.iter().map(|o| o.material.name.as_str()));
         let recipes = catalogue.resolved_json_for(used);
-        let key = fnv1a(&[
+        let key = clevrtex_materials::content_hash(&[
             ref_json.as_bytes(),
             recipes.as_bytes(),
             blender_version.as_bytes(),
@@ -774,14 +759,6 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("hint:"));
-    }
-
-    #[test]
-    fn cache_key_changes_with_every_part() {
-        let a = fnv1a(&[b"scene", b"mat"]);
-        assert_eq!(a, fnv1a(&[b"scene", b"mat"]));
-        assert_ne!(a, fnv1a(&[b"scen", b"emat"]));
-        assert_ne!(a, fnv1a(&[b"scene", b"mat2"]));
     }
 
     #[test]

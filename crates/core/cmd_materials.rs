@@ -180,16 +180,13 @@ fn cache_dir(explicit: Option<PathBuf>) -> PathBuf {
     base.join("clevrtex").join("sheet")
 }
 
-/// FNV-1a over the bridge scripts: a change to any of them invalidates every cached cell.
+/// Hash of the bridge scripts: a change to any of them invalidates every cached cell.
 fn scripts_hash() -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for (name, text) in tool::SCRIPTS {
-        for b in name.bytes().chain(text.bytes()) {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-    h
+    let parts: Vec<&[u8]> = tool::SCRIPTS
+        .iter()
+        .flat_map(|(name, text)| [name.as_bytes(), text.as_bytes()])
+        .collect();
+    clevrtex_materials::content_hash(&parts)
 }
 
 fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
