@@ -10,6 +10,11 @@ use clevrtex_materials::{Catalogue, Set};
 
 use crate::exit::{CmdResult, OK};
 
+#[path = "materials/sheet.rs"]
+mod sheet;
+#[path = "materials/stats.rs"]
+mod stats;
+
 /// Arguments of `clevrtex materials`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -252,7 +257,7 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
         }
     }
     let cells: Vec<PathBuf> = names.iter().map(|n| cache.join(key(n))).collect();
-    let img = tool::stitch(&cells, a.cols).context("cannot assemble the sheet")?;
+    let img = sheet::stitch(&cells, a.cols).context("cannot assemble the sheet")?;
     img.save(&a.out)
         .with_context(|| format!("cannot write `{}`", a.out.display()))?;
     eprintln!("wrote {}", a.out.display());
@@ -302,7 +307,7 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
 }
 
 fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
-    use clevrtex_materials::stats::{distance, features};
+    use stats::{distance, features};
     let mut names = select(cat, &a.batch)?;
     names.retain(|n| !matches!(*n, "rubber" | "metal"));
     let dir = a.out_dir.clone().unwrap_or_else(|| {

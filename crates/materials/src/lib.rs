@@ -28,7 +28,6 @@
 mod error;
 mod hash;
 mod schema;
-pub mod stats;
 pub mod tool;
 
 use std::collections::BTreeMap;
