@@ -28,7 +28,6 @@
 mod error;
 mod hash;
 mod schema;
-pub mod tool;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -360,7 +359,9 @@ impl Material {
         let mut parts = vec![serde_json::to_vec(&recipe).expect("json")];
         let top = recipe.get("path").and_then(Value::as_str);
         let layers = recipe["layers"].as_array().into_iter().flatten();
-        let paths = top.into_iter().chain(layers.filter_map(|l| l["path"].as_str()));
+        let paths = top
+            .into_iter()
+            .chain(layers.filter_map(|l| l["path"].as_str()));
         parts.extend(paths.filter_map(|p| std::fs::read(p).ok()));
         let parts: Vec<&[u8]> = parts.iter().map(Vec::as_slice).collect();
         Material {

@@ -56,7 +56,10 @@ pub use bridge::BridgeDir;
 pub use error::{RenderError, Result, Tails};
 pub use pool::{Job, PoolEvent, PoolOptions, RunReport, SampleStats};
 pub use session::{Hooks, Session};
-pub use worker::{BridgeTimings, Mode, Ready, RenderReply, Worker, WorkerOptions};
+pub use worker::{
+    BridgeTimings, MaterialMode, MaterialReply, MaterialSettings, Mode, Ready, RenderReply, Worker,
+    WorkerOptions,
+};
 
 /// The resolved built-in material catalogue for the bridge (`materials.json`, see
 /// `docs/bridge-protocol.md`), from `clevrtex-materials`. Fails only if the embedded
