@@ -2,8 +2,8 @@
 //! dataset layout.
 //!
 //! - [`Worker`]: one long-lived Blender process running the embedded bridge
-//!   (`blender_scripts/`, see `docs/bridge-protocol.md`); it renders many scenes, with a
-//!   deadline on every request.
+//!   (`blender_scripts/`, see `docs/bridge-protocol.md`); it renders many scenes (and single
+//!   materials, [`Worker::material`]), with a deadline on every request.
 //! - [`Session`]: a restartable worker: the one restart-and-retry policy (timeouts, crashes,
 //!   Ctrl-C) shared by the pool, `clevrtex bench` and `clevrtex materials`.
 //! - [`pool::run`]: `N` workers rendering [`Job`]s in parallel, with the visibility-first
@@ -11,7 +11,8 @@
 //!   is what `clevrtex generate` and `clevrtex render` call.
 //! - [`output`]: the file layout; [`post`]: the pass encodings.
 //!
-//! Rendering one scene file into a folder (what a contact sheet or a benchmark needs):
+//! Rendering one scene file into a folder with a bare worker (no restarts; see [`Session`]
+//! for a worker that survives crashes):
 //!
 //! ```no_run
 //! use std::sync::{atomic::AtomicBool, Arc};
