@@ -1,57 +1,32 @@
-"""Standalone Blender script behind `clevrtex materials sheet|check|stats|cost`.
+"""Material scenes of `clevrtex materials sheet|check|stats|cost`: the worker's `material`
+request (docs/bridge-protocol.md).
 
-    blender -b --factory-startup --python-exit-code 1 --python material_tool.py -- \
-        --mode sheet|tile|check|cost|density --materials materials.json --names a,b \
-        --out-dir DIR [--size 160] [--samples 16] [--tag TAG]
-
-One Blender process handles a whole batch. For every material it writes `DIR/<name>.png`
-(sheet, tile, check, density) and prints one reply line `TAG {json}` (when --tag is given):
-`{"name", "ok", "render_s", "file", "error"}`. A failure of one material is reported and the
-batch goes on.
+`render(req, threads)` resets Blender to factory settings, builds one small scene around the
+material `req["name"]` (recipe `req["recipe"]`), renders it to `<out_dir>/<name>.png` and
+returns the reply's fields. Modes:
 
 - sheet: a sphere and a cube of the material on a grey floor, name written underneath;
 - tile: the material on a flat square seen straight down, flat-lit (distinctness stats);
-- check: a small sphere and cube, for the build-and-render test;
-- cost: a sphere filling the frame at --samples, timed (relative cost vs `plain`);
-- density: a small and a large cube side by side, orthographic from the front.
+- check: like sheet, plus the share of pink (missing-texture) pixels;
+- cost: a sphere filling the frame at `samples`, timed (relative cost vs `plain`);
+- density: a small and a large cube side by side, orthographic from the front, plus the
+  stripe period measured on each.
 """
 
-import argparse
-import json
-import math
 import os
-import sys
 import time
-import traceback
 
 import bpy
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import materials  # noqa: E402
+import materials
 
 
-def parse_args():
-    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--mode", required=True)
-    ap.add_argument("--materials", required=True)
-    ap.add_argument("--names", default="")
-    ap.add_argument("--out-dir", required=True)
-    ap.add_argument("--size", type=int, default=160)
-    ap.add_argument("--samples", type=int, default=16)
-    ap.add_argument("--threads", type=int, default=0)
-    ap.add_argument("--tag", default="")
-    ap.add_argument("--displacement", type=float, default=0.0)
-    ap.add_argument("--random", type=float, default=0.37)
-    return ap.parse_args(argv)
+class Options:
+    """The per-request settings the scene builders read."""
 
-
-def reply(tag, obj):
-    line = json.dumps(obj)
-    if tag:
-        print("%s %s" % (tag, line), flush=True)
-    else:
-        print(line, flush=True)
+    def __init__(self, req):
+        self.displacement = float(req.get("displacement", 0.0))
+        self.random = float(req.get("random", 0.37))
 
 
 def reset_scene():
@@ -154,17 +129,17 @@ def label(text, location, size):
     return ob
 
 
-def instance(name, args, random=None):
-    inst = {"name": name, "random": args.random if random is None else random}
-    if args.displacement > 0:
-        inst["displacement"] = args.displacement
+def instance(name, opts, random=None):
+    inst = {"name": name, "random": opts.random if random is None else random}
+    if opts.displacement > 0:
+        inst["displacement"] = opts.displacement
     return inst
 
 
-def scene_sheet(name, recipe, args):
+def scene_sheet(name, recipe, opts):
     scene = reset_scene()
-    ctx = {"displacement": args.displacement > 0}
-    mat = materials.build_material(name, recipe, instance(name, args), ctx)
+    ctx = {"displacement": opts.displacement > 0}
+    mat = materials.build_material(name, recipe, instance(name, opts), ctx)
     floor = add_mesh("plane", 6.0, (0, 0, 0))
     floor.data.materials.append(grey_material())
     s = add_mesh("sphere", 0.7, (-0.8, 0.3, 0.7))
@@ -182,9 +157,9 @@ def scene_sheet(name, recipe, args):
     return scene
 
 
-def scene_tile(name, recipe, args):
+def scene_tile(name, recipe, opts):
     scene = reset_scene()
-    mat = materials.build_material(name, recipe, instance(name, args), {"displacement": False})
+    mat = materials.build_material(name, recipe, instance(name, opts), {"displacement": False})
     tile = add_mesh("plane", 1.0, (0, 0, 0))
     tile.data.materials.append(mat)
     add_camera((0, 0, 5), (0, 0, 0), ortho=2.0)
@@ -196,13 +171,13 @@ def scene_tile(name, recipe, args):
     return scene
 
 
-def scene_check(name, recipe, args):
-    return scene_sheet(name, recipe, args)
+def scene_check(name, recipe, opts):
+    return scene_sheet(name, recipe, opts)
 
 
-def scene_cost(name, recipe, args):
+def scene_cost(name, recipe, opts):
     scene = reset_scene()
-    mat = materials.build_material(name, recipe, instance(name, args), {"displacement": False})
+    mat = materials.build_material(name, recipe, instance(name, opts), {"displacement": False})
     s = add_mesh("sphere", 1.0, (0, 0, 0))
     s.data.materials.append(mat)
     add_camera((0, -4.2, 0), (0, 0, 0), lens=50)
@@ -211,9 +186,9 @@ def scene_cost(name, recipe, args):
     return scene
 
 
-def scene_density(name, recipe, args):
+def scene_density(name, recipe, opts):
     scene = reset_scene()
-    mat = materials.build_material(name, recipe, instance(name, args, 0.0), {"displacement": False})
+    mat = materials.build_material(name, recipe, instance(name, opts, 0.0), {"displacement": False})
     small = add_mesh("cube", 0.35, (-1.0, 0, 0))
     large = add_mesh("cube", 0.7, (0.8, 0, 0))
     for ob in (small, large):
@@ -274,45 +249,43 @@ def stripe_periods(path, scene):
     return out
 
 
-def main():
-    args = parse_args()
-    with open(args.materials) as f:
-        catalogue = json.load(f)["materials"]
-    names = [n for n in args.names.split(",") if n] or sorted(catalogue)
-    os.makedirs(args.out_dir, exist_ok=True)
-    build = SCENES[args.mode]
-    for name in names:
-        t0 = time.perf_counter()
-        try:
-            if name not in catalogue:
-                raise KeyError("material `%s` is not in materials.json" % name)
-            scene = build(name, catalogue[name], args)
-            square = args.mode in ("tile", "cost")
-            scene.render.resolution_x = args.size
-            scene.render.resolution_y = args.size if square else int(args.size * 0.75)
-            if args.mode == "density":
-                scene.render.resolution_y = args.size // 2
-            scene.render.resolution_percentage = 100
-            scene.cycles.samples = args.samples
-            scene.render.threads_mode = "FIXED" if args.threads else "AUTO"
-            if args.threads:
-                scene.render.threads = args.threads
-            path = os.path.join(args.out_dir, name + ".png")
-            scene.render.filepath = path
-            t1 = time.perf_counter()
-            bpy.ops.render.render(write_still=True)
-            t2 = time.perf_counter()
-            msg = {"name": name, "ok": True, "build_s": t1 - t0, "render_s": t2 - t1,
-                   "file": path}
-            if args.mode == "check":
-                msg["pink"] = pink_fraction(path)
-            if args.mode == "density":
-                msg.update(stripe_periods(path, scene))
-            reply(args.tag, msg)
-        except Exception as e:  # one bad material must not stop the batch
-            reply(args.tag, {"name": name, "ok": False, "error": "%s: %s" % (type(e).__name__, e),
-                             "traceback": traceback.format_exc()})
+MODES = tuple(SCENES)
 
 
-if __name__ == "__main__":
-    main()
+def render(req, recipe, threads):
+    """Build and render the scene of one `material` request; returns `file`, `timings` and
+    `measures` (mode `check`: `pink`; mode `density`: stripe periods and counts)."""
+    mode = req.get("mode")
+    if mode not in SCENES:
+        raise ValueError("unknown material mode `%s` (expected one of %s)"
+                         % (mode, ", ".join(MODES)))
+    name = req["name"]
+    out_dir = req["out_dir"]
+    if not os.path.isdir(out_dir):
+        raise FileNotFoundError("output directory `%s` does not exist" % out_dir)
+    size = int(req.get("size", 160))
+    samples = int(req.get("samples", 16))
+    t0 = time.perf_counter()
+    scene = SCENES[mode](name, recipe, Options(req))
+    square = mode in ("tile", "cost")
+    scene.render.resolution_x = size
+    scene.render.resolution_y = size if square else int(size * 0.75)
+    if mode == "density":
+        scene.render.resolution_y = size // 2
+    scene.render.resolution_percentage = 100
+    scene.cycles.samples = samples
+    scene.render.threads_mode = "FIXED" if threads else "AUTO"
+    if threads:
+        scene.render.threads = threads
+    path = os.path.join(out_dir, name + ".png")
+    scene.render.filepath = path
+    t1 = time.perf_counter()
+    bpy.ops.render.render(write_still=True)
+    t2 = time.perf_counter()
+    measures = {}
+    if mode == "check":
+        measures["pink"] = pink_fraction(path)
+    if mode == "density":
+        measures.update(stripe_periods(path, scene))
+    return {"file": path, "timings": {"build_s": t1 - t0, "render_s": t2 - t1},
+            "measures": measures}

@@ -218,8 +218,12 @@ _GROUPS = {}
 
 def _load_group(path, group):
     key = (path, group)
-    if key in _GROUPS and _GROUPS[key].name in bpy.data.node_groups:
-        return _GROUPS[key]
+    if key in _GROUPS:
+        try:
+            if _GROUPS[key].name in bpy.data.node_groups:
+                return _GROUPS[key]
+        except ReferenceError:
+            pass  # removed, e.g. by the factory reset of a `material` request: load again
     with bpy.data.libraries.load(path, link=False) as (src, dst):
         dst.node_groups = list(src.node_groups)
     candidates = [ng for ng in dst.node_groups if ng is not None]

@@ -198,7 +198,17 @@ def mesh(shape):
 
 
 def cached_meshes():
-    return [m for m in _cache.values()]
+    """The cached meshes still alive. A factory reset (the `material` request's scenes start
+    from one) removes them: they are dropped here and `mesh` builds them again."""
+    alive = []
+    for shape, me in list(_cache.items()):
+        try:
+            me.name  # raises ReferenceError if something removed it
+        except ReferenceError:
+            del _cache[shape]
+            continue
+        alive.append(me)
+    return alive
 
 
 def new_object(shape, name, collection):

@@ -1,5 +1,5 @@
-"""The Blender worker: renders scene files on request, over the protocol of
-docs/bridge-protocol.md.
+"""The Blender worker: renders scene files (and single materials, for the contact sheet and
+the material checks) on request, over the protocol of docs/bridge-protocol.md.
 
 Run as `blender -b --factory-startup --python-exit-code 1 --python worker.py -- --tag TAG
 [--threads T] [--materials materials.json]`.
@@ -131,10 +131,30 @@ class Worker:
             "data_blocks": b.data_block_counts(),
         }
 
+    def material(self, req):
+        """One material on its own small scene (contact sheet, checks, statistics)."""
+        import material_tool
+
+        name = req["name"]
+        if self.catalogue is None:
+            recipe = {}
+        elif name in self.catalogue:
+            recipe = self.catalogue[name]
+        else:
+            raise KeyError("material `%s` is not in materials.json" % name)
+        # The material scenes start from factory settings: whatever scene was built is gone.
+        self.built = None
+        result = material_tool.render(req, recipe, self.args.threads)
+        result.update({"type": "done", "id": req.get("id"), "mode": req.get("mode"),
+                       "name": name})
+        return result
+
     def handle(self, req):
         kind = req.get("type")
         if kind == "render":
             return self.render(req)
+        if kind == "material":
+            return self.material(req)
         if kind == "ping":
             return {"type": "pong", "id": req.get("id")}
         raise ValueError("unknown request type `%s`" % kind)

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use serde_json::Value;
 
-use crate::util::{blender_or_skip, clevrtex, text};
+use crate::util::{blender_or_skip, clevrtex, crash_once_then, fake_blender, text};
 
 fn bench(out: &Path, extra: &[&str]) -> std::process::Output {
     clevrtex()
@@ -103,6 +103,61 @@ fn bench_render_writes_table_csv_plot_and_caches_references() {
     assert_eq!(rows2.len(), 1);
     // Same scene, same settings, same seed: the same error, bit for bit.
     assert_eq!(rows2[0]["rmse_linear"], rows[0]["rmse_linear"]);
+}
+
+/// A Blender that dies on its first request is restarted and the render retried, as in
+/// `generate`: the bench still finishes.
+#[test]
+fn bench_render_survives_a_crashed_worker() {
+    let Some(blender) = blender_or_skip("bench_render_survives_a_crashed_worker") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let wrapper = crash_once_then(dir.path(), &format!("'{}'", blender.display()));
+    let out = bench(
+        &dir.path().join("out"),
+        &["--only", "fixed-4", "--blender", wrapper.to_str().unwrap()],
+    );
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert_eq!(t.matches("restarting a Blender worker").count(), 1, "{t}");
+    assert!(t.contains("SIGSEGV"), "{t}");
+    let rows = read_csv(&dir.path().join("out/bench-render.csv"));
+    assert_eq!(rows.len(), 1, "{t}");
+    assert_eq!(rows[0]["setting"], "fixed-4");
+}
+
+/// A Blender that crashes on every request: `--retries` restarts, then a clear error naming
+/// the crash and Blender's last words, exit code 1, no table.
+#[test]
+fn bench_render_gives_up_on_a_worker_that_keeps_crashing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = clevrtex()
+        .env("FAKE_BLENDER_MODE", "crash")
+        .args([
+            "bench",
+            "render",
+            "--quick",
+            "--scenes",
+            "1",
+            "--retries",
+            "2",
+        ])
+        .args(["--width", "24", "--height", "16", "--out"])
+        .arg(dir.path())
+        .arg("--blender")
+        .arg(fake_blender())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert_eq!(t.matches("restarting a Blender worker").count(), 2, "{t}");
+    assert!(t.contains("error: blender worker"), "{t}");
+    assert!(t.contains("while rendering `full#0 reference`"), "{t}");
+    assert!(t.contains("SIGSEGV"), "{t}");
+    assert!(t.contains("segmentation fault while rendering"), "{t}");
+    assert!(t.contains("hint: "), "{t}");
+    assert!(!dir.path().join("bench-render.csv").exists(), "{t}");
 }
 
 #[test]

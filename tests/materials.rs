@@ -2,8 +2,15 @@
 
 use std::path::Path;
 use std::process::Command;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
 
-use crate::util::{blender_or_skip, repo_root, run, text};
+use clevrtex_render::{BridgeDir, MaterialMode, MaterialSettings, Session, WorkerOptions};
+
+use crate::util::{
+    blender_or_skip, blender_wrapper, clevrtex, crash_once_then, fake_blender, run, text,
+};
 
 fn write(dir: &Path, name: &str, body: &str) {
     std::fs::write(dir.join(name), body).unwrap();
@@ -130,59 +137,54 @@ fn texture_density_is_invariant_across_object_sizes() {
     );
     let json = run(&["materials", "json", "--materials", mats.to_str().unwrap()]);
     assert!(json.status.success(), "{}", text(&json));
-    let mjson = dir.path().join("materials.json");
-    std::fs::write(&mjson, &json.stdout).unwrap();
-    let out = Command::new(blender)
-        .args([
-            "-b",
-            "--factory-startup",
-            "--python-exit-code",
-            "1",
-            "--python",
-        ])
-        .arg(repo_root().join("blender_scripts/material_tool.py"))
-        .arg("--")
-        .args([
-            "--mode",
-            "density",
-            "--names",
-            "stripes,bricks",
-            "--size",
-            "400",
-        ])
-        .args(["--samples", "4", "--tag", "@@T@@", "--materials"])
-        .arg(&mjson)
-        .arg("--out-dir")
-        .arg(dir.path().join("out"))
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", text(&out));
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let replies: Vec<serde_json::Value> = stdout
-        .lines()
-        .filter_map(|l| l.strip_prefix("@@T@@ "))
-        .map(|l| serde_json::from_str(l).unwrap())
+    // The worker's `material` request, as `clevrtex materials` sends it.
+    let bridge = BridgeDir::create(&String::from_utf8(json.stdout).unwrap()).unwrap();
+    let mut session = Session::new(
+        WorkerOptions {
+            blender,
+            script: bridge.worker_script(),
+            materials: bridge.materials_json(),
+            threads: 0,
+            startup_timeout: Duration::from_secs(120),
+            interrupt: Arc::new(AtomicBool::new(false)),
+        },
+        0,
+        None,
+    );
+    let settings = MaterialSettings {
+        mode: MaterialMode::Density,
+        size: 400,
+        samples: 4,
+        displacement: 0.0,
+        random: 0.37,
+    };
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    let replies: Vec<_> = ["stripes", "bricks"]
+        .iter()
+        .map(|name| {
+            session
+                .request(&mut (), |w| {
+                    w.material(&settings, name, &out, Duration::from_secs(600))
+                })
+                .unwrap_or_else(|e| panic!("{name}: {e}"))
+        })
         .collect();
-    assert_eq!(replies.len(), 2, "{stdout}");
-    let stripes = &replies[0];
-    let (small, large) = (
-        stripes["period_small"].as_f64().unwrap(),
-        stripes["period_large"].as_f64().unwrap(),
-    );
+    session.close();
+    assert_eq!(replies.len(), 2);
+    let stripes = &replies[0].measures;
+    let (small, large) = (stripes["period_small"], stripes["period_large"]);
     eprintln!("stripe period: small cube {small:.4}, large cube {large:.4} (world units)");
-    assert!((small - 0.1).abs() < 0.01, "{stripes}");
-    assert!((large - 0.1).abs() < 0.01, "{stripes}");
+    assert!((small - 0.1).abs() < 0.01, "{stripes:?}");
+    assert!((large - 0.1).abs() < 0.01, "{stripes:?}");
     // The large cube shows about twice as many stripes as the small one.
-    let flips = |k: &str| stripes[k].as_f64().unwrap();
+    let flips = |k: &str| stripes[k];
     let ratio = flips("flips_large") / flips("flips_small");
-    assert!((1.7..2.4).contains(&ratio), "{stripes}");
+    assert!((1.7..2.4).contains(&ratio), "{stripes:?}");
     // Bricks: the mortar-line period along x agrees between sizes too.
-    let b = &replies[1];
-    let (bs, bl) = (
-        b["period_small"].as_f64().unwrap(),
-        b["period_large"].as_f64().unwrap(),
-    );
-    assert!((bs / bl - 1.0).abs() < 0.3, "{b}");
+    let b = &replies[1].measures;
+    let (bs, bl) = (b["period_small"], b["period_large"]);
+    assert!((bs / bl - 1.0).abs() < 0.3, "{b:?}");
 }
 
 const MAKE_BLEND: &str = r#"
@@ -258,5 +260,171 @@ fn user_blend_node_group_material_renders() {
         String::from_utf8_lossy(&out.stdout).contains("ok     checker_pack"),
         "{}",
         text(&out)
+    );
+}
+
+/// `clevrtex materials sheet` of three materials into `dir/sheet.png` (cells cached in
+/// `dir/cache`) with the Blender `blender`.
+fn sheet_with(blender: &Path, dir: &Path, extra: &[&str]) -> std::process::Output {
+    clevrtex()
+        .env_remove("FAKE_BLENDER_MODE")
+        .args([
+            "materials",
+            "sheet",
+            "--names",
+            "bricks,plain,moss",
+            "--out",
+        ])
+        .arg(dir.join("sheet.png"))
+        .arg("--cache")
+        .arg(dir.join("cache"))
+        .arg("--blender")
+        .arg(blender)
+        .args(extra)
+        .output()
+        .expect("run clevrtex")
+}
+
+/// The material renders are requests of the worker protocol, with `generate`'s failure
+/// policy: a Blender killed mid-render is restarted, the material rendered again, and the
+/// sheet still made.
+#[test]
+fn materials_sheet_survives_a_crashed_worker() {
+    let dir = tempfile::tempdir().unwrap();
+    let fake = format!(
+        "env FAKE_BLENDER_MODE=material '{}'",
+        fake_blender().display()
+    );
+    let blender = crash_once_then(dir.path(), &fake);
+    let out = sheet_with(&blender, dir.path(), &[]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert_eq!(t.matches("restarting a Blender worker").count(), 1, "{t}");
+    assert!(
+        t.contains("while rendering material `bricks` (sheet)"),
+        "{t}"
+    );
+    assert!(t.contains("SIGSEGV"), "{t}");
+    assert!(t.contains("segmentation fault while rendering"), "{t}");
+    // Three 8x6 cells of the fake, in one row.
+    let sheet = clevrtex_render::post::decode_png(&dir.path().join("sheet.png")).unwrap();
+    assert_eq!((sheet.width, sheet.height), (24, 6), "{t}");
+    let cached: Vec<_> = std::fs::read_dir(dir.path().join("cache"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(cached.len(), 3, "{cached:?}");
+    assert!(cached.iter().all(|f| f.ends_with(".png")), "{cached:?}");
+}
+
+/// A Blender that dies on every request: `--retries` restarts, then a clear error (which
+/// material, the crash, Blender's last words, a hint), exit 1, and no sheet or stray files.
+#[test]
+fn materials_sheet_gives_up_on_a_worker_that_keeps_crashing() {
+    let dir = tempfile::tempdir().unwrap();
+    let blender = blender_wrapper(
+        dir.path(),
+        &format!(
+            "FAKE_BLENDER_MODE=crash exec '{}' \"$@\"",
+            fake_blender().display()
+        ),
+    );
+    let out = sheet_with(&blender, dir.path(), &["--retries", "1"]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert_eq!(t.matches("restarting a Blender worker").count(), 1, "{t}");
+    assert!(t.contains("error: blender worker"), "{t}");
+    assert!(
+        t.contains("while rendering material `bricks` (sheet)"),
+        "{t}"
+    );
+    assert!(t.contains("SIGSEGV"), "{t}");
+    assert!(t.contains("--- stderr"), "{t}");
+    assert!(t.contains("segmentation fault while rendering"), "{t}");
+    assert!(t.contains("hint: "), "{t}");
+    assert!(!dir.path().join("sheet.png").exists(), "{t}");
+    let cache: Vec<_> = std::fs::read_dir(dir.path().join("cache"))
+        .unwrap()
+        .collect();
+    assert!(cache.is_empty(), "{cache:?}");
+}
+
+/// A hung Blender is killed at the `--timeout` limit, as in `generate`.
+#[test]
+fn materials_check_kills_a_hung_worker_at_the_time_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let blender = blender_wrapper(
+        dir.path(),
+        &format!(
+            "FAKE_BLENDER_MODE=hang exec '{}' \"$@\"",
+            fake_blender().display()
+        ),
+    );
+    let started = std::time::Instant::now();
+    let out = clevrtex()
+        .args(["materials", "check", "--names", "plain"])
+        .args(["--timeout", "1", "--retries", "0", "--blender"])
+        .arg(&blender)
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("timed out after") && t.contains("rendering material `plain` (check)"),
+        "{t}"
+    );
+    assert!(t.contains("it was killed"), "{t}");
+    assert!(started.elapsed() < Duration::from_secs(30), "{t}");
+}
+
+/// Ctrl-C stops the Blender worker at once: exit code 130, the worker process gone.
+#[test]
+fn materials_sheet_stops_blender_on_ctrl_c() {
+    let dir = tempfile::tempdir().unwrap();
+    let pid_file = dir.path().join("worker.pid");
+    // The wrapper records the worker's pid (kept by `exec`) once it is running.
+    let blender = blender_wrapper(
+        dir.path(),
+        &format!(
+            "echo $$ > '{}.tmp' && mv '{0}.tmp' '{0}'\nFAKE_BLENDER_MODE=hang exec '{}' \"$@\"",
+            pid_file.display(),
+            fake_blender().display()
+        ),
+    );
+    let child = clevrtex()
+        .args(["materials", "sheet", "--names", "plain", "--out"])
+        .arg(dir.path().join("sheet.png"))
+        .arg("--cache")
+        .arg(dir.path().join("cache"))
+        .arg("--blender")
+        .arg(&blender)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    while !pid_file.exists() && std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let worker_pid = std::fs::read_to_string(&pid_file).expect("the worker never started");
+    // Let the fake answer `ready` and receive its request.
+    std::thread::sleep(Duration::from_millis(500));
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let out = child.wait_with_output().unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(130), "{t}");
+    assert!(t.contains("interrupted"), "{t}");
+    assert!(!dir.path().join("sheet.png").exists(), "{t}");
+    let alive = Command::new("kill")
+        .args(["-0", worker_pid.trim()])
+        .output()
+        .unwrap();
+    assert!(
+        !alive.status.success(),
+        "worker {worker_pid} still runs\n{t}"
     );
 }

@@ -90,3 +90,34 @@ pub fn test_python_or_skip(test: &str, module: &str) -> Option<PathBuf> {
     eprintln!("SKIPPED {test}: no Python with `{module}` (run `./scripts/setup.sh --test-venv` or set CLEVRTEX_TEST_PYTHON; set CLEVRTEX_REQUIRE_BLENDER=1 to make this a failure)");
     None
 }
+
+/// The fake Blender of `tests/fake_blender/` (its modes are listed at its top).
+pub fn fake_blender() -> PathBuf {
+    repo_root().join("tests/fake_blender/blender")
+}
+
+/// An executable `blender` in `dir` that runs `body` (a `sh` script; `"$@"` holds Blender's
+/// arguments), e.g. to pick the fake's mode per start without touching this process's
+/// environment.
+pub fn blender_wrapper(dir: &Path, body: &str) -> PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let path = dir.join("blender");
+    std::fs::write(&path, format!("#!/bin/sh\n{body}\n")).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+    path
+}
+
+/// A [`blender_wrapper`] whose first start is the fake Blender in `crash` mode (dies on its
+/// first request) and whose later starts run `then` (a program, given Blender's arguments;
+/// the marker file in `dir` remembers the first start).
+pub fn crash_once_then(dir: &Path, then: &str) -> PathBuf {
+    let marker = dir.join("crashed-once");
+    blender_wrapper(
+        dir,
+        &format!(
+            "if [ ! -e '{marker}' ]; then\n  : > '{marker}'\n  FAKE_BLENDER_MODE=crash exec '{fake}' \"$@\"\nfi\nexec {then} \"$@\"",
+            marker = marker.display(),
+            fake = fake_blender().display(),
+        ),
+    )
+}

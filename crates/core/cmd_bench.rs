@@ -15,10 +15,11 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use clevrtex_render::exr_io::Channels;
-use clevrtex_render::{BridgeDir, Mode, RenderError, Worker, WorkerOptions};
+use clevrtex_render::Mode;
 use clevrtex_scene::quality::{Quality, Sampling};
 use clevrtex_scene::{Config, Pass, SampleRequest, SceneFile};
 
+use crate::blender_session::{command_error, BlenderSession, Settings};
 use crate::exit::{self, CmdResult};
 
 #[path = "bench/ladder.rs"]
@@ -80,6 +81,9 @@ pub struct RenderArgs {
     /// Cycles threads (default: Blender's choice, all cores).
     #[arg(long, default_value_t = 0, value_name = "T")]
     threads: u32,
+    /// Restarts of a crashed or hung Blender worker per render before the bench stops.
+    #[arg(long, default_value_t = 2, value_name = "N")]
+    retries: u32,
     /// Blender executable (default: `blender` on PATH).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Option<PathBuf>,
@@ -151,21 +155,6 @@ fn bench_scenes(n: usize, width: u32, height: u32) -> anyhow::Result<Vec<BenchSc
         .collect()
 }
 
-/// FNV-1a, 64 bit: a stable hash for cache keys (std's hashers may change between releases).
-fn fnv1a(parts: &[&[u8]]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for part in parts {
-        for &b in *part {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-        // Separator, so ("ab", "c") and ("a", "bc") differ.
-        h ^= 0xff;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
-}
-
 fn with_sampling(scene: &SceneFile, s: &Sampling) -> SceneFile {
     let mut scene = scene.clone();
     s.apply(&mut scene.render);
@@ -180,7 +169,7 @@ fn timeout_for(scene: &SceneFile) -> Duration {
 }
 
 struct Bench {
-    worker: Worker,
+    session: BlenderSession,
     out: PathBuf,
 }
 
@@ -201,13 +190,11 @@ impl Bench {
         std::fs::write(&path, clevrtex_scene::to_pretty_json(scene)?)
             .with_context(|| format!("cannot write `{}`", path.display()))?;
         let started = Instant::now();
+        let timeout = timeout_for(scene);
         let reply = self
-            .worker
-            .render_labelled(label, &path, Mode::Final, dir, timeout_for(scene))
-            .map_err(|e| match e {
-                RenderError::Interrupted => anyhow::Error::new(exit::Interrupted),
-                e => e.into(),
-            })?;
+            .session
+            .request(|w| w.render_labelled(label, &path, Mode::Final, dir, timeout))
+            .map_err(command_error)?;
         Ok((started.elapsed().as_secs_f64(), reply.timings.render_s))
     }
 }
@@ -301,7 +288,6 @@ fn run_render(args: RenderArgs) -> CmdResult {
     let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
     let catalogue = clevrtex_materials::Catalogue::builtin()
         .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
-    let bridge = BridgeDir::create(&catalogue.resolved_json())?;
     let interrupt = Arc::new(AtomicBool::new(false));
     {
         let flag = Arc::clone(&interrupt);
@@ -312,21 +298,17 @@ fn run_render(args: RenderArgs) -> CmdResult {
             eprintln!("\ninterrupt: stopping Blender (Ctrl-C again to quit at once)");
         });
     }
-    let worker = Worker::start(&WorkerOptions {
+    let mut session = BlenderSession::new(Settings {
         blender,
-        script: bridge.worker_script(),
-        materials: bridge.materials_json(),
+        materials_json: catalogue.resolved_json(),
         threads: args.threads,
-        startup_timeout: Duration::from_secs(120),
-        interrupt: Arc::clone(&interrupt),
-    })
-    .map_err(|e| match e {
-        RenderError::Interrupted => anyhow::Error::new(exit::Interrupted),
-        e => e.into(),
+        retries: args.retries,
+        idle_timeout: None,
+        interrupt,
     })?;
-    let blender_version = worker.ready().blender_version.clone();
+    let blender_version = session.ready()?.blender_version;
     let mut bench = Bench {
-        worker,
+        session,
         out: args.out.clone(),
     };
 
@@ -361,7 +343,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
         let used = std::iter::once(bs.scene.backdrop.material.name.as_str())
             .chain(bs.scene.objects.iter().map(|o| o.material.name.as_str()));
         let recipes = catalogue.resolved_json_for(used);
-        let key = fnv1a(&[
+        let key = clevrtex_materials::content_hash(&[
             ref_json.as_bytes(),
             recipes.as_bytes(),
             blender_version.as_bytes(),
@@ -429,7 +411,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
             });
         }
     }
-    bench.worker.quit();
+    bench.session.close();
 
     let csv = args.out.join("bench-render.csv");
     std::fs::write(&csv, to_csv(&rows))
@@ -774,14 +756,6 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("hint:"));
-    }
-
-    #[test]
-    fn cache_key_changes_with_every_part() {
-        let a = fnv1a(&[b"scene", b"mat"]);
-        assert_eq!(a, fnv1a(&[b"scene", b"mat"]));
-        assert_ne!(a, fnv1a(&[b"scen", b"emat"]));
-        assert_ne!(a, fnv1a(&[b"scene", b"mat2"]));
     }
 
     #[test]

@@ -1,14 +1,28 @@
 //! `clevrtex materials`: list the catalogue, print the resolved recipes, render a contact
 //! sheet, check that every material builds, and measure distinctness and cost.
+//!
+//! The renders are `material` requests of the bridge protocol (`docs/bridge-protocol.md`),
+//! one per material, sent to one Blender worker with `generate`'s failure policy: a time
+//! limit per request, a crashed or hung worker restarted and the request retried
+//! (`--retries`), Ctrl-C stopping Blender at once.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
 
 use anyhow::{bail, Context};
-use clevrtex_materials::tool::{self, Mode, ToolRun};
 use clevrtex_materials::{Catalogue, Set};
+use clevrtex_render::{MaterialMode, MaterialReply, MaterialSettings, RenderError};
 
-use crate::exit::{CmdResult, OK};
+use crate::blender_session::{command_error, BlenderSession, Settings};
+use crate::exit::{self, CmdResult, OK};
+
+#[path = "materials/sheet.rs"]
+mod sheet;
+#[path = "materials/stats.rs"]
+mod stats;
 
 /// Arguments of `clevrtex materials`.
 #[derive(Debug, clap::Args)]
@@ -78,6 +92,14 @@ struct BatchArgs {
     /// Cycles threads (0: automatic).
     #[arg(long, default_value_t = 0)]
     threads: u32,
+    /// Time limit per material render, seconds; a worker over it is killed and the render
+    /// retried. Default: 600 + 8 per sample at 320x240, and a worker silent for 300 s counts
+    /// as hung.
+    #[arg(long, value_name = "SECONDS")]
+    timeout: Option<f64>,
+    /// Restarts of a crashed or hung Blender worker per material before the command stops.
+    #[arg(long, default_value_t = 2, value_name = "N")]
+    retries: u32,
 }
 
 #[derive(Debug, clap::Args)]
@@ -161,12 +183,101 @@ fn select<'a>(cat: &'a Catalogue, a: &'a BatchArgs) -> anyhow::Result<Vec<&'a st
     Ok(cat.names(set))
 }
 
-fn blender(a: &BatchArgs) -> anyhow::Result<PathBuf> {
-    a.blender.clone().or_else(tool::find_blender).ok_or_else(|| {
-        anyhow::anyhow!(
-            "blender not found\nhint: install it (`apt-get install -y blender`) or pass `--blender PATH`"
-        )
+/// How one material's render came out.
+enum Outcome {
+    /// Rendered.
+    Done(MaterialReply),
+    /// The bridge could not build or render it (the worker survived).
+    Failed {
+        /// The bridge's message.
+        message: String,
+        /// The Python traceback (may be empty).
+        traceback: String,
+    },
+}
+
+/// One Blender worker for the materials `names` of `cat`, started on the first render, with
+/// a Ctrl-C handler that stops it.
+fn session(cat: &Catalogue, names: &[&str], a: &BatchArgs) -> anyhow::Result<BlenderSession> {
+    if let Some(t) = a.timeout {
+        if !(t > 0.0 && t.is_finite()) {
+            bail!(
+                "`--timeout {t}` must be a positive number of seconds\nhint: e.g. `--timeout 600`"
+            );
+        }
+    }
+    let blender = clevrtex_render::blender::locate(a.blender.as_deref())?;
+    let interrupt = Arc::new(AtomicBool::new(false));
+    {
+        let flag = Arc::clone(&interrupt);
+        // Failing to install the handler (e.g. one is already set) only loses clean Ctrl-C.
+        let _ = ctrlc::set_handler(move || {
+            if flag.swap(true, Ordering::SeqCst) {
+                std::process::exit(i32::from(exit::INTERRUPTED));
+            }
+            eprintln!("\ninterrupt: stopping Blender (Ctrl-C again to quit at once)");
+        });
+    }
+    BlenderSession::new(Settings {
+        blender,
+        materials_json: cat.resolved_json_for(names.iter().copied()),
+        threads: a.threads,
+        retries: a.retries,
+        // With an explicit `--timeout` that limit is the only one, as in `generate`.
+        idle_timeout: a
+            .timeout
+            .is_none()
+            .then_some(clevrtex_render::pool::IDLE_TIMEOUT),
+        interrupt,
     })
+}
+
+/// The time limit of one render: `--timeout`, else 600 s + 8 s per sample at 320x240 (the
+/// rule `generate` uses for scenes).
+fn timeout(a: &BatchArgs, s: &MaterialSettings) -> Duration {
+    let pixels = f64::from(s.size) * f64::from(s.size) / (320.0 * 240.0);
+    let auto = 600.0 + 8.0 * f64::from(s.samples) * pixels.max(0.05);
+    Duration::from_secs_f64(a.timeout.unwrap_or(auto))
+}
+
+/// Render each of `names` with `settings` into `out_dir/<name>.png`, in order. A material the
+/// bridge cannot build is an [`Outcome::Failed`] and the batch goes on; a worker that keeps
+/// failing (after `--retries` restarts) or an interrupt ends it with an error.
+fn render_all(
+    session: &mut BlenderSession,
+    a: &BatchArgs,
+    settings: &MaterialSettings,
+    names: &[&str],
+    out_dir: &Path,
+) -> anyhow::Result<Vec<Outcome>> {
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create `{}`", out_dir.display()))?;
+    let limit = timeout(a, settings);
+    names
+        .iter()
+        .map(
+            |name| match session.request(|w| w.material(settings, name, out_dir, limit)) {
+                Ok(reply) => Ok(Outcome::Done(reply)),
+                Err(RenderError::Bridge {
+                    message, traceback, ..
+                }) => Ok(Outcome::Failed { message, traceback }),
+                Err(e) => Err(command_error(e)),
+            },
+        )
+        .collect()
+}
+
+/// [`render_all`] into `dir`, which is removed afterwards whatever happened.
+fn render_all_in_temp(
+    session: &mut BlenderSession,
+    a: &BatchArgs,
+    settings: &MaterialSettings,
+    names: &[&str],
+    dir: &Path,
+) -> anyhow::Result<Vec<Outcome>> {
+    let result = render_all(session, a, settings, names, dir);
+    let _ = std::fs::remove_dir_all(dir);
+    result
 }
 
 fn cache_dir(explicit: Option<PathBuf>) -> PathBuf {
@@ -180,16 +291,14 @@ fn cache_dir(explicit: Option<PathBuf>) -> PathBuf {
     base.join("clevrtex").join("sheet")
 }
 
-/// FNV-1a over the bridge scripts: a change to any of them invalidates every cached cell.
+/// Hash of the embedded bridge scripts: a change to any of them invalidates every cached
+/// cell.
 fn scripts_hash() -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for (name, text) in tool::SCRIPTS {
-        for b in name.bytes().chain(text.bytes()) {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-    h
+    let parts: Vec<&[u8]> = clevrtex_render::bridge::files()
+        .iter()
+        .flat_map(|(name, text)| [name.as_bytes(), text.as_bytes()])
+        .collect();
+    clevrtex_materials::content_hash(&parts)
 }
 
 fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
@@ -224,28 +333,34 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
     );
     if !missing.is_empty() {
         let tmp = cache.join(format!("tmp-{}", std::process::id()));
-        let run = ToolRun {
-            blender: blender(&a.batch)?,
-            mode: Mode::Sheet,
+        let settings = MaterialSettings {
+            mode: MaterialMode::Sheet,
             size: a.size,
             samples: a.samples,
-            threads: a.batch.threads,
-            out_dir: tmp.clone(),
             displacement: 0.0,
             random: 0.37,
         };
-        let replies = run.run(cat, &missing)?;
-        let mut failed = Vec::new();
-        for r in &replies {
-            if r.value["ok"].as_bool() == Some(true) {
-                let from = tmp.join(format!("{}.png", r.name));
-                std::fs::rename(&from, cache.join(key(&r.name)))
-                    .with_context(|| format!("cannot move `{}` into the cache", from.display()))?;
-            } else {
-                failed.push(format!("{}: {}", r.name, r.value["error"]));
-            }
-        }
+        let mut session = session(cat, &missing, &a.batch)?;
+        let result =
+            render_all(&mut session, &a.batch, &settings, &missing, &tmp).and_then(|outcomes| {
+                session.close();
+                let mut failed = Vec::new();
+                for (name, outcome) in missing.iter().zip(outcomes) {
+                    match outcome {
+                        Outcome::Done(reply) => {
+                            std::fs::rename(&reply.file, cache.join(key(name))).with_context(
+                                || format!("cannot move `{}` into the cache", reply.file.display()),
+                            )?;
+                        }
+                        Outcome::Failed { message, .. } => {
+                            failed.push(format!("{name}: {message}"))
+                        }
+                    }
+                }
+                Ok(failed)
+            });
         let _ = std::fs::remove_dir_all(&tmp);
+        let failed = result?;
         if !failed.is_empty() {
             bail!(
                 "{} material(s) failed to build:\n{}\nhint: run `clevrtex materials check --names <name>` for the traceback",
@@ -255,7 +370,7 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
         }
     }
     let cells: Vec<PathBuf> = names.iter().map(|n| cache.join(key(n))).collect();
-    let img = tool::stitch(&cells, a.cols).context("cannot assemble the sheet")?;
+    let img = sheet::stitch(&cells, a.cols).context("cannot assemble the sheet")?;
     img.save(&a.out)
         .with_context(|| format!("cannot write `{}`", a.out.display()))?;
     eprintln!("wrote {}", a.out.display());
@@ -265,79 +380,77 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
 fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
     let names = select(cat, &a)?;
     let dir = std::env::temp_dir().join(format!("clevrtex-check-{}", std::process::id()));
-    let run = ToolRun {
-        blender: blender(&a)?,
-        mode: Mode::Check,
+    let settings = MaterialSettings {
+        mode: MaterialMode::Check,
         size: 64,
         samples: 2,
-        threads: a.threads,
-        out_dir: dir.clone(),
         displacement: 0.0,
         random: 0.37,
     };
-    let replies = run.run(cat, &names)?;
-    let _ = std::fs::remove_dir_all(&dir);
+    let mut session = session(cat, &names, &a)?;
+    let outcomes = render_all_in_temp(&mut session, &a, &settings, &names, &dir)?;
+    session.close();
     let mut failed = 0;
     let mut out = std::io::stdout().lock();
-    for r in &replies {
-        let pink = r.value["pink"].as_f64().unwrap_or(0.0);
-        let ok = r.value["ok"].as_bool() == Some(true) && pink == 0.0;
-        if ok {
-            let _ = writeln!(out, "ok     {}", r.name);
-        } else {
-            failed += 1;
-            let why = r.value["error"]
-                .as_str()
-                .unwrap_or("pink (missing texture) pixels");
-            let _ = writeln!(out, "FAILED {}: {why}", r.name);
-            if let Some(tb) = r.value["traceback"].as_str() {
-                let _ = writeln!(out, "{tb}");
+    for (name, outcome) in names.iter().zip(&outcomes) {
+        match outcome {
+            Outcome::Done(reply) if reply.measures.get("pink").copied().unwrap_or(0.0) == 0.0 => {
+                let _ = writeln!(out, "ok     {name}");
+            }
+            Outcome::Done(_) => {
+                failed += 1;
+                let _ = writeln!(out, "FAILED {name}: pink (missing texture) pixels");
+            }
+            Outcome::Failed { message, traceback } => {
+                failed += 1;
+                let _ = writeln!(out, "FAILED {name}: {message}");
+                if !traceback.is_empty() {
+                    let _ = writeln!(out, "{traceback}");
+                }
             }
         }
     }
     if failed > 0 {
         bail!(
             "{failed} of {} material(s) failed to build or render\nhint: the traceback above names the block and parameter",
-            replies.len()
+            outcomes.len()
         );
     }
     Ok(OK)
 }
 
 fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
-    use clevrtex_materials::stats::{distance, features};
+    use stats::{distance, features};
     let mut names = select(cat, &a.batch)?;
     names.retain(|n| !matches!(*n, "rubber" | "metal"));
     let dir = a.out_dir.clone().unwrap_or_else(|| {
         std::env::temp_dir().join(format!("clevrtex-stats-{}", std::process::id()))
     });
     let mut feats = Vec::new();
+    let mut session = session(cat, &names, &a.batch)?;
     for (i, random) in [0.37, 0.81].into_iter().enumerate() {
-        let run = ToolRun {
-            blender: blender(&a.batch)?,
-            mode: Mode::Tile,
+        let settings = MaterialSettings {
+            mode: MaterialMode::Tile,
             size: a.size,
             samples: a.samples,
-            threads: a.batch.threads,
-            out_dir: dir.join(format!("r{i}")),
             displacement: 0.0,
             random,
         };
-        let replies = run.run(cat, &names)?;
+        let out_dir = dir.join(format!("r{i}"));
+        let outcomes = render_all(&mut session, &a.batch, &settings, &names, &out_dir)?;
         let mut f = Vec::new();
-        for r in &replies {
-            let Some(file) = r.value["file"].as_str() else {
-                bail!(
-                    "material `{}` failed: {}\nhint: run `clevrtex materials check --names {}`",
-                    r.name,
-                    r.value["error"],
-                    r.name
-                );
+        for (name, outcome) in names.iter().zip(outcomes) {
+            let file = match outcome {
+                Outcome::Done(reply) => reply.file,
+                Outcome::Failed { message, .. } => bail!(
+                    "material `{name}` failed: {message}\nhint: run `clevrtex materials check --names {name}`"
+                ),
             };
-            f.push(features(Path::new(file)).with_context(|| format!("cannot read `{file}`"))?);
+            f.push(features(&file).with_context(|| format!("cannot read `{}`", file.display()))?);
         }
         feats.push(f);
     }
+    session.close();
     // The same material with another `random` is the yardstick: two different materials
     // closer than the farthest pair of instances of one material could pass for one.
     let intra: Vec<f64> = (0..names.len())
@@ -394,38 +507,43 @@ fn cost(cat: &Catalogue, a: CostArgs) -> CmdResult {
         names.insert(0, "plain");
     }
     let dir = std::env::temp_dir().join(format!("clevrtex-cost-{}", std::process::id()));
-    let run = ToolRun {
-        blender: blender(&a.batch)?,
-        mode: Mode::Cost,
+    let settings = MaterialSettings {
+        mode: MaterialMode::Cost,
         size: a.size,
         samples: a.samples,
-        threads: a.batch.threads,
-        out_dir: dir.clone(),
         displacement: 0.0,
         random: 0.37,
     };
-    let replies = run.run(cat, &names)?;
-    let _ = std::fs::remove_dir_all(&dir);
-    let time = |r: &tool::Reply| r.value["render_s"].as_f64().unwrap_or(f64::NAN);
-    let plain = replies
+    let mut session = session(cat, &names, &a.batch)?;
+    let outcomes = render_all_in_temp(&mut session, &a.batch, &settings, &names, &dir)?;
+    session.close();
+    // A material that failed to build has no time (NaN), so it shows as such in the table.
+    let times: Vec<f64> = outcomes
         .iter()
-        .find(|r| r.name == "plain")
-        .map(time)
-        .unwrap_or(f64::NAN);
-    let mut rel: Vec<f64> = replies.iter().map(|r| time(r) / plain).collect();
+        .map(|o| match o {
+            Outcome::Done(reply) => reply.timings.render_s,
+            Outcome::Failed { .. } => f64::NAN,
+        })
+        .collect();
+    let plain = names
+        .iter()
+        .zip(&times)
+        .find(|(n, _)| **n == "plain")
+        .map_or(f64::NAN, |(_, t)| *t);
+    let mut rel: Vec<f64> = times.iter().map(|t| t / plain).collect();
     let mut out = std::io::stdout().lock();
     let _ = writeln!(out, "{:<24} {:>8} {:>8}", "material", "seconds", "x plain");
-    for (r, x) in replies.iter().zip(&rel) {
-        let _ = writeln!(out, "{:<24} {:>8.2} {:>8.2}", r.name, time(r), x);
+    for ((name, t), x) in names.iter().zip(&times).zip(&rel) {
+        let _ = writeln!(out, "{name:<24} {t:>8.2} {x:>8.2}");
     }
     let shown = rel.clone();
     rel.sort_by(f64::total_cmp);
     let median = rel[rel.len() / 2];
-    let outliers: Vec<String> = replies
+    let outliers: Vec<String> = names
         .iter()
         .zip(&shown)
         .filter(|(_, x)| **x > 3.0 * median)
-        .map(|(r, x)| format!("{} ({x:.2}x plain)", r.name))
+        .map(|(name, x)| format!("{name} ({x:.2}x plain)"))
         .collect();
     let _ = writeln!(
         out,

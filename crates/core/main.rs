@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod blender_session;
 mod cmd_bench;
 mod cmd_doctor;
 mod cmd_eval;

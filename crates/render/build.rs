@@ -1,5 +1,7 @@
-//! Embeds every file of `blender_scripts/` into the library, so an installed `clevrtex`
-//! binary never hunts for the bridge on disk. Generates `$OUT_DIR/bridge_files.rs` holding
+//! Embeds the bridge, every file of `blender_scripts/` except the development tools in
+//! `blender_scripts/dev/`, into the library, so an installed `clevrtex` binary never hunts
+//! for it on disk. This is the one set of scripts every Blender run uses (`generate`,
+//! `render`, `bench`, `materials`, `doctor`). Generates `$OUT_DIR/bridge_files.rs` holding
 //! `BRIDGE_FILES: &[(relative path, contents)]`.
 
 use std::fmt::Write as _;
@@ -30,7 +32,11 @@ fn main() {
     std::fs::write(dest, out).expect("write bridge_files.rs");
 }
 
-/// Python files (and JSON data files) under `dir`, recursively; caches are skipped.
+/// Development tools (`blender_scripts/dev/`): not needed at run time, so not embedded.
+const DEV_DIR: &str = "dev";
+
+/// Python files (and JSON data files) under `dir`, recursively; caches and the development
+/// tools are skipped.
 fn collect(root: &Path, dir: &Path, files: &mut Vec<(String, PathBuf)>) {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
@@ -38,7 +44,7 @@ fn collect(root: &Path, dir: &Path, files: &mut Vec<(String, PathBuf)>) {
     for entry in entries.flatten() {
         let path = entry.path();
         let name = entry.file_name().to_string_lossy().into_owned();
-        if name.starts_with('.') || name == "__pycache__" {
+        if name.starts_with('.') || name == "__pycache__" || (dir == root && name == DEV_DIR) {
             continue;
         }
         if path.is_dir() {

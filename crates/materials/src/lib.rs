@@ -26,9 +26,8 @@
 #![deny(missing_docs)]
 
 mod error;
+mod hash;
 mod schema;
-pub mod stats;
-pub mod tool;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -38,6 +37,7 @@ use std::sync::OnceLock;
 use serde_json::{Map, Value};
 
 pub use error::{Error, ErrorKind};
+pub use hash::content_hash;
 use schema::Schema;
 
 mod embedded {
@@ -355,22 +355,15 @@ impl Material {
     fn from_recipe(name: String, set: Set, file: String, mut recipe: Value) -> Material {
         let obj = recipe.as_object_mut().expect("recipes are objects");
         obj.insert("set".into(), set.name().into());
-        let mut h = Fnv::default();
-        h.write(serde_json::to_string(&recipe).expect("json").as_bytes());
-        for key in ["path"] {
-            if let Some(p) = recipe.get(key).and_then(Value::as_str) {
-                if let Ok(bytes) = std::fs::read(p) {
-                    h.write(&bytes);
-                }
-            }
-        }
-        for layer in recipe["layers"].as_array().into_iter().flatten() {
-            if let Some(p) = layer.get("path").and_then(Value::as_str) {
-                if let Ok(bytes) = std::fs::read(p) {
-                    h.write(&bytes);
-                }
-            }
-        }
+        // The recipe and the bytes of the files it references (a `.blend`, an image).
+        let mut parts = vec![serde_json::to_vec(&recipe).expect("json")];
+        let top = recipe.get("path").and_then(Value::as_str);
+        let layers = recipe["layers"].as_array().into_iter().flatten();
+        let paths = top
+            .into_iter()
+            .chain(layers.filter_map(|l| l["path"].as_str()));
+        parts.extend(paths.filter_map(|p| std::fs::read(p).ok()));
+        let parts: Vec<&[u8]> = parts.iter().map(Vec::as_slice).collect();
         Material {
             description: recipe["description"].as_str().unwrap_or("").to_string(),
             displaces: recipe["displaces"].as_bool().unwrap_or(false),
@@ -378,7 +371,7 @@ impl Material {
             set,
             file,
             recipe,
-            hash: format!("{:016x}", h.0),
+            hash: format!("{:016x}", content_hash(&parts)),
         }
     }
 }
@@ -412,24 +405,6 @@ fn user_name(path: &Path) -> String {
             }
         })
         .collect()
-}
-
-/// FNV-1a, 64 bit: a stable content hash for cache keys (not for security).
-struct Fnv(u64);
-
-impl Default for Fnv {
-    fn default() -> Fnv {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-}
-
-impl Fnv {
-    fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.0 ^= u64::from(*b);
-            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
 }
 
 #[cfg(test)]

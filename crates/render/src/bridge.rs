@@ -9,7 +9,8 @@ include!(concat!(env!("OUT_DIR"), "/bridge_files.rs"));
 /// Bridge protocol version this crate speaks (`bridge_version` of the `ready` reply).
 pub const BRIDGE_VERSION: u64 = 1;
 
-/// Every embedded bridge file, as (path relative to `blender_scripts/`, contents).
+/// Every embedded bridge file, as (path relative to `blender_scripts/`, contents): all of
+/// `blender_scripts/` but the development tools of `blender_scripts/dev/`.
 pub fn files() -> &'static [(&'static str, &'static str)] {
     BRIDGE_FILES
 }
@@ -70,5 +71,31 @@ impl BridgeDir {
     /// The resolved material catalogue.
     pub fn materials_json(&self) -> PathBuf {
         self.dir.path().join("materials.json")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_run_time_script_is_embedded_and_no_dev_tool() {
+        for name in [
+            "worker.py",
+            "compat.py",
+            "builder.py",
+            "shapes.py",
+            "passes.py",
+            "materials.py",
+            "material_tool.py",
+        ] {
+            assert!(file(name).is_some(), "`{name}` is not embedded");
+        }
+        let dev: Vec<&str> = files()
+            .iter()
+            .map(|(n, _)| *n)
+            .filter(|n| n.starts_with("dev/"))
+            .collect();
+        assert!(dev.is_empty(), "development tools embedded: {dev:?}");
     }
 }

@@ -165,8 +165,8 @@ impl Slot<'_, '_> {
             let final_request_s = t.elapsed().as_secs_f64();
             let t_post = Instant::now();
             let facts_blender = self
-                .worker
-                .as_ref()
+                .session
+                .current()
                 .map(|w| w.ready().blender_version.clone())
                 .unwrap_or_default();
             let dir = layout::sample_dir(&opts.out, &job.variant, job.index);

@@ -2,14 +2,17 @@
 //! dataset layout.
 //!
 //! - [`Worker`]: one long-lived Blender process running the embedded bridge
-//!   (`blender_scripts/`, see `docs/bridge-protocol.md`); it renders many scenes, with a
-//!   deadline on every request.
+//!   (`blender_scripts/`, see `docs/bridge-protocol.md`); it renders many scenes (and single
+//!   materials, [`Worker::material`]), with a deadline on every request.
+//! - [`Session`]: a restartable worker: the one restart-and-retry policy (timeouts, crashes,
+//!   Ctrl-C) shared by the pool, `clevrtex bench` and `clevrtex materials`.
 //! - [`pool::run`]: `N` workers rendering [`Job`]s in parallel, with the visibility-first
 //!   check, bounded retries, restarts, a failure ledger, resume and crash-safe output; this
 //!   is what `clevrtex generate` and `clevrtex render` call.
 //! - [`output`]: the file layout; [`post`]: the pass encodings.
 //!
-//! Rendering one scene file into a folder (what a contact sheet or a benchmark needs):
+//! Rendering one scene file into a folder with a bare worker (no restarts; see [`Session`]
+//! for a worker that survives crashes):
 //!
 //! ```no_run
 //! use std::sync::{atomic::AtomicBool, Arc};
@@ -46,13 +49,18 @@ pub mod output;
 mod passes;
 pub mod pool;
 pub mod post;
+mod session;
 pub mod verify;
 mod worker;
 
 pub use bridge::BridgeDir;
 pub use error::{RenderError, Result, Tails};
 pub use pool::{Job, PoolEvent, PoolOptions, RunReport, SampleStats};
-pub use worker::{BridgeTimings, Mode, Ready, RenderReply, Worker, WorkerOptions};
+pub use session::{Hooks, Session};
+pub use worker::{
+    BridgeTimings, MaterialMode, MaterialReply, MaterialSettings, Mode, Ready, RenderReply, Worker,
+    WorkerOptions,
+};
 
 /// The resolved built-in material catalogue for the bridge (`materials.json`, see
 /// `docs/bridge-protocol.md`), from `clevrtex-materials`. Fails only if the embedded

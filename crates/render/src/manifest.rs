@@ -61,10 +61,10 @@ pub struct Manifest {
     pub files: BTreeMap<String, FileEntry>,
 }
 
-/// xxh3-64 of `bytes` as 16 hex digits: the one content hash of the project (manifests,
-/// eval provenance, material caches).
+/// xxh3-64 of `bytes` as 16 hex digits ([`clevrtex_materials::content_hash`], the one content
+/// hash of the project).
 pub fn hash_hex(bytes: &[u8]) -> String {
-    format!("{:016x}", xxhash_rust::xxh3::xxh3_64(bytes))
+    format!("{:016x}", clevrtex_materials::content_hash(&[bytes]))
 }
 
 /// The manifest's file name for shard `k` of `n`.

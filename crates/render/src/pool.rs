@@ -1,10 +1,10 @@
 //! A pool of Blender workers rendering a list of jobs into the dataset layout.
 //!
-//! `N` threads each own a [`Slot`]: a (re)startable Blender worker and a scratch folder. They
-//! take jobs from one queue and run them (see [`crate::job`] for the attempt and visibility
-//! policy of one job). A crashed, hung or babbling worker is killed and restarted, and the
-//! request retried up to `retries` times; then the job is written to the failure ledger
-//! ([`crate::ledger`]) and the run goes on (or stops, with `fail_fast`).
+//! `N` threads each own a [`Slot`]: a [`Session`] (a restartable Blender worker) and a scratch
+//! folder. They take jobs from one queue and run them (see [`crate::job`] for the attempt and
+//! visibility policy of one job). A crashed, hung or babbling worker is killed and restarted,
+//! and the request retried up to `retries` times; then the job is written to the failure
+//! ledger ([`crate::ledger`]) and the run goes on (or stops, with `fail_fast`).
 
 use std::collections::{BTreeSet, VecDeque};
 use std::path::{Path, PathBuf};
@@ -16,6 +16,7 @@ use crate::bridge::BridgeDir;
 use crate::error::{RenderError, Result};
 use crate::ledger::Ledger;
 use crate::output;
+use crate::session::{Hooks, Session};
 use crate::worker::{Mode, RenderReply, Worker, WorkerOptions};
 use clevrtex_scene::layout;
 
@@ -186,7 +187,8 @@ pub(crate) struct Shared<'a> {
     report: Mutex<RunReport>,
     stop: AtomicBool,
     fatal: Mutex<Option<RenderError>>,
-    ever_started: AtomicBool,
+    /// Whether any worker of the run has started (see [`Session::sharing_start_flag`]).
+    ever_started: Arc<AtomicBool>,
     threads: u32,
     ledger: Mutex<Ledger>,
     failed_stems: Mutex<BTreeSet<String>>,
@@ -233,7 +235,7 @@ pub fn run(
         report: Mutex::new(report),
         stop: AtomicBool::new(false),
         fatal: Mutex::new(None),
-        ever_started: AtomicBool::new(false),
+        ever_started: Arc::new(AtomicBool::new(false)),
         threads: if opts.threads > 0 {
             opts.threads
         } else {
@@ -293,7 +295,7 @@ impl Shared<'_> {
 /// One worker slot: a (re)startable Blender process and its scratch folder.
 pub(crate) struct Slot<'s, 'a> {
     pub(crate) shared: &'s Shared<'a>,
-    pub(crate) worker: Option<Worker>,
+    pub(crate) session: Session,
     pub(crate) scratch: tempfile::TempDir,
 }
 
@@ -310,9 +312,25 @@ fn worker_thread(shared: &Shared) {
             return;
         }
     };
+    let opts = shared.opts;
+    // With an explicit `--timeout` that limit is the only one; otherwise silence for
+    // IDLE_TIMEOUT also counts as a hang.
+    let session = Session::new(
+        WorkerOptions {
+            blender: opts.blender.clone(),
+            script: shared.bridge.worker_script(),
+            materials: shared.bridge.materials_json(),
+            threads: shared.threads,
+            startup_timeout: opts.startup_timeout,
+            interrupt: Arc::clone(&opts.interrupt),
+        },
+        opts.retries,
+        opts.timeout.is_none().then_some(IDLE_TIMEOUT),
+    )
+    .sharing_start_flag(Arc::clone(&shared.ever_started));
     let mut slot = Slot {
         shared,
-        worker: None,
+        session,
         scratch,
     };
     loop {
@@ -356,13 +374,7 @@ fn worker_thread(shared: &Shared) {
             }
         }
     }
-    if let Some(w) = slot.worker.take() {
-        if shared.opts.interrupt.load(Ordering::SeqCst) {
-            drop(w); // kills
-        } else {
-            w.quit();
-        }
-    }
+    slot.session.close();
 }
 
 /// Logical cores of this machine (1 if unknown).
@@ -399,50 +411,7 @@ impl Slot<'_, '_> {
         self.shared.opts
     }
 
-    /// A running worker, starting one if needed.
-    fn worker(&mut self) -> Result<&mut Worker> {
-        if self.worker.as_ref().is_some_and(|w| w.is_dead()) {
-            self.worker = None;
-        }
-        if self.worker.is_none() {
-            let opts = self.opts();
-            let w = Worker::start(&WorkerOptions {
-                blender: opts.blender.clone(),
-                script: self.shared.bridge.worker_script(),
-                materials: self.shared.bridge.materials_json(),
-                threads: self.shared.threads,
-                startup_timeout: opts.startup_timeout,
-                interrupt: Arc::clone(&opts.interrupt),
-            });
-            let w = match w {
-                Ok(w) => w,
-                // A worker that never once started (wrong program, broken install) would fail
-                // every job the same way: stop the run instead of filling the ledger.
-                Err(e) if !self.shared.ever_started.load(Ordering::SeqCst) => {
-                    return Err(RenderError::WorkerStart(Box::new(e)))
-                }
-                Err(e) => return Err(e),
-            };
-            let mut w = w;
-            // With an explicit `--timeout` that limit is the only one; otherwise silence
-            // for IDLE_TIMEOUT also counts as a hang.
-            w.set_idle_timeout(opts.timeout.is_none().then_some(IDLE_TIMEOUT));
-            self.shared.ever_started.store(true, Ordering::SeqCst);
-            {
-                let mut r = self.shared.report.lock().unwrap();
-                r.worker_starts += 1;
-                r.blender_start_s += w.startup_time().as_secs_f64();
-            }
-            (self.shared.on_event)(&PoolEvent::WorkerStarted {
-                took: w.startup_time(),
-            });
-            self.worker = Some(w);
-        }
-        Ok(self.worker.as_mut().expect("just started"))
-    }
-
-    /// One request with restarts: a crash, hang or garbage kills the worker; a fresh one
-    /// retries, up to `retries` times.
+    /// One request with restarts (see [`Session::request`]).
     pub(crate) fn request(
         &mut self,
         label: &str,
@@ -451,28 +420,34 @@ impl Slot<'_, '_> {
         dir: &Path,
         timeout: Duration,
     ) -> Result<RenderReply> {
-        let mut tries = 0;
-        loop {
-            let result = self
-                .worker()
-                .and_then(|w| w.render_labelled(label, scene, mode, dir, timeout));
-            match result {
-                Err(e) if e.is_worker_failure() && tries < self.opts().retries => {
-                    tries += 1;
-                    self.worker = None;
-                    (self.shared.on_event)(&PoolEvent::WorkerRestarted { error: &e });
-                    if self.shared.stopping() {
-                        return Err(RenderError::Interrupted);
-                    }
-                }
-                Err(e) => {
-                    if e.is_worker_failure() {
-                        self.worker = None;
-                    }
-                    return Err(e);
-                }
-                Ok(r) => return Ok(r),
-            }
+        let mut hooks = PoolHooks(self.shared);
+        self.session.request(&mut hooks, |w| {
+            w.render_labelled(label, scene, mode, dir, timeout)
+        })
+    }
+}
+
+/// A slot's session reports to the run: start counts and times, restart events, and the
+/// run's stop flag.
+struct PoolHooks<'s, 'a>(&'s Shared<'a>);
+
+impl Hooks for PoolHooks<'_, '_> {
+    fn started(&mut self, worker: &Worker) {
+        {
+            let mut r = self.0.report.lock().unwrap();
+            r.worker_starts += 1;
+            r.blender_start_s += worker.startup_time().as_secs_f64();
         }
+        (self.0.on_event)(&PoolEvent::WorkerStarted {
+            took: worker.startup_time(),
+        });
+    }
+
+    fn restarting(&mut self, error: &RenderError) {
+        (self.0.on_event)(&PoolEvent::WorkerRestarted { error });
+    }
+
+    fn stopping(&self) -> bool {
+        self.0.stopping()
     }
 }

@@ -109,6 +109,64 @@ pub struct RenderReply {
     pub projected: Vec<[f64; 3]>,
 }
 
+/// What a `material` request renders around the material (see
+/// `blender_scripts/material_tool.py`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MaterialMode {
+    /// A sphere and a cube on a grey floor, labelled (the contact sheet).
+    Sheet,
+    /// A flat-lit square seen straight down (distinctness statistics).
+    Tile,
+    /// Like `Sheet`, plus the share of pink (missing-texture) pixels (`pink`).
+    Check,
+    /// A sphere filling the frame, timed.
+    Cost,
+    /// A small and a large cube side by side, orthographic, plus their stripe periods
+    /// (`period_small`, `period_large`, `flips_small`, `flips_large`).
+    Density,
+}
+
+impl MaterialMode {
+    /// The protocol name.
+    pub fn name(self) -> &'static str {
+        match self {
+            MaterialMode::Sheet => "sheet",
+            MaterialMode::Tile => "tile",
+            MaterialMode::Check => "check",
+            MaterialMode::Cost => "cost",
+            MaterialMode::Density => "density",
+        }
+    }
+}
+
+/// The settings of a `material` request, shared by every material of a batch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MaterialSettings {
+    /// What to render.
+    pub mode: MaterialMode,
+    /// Image width in pixels (the height follows from the mode).
+    pub size: u32,
+    /// Samples per pixel.
+    pub samples: u32,
+    /// Displacement strength given to the instance (0: none).
+    pub displacement: f64,
+    /// The instance's `random` value (0.37 unless comparing instances).
+    pub random: f64,
+}
+
+/// The reply to a `material` request.
+#[derive(Debug, Clone, Deserialize)]
+pub struct MaterialReply {
+    /// The PNG written (`<out_dir>/<name>.png`).
+    pub file: PathBuf,
+    /// Scene build and Cycles time.
+    #[serde(default)]
+    pub timings: BridgeTimings,
+    /// What the mode measures on the image (`pink` for check, stripe periods for density).
+    #[serde(default)]
+    pub measures: BTreeMap<String, f64>,
+}
+
 enum Event {
     Reply(String),
     Eof,
@@ -330,27 +388,63 @@ impl Worker {
         out_dir: &Path,
         timeout: Duration,
     ) -> Result<RenderReply> {
-        let id = self.next_id;
-        self.next_id += 1;
         let doing = format!("rendering `{label}` ({})", mode.name());
         let request = serde_json::json!({
             "type": "render",
-            "id": id,
             "mode": mode.name(),
             "scene": scene,
             "out_dir": out_dir,
         });
-        self.send(&request, &doing)?;
-        let reply = self.wait_reply(Instant::now() + timeout, &doing)?;
+        self.call(request, &doing, timeout)
+    }
+
+    /// Ask the worker to render material `name` of its catalogue on the small scene of
+    /// `settings.mode`, into `out_dir/<name>.png` (`out_dir` must exist), and wait at most
+    /// `timeout`. Failures as for [`Worker::render`]: a material that does not build is a
+    /// [`RenderError::Bridge`] error and leaves the worker usable.
+    pub fn material(
+        &mut self,
+        settings: &MaterialSettings,
+        name: &str,
+        out_dir: &Path,
+        timeout: Duration,
+    ) -> Result<MaterialReply> {
+        let doing = format!("rendering material `{name}` ({})", settings.mode.name());
+        let request = serde_json::json!({
+            "type": "material",
+            "mode": settings.mode.name(),
+            "name": name,
+            "out_dir": out_dir,
+            "size": settings.size,
+            "samples": settings.samples,
+            "displacement": settings.displacement,
+            "random": settings.random,
+        });
+        self.call(request, &doing, timeout)
+    }
+
+    /// Send `request` (an object; its `id` is added here) and wait at most `timeout` for its
+    /// `done` reply.
+    fn call<T: serde::de::DeserializeOwned>(
+        &mut self,
+        mut request: serde_json::Value,
+        doing: &str,
+        timeout: Duration,
+    ) -> Result<T> {
+        let id = self.next_id;
+        self.next_id += 1;
+        request["id"] = id.into();
+        self.send(&request, doing)?;
+        let reply = self.wait_reply(Instant::now() + timeout, doing)?;
         if reply.get("id").and_then(|v| v.as_u64()) != Some(id) {
             let line = reply.to_string();
             return Err(self.fail_protocol(
-                &doing,
+                doing,
                 line,
                 format!("expected a reply to request {id}"),
             ));
         }
-        self.expect_type(&reply, "done", &doing)
+        self.expect_type(&reply, "done", doing)
     }
 
     /// Ask the worker to quit and wait briefly for it; kills it if it lingers.

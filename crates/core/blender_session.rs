@@ -1,0 +1,102 @@
+//! The Blender session of the commands that render outside the pool (`bench render`,
+//! `materials sheet|check|stats|cost`): the render crate's [`Session`] (the same
+//! restart-and-retry policy as `generate`) together with its bridge folder, a warning on
+//! stderr for each restart, and Ctrl-C mapped to exit code 130.
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
+
+use clevrtex_render::{BridgeDir, Hooks, Ready, RenderError, Session, Worker, WorkerOptions};
+
+use crate::exit;
+
+/// Prints each restart the way `generate` does.
+struct WarnOnRestart;
+
+impl Hooks for WarnOnRestart {
+    fn restarting(&mut self, error: &RenderError) {
+        eprintln!("warning: restarting a Blender worker: {error}");
+    }
+}
+
+/// How to start the session's workers.
+pub struct Settings {
+    /// The Blender executable.
+    pub blender: PathBuf,
+    /// The resolved material catalogue for the bridge.
+    pub materials_json: String,
+    /// Cycles threads (0 = Blender's choice).
+    pub threads: u32,
+    /// Restarts of a crashed or hung worker per request.
+    pub retries: u32,
+    /// A worker silent this long counts as hung (see `Worker::set_idle_timeout`).
+    pub idle_timeout: Option<Duration>,
+    /// Set by the command's Ctrl-C handler.
+    pub interrupt: Arc<AtomicBool>,
+}
+
+/// A restartable Blender worker and the bridge folder it runs from.
+pub struct BlenderSession {
+    // Declared first so it is dropped first: the worker dies before its folder goes.
+    session: Session,
+    _bridge: BridgeDir,
+}
+
+impl BlenderSession {
+    /// Write the bridge; the first worker starts with the first request (or [`Self::ready`]).
+    pub fn new(settings: Settings) -> anyhow::Result<BlenderSession> {
+        let bridge = BridgeDir::create(&settings.materials_json)?;
+        let session = Session::new(
+            WorkerOptions {
+                blender: settings.blender,
+                script: bridge.worker_script(),
+                materials: bridge.materials_json(),
+                threads: settings.threads,
+                startup_timeout: Duration::from_secs(120),
+                interrupt: settings.interrupt,
+            },
+            settings.retries,
+            settings.idle_timeout,
+        );
+        Ok(BlenderSession {
+            session,
+            _bridge: bridge,
+        })
+    }
+
+    /// What the worker reported when it started (starting it if needed).
+    pub fn ready(&mut self) -> anyhow::Result<Ready> {
+        let worker = self
+            .session
+            .worker(&mut WarnOnRestart)
+            .map_err(command_error)?;
+        Ok(worker.ready().clone())
+    }
+
+    /// Run `call` on a worker, restarting and retrying after worker failures (see
+    /// [`Session::request`]). Errors are the render crate's, for callers that handle some
+    /// (a material that does not build); [`command_error`] turns the rest into the
+    /// command's.
+    pub fn request<T>(
+        &mut self,
+        call: impl FnMut(&mut Worker) -> Result<T, RenderError>,
+    ) -> Result<T, RenderError> {
+        self.session.request(&mut WarnOnRestart, call)
+    }
+
+    /// Let the worker quit (or kill it after Ctrl-C).
+    pub fn close(mut self) {
+        self.session.close();
+    }
+}
+
+/// A render error as the command's error: an interrupt becomes [`exit::Interrupted`] (exit
+/// code 130), anything else keeps its message and hint.
+pub fn command_error(err: RenderError) -> anyhow::Error {
+    match err {
+        RenderError::Interrupted => anyhow::Error::new(exit::Interrupted),
+        e => e.into(),
+    }
+}
