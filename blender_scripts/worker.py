@@ -187,7 +187,25 @@ class Worker:
             self.replier.send(reply)
 
 
+def _die_with_parent():
+    """Never outlive the clevrtex process that started us, even when it is killed with SIGKILL
+    (no chance for it to stop us): on Linux, ask the kernel for SIGKILL when our parent dies,
+    then check that the parent named by CLEVRTEX_PARENT_PID is still it (it may have died
+    before the request). Elsewhere, or without the variable, nothing happens."""
+    parent = os.environ.get("CLEVRTEX_PARENT_PID")
+    if not parent or not sys.platform.startswith("linux"):
+        return
+    try:
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, 9, 0, 0, 0)
+    except Exception:
+        return
+    if os.getppid() != int(parent):
+        os._exit(1)
+
+
 def main():
+    _die_with_parent()
     args = _parse_args(sys.argv)
     replier = Replier(_take_stdout(), args.tag)
     t0 = time.perf_counter()

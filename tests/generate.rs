@@ -1223,3 +1223,101 @@ fn bad_sizes_attempts_configs_and_scene_files_fail_up_front() {
         assert!(t.contains(want), "{want}: {t}");
     }
 }
+
+/// Processes whose command line mentions `dir`.
+fn processes_mentioning(dir: &Path) -> Vec<String> {
+    let o = std::process::Command::new("pgrep")
+        .arg("-af")
+        .arg(dir.display().to_string())
+        .output()
+        .unwrap();
+    String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+/// `kill -9` of clevrtex mid-run: its Blender workers die with it (parent-death signal), and
+/// the temporary folders it could not remove are removed by the next run.
+#[test]
+fn workers_and_temp_folders_do_not_outlive_a_killed_clevrtex() {
+    let Some(blender) = blender_or_skip("workers_do_not_outlive_a_killed_clevrtex") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let out = dir.path().join("out");
+    // Renders long enough (thousands of samples) that a worker left alone would still be
+    // busy well after the deadline below.
+    let gen = |samples: &str| {
+        let mut c = clevrtex();
+        c.args([
+            "generate",
+            "--variant",
+            "clevr",
+            "-n",
+            "2",
+            "--workers",
+            "2",
+        ])
+        .args(["--width", "64", "--height", "48", "--samples", samples])
+        .arg("--blender")
+        .arg(&blender)
+        .arg("--out")
+        .arg(&out)
+        .env("TMPDIR", &tmp)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
+        c
+    };
+    let mut child = gen("20000").spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while processes_mentioning(&tmp).len() < 2 {
+        assert!(Instant::now() < deadline, "no Blender worker started");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // Into the long final renders.
+    std::thread::sleep(Duration::from_secs(4));
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(3);
+    while !processes_mentioning(&tmp).is_empty() {
+        assert!(
+            Instant::now() < deadline,
+            "workers outlived their killed parent: {:?}",
+            processes_mentioning(&tmp)
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let ours = |tmp: &Path| -> Vec<String> {
+        std::fs::read_dir(tmp)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with("clevrtex-"))
+            .collect()
+    };
+    assert!(
+        !ours(&tmp).is_empty(),
+        "a killed run cannot clean up after itself"
+    );
+    // The next run removes them, finishes, and leaves nothing behind itself.
+    let o = gen("1")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .arg("--overwrite")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert_eq!(ours(&tmp), Vec::<String>::new());
+    let blender_dirs: Vec<_> = std::fs::read_dir(&tmp)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with("blender"))
+        .collect();
+    assert!(
+        blender_dirs.is_empty(),
+        "Blender's own temporary folders are ours to remove"
+    );
+}

@@ -34,17 +34,16 @@ impl BridgeDir {
     /// Write the embedded scripts and `materials_json` (the resolved catalogue, see
     /// `docs/bridge-protocol.md`) into a fresh temporary folder.
     pub fn create(materials_json: &str) -> Result<BridgeDir> {
-        let dir = tempfile::Builder::new()
-            .prefix("clevrtex-bridge-")
-            .tempdir()
-            .map_err(|e| {
-                RenderError::io(
-                    "cannot create a temporary folder in",
-                    std::env::temp_dir(),
-                    e,
-                    "set `TMPDIR` to a writable folder",
-                )
-            })?;
+        // Folders of earlier runs that were killed (so never cleaned up) go first.
+        crate::tmp::remove_stale();
+        let dir = crate::tmp::private_dir("clevrtex-bridge-").map_err(|e| {
+            RenderError::io(
+                "cannot create a temporary folder in",
+                std::env::temp_dir(),
+                e,
+                "set `TMPDIR` to a writable folder",
+            )
+        })?;
         for (rel, text) in BRIDGE_FILES {
             let path = dir.path().join(rel);
             if let Some(parent) = path.parent() {

@@ -50,6 +50,7 @@ mod passes;
 pub mod pool;
 pub mod post;
 mod session;
+pub mod tmp;
 pub mod verify;
 mod worker;
 

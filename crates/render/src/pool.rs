@@ -300,7 +300,7 @@ pub(crate) struct Slot<'s, 'a> {
 }
 
 fn worker_thread(shared: &Shared) {
-    let scratch = match tempfile::Builder::new().prefix("clevrtex-work-").tempdir() {
+    let scratch = match crate::tmp::private_dir("clevrtex-work-") {
         Ok(d) => d,
         Err(e) => {
             shared.set_fatal(RenderError::io(

@@ -191,6 +191,8 @@ pub struct Worker {
     activity: Arc<AtomicU64>,
     epoch: Instant,
     idle_timeout: Option<Duration>,
+    /// Blender's `TMPDIR`: removed when the worker is dropped, after `Drop` killed Blender.
+    _tmp: tempfile::TempDir,
 }
 
 impl std::fmt::Debug for Event {
@@ -237,6 +239,21 @@ impl Worker {
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
+        // Blender's own temporary files (`blender_*` folders, left behind whenever a worker is
+        // killed) go into a private folder removed with the worker, or by the next run if we
+        // are killed ourselves.
+        let tmp = crate::tmp::private_dir("clevrtex-blender-").map_err(|e| {
+            RenderError::io(
+                "cannot create a temporary folder in",
+                std::env::temp_dir(),
+                e,
+                "set `TMPDIR` to a writable folder with free space",
+            )
+        })?;
+        cmd.env("TMPDIR", tmp.path());
+        // The bridge asks the kernel to kill it when we die, even by SIGKILL, and checks that
+        // we are still its parent (see worker.py).
+        cmd.env("CLEVRTEX_PARENT_PID", std::process::id().to_string());
         // Own process group: a Ctrl-C in the terminal reaches only us, and we stop the
         // workers ourselves, so no half-written output is left behind.
         #[cfg(unix)]
@@ -315,6 +332,7 @@ impl Worker {
             activity,
             epoch,
             idle_timeout: None,
+            _tmp: tmp,
         };
         let doing = "starting up".to_string();
         let reply = worker.wait_reply(Instant::now() + opts.startup_timeout, &doing)?;

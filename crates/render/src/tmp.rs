@@ -1,0 +1,99 @@
+//! Private temporary folders (`clevrtex-bridge-*`, `clevrtex-work-*`, `clevrtex-blender-*` in
+//! `$TMPDIR`) that are cleaned up even after a `kill -9`.
+//!
+//! Each folder holds an `owner` file: the pid and the start time (clock ticks since boot,
+//! `/proc/<pid>/stat` field 22) of the process that made it. A dropped folder is removed at
+//! once; folders whose owner is gone (killed, so its destructors never ran) are removed by the
+//! next run, in [`remove_stale`], which every run calls when it makes its bridge folder. The
+//! start time tells a dead owner from a new process that got the same pid.
+
+use std::path::Path;
+
+/// Prefixes of our folders in `$TMPDIR`.
+const PREFIXES: [&str; 3] = ["clevrtex-bridge-", "clevrtex-work-", "clevrtex-blender-"];
+/// The ownership file in each folder.
+const OWNER: &str = "owner";
+
+/// Start time of process `pid` (field 22 of `/proc/<pid>/stat`), if it is running.
+fn start_time(pid: u32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name (field 2) may hold spaces and parentheses: fields resume after the
+    // last `)`, at field 3.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    rest.split_whitespace().nth(19)?.parse().ok()
+}
+
+/// The `owner` line of this process.
+fn owner_line() -> String {
+    let pid = std::process::id();
+    format!("{pid} {}\n", start_time(pid).unwrap_or(0))
+}
+
+/// A fresh private folder `$TMPDIR/<prefix>XXXXXX` owned by this process.
+pub(crate) fn private_dir(prefix: &str) -> std::io::Result<tempfile::TempDir> {
+    let dir = tempfile::Builder::new().prefix(prefix).tempdir()?;
+    std::fs::write(dir.path().join(OWNER), owner_line())?;
+    Ok(dir)
+}
+
+/// Whether the folder's owner (per its `owner` file) is still running. Folders without a
+/// readable owner file count as alive: they may be being created, or be someone else's.
+fn owner_alive(dir: &Path) -> bool {
+    let Ok(text) = std::fs::read_to_string(dir.join(OWNER)) else {
+        return true;
+    };
+    let mut it = text.split_whitespace();
+    let (Some(Ok(pid)), Some(Ok(start))) = (
+        it.next().map(str::parse::<u32>),
+        it.next().map(str::parse::<u64>),
+    ) else {
+        return true;
+    };
+    start_time(pid).is_some_and(|s| start == 0 || s == start)
+}
+
+/// Remove our folders in `$TMPDIR` whose owner process is gone. Returns how many were
+/// removed. Never fails: what cannot be removed is left for a later run.
+pub fn remove_stale() -> usize {
+    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if !PREFIXES.iter().any(|p| name.starts_with(p)) {
+            continue;
+        }
+        let path = e.path();
+        if path.is_dir() && !owner_alive(&path) && std::fs::remove_dir_all(&path).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn our_own_folder_is_alive_and_a_dead_owners_is_stale() {
+        let mine = private_dir("clevrtex-work-").unwrap();
+        assert!(owner_alive(mine.path()));
+        assert!(start_time(std::process::id()).is_some_and(|s| s > 0));
+        // A process that has exited: its pid no longer matches its start time.
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let pid = child.id();
+        child.wait().unwrap();
+        let dead = tempfile::Builder::new()
+            .prefix("clevrtex-work-")
+            .tempdir()
+            .unwrap()
+            .keep();
+        std::fs::write(dead.join(OWNER), format!("{pid} 1\n")).unwrap();
+        assert!(!owner_alive(&dead));
+        remove_stale();
+        assert!(!dead.exists());
+        assert!(mine.path().exists(), "a live owner's folder is kept");
+    }
+}
