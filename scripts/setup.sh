@@ -4,7 +4,7 @@
 #
 #   ./scripts/setup.sh               Blender (apt) and the Rust components
 #   ./scripts/setup.sh --test-venv   also `.venv-test/`: a Python venv with the libraries the
-#                                    tests read our files with (webdataset)
+#                                    tests read our files with (webdataset, PyYAML)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SUDO=""
@@ -29,9 +29,9 @@ if command -v rustup >/dev/null 2>&1; then
   rustup component add rustfmt clippy >/dev/null 2>&1 || true
 fi
 if [ "$test_venv" = 1 ]; then
-  if ! .venv-test/bin/python -c 'import webdataset' >/dev/null 2>&1; then
+  if ! .venv-test/bin/python -c 'import webdataset, yaml' >/dev/null 2>  if ! .venv-test/bin/python -c 'import webdataset' >/dev/null 2>&1; then1; then
     python3 -m venv .venv-test
-    .venv-test/bin/pip install --quiet --disable-pip-version-check 'webdataset>=0.2,<2'
+    .venv-test/bin/pip install --quiet --disable-pip-version-check 'webdataset>=0.2,<2' 'pyyaml>=6'
   fi
   echo "test venv: $(.venv-test/bin/python -c 'import webdataset, sys; print(sys.version.split()[0], "webdataset", getattr(webdataset, "__version__", "?"))')"
 fi

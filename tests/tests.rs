@@ -8,6 +8,7 @@ mod eval;
 mod export;
 mod extreme;
 mod generate;
+mod k8s;
 mod materials;
 mod sample;
 mod slurm;

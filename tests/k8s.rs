@@ -1,0 +1,165 @@
+//! The Kubernetes Indexed Job (`deploy/k8s/`): no cluster here, so what can be checked is: the
+//! YAML parses (with PyYAML, as kubectl's parser would) into an Indexed Job whose image, user
+//! and command are the ones the Dockerfile builds, and whose arguments the real `clevrtex`
+//! accepts; and `generate` with `JOB_COMPLETION_INDEX=k` for every `k` makes the same union
+//! as one run.
+
+use std::path::Path;
+
+use serde_json::Value;
+
+use crate::util::{blender_or_skip, clevrtex, repo_root, test_python_or_skip, text};
+
+#[test]
+fn indexed_job_yaml_names_the_dockerfiles_image_and_a_valid_command() {
+    let Some(python) = test_python_or_skip("indexed_job_yaml", "yaml") else {
+        return;
+    };
+    let yaml = repo_root().join("deploy/k8s/indexed-job.yaml");
+    let o = std::process::Command::new(&python)
+        .args([
+            "-c",
+            "import json, sys, yaml; print(json.dumps(list(yaml.safe_load_all(open(sys.argv[1])))))",
+        ])
+        .arg(&yaml)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let docs: Vec<Value> = serde_json::from_slice(&o.stdout).unwrap();
+    let job = docs.iter().find(|d| d["kind"] == "Job").expect("a Job");
+    let pvc = docs
+        .iter()
+        .find(|d| d["kind"] == "PersistentVolumeClaim")
+        .expect("a PVC");
+    let spec = &job["spec"];
+    assert_eq!(spec["completionMode"], "Indexed");
+    assert!(spec["backoffLimitPerIndex"].as_u64().is_some());
+    let completions = spec["completions"].as_u64().unwrap();
+    let pod = &spec["template"]["spec"];
+    let c = &pod["containers"][0];
+    let env: Vec<(String, String)> = c["env"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            (
+                e["name"].as_str().unwrap().to_string(),
+                e["value"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect();
+    assert!(
+        env.contains(&("CLEVRTEX_SHARD_COUNT".into(), completions.to_string())),
+        "CLEVRTEX_SHARD_COUNT must equal completions: {env:?}"
+    );
+    assert_eq!(
+        pod["volumes"][0]["persistentVolumeClaim"]["claimName"],
+        pvc["metadata"]["name"]
+    );
+
+    // The image and user are the Dockerfile's.
+    let dockerfile = std::fs::read_to_string(repo_root().join("deploy/k8s/Dockerfile")).unwrap();
+    let image = c["image"].as_str().unwrap();
+    assert_eq!(image, format!("clevrtex:{}", env!("CARGO_PKG_VERSION")));
+    assert!(dockerfile.contains(&format!("-t {image} ")), "{dockerfile}");
+    assert!(dockerfile.contains("ENTRYPOINT [\"/usr/local/bin/clevrtex\"]"));
+    let uid = pod["securityContext"]["runAsUser"].as_u64().unwrap();
+    assert!(dockerfile.contains(&format!("USER {uid}")), "{dockerfile}");
+
+    // The real binary accepts the arguments: with pod 0's index it gets as far as looking for
+    // Blender (not a usage error, not a shard error).
+    let args: Vec<String> = c["args"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(args[0], "generate");
+    let dir = tempfile::tempdir().unwrap();
+    let args: Vec<String> = args
+        .iter()
+        .map(|a| {
+            if a == "/data" {
+                dir.path().display().to_string()
+            } else {
+                a.clone()
+            }
+        })
+        .collect();
+    let o = clevrtex()
+        .args(&args)
+        .args(["--blender", "/no/such/blender"])
+        .env("JOB_COMPLETION_INDEX", "0")
+        .envs(env.iter().map(|(k, v)| (k.as_str(), v.as_str())))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("blender not found at `/no/such/blender`"),
+        "{}",
+        text(&o)
+    );
+}
+
+/// Masks, depth and metadata of one output folder.
+fn comparable(out: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    std::fs::read_dir(out.join("clevrtex_clevr/0"))
+        .unwrap()
+        .flatten()
+        .filter(|e| {
+            let n = e.file_name().to_string_lossy().into_owned();
+            n.ends_with("_flat.png") || n.ends_with("_depth_0001.png") || n.ends_with(".json")
+        })
+        .map(|e| {
+            (
+                e.file_name().to_string_lossy().into_owned(),
+                std::fs::read(e.path()).unwrap(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn job_completion_index_shards_make_the_same_union_as_one_run() {
+    let Some(blender) = blender_or_skip("job_completion_index_shards") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let run = |out: &Path, index: Option<u64>| {
+        let mut c = clevrtex();
+        c.args(["generate", "--variant", "clevr", "-n", "6", "--seed", "9"])
+            .args([
+                "--width",
+                "40",
+                "--height",
+                "30",
+                "--samples",
+                "1",
+                "--workers",
+                "1",
+            ])
+            .args(["--passes", "rgb,mask,depth", "--blender"])
+            .arg(&blender)
+            .arg("--out")
+            .arg(out)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX");
+        if let Some(k) = index {
+            c.env("JOB_COMPLETION_INDEX", k.to_string())
+                .env("CLEVRTEX_SHARD_COUNT", "3");
+        }
+        let o = c.output().unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    };
+    let (pods, one) = (dir.path().join("pods"), dir.path().join("one"));
+    for k in 0..3 {
+        run(&pods, Some(k));
+    }
+    run(&one, None);
+    let (a, b) = (comparable(&pods), comparable(&one));
+    assert_eq!(a.len(), 18);
+    assert_eq!(a, b, "the pods' union differs from one run");
+    let v = clevrtex().arg("verify").arg(&pods).output().unwrap();
+    assert_eq!(v.status.code(), Some(0), "{}", text(&v));
+    assert!(text(&v).contains("3 manifest(s)"), "{}", text(&v));
+}
