@@ -29,7 +29,7 @@ if command -v rustup >/dev/null 2>&1; then
   rustup component add rustfmt clippy >/dev/null 2>&1 || true
 fi
 if [ "$test_venv" = 1 ]; then
-  if ! .venv-test/bin/python -c 'import webdataset, yaml' >/dev/null 2>  if ! .venv-test/bin/python -c 'import webdataset' >/dev/null 2>&1; then1; then
+  if ! .venv-test/bin/python -c 'import webdataset, yaml' >/dev/null 2>&1; then
     python3 -m venv .venv-test
     .venv-test/bin/pip install --quiet --disable-pip-version-check 'webdataset>=0.2,<2' 'pyyaml>=6'
   fi
