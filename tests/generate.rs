@@ -1321,3 +1321,23 @@ fn workers_and_temp_folders_do_not_outlive_a_killed_clevrtex() {
         "Blender's own temporary folders are ours to remove"
     );
 }
+
+/// `clevrtex doctor` with a program that never answers: killed and reported within its
+/// `--timeout`, not a hang.
+#[test]
+fn doctor_reports_a_blender_that_never_answers() {
+    let t = Instant::now();
+    let out = clevrtex()
+        .env("FAKE_BLENDER_MODE", "deaf")
+        .args(["doctor", "--timeout", "2", "--blender"])
+        .arg(fake_blender())
+        .output()
+        .unwrap();
+    let t_ = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t_}");
+    assert!(
+        t_.contains("--version` did not answer within 2 s; it was killed"),
+        "{t_}"
+    );
+    assert!(t.elapsed() < Duration::from_secs(20), "{:?}", t.elapsed());
+}

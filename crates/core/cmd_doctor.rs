@@ -19,6 +19,10 @@ pub struct Args {
     /// Blender executable to check (default: `blender` on PATH).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Option<PathBuf>,
+    /// Seconds each check may take (`blender --version`, the bridge's start-up) before the
+    /// program is killed and reported.
+    #[arg(long, default_value_t = 60.0, value_name = "SECS")]
+    timeout: f64,
 }
 
 /// Run `clevrtex doctor`.
@@ -30,9 +34,16 @@ pub fn run(args: Args) -> CmdResult {
         "machine: {cores} core(s); `generate` defaults to {workers} worker(s) x {} Cycles thread(s)",
         (cores / workers).max(1)
     );
+    if !(args.timeout > 0.0 && args.timeout.is_finite()) {
+        anyhow::bail!(
+            "`--timeout {}` must be a positive number of seconds\nhint: e.g. `--timeout 60`",
+            args.timeout
+        );
+    }
+    let deadline = Duration::from_secs_f64(args.timeout);
     let path = blender::locate(args.blender.as_deref())?;
     println!("blender: {}", path.display());
-    let line = blender::version_line(&path)?;
+    let line = blender::version_line_within(&path, deadline)?;
     let mut problems = Vec::new();
     match blender::parse_version(&line) {
         Some((major, minor, patch)) => {
@@ -62,7 +73,7 @@ pub fn run(args: Args) -> CmdResult {
         script: bridge.worker_script(),
         materials: bridge.materials_json(),
         threads: 1,
-        startup_timeout: Duration::from_secs(120),
+        startup_timeout: deadline,
         interrupt: Arc::new(AtomicBool::new(false)),
     }) {
         Ok(worker) => {

@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 use crate::error::{RenderError, Result};
 
@@ -38,23 +39,55 @@ fn find_on_path(name: &str) -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
-/// The first line of `blender --version` (e.g. `Blender 3.4.1`).
-pub fn version_line(blender: &Path) -> Result<String> {
-    let out = Command::new(blender)
+/// How long `blender --version` may take (it takes ~1 s; a Blender that never answers is
+/// killed and reported instead of hanging the command).
+pub const VERSION_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// The first line of `blender --version` (e.g. `Blender 3.4.1`), within `timeout`.
+pub fn version_line_within(blender: &Path, timeout: Duration) -> Result<String> {
+    let mut child = Command::new(blender)
         .arg("--version")
         .stdin(std::process::Stdio::null())
-        .output()
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
         .map_err(|source| RenderError::Spawn {
             program: blender.to_path_buf(),
             cause: source,
         })?;
-    let text = String::from_utf8_lossy(&out.stdout);
+    let mut stdout = child.stdout.take().expect("piped");
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = std::io::Read::read_to_string(&mut stdout, &mut s);
+        s
+    });
+    let deadline = Instant::now() + timeout;
+    loop {
+        match child.try_wait() {
+            Ok(Some(_)) => break,
+            Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
+            _ => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err(RenderError::VersionTimeout {
+                    program: blender.to_path_buf(),
+                    waited: timeout,
+                });
+            }
+        }
+    }
+    let text = reader.join().unwrap_or_default();
     Ok(text
         .lines()
         .map(str::trim)
         .find(|l| l.starts_with("Blender"))
         .unwrap_or_else(|| text.lines().next().unwrap_or(""))
         .to_string())
+}
+
+/// [`version_line_within`] the default [`VERSION_TIMEOUT`].
+pub fn version_line(blender: &Path) -> Result<String> {
+    version_line_within(blender, VERSION_TIMEOUT)
 }
 
 /// The version numbers in a `Blender X.Y.Z` line.

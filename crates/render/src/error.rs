@@ -49,7 +49,7 @@ pub enum RenderError {
         cause: std::io::Error,
     },
     /// The worker did not answer within the time limit; it was killed.
-    #[error("blender worker `{}` timed out after {:.1} s while {doing}; it was killed\n{tails}hint: raise `--timeout` (seconds) if renders are just slow, or lower `--samples`", .program.display(), .after.as_secs_f64())]
+    #[error("blender worker `{}` timed out after {:.1} s while {doing}; it was killed\n{tails}hint: {}", .program.display(), .after.as_secs_f64(), timeout_hint(.doing))]
     Timeout {
         /// The program.
         program: PathBuf,
@@ -73,7 +73,7 @@ pub enum RenderError {
         tails: Box<Tails>,
     },
     /// The worker printed a reply line that is not valid protocol.
-    #[error("blender worker `{}` sent a malformed reply while {doing}: `{line}` ({problem})\n{tails}hint: the bridge scripts and this binary disagree; reinstall `clevrtex`", .program.display())]
+    #[error("blender worker `{}` sent a malformed reply while {doing}: `{line}` ({problem})\n{tails}hint: a reply line was cut or garbled (the worker crashed mid-write, or something else in Blender wrote to the reply stream); the request is retried with a fresh worker; if it keeps happening, run `clevrtex doctor` and report it with the output above", .program.display())]
     Protocol {
         /// The program.
         program: PathBuf,
@@ -128,8 +128,16 @@ pub enum RenderError {
         /// Why the ledger could not be written.
         cause: std::io::Error,
     },
+    /// `blender --version` did not finish in time.
+    #[error("`{} --version` did not answer within {} s; it was killed\nhint: this program is not a working Blender (or hangs at start-up); pass another with `--blender PATH`, or check it by running `{} -b --version`", .program.display(), .waited.as_secs(), .program.display())]
+    VersionTimeout {
+        /// The program.
+        program: PathBuf,
+        /// How long we waited.
+        waited: std::time::Duration,
+    },
     /// A file Blender wrote could not be decoded or lacks what we asked for.
-    #[error("bad render output `{}`: {problem}\nhint: the bridge and this binary disagree about the pass layout; run `clevrtex doctor`", .path.display())]
+    #[error("bad render output `{}`: {problem}\nhint: Blender wrote something other than what was asked for (a full disk under `$TMPDIR`, or a Blender version clevrtex does not support); run `clevrtex doctor`", .path.display())]
     BadOutput {
         /// The file.
         path: PathBuf,
@@ -200,6 +208,18 @@ impl RenderError {
         )
     }
 }
+
+/// What to raise when a worker timed out while `doing` something.
+fn timeout_hint(doing: &str) -> &'static str {
+    if doing == STARTING_UP {
+        "raise `--startup-timeout` (seconds) if Blender is just slow to start (a busy machine or a network file system), or run `clevrtex doctor`"
+    } else {
+        "raise `--timeout` (seconds) if renders are just slow, or lower `--samples`"
+    }
+}
+
+/// What a worker is doing while it starts (in [`RenderError`] messages).
+pub(crate) const STARTING_UP: &str = "starting up";
 
 fn status_text(status: &Option<ExitStatus>) -> String {
     match status {

@@ -334,7 +334,7 @@ impl Worker {
             idle_timeout: None,
             _tmp: tmp,
         };
-        let doing = "starting up".to_string();
+        let doing = crate::error::STARTING_UP.to_string();
         let reply = worker.wait_reply(Instant::now() + opts.startup_timeout, &doing)?;
         let ready: Ready = worker.expect_type(&reply, "ready", &doing)?;
         if ready.bridge_version != crate::bridge::BRIDGE_VERSION {
