@@ -428,3 +428,40 @@ fn materials_sheet_stops_blender_on_ctrl_c() {
         "worker {worker_pid} still runs\n{t}"
     );
 }
+
+/// A random-bytes `x.blend` in a material directory is refused by name, not listed as a
+/// material; a `--size 0` sheet is refused instead of writing a 4x4 image.
+#[test]
+fn a_fake_blend_and_a_zero_size_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("x.blend"),
+        b"\x00\x13random bytes, not Blender",
+    )
+    .unwrap();
+    let d = dir.path().to_str().unwrap();
+    let out = run(&["materials", "list", "--materials", d]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("x.blend") && t.contains("not a Blender file"),
+        "{t}"
+    );
+    assert!(!t.contains("user node group"), "{t}");
+
+    let sheet = dir.path().join("sheet.png");
+    let out = run(&[
+        "materials",
+        "sheet",
+        "--names",
+        "plain",
+        "--size",
+        "0",
+        "--out",
+        sheet.to_str().unwrap(),
+    ]);
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(2), "{t}");
+    assert!(t.contains("0 is not in 16..=4096"), "{t}");
+    assert!(!sheet.exists());
+}

@@ -55,8 +55,8 @@ enum Sub {
 struct StatsArgs {
     #[command(flatten)]
     batch: BatchArgs,
-    /// Tile size in pixels.
-    #[arg(long, default_value_t = 128)]
+    /// Tile size in pixels (16 to 4096).
+    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(16..=4096))]
     size: u32,
     /// Samples per pixel.
     #[arg(long, default_value_t = 16)]
@@ -70,8 +70,8 @@ struct StatsArgs {
 struct CostArgs {
     #[command(flatten)]
     batch: BatchArgs,
-    /// Image size in pixels.
-    #[arg(long, default_value_t = 160)]
+    /// Image size in pixels (16 to 4096).
+    #[arg(long, default_value_t = 160, value_parser = clap::value_parser!(u32).range(16..=4096))]
     size: u32,
     /// Samples per pixel.
     #[arg(long, default_value_t = 64)]
@@ -109,8 +109,8 @@ struct SheetArgs {
     /// Output PNG.
     #[arg(long)]
     out: PathBuf,
-    /// Cell width in pixels (height is 3/4 of it).
-    #[arg(long, default_value_t = 240)]
+    /// Cell width in pixels, 16 to 4096 (height is 3/4 of it).
+    #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(16..=4096))]
     size: u32,
     /// Samples per pixel.
     #[arg(long, default_value_t = 24)]

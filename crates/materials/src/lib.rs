@@ -201,6 +201,9 @@ impl Catalogue {
 
     /// Add the materials of a user directory (`--materials DIR`), set [`Set::User`].
     ///
+    /// A `.blend` file must be one (its header is checked: `BLENDER`, or gzip or zstd
+    /// compressed), so a stray file fails here, naming it, not later inside Blender.
+    ///
     /// `NAME.json` is a material in our format (relative paths resolve against `DIR`), or
     /// `{"blend": "file.blend", "group": "NodeGroup"}`; a `NAME.blend` that no JSON file
     /// refers to becomes material `NAME` using the first node group with the ClevrTex
@@ -247,6 +250,15 @@ impl Catalogue {
                     continue;
                 }
                 let shown = path.display().to_string();
+                if let Some(problem) = blend_file_problem(path) {
+                    return Err(Error::new(
+                        ErrorKind::BadValue,
+                        &shown,
+                        "",
+                        problem,
+                        "save it again from Blender (File > Save), or remove it from the material directory",
+                    ));
+                }
                 let mut recipe = Map::new();
                 recipe.insert("kind".into(), "blend".into());
                 recipe.insert("description".into(), "user node group".into());
@@ -405,6 +417,25 @@ fn user_name(path: &Path) -> String {
             }
         })
         .collect()
+}
+
+/// Why `path` is not a `.blend` file, if it is not: unreadable, or a header that is neither
+/// Blender's `BLENDER` nor gzip or zstd compression (which Blender uses for compressed files).
+pub fn blend_file_problem(path: &Path) -> Option<String> {
+    let mut head = [0u8; 7];
+    let read = std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head).map(|()| head));
+    match read {
+        Err(e) => Some(format!("cannot read the `.blend` file: {e}")),
+        Ok(h)
+            if &h == b"BLENDER" || h[..2] == [0x1f, 0x8b] || h[..4] == [0x28, 0xb5, 0x2f, 0xfd] =>
+        {
+            None
+        }
+        Ok(_) => {
+            Some("not a Blender file (no `BLENDER` header, not gzip or zstd compressed)".into())
+        }
+    }
 }
 
 #[cfg(test)]

@@ -118,6 +118,16 @@ impl Schema {
             .unwrap_or("user node group");
         out.insert("description".into(), desc.into());
         let path = ctx.resolve_path("blend", obj.get("blend"))?;
+        if let Some(problem) =
+            crate::blend_file_problem(std::path::Path::new(path.as_str().unwrap_or("")))
+        {
+            return Err(ctx.err(
+                ErrorKind::BadValue,
+                "blend",
+                problem,
+                "save the node group from Blender (File > Save) and point `blend` at that file",
+            ));
+        }
         out.insert("path".into(), path);
         let group = match obj.get("group") {
             None | Some(Value::Null) => Value::Null,
