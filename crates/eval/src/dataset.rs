@@ -37,14 +37,19 @@ pub enum Split {
 }
 
 impl Split {
+    /// The dataset layout's split this one is, `None` for [`Split::All`].
+    pub fn part(self) -> Option<layout::Split> {
+        match self {
+            Split::Test => Some(layout::Split::Test),
+            Split::Val => Some(layout::Split::Val),
+            Split::Train => Some(layout::Split::Train),
+            Split::All => None,
+        }
+    }
+
     /// Name as on the command line.
     pub fn name(self) -> &'static str {
-        match self {
-            Split::Test => "test",
-            Split::Val => "val",
-            Split::Train => "train",
-            Split::All => "all",
-        }
+        self.part().map_or("all", layout::Split::name)
     }
 
     /// The positions `start..end` of this split among `n` samples of `variant`, by the
@@ -52,11 +57,8 @@ impl Split {
     /// `"splits": "test_only"` (`outd`) has only a test split, all of it.
     pub fn range(self, n: usize, variant: &str) -> Result<std::ops::Range<usize>, EvalError> {
         let splits = layout::variant_splits(variant);
-        let part = match self {
-            Split::All => return Ok(0..n),
-            Split::Test => layout::Split::Test,
-            Split::Val => layout::Split::Val,
-            Split::Train => layout::Split::Train,
+        let Some(part) = self.part() else {
+            return Ok(0..n);
         };
         if splits == Splits::TestOnly && part != layout::Split::Test {
             return Err(EvalError::Usage {

@@ -36,14 +36,7 @@ impl BridgeDir {
     pub fn create(materials_json: &str) -> Result<BridgeDir> {
         // Folders of earlier runs that were killed (so never cleaned up) go first.
         crate::tmp::remove_stale();
-        let dir = crate::tmp::private_dir("clevrtex-bridge-").map_err(|e| {
-            RenderError::io(
-                "cannot create a temporary folder in",
-                std::env::temp_dir(),
-                e,
-                "set `TMPDIR` to a writable folder",
-            )
-        })?;
+        let dir = crate::tmp::private_dir("clevrtex-bridge-")?;
         for (rel, text) in BRIDGE_FILES {
             let path = dir.path().join(rel);
             if let Some(parent) = path.parent() {

@@ -303,12 +303,7 @@ fn worker_thread(shared: &Shared) {
     let scratch = match crate::tmp::private_dir("clevrtex-work-") {
         Ok(d) => d,
         Err(e) => {
-            shared.set_fatal(RenderError::io(
-                "cannot create a temporary folder in",
-                std::env::temp_dir(),
-                e,
-                "set `TMPDIR` to a writable folder with free space",
-            ));
+            shared.set_fatal(e);
             return;
         }
     };

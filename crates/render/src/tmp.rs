@@ -30,10 +30,20 @@ fn owner_line() -> String {
 }
 
 /// A fresh private folder `$TMPDIR/<prefix>XXXXXX` owned by this process.
-pub(crate) fn private_dir(prefix: &str) -> std::io::Result<tempfile::TempDir> {
-    let dir = tempfile::Builder::new().prefix(prefix).tempdir()?;
-    std::fs::write(dir.path().join(OWNER), owner_line())?;
-    Ok(dir)
+pub(crate) fn private_dir(prefix: &str) -> crate::Result<tempfile::TempDir> {
+    let make = || -> std::io::Result<tempfile::TempDir> {
+        let dir = tempfile::Builder::new().prefix(prefix).tempdir()?;
+        std::fs::write(dir.path().join(OWNER), owner_line())?;
+        Ok(dir)
+    };
+    make().map_err(|e| {
+        crate::RenderError::io(
+            "cannot create a temporary folder in",
+            std::env::temp_dir(),
+            e,
+            "set `TMPDIR` to a writable folder with free space",
+        )
+    })
 }
 
 /// Whether the folder's owner (per its `owner` file) is still running. Folders without a

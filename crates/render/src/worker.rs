@@ -242,14 +242,7 @@ impl Worker {
         // Blender's own temporary files (`blender_*` folders, left behind whenever a worker is
         // killed) go into a private folder removed with the worker, or by the next run if we
         // are killed ourselves.
-        let tmp = crate::tmp::private_dir("clevrtex-blender-").map_err(|e| {
-            RenderError::io(
-                "cannot create a temporary folder in",
-                std::env::temp_dir(),
-                e,
-                "set `TMPDIR` to a writable folder with free space",
-            )
-        })?;
+        let tmp = crate::tmp::private_dir("clevrtex-blender-")?;
         cmd.env("TMPDIR", tmp.path());
         // The bridge asks the kernel to kill it when we die, even by SIGKILL, and checks that
         // we are still its parent (see worker.py).
