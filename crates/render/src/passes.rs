@@ -129,7 +129,17 @@ pub(crate) fn write_passes(
     for &pass in passes {
         let name = layout::pass_file(stem, pass);
         if pass.spec().source == Source::RgbPng {
-            staged.copy(&name, &reply_file(reply, "rgb", work)?)?;
+            let from = reply_file(reply, "rgb", work)?;
+            let bytes = std::fs::read(&from).map_err(|e| {
+                RenderError::io(
+                    "cannot read render output",
+                    &from,
+                    e,
+                    "the Blender worker's temporary folder vanished; rerun",
+                )
+            })?;
+            // Blender's timing stamps out: the same pixels give the same bytes.
+            staged.write(&name, &post::strip_png_text(&bytes, &from)?)?;
             continue;
         }
         let kind = pass.spec().png;

@@ -221,6 +221,42 @@ pub fn encode_png(
     Ok(bytes)
 }
 
+/// A PNG without its text chunks (`tEXt`, `zTXt`, `iTXt`) and time stamp (`tIME`): Blender
+/// writes the render's timings there (`cycles.ViewLayer.render_time`...), which would make
+/// two renders of the same pixels differ in bytes. Every other chunk is kept as it is (same
+/// bytes, same CRCs). `path` names the file in errors.
+pub fn strip_png_text(bytes: &[u8], path: &Path) -> Result<Vec<u8>> {
+    const SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
+    let bad = |problem: &str| RenderError::BadOutput {
+        path: path.to_path_buf(),
+        problem: problem.to_string(),
+    };
+    if !bytes.starts_with(SIGNATURE) {
+        return Err(bad("not a PNG (bad signature)"));
+    }
+    let mut out = SIGNATURE.to_vec();
+    let mut pos = SIGNATURE.len();
+    while pos < bytes.len() {
+        let len = bytes
+            .get(pos..pos + 4)
+            .map(|b| u32::from_be_bytes([b[0], b[1], b[2], b[3]]) as usize)
+            .ok_or_else(|| bad("truncated PNG chunk"))?;
+        let end = pos
+            .checked_add(12 + len)
+            .filter(|&e| e <= bytes.len())
+            .ok_or_else(|| bad("truncated PNG chunk"))?;
+        let kind = &bytes[pos + 4..pos + 8];
+        if !matches!(kind, b"tEXt" | b"zTXt" | b"iTXt" | b"tIME") {
+            out.extend_from_slice(&bytes[pos..end]);
+        }
+        if kind == b"IEND" {
+            break;
+        }
+        pos = end;
+    }
+    Ok(out)
+}
+
 /// Write bytes to `path` and flush them to disk (so a full disk is reported here, not lost).
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     let mut f = std::fs::File::create(path).map_err(|e| RenderError::write(path, e))?;
@@ -305,6 +341,23 @@ pub fn decode_png_bytes(bytes: &[u8], path: &Path) -> Result<DecodedPng> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn text_chunks_are_stripped_and_pixels_kept() {
+        let png = encode_png(PngKind::Rgb8, 2, 1, &[1, 2, 3, 4, 5, 6], &[]).unwrap();
+        // Insert a tEXt chunk after IHDR (8 + 25 bytes), as Blender writes its timings.
+        let mut with_text = png[..33].to_vec();
+        let body = b"cycles.ViewLayer.render_time\x0000:00.05";
+        with_text.extend((body.len() as u32).to_be_bytes());
+        with_text.extend(b"tEXt");
+        with_text.extend(body);
+        with_text.extend([0, 0, 0, 0]); // CRC is not checked by the stripper
+        with_text.extend(&png[33..]);
+        let p = Path::new("x.png");
+        assert_eq!(strip_png_text(&with_text, p).unwrap(), png);
+        assert_eq!(strip_png_text(&png, p).unwrap(), png);
+        assert!(strip_png_text(&png[..40], p).is_err());
+    }
 
     #[test]
     fn ids_must_be_exact() {
