@@ -3,7 +3,7 @@
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -14,6 +14,7 @@ use clevrtex_scene::{layout, Config, Pass, SampleRequest, SceneFile};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::exit::{self, CmdResult};
+use crate::interrupt::{self, OnInterrupt};
 
 /// Options shared by `generate` and `render`: how to run Blender and write the output.
 #[derive(Debug, clap::Args)]
@@ -451,17 +452,9 @@ fn run_jobs(
     check_output_writable(&args.out)?;
     let materials_json = clevrtex_render::default_materials_json()
         .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
-    let interrupt = Arc::new(AtomicBool::new(false));
-    {
-        let flag = Arc::clone(&interrupt);
-        // Failing to install the handler (e.g. one is already set) only loses clean Ctrl-C.
-        let _ = ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(exit::INTERRUPTED as i32);
-            }
-            eprintln!("\ninterrupt: stopping the workers; finished samples are kept (Ctrl-C again to quit at once)");
-        });
-    }
+    let interrupt = interrupt::flag(OnInterrupt::Stop {
+        message: "stopping the workers; finished samples are kept",
+    });
     if let Some(t) = args.timeout {
         if !(t > 0.0 && t.is_finite()) {
             bail!(

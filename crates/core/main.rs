@@ -15,6 +15,7 @@ mod cmd_materials;
 mod cmd_sample;
 mod cmd_verify;
 mod exit;
+mod interrupt;
 mod shard;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object
