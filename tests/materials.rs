@@ -145,7 +145,7 @@ fn texture_density_is_invariant_across_object_sizes() {
             script: bridge.worker_script(),
             materials: bridge.materials_json(),
             threads: 0,
-            startup_timeout: Duration::from_secs(120),
+            startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
             interrupt: Arc::new(AtomicBool::new(false)),
         },
         0,

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use std::time::Duration;
 
 use clevrtex_render::{blender, BridgeDir, Worker, WorkerOptions};
 
@@ -62,7 +61,7 @@ pub fn run(args: Args) -> CmdResult {
         script: bridge.worker_script(),
         materials: bridge.materials_json(),
         threads: 1,
-        startup_timeout: Duration::from_secs(120),
+        startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
         interrupt: Arc::new(AtomicBool::new(false)),
     }) {
         Ok(worker) => {

@@ -471,7 +471,7 @@ fn run_jobs(
         workers: args.workers.unwrap_or_else(pool::default_workers),
         threads: args.threads.unwrap_or(0),
         timeout: args.timeout.map(Duration::from_secs_f64),
-        startup_timeout: Duration::from_secs(120),
+        startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
         retries: args.retries,
         max_attempts: max_attempts.max(1),
         visibility_check: true,
