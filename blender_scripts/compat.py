@@ -1,7 +1,10 @@
 """Blender-version differences, in one place.
 
 The target is Debian's Blender 3.4.1; 4.x is handled where the difference is known. Every
-other module calls these helpers instead of testing `bpy.app.version` itself.
+other module calls these helpers instead of testing `bpy.app.version` itself or touching a
+setting whose name, place or unit depends on the version: Principled BSDF inputs, the
+displacement method, light power, smooth shading, shadow visibility, the output file
+format and colour management (view transform and look).
 """
 
 import importlib.util
@@ -41,15 +44,43 @@ def set_view_look(view_settings, view_transform, look):
     )
 
 
+def set_color_management(scene, view_transform, look, exposure, gamma):
+    """The scene's colour management: sRGB display and sequencer, the view transform and look
+    ([`set_view_look`]), exposure and gamma, no curves. The colour-space names are those of
+    the 3.x and 4.x OpenColorIO configs."""
+    scene.display_settings.display_device = "sRGB"
+    set_view_look(scene.view_settings, view_transform, look)
+    scene.view_settings.exposure = exposure
+    scene.view_settings.gamma = gamma
+    scene.view_settings.use_curve_mapping = False
+    scene.sequencer_colorspace_settings.name = "sRGB"
+
+
 def area_light_energy(watts):
     """Area-light power in Blender's unit for the scene file's watts (same in 3.x and 4.x)."""
     return watts
 
 
-def set_auto_smooth(mesh, enabled):
-    """`Mesh.use_auto_smooth` exists up to 4.0; 4.1 replaced it by a modifier we do not need."""
-    if hasattr(mesh, "use_auto_smooth"):
-        mesh.use_auto_smooth = enabled
+def sun_strength(irradiance):
+    """Sun-light strength in Blender's unit for the scene file's W/m^2 (same in 3.x and 4.x)."""
+    return irradiance
+
+
+def set_png_output(image_settings, compression=None):
+    """Save renders as 8-bit RGB PNG (`compression` in percent; None keeps Blender's)."""
+    image_settings.file_format = "PNG"
+    image_settings.color_mode = "RGB"
+    image_settings.color_depth = "8"
+    if compression is not None:
+        image_settings.compression = compression
+
+
+def set_exr_multilayer_output(image_settings, codec):
+    """Save renders as 32-bit float RGBA multilayer OpenEXR with `codec` (e.g. `RLE`)."""
+    image_settings.file_format = "OPEN_EXR_MULTILAYER"
+    image_settings.color_mode = "RGBA"
+    image_settings.color_depth = "32"
+    image_settings.exr_codec = codec
 
 
 def shade_smooth(mesh):
@@ -61,21 +92,28 @@ def shade_smooth(mesh):
             poly.use_smooth = True
 
 
+# Principled BSDF inputs renamed in 4.0, by their 3.x name; None: removed without a
+# replacement (4.x scatters the base colour).
+_PRINCIPLED_4X = {
+    "Subsurface": "Subsurface Weight",
+    "Subsurface Color": None,
+    "Specular": "Specular IOR Level",
+    "Transmission": "Transmission Weight",
+    "Coat": "Coat Weight",
+    "Clearcoat": "Coat Weight",
+    "Clearcoat Roughness": "Coat Roughness",
+    "Sheen": "Sheen Weight",
+    "Emission": "Emission Color",
+}
+
+
 def principled_input(node, name):
-    """A principled BSDF input by its 3.x name, mapped to the 4.x name where it changed."""
-    renamed_4x = {
-        "Subsurface": "Subsurface Weight",
-        "Specular": "Specular IOR Level",
-        "Transmission": "Transmission Weight",
-        "Coat": "Coat Weight",
-        "Clearcoat": "Coat Weight",
-        "Clearcoat Roughness": "Coat Roughness",
-        "Sheen": "Sheen Weight",
-        "Emission": "Emission Color",
-    }
+    """A principled BSDF input by its 3.x name, mapped to the 4.x name where it changed;
+    None where this version has no such input."""
     if name in node.inputs:
         return node.inputs[name]
-    return node.inputs[renamed_4x.get(name, name)]
+    new = _PRINCIPLED_4X.get(name, name)
+    return None if new is None else node.inputs[new]
 
 
 def displacement_method(mat):
@@ -83,6 +121,14 @@ def displacement_method(mat):
     if hasattr(mat, "displacement_method"):
         return mat.displacement_method
     return mat.cycles.displacement_method
+
+
+def set_displacement_method(mat, method):
+    """Set what [`displacement_method`] reads."""
+    if hasattr(mat, "displacement_method"):
+        mat.displacement_method = method
+    else:
+        mat.cycles.displacement_method = method
 
 
 def set_cast_shadow(obj, enabled):

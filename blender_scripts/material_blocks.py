@@ -12,8 +12,9 @@ parameters `L` (every default filled by clevrtex-materials) and the per-material
 - `color`: a colour that replaces the palette (image and graph blocks only);
 - `cell`, `inside`: set by layout blocks so later layers can vary per cell.
 
-The table `BLOCKS` at the end must list exactly the blocks of materials/blocks.json (a test
-checks it).
+The table `BLOCKS` at the end must list exactly the blocks of materials/blocks.json (the
+test `materials::bridge_block_table_matches_the_block_schema` in tests/materials.rs checks
+it).
 """
 
 import math

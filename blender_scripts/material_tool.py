@@ -18,6 +18,7 @@ import time
 
 import bpy
 
+import compat
 import materials
 
 
@@ -37,10 +38,8 @@ def reset_scene():
     scene.cycles.use_denoising = False
     scene.cycles.use_adaptive_sampling = False
     scene.render.film_transparent = False
-    scene.view_settings.view_transform = "Filmic"
-    scene.view_settings.look = "Medium High Contrast"
-    scene.render.image_settings.file_format = "PNG"
-    scene.render.image_settings.color_mode = "RGB"
+    compat.set_view_look(scene.view_settings, "Filmic", "Medium High Contrast")
+    compat.set_png_output(scene.render.image_settings)
     world = bpy.data.worlds.new("world")
     world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.05, 0.05, 0.05, 1)
@@ -82,7 +81,10 @@ def add_camera(location, look_at, lens=50.0, ortho=None):
 
 def add_light(kind, location, energy, size=2.0, rotation=(0.0, 0.0, 0.0)):
     light = bpy.data.lights.new(kind, kind)
-    light.energy = energy
+    if kind == "SUN":
+        light.energy = compat.sun_strength(energy)
+    else:
+        light.energy = compat.area_light_energy(energy)
     if kind == "AREA":
         light.size = size
     ob = bpy.data.objects.new(kind, light)
@@ -103,8 +105,8 @@ def grey_material():
     m = bpy.data.materials.new("floor")
     m.use_nodes = True
     b = m.node_tree.nodes["Principled BSDF"]
-    b.inputs["Base Color"].default_value = (0.35, 0.35, 0.35, 1)
-    b.inputs["Roughness"].default_value = 0.7
+    compat.principled_input(b, "Base Color").default_value = (0.35, 0.35, 0.35, 1)
+    compat.principled_input(b, "Roughness").default_value = 0.7
     return m
 
 
@@ -166,8 +168,7 @@ def scene_tile(name, recipe, opts):
     # Flat, even light: a big emitting world and no sun, so shading does not dominate.
     scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
     scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
+    compat.set_view_look(scene.view_settings, "Standard", "None")
     return scene
 
 
@@ -195,8 +196,7 @@ def scene_density(name, recipe, opts):
         ob.data.materials.append(mat)
     add_camera((0, -10, 0), (0, 0, 0), ortho=4.0)
     scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
+    compat.set_view_look(scene.view_settings, "Standard", "None")
     return scene
 
 

@@ -23,6 +23,7 @@ Displacement node. A recipe of kind `blend` uses a user node group from a .blend
 
 import bpy
 
+import compat
 import material_blocks
 from material_nodes import Graph
 
@@ -51,7 +52,7 @@ def build_material(name, recipe, instance, context):
         _build_blend(nt, out, recipe, instance, displace)
     else:
         displace = _build_layers(nt, out, recipe, instance, displace)
-    mat.cycles.displacement_method = "BOTH" if displace else "BUMP"
+    compat.set_displacement_method(mat, "BOTH" if displace else "BUMP")
     return mat
 
 
@@ -66,6 +67,14 @@ def _coords(g, recipe, instance):
     p = g.vmath("MULTIPLY_ADD", p, (k, k, k))
     p.node.inputs[2].default_value = off
     return p, tc.outputs["Normal"]
+
+
+def _set_bsdf(g, bsdf, name, value):
+    """Set a Principled BSDF input named as in Blender 3.x (`compat.principled_input`);
+    skipped where this Blender has no such input."""
+    socket = compat.principled_input(bsdf, name)
+    if socket is not None:
+        g.set(socket, value)
 
 
 def _build_layers(nt, out, recipe, instance, displace):
@@ -93,25 +102,25 @@ def _build_layers(nt, out, recipe, instance, displace):
     color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"))
     surf = recipe.get("surface") or {}
     bsdf = g.node("ShaderNodeBsdfPrincipled")
-    g.set(bsdf.inputs["Base Color"], color)
-    g.set(bsdf.inputs["Roughness"], rough)
-    g.set(bsdf.inputs["Metallic"], metal)
-    g.set(bsdf.inputs["Specular"], surf.get("specular", 0.5))
+    _set_bsdf(g, bsdf, "Base Color", color)
+    _set_bsdf(g, bsdf, "Roughness", rough)
+    _set_bsdf(g, bsdf, "Metallic", metal)
+    _set_bsdf(g, bsdf, "Specular", surf.get("specular", 0.5))
     if surf.get("sheen", 0.0) > 0:
-        g.set(bsdf.inputs["Sheen"], surf["sheen"])
+        _set_bsdf(g, bsdf, "Sheen", surf["sheen"])
     if surf.get("coat", 0.0) > 0:
-        g.set(bsdf.inputs["Clearcoat"], surf["coat"])
-        g.set(bsdf.inputs["Clearcoat Roughness"], surf.get("coat_roughness", 0.05))
+        _set_bsdf(g, bsdf, "Clearcoat", surf["coat"])
+        _set_bsdf(g, bsdf, "Clearcoat Roughness", surf.get("coat_roughness", 0.05))
     if surf.get("subsurface", 0.0) > 0:
-        g.set(bsdf.inputs["Subsurface"], surf["subsurface"])
-        g.set(bsdf.inputs["Subsurface Color"], color)
-        g.set(bsdf.inputs["Subsurface Radius"], (0.05, 0.03, 0.02))
+        _set_bsdf(g, bsdf, "Subsurface", surf["subsurface"])
+        _set_bsdf(g, bsdf, "Subsurface Color", color)
+        _set_bsdf(g, bsdf, "Subsurface Radius", (0.05, 0.03, 0.02))
     bump = surf.get("bump", 0.0)
     if height is not None and bump > 0 and hasattr(height, "node"):
         b = g.node("ShaderNodeBump")
         g.set(b.inputs["Height"], height)
         g.set(b.inputs["Distance"], bump)
-        g.set(bsdf.inputs["Normal"], b.outputs["Normal"])
+        _set_bsdf(g, bsdf, "Normal", b.outputs["Normal"])
     nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
     relief = surf.get("relief", 0.0)
     if displace and relief > 0 and height is not None and hasattr(height, "node"):

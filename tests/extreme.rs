@@ -396,7 +396,7 @@ fn render(blender: PathBuf, out: &Path, scenes: &[SceneFile]) -> Vec<SampleStats
         workers: 1,
         threads: 0,
         timeout: Some(Duration::from_secs(900)),
-        startup_timeout: Duration::from_secs(120),
+        startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
         retries: 0,
         max_attempts: 1,
         visibility_check: true,

@@ -833,7 +833,7 @@ fn render_fixtures(blender: PathBuf, out: &Path, scenes: Vec<SceneFile>) -> Vec<
         workers: 1,
         threads: 0,
         timeout: None,
-        startup_timeout: Duration::from_secs(120),
+        startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
         retries: 0,
         max_attempts: 1,
         visibility_check: true,

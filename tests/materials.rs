@@ -105,6 +105,51 @@ fn user_names_must_not_clash() {
 
 /// Every catalogue entry builds in real Blender and renders with no error and no pink
 /// (missing texture) pixel. One Blender process for all of them.
+/// The bridge's block table (`BLOCKS` in `blender_scripts/material_blocks.py`) implements
+/// exactly the blocks of the schema (`materials/blocks.json`): a block the schema accepts but
+/// the bridge lacks would only fail inside Blender, one the bridge has but the schema lacks
+/// could never be used.
+#[test]
+fn bridge_block_table_matches_the_block_schema() {
+    let path = crate::util::repo_root().join("blender_scripts/material_blocks.py");
+    let source = std::fs::read_to_string(&path).unwrap();
+    let mut lines = source
+        .lines()
+        .skip_while(|l| l.trim_end() != "BLOCKS = {")
+        .skip(1);
+    let mut bridge = Vec::new();
+    for line in lines.by_ref() {
+        let line = line.trim();
+        if line == "}" {
+            break;
+        }
+        let name = line
+            .strip_prefix('"')
+            .and_then(|l| l.split_once("\":"))
+            .map(|(name, _)| name.to_string())
+            .unwrap_or_else(|| panic!("unexpected line in BLOCKS of {}: `{line}`", path.display()));
+        bridge.push(name);
+    }
+    assert!(
+        !bridge.is_empty(),
+        "no `BLOCKS = {{` table in {}",
+        path.display()
+    );
+    bridge.sort();
+    let schema: serde_json::Value = serde_json::from_str(clevrtex_materials::BLOCKS_JSON).unwrap();
+    let mut schema: Vec<String> = schema["blocks"]
+        .as_object()
+        .expect("blocks.json has a `blocks` object")
+        .keys()
+        .cloned()
+        .collect();
+    schema.sort();
+    assert_eq!(
+        bridge, schema,
+        "blender_scripts/material_blocks.py BLOCKS vs materials/blocks.json `blocks`"
+    );
+}
+
 #[test]
 fn every_material_builds_and_renders_in_blender() {
     if blender_or_skip("every_material_builds_and_renders_in_blender").is_none() {
@@ -145,7 +190,7 @@ fn texture_density_is_invariant_across_object_sizes() {
             script: bridge.worker_script(),
             materials: bridge.materials_json(),
             threads: 0,
-            startup_timeout: Duration::from_secs(120),
+            startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
             interrupt: Arc::new(AtomicBool::new(false)),
         },
         0,

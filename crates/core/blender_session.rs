@@ -54,7 +54,7 @@ impl BlenderSession {
                 script: bridge.worker_script(),
                 materials: bridge.materials_json(),
                 threads: settings.threads,
-                startup_timeout: Duration::from_secs(120),
+                startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
                 interrupt: settings.interrupt,
             },
             settings.retries,

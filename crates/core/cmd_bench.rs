@@ -9,8 +9,6 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
@@ -21,6 +19,7 @@ use clevrtex_scene::{Config, Pass, SampleRequest, SceneFile};
 
 use crate::blender_session::{command_error, BlenderSession, Settings};
 use crate::exit::{self, CmdResult};
+use crate::interrupt::{self, OnInterrupt};
 
 #[path = "bench/ladder.rs"]
 mod ladder;
@@ -288,16 +287,9 @@ fn run_render(args: RenderArgs) -> CmdResult {
     let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
     let catalogue = clevrtex_materials::Catalogue::builtin()
         .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
-    let interrupt = Arc::new(AtomicBool::new(false));
-    {
-        let flag = Arc::clone(&interrupt);
-        let _ = ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(i32::from(exit::INTERRUPTED));
-            }
-            eprintln!("\ninterrupt: stopping Blender (Ctrl-C again to quit at once)");
-        });
-    }
+    let interrupt = interrupt::flag(OnInterrupt::Stop {
+        message: "stopping Blender",
+    });
     let mut session = BlenderSession::new(Settings {
         blender,
         materials_json: catalogue.resolved_json(),

@@ -1,30 +1,33 @@
-//! `clevrtex generate` and `clevrtex render`: glue between the command line, the sampler
-//! (`clevrtex-scene`) and the render pool (`clevrtex-render`).
+//! `clevrtex generate`: glue between the command line, the sampler (`clevrtex-scene`) and the
+//! render pool (`clevrtex-render`); also what `generate` and `render` (`cmd_render.rs`) share:
+//! their run options ([`RunArgs`]), `--passes` ([`parse_passes`]) and the pool run with its
+//! progress and summary ([`run_jobs`]).
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
 use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, RunReport};
 use clevrtex_render::RenderError;
-use clevrtex_scene::{layout, Config, Pass, SampleRequest, SceneFile};
+use clevrtex_scene::{layout, Config, Pass, SampleRequest};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::exit::{self, CmdResult};
+use crate::interrupt::{self, OnInterrupt};
 
 /// Options shared by `generate` and `render`: how to run Blender and write the output.
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {
     /// Output root; samples go to `OUT/clevrtex_<variant>/<index / 1000>/`.
     #[arg(long, value_name = "OUT")]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Passes to write, comma-separated: rgb,mask,depth,normal,albedo,shadow (default all
     /// for `generate`; the scene files' own list for `render`).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
-    passes: Option<Vec<String>>,
+    pub(crate) passes: Option<Vec<String>>,
     /// Blender executable (default: `blender` on PATH).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Option<PathBuf>,
@@ -99,17 +102,6 @@ pub struct GenerateArgs {
     /// Layout attempts per image when objects are hidden, before the image fails.
     #[arg(long, default_value_t = 20, value_name = "N")]
     max_attempts: u32,
-    #[command(flatten)]
-    run: RunArgs,
-}
-
-/// Arguments of `clevrtex render`.
-#[derive(Debug, clap::Args)]
-pub struct RenderArgs {
-    /// Scene files, or folders searched (recursively, as `clevrtex sample --out` lays them
-    /// out) for `*.json` scene files.
-    #[arg(required = true, value_name = "SCENES")]
-    scenes: Vec<PathBuf>,
     #[command(flatten)]
     run: RunArgs,
 }
@@ -221,7 +213,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
 }
 
 /// What `generate` records in its run manifest (`clevrtex_render::manifest`).
-struct ManifestPlan {
+pub(crate) struct ManifestPlan {
     variant: String,
     seed: u64,
     config_hash: String,
@@ -279,131 +271,6 @@ impl ManifestPlan {
     }
 }
 
-/// Run `clevrtex render`.
-pub fn run_render(args: RenderArgs) -> CmdResult {
-    let mut files = Vec::new();
-    for p in &args.scenes {
-        if p.is_dir() {
-            let mut found = Vec::new();
-            find_scene_files(p, &mut found)?;
-            found.sort();
-            files.extend(found);
-        } else if p.is_file() {
-            files.push(p.clone());
-        } else {
-            bail!(
-                "scene path `{}` does not exist\nhint: pass scene files or folders written by `clevrtex sample`",
-                p.display()
-            );
-        }
-    }
-    if files.is_empty() {
-        let searched: Vec<String> = args
-            .scenes
-            .iter()
-            .map(|p| format!("`{}`", p.display()))
-            .collect();
-        bail!(
-            "no `*.json` scene files found in {}\nhint: make some with `clevrtex sample --out DIR` and pass that `DIR`",
-            searched.join(", ")
-        );
-    }
-    let override_passes = match &args.run.passes {
-        Some(list) => Some(parse_passes(list)?),
-        None => None,
-    };
-    let mut jobs = Vec::new();
-    let mut variants = std::collections::BTreeSet::new();
-    for f in files {
-        let scene = read_scene(&f)?;
-        // The metadata has the scene file's name: rendering into the folder the scenes came
-        // from would replace each scene file with its metadata.
-        let meta = layout::sample_dir(&args.run.out, &scene.variant, scene.index)
-            .join(layout::metadata_file(&scene.stem));
-        if let (Ok(a), Ok(b)) = (f.canonicalize(), meta.canonicalize()) {
-            if a == b {
-                bail!(
-                    "rendering scene file `{}` would overwrite it with its metadata (same name)\nhint: pass another `--out` than the folder the scenes are in",
-                    f.display()
-                );
-            }
-        }
-        let passes = override_passes
-            .clone()
-            .unwrap_or_else(|| scene.passes.clone());
-        variants.insert(scene.variant.clone());
-        let scene = Arc::new(scene);
-        jobs.push(Job {
-            index: scene.index,
-            variant: scene.variant.clone(),
-            stem: scene.stem.clone(),
-            passes,
-            scene: Arc::new(move |_| Ok((*scene).clone())),
-            resample: false,
-        });
-    }
-    let ledger = match variants.iter().next() {
-        Some(v) if variants.len() == 1 => {
-            layout::variant_dir(&args.run.out, v).join("failures.jsonl")
-        }
-        _ => args.run.out.join("failures.jsonl"),
-    };
-    run_jobs(&args.run, jobs, ledger, 1, None)
-}
-
-/// Collect the `*.json` files under `dir`, recursively: `clevrtex sample --out DIR` writes
-/// them to `DIR/clevrtex_<variant>/<index / 1000>/`, and `clevrtex render DIR` must find them.
-fn find_scene_files(dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> {
-    let entries = std::fs::read_dir(dir).map_err(|e| {
-        anyhow::anyhow!(
-            "cannot read folder `{}`: {e}\nhint: pass a readable folder of scene files",
-            dir.display()
-        )
-    })?;
-    for entry in entries.flatten() {
-        let path = entry.path();
-        if path.is_dir() {
-            find_scene_files(&path, found)?;
-        } else if path.extension().is_some_and(|e| e == "json") && path.is_file() {
-            found.push(path);
-        }
-    }
-    Ok(())
-}
-
-fn read_scene(path: &Path) -> anyhow::Result<SceneFile> {
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        anyhow::anyhow!(
-            "cannot read scene file `{}`: {e}\nhint: pass scene files written by `clevrtex sample`",
-            path.display()
-        )
-    })?;
-    let scene: SceneFile = serde_json::from_str(&text).map_err(|e| {
-        anyhow::anyhow!(
-            "bad scene file `{}`: {e}\nhint: regenerate it with `clevrtex sample`",
-            path.display()
-        )
-    })?;
-    if scene.format != clevrtex_scene::scene_file::SCENE_FORMAT
-        || scene.version != clevrtex_scene::scene_file::SCENE_VERSION
-    {
-        bail!(
-            "`{}` is not a version {} clevrtex scene file (format `{}`, version {})\nhint: regenerate it with this version's `clevrtex sample`",
-            path.display(),
-            clevrtex_scene::scene_file::SCENE_VERSION,
-            scene.format,
-            scene.version
-        );
-    }
-    if let Err(problem) = scene.validate() {
-        bail!(
-            "bad scene file `{}`: {problem}\nhint: fix that key, or regenerate the file with `clevrtex sample`",
-            path.display()
-        );
-    }
-    Ok(scene)
-}
-
 fn positive(flag: &str, v: u32) -> anyhow::Result<u32> {
     if v == 0 {
         bail!("`{flag} 0` is not allowed\nhint: pass a positive number");
@@ -418,7 +285,7 @@ fn within(flag: &str, v: u32, max: u32) -> anyhow::Result<u32> {
     positive(flag, v)
 }
 
-fn parse_passes(list: &[String]) -> anyhow::Result<Vec<Pass>> {
+pub(crate) fn parse_passes(list: &[String]) -> anyhow::Result<Vec<Pass>> {
     let mut out = Vec::new();
     for name in list.iter().map(|s| s.trim()).filter(|s| !s.is_empty()) {
         match Pass::from_name(name) {
@@ -440,7 +307,7 @@ fn parse_passes(list: &[String]) -> anyhow::Result<Vec<Pass>> {
     Ok(out)
 }
 
-fn run_jobs(
+pub(crate) fn run_jobs(
     args: &RunArgs,
     jobs: Vec<Job>,
     ledger: PathBuf,
@@ -451,17 +318,9 @@ fn run_jobs(
     check_output_writable(&args.out)?;
     let materials_json = clevrtex_render::default_materials_json()
         .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
-    let interrupt = Arc::new(AtomicBool::new(false));
-    {
-        let flag = Arc::clone(&interrupt);
-        // Failing to install the handler (e.g. one is already set) only loses clean Ctrl-C.
-        let _ = ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(exit::INTERRUPTED as i32);
-            }
-            eprintln!("\ninterrupt: stopping the workers; finished samples are kept (Ctrl-C again to quit at once)");
-        });
-    }
+    let interrupt = interrupt::flag(OnInterrupt::Stop {
+        message: "stopping the workers; finished samples are kept",
+    });
     if let Some(t) = args.timeout {
         if !(t > 0.0 && t.is_finite()) {
             bail!(
@@ -478,7 +337,7 @@ fn run_jobs(
         workers: args.workers.unwrap_or_else(pool::default_workers),
         threads: args.threads.unwrap_or(0),
         timeout: args.timeout.map(Duration::from_secs_f64),
-        startup_timeout: Duration::from_secs(120),
+        startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
         retries: args.retries,
         max_attempts: max_attempts.max(1),
         visibility_check: true,

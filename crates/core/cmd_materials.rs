@@ -8,8 +8,6 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
@@ -17,7 +15,8 @@ use clevrtex_materials::{Catalogue, Set};
 use clevrtex_render::{MaterialMode, MaterialReply, MaterialSettings, RenderError};
 
 use crate::blender_session::{command_error, BlenderSession, Settings};
-use crate::exit::{self, CmdResult, OK};
+use crate::exit::{CmdResult, OK};
+use crate::interrupt::{self, OnInterrupt};
 
 #[path = "materials/sheet.rs"]
 mod sheet;
@@ -207,17 +206,9 @@ fn session(cat: &Catalogue, names: &[&str], a: &BatchArgs) -> anyhow::Result<Ble
         }
     }
     let blender = clevrtex_render::blender::locate(a.blender.as_deref())?;
-    let interrupt = Arc::new(AtomicBool::new(false));
-    {
-        let flag = Arc::clone(&interrupt);
-        // Failing to install the handler (e.g. one is already set) only loses clean Ctrl-C.
-        let _ = ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(i32::from(exit::INTERRUPTED));
-            }
-            eprintln!("\ninterrupt: stopping Blender (Ctrl-C again to quit at once)");
-        });
-    }
+    let interrupt = interrupt::flag(OnInterrupt::Stop {
+        message: "stopping Blender",
+    });
     BlenderSession::new(Settings {
         blender,
         materials_json: cat.resolved_json_for(names.iter().copied()),

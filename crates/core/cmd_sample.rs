@@ -3,7 +3,6 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
@@ -11,6 +10,7 @@ use clevrtex_scene::{config::Config, sample, sample_dir, SampleRequest};
 use rayon::prelude::*;
 
 use crate::exit::{CmdResult, Interrupted, OK};
+use crate::interrupt::{self, OnInterrupt};
 
 /// Arguments of `clevrtex sample`.
 #[derive(Debug, clap::Args)]
@@ -101,11 +101,7 @@ pub fn run(args: Args) -> CmdResult {
     let progress = indicatif::ProgressBar::new(end.saturating_sub(args.start).div_ceil(shard.n));
     let stop = AtomicBool::new(false);
     // Ctrl-C: finish the files being written (each appears whole or not at all) and stop.
-    let interrupted = Arc::new(AtomicBool::new(false));
-    {
-        let flag = Arc::clone(&interrupted);
-        let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
-    }
+    let interrupted = interrupt::flag(OnInterrupt::FlagOnly);
     let mut written = 0u64;
     let mut last_dir = None;
     while indices.peek().is_some() {

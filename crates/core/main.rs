@@ -12,9 +12,11 @@ mod cmd_eval;
 mod cmd_export;
 mod cmd_generate;
 mod cmd_materials;
+mod cmd_render;
 mod cmd_sample;
 mod cmd_verify;
 mod exit;
+mod interrupt;
 mod shard;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object
@@ -33,7 +35,7 @@ enum Command {
     /// Sample and render a dataset through Blender.
     Generate(cmd_generate::GenerateArgs),
     /// Render scene files made by `clevrtex sample`.
-    Render(cmd_generate::RenderArgs),
+    Render(cmd_render::Args),
     /// Score predictions against a ground-truth dataset.
     Eval(cmd_eval::Args),
     /// List the material catalogue or render a contact sheet.
@@ -63,7 +65,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Sample(args) => cmd_sample::run(args),
         Command::Generate(args) => cmd_generate::run_generate(args),
-        Command::Render(args) => cmd_generate::run_render(args),
+        Command::Render(args) => cmd_render::run(args),
         Command::Eval(args) => cmd_eval::run(args),
         Command::Materials(args) => cmd_materials::run(args),
         Command::Bench(args) => cmd_bench::run(args),

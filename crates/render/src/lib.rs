@@ -17,7 +17,7 @@
 //! ```no_run
 //! use std::sync::{atomic::AtomicBool, Arc};
 //! use std::time::Duration;
-//! use clevrtex_render::{BridgeDir, Mode, Worker, WorkerOptions};
+//! use clevrtex_render::{BridgeDir, Mode, Worker, WorkerOptions, STARTUP_TIMEOUT};
 //!
 //! # fn main() -> Result<(), clevrtex_render::RenderError> {
 //! let materials = clevrtex_render::default_materials_json().expect("valid built-in catalogue");
@@ -27,7 +27,7 @@
 //!     script: bridge.worker_script(),
 //!     materials: bridge.materials_json(),
 //!     threads: 0,
-//!     startup_timeout: Duration::from_secs(120),
+//!     startup_timeout: STARTUP_TIMEOUT,
 //!     interrupt: Arc::new(AtomicBool::new(false)),
 //! })?;
 //! let out = std::path::Path::new("/tmp/out");
@@ -60,7 +60,7 @@ pub use pool::{Job, PoolEvent, PoolOptions, RunReport, SampleStats};
 pub use session::{Hooks, Session};
 pub use worker::{
     BridgeTimings, MaterialMode, MaterialReply, MaterialSettings, Mode, Ready, RenderReply, Worker,
-    WorkerOptions,
+    WorkerOptions, STARTUP_TIMEOUT,
 };
 
 /// The resolved built-in material catalogue for the bridge (`materials.json`, see

@@ -13,7 +13,7 @@
 //! ```no_run
 //! use std::time::Duration;
 //! use std::sync::{atomic::AtomicBool, Arc};
-//! use clevrtex_render::{BridgeDir, Mode, Session, WorkerOptions};
+//! use clevrtex_render::{BridgeDir, Mode, Session, WorkerOptions, STARTUP_TIMEOUT};
 //!
 //! # fn main() -> Result<(), clevrtex_render::RenderError> {
 //! let bridge = BridgeDir::create(&clevrtex_render::default_materials_json().unwrap())?;
@@ -23,7 +23,7 @@
 //!         script: bridge.worker_script(),
 //!         materials: bridge.materials_json(),
 //!         threads: 0,
-//!         startup_timeout: Duration::from_secs(120),
+//!         startup_timeout: STARTUP_TIMEOUT,
 //!         interrupt: Arc::new(AtomicBool::new(false)),
 //!     },
 //!     2,    // restarts per request

@@ -26,6 +26,10 @@ const POLL: Duration = Duration::from_millis(50);
 /// After stdout closes, how long to wait for the exit status before killing.
 const EXIT_GRACE: Duration = Duration::from_secs(3);
 
+/// How long Blender may take to start and send `ready`: the
+/// [`WorkerOptions::startup_timeout`] every command uses.
+pub const STARTUP_TIMEOUT: Duration = Duration::from_secs(120);
+
 /// How to start a worker.
 #[derive(Debug, Clone)]
 pub struct WorkerOptions {
@@ -37,7 +41,7 @@ pub struct WorkerOptions {
     pub materials: PathBuf,
     /// Cycles threads (0 = Blender's automatic choice).
     pub threads: u32,
-    /// How long Blender may take to start and send `ready`.
+    /// How long Blender may take to start and send `ready` (normally [`STARTUP_TIMEOUT`]).
     pub startup_timeout: Duration,
     /// Set to `true` (e.g. by a Ctrl-C handler) to abort any wait: the worker is killed and
     /// the call returns [`RenderError::Interrupted`].

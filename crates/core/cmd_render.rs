@@ -1,0 +1,148 @@
+//! `clevrtex render`: render scene files made by `clevrtex sample`, through the same pool run
+//! as `generate` (`cmd_generate.rs`: [`RunArgs`], [`run_jobs`]).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::bail;
+use clevrtex_render::pool::Job;
+use clevrtex_scene::{layout, SceneFile};
+
+use crate::cmd_generate::{parse_passes, run_jobs, RunArgs};
+use crate::exit::CmdResult;
+
+/// Arguments of `clevrtex render`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Scene files, or folders searched (recursively, as `clevrtex sample --out` lays them
+    /// out) for `*.json` scene files.
+    #[arg(required = true, value_name = "SCENES")]
+    scenes: Vec<PathBuf>,
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+/// Run `clevrtex render`.
+pub fn run(args: Args) -> CmdResult {
+    let mut files = Vec::new();
+    for p in &args.scenes {
+        if p.is_dir() {
+            let mut found = Vec::new();
+            find_scene_files(p, &mut found)?;
+            found.sort();
+            files.extend(found);
+        } else if p.is_file() {
+            files.push(p.clone());
+        } else {
+            bail!(
+                "scene path `{}` does not exist\nhint: pass scene files or folders written by `clevrtex sample`",
+                p.display()
+            );
+        }
+    }
+    if files.is_empty() {
+        let searched: Vec<String> = args
+            .scenes
+            .iter()
+            .map(|p| format!("`{}`", p.display()))
+            .collect();
+        bail!(
+            "no `*.json` scene files found in {}\nhint: make some with `clevrtex sample --out DIR` and pass that `DIR`",
+            searched.join(", ")
+        );
+    }
+    let override_passes = match &args.run.passes {
+        Some(list) => Some(parse_passes(list)?),
+        None => None,
+    };
+    let mut jobs = Vec::new();
+    let mut variants = std::collections::BTreeSet::new();
+    for f in files {
+        let scene = read_scene(&f)?;
+        // The metadata has the scene file's name: rendering into the folder the scenes came
+        // from would replace each scene file with its metadata.
+        let meta = layout::sample_dir(&args.run.out, &scene.variant, scene.index)
+            .join(layout::metadata_file(&scene.stem));
+        if let (Ok(a), Ok(b)) = (f.canonicalize(), meta.canonicalize()) {
+            if a == b {
+                bail!(
+                    "rendering scene file `{}` would overwrite it with its metadata (same name)\nhint: pass another `--out` than the folder the scenes are in",
+                    f.display()
+                );
+            }
+        }
+        let passes = override_passes
+            .clone()
+            .unwrap_or_else(|| scene.passes.clone());
+        variants.insert(scene.variant.clone());
+        let scene = Arc::new(scene);
+        jobs.push(Job {
+            index: scene.index,
+            variant: scene.variant.clone(),
+            stem: scene.stem.clone(),
+            passes,
+            scene: Arc::new(move |_| Ok((*scene).clone())),
+            resample: false,
+        });
+    }
+    let ledger = match variants.iter().next() {
+        Some(v) if variants.len() == 1 => {
+            layout::variant_dir(&args.run.out, v).join("failures.jsonl")
+        }
+        _ => args.run.out.join("failures.jsonl"),
+    };
+    run_jobs(&args.run, jobs, ledger, 1, None)
+}
+
+/// Collect the `*.json` files under `dir`, recursively: `clevrtex sample --out DIR` writes
+/// them to `DIR/clevrtex_<variant>/<index / 1000>/`, and `clevrtex render DIR` must find them.
+fn find_scene_files(dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+    let entries = std::fs::read_dir(dir).map_err(|e| {
+        anyhow::anyhow!(
+            "cannot read folder `{}`: {e}\nhint: pass a readable folder of scene files",
+            dir.display()
+        )
+    })?;
+    for entry in entries.flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            find_scene_files(&path, found)?;
+        } else if path.extension().is_some_and(|e| e == "json") && path.is_file() {
+            found.push(path);
+        }
+    }
+    Ok(())
+}
+
+fn read_scene(path: &Path) -> anyhow::Result<SceneFile> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        anyhow::anyhow!(
+            "cannot read scene file `{}`: {e}\nhint: pass scene files written by `clevrtex sample`",
+            path.display()
+        )
+    })?;
+    let scene: SceneFile = serde_json::from_str(&text).map_err(|e| {
+        anyhow::anyhow!(
+            "bad scene file `{}`: {e}\nhint: regenerate it with `clevrtex sample`",
+            path.display()
+        )
+    })?;
+    if scene.format != clevrtex_scene::scene_file::SCENE_FORMAT
+        || scene.version != clevrtex_scene::scene_file::SCENE_VERSION
+    {
+        bail!(
+            "`{}` is not a version {} clevrtex scene file (format `{}`, version {})\nhint: regenerate it with this version's `clevrtex sample`",
+            path.display(),
+            clevrtex_scene::scene_file::SCENE_VERSION,
+            scene.format,
+            scene.version
+        );
+    }
+    if let Err(problem) = scene.validate() {
+        bail!(
+            "bad scene file `{}`: {problem}\nhint: fix that key, or regenerate the file with `clevrtex sample`",
+            path.display()
+        );
+    }
+    Ok(scene)
+}
