@@ -1341,3 +1341,70 @@ fn doctor_reports_a_blender_that_never_answers() {
     );
     assert!(t.elapsed() < Duration::from_secs(20), "{:?}", t.elapsed());
 }
+
+/// SIGTERM (what `timeout`, SLURM and Kubernetes send) mid-render: like Ctrl-C, the workers are
+/// stopped, no partial sample or temporary file is left, and the exit code is 143.
+#[test]
+fn sigterm_stops_workers_and_leaves_no_partial_output() {
+    let Some(blender) = blender_or_skip("sigterm_stops_workers") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let out = dir.path().join("out");
+    let child = clevrtex()
+        .args([
+            "generate",
+            "--variant",
+            "clevr",
+            "-n",
+            "4",
+            "--workers",
+            "2",
+        ])
+        .args(["--width", "64", "--height", "48", "--quality", "reference"])
+        .args(["--samples", "20000", "--blender"])
+        .arg(&blender)
+        .arg("--out")
+        .arg(&out)
+        .env("TMPDIR", &tmp)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while processes_mentioning(&tmp).len() < 2 {
+        assert!(Instant::now() < deadline, "no Blender worker started");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    std::thread::sleep(Duration::from_secs(4));
+    let t = Instant::now();
+    let st = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let o = child.wait_with_output().unwrap();
+    let t_ = text(&o);
+    assert_eq!(o.status.code(), Some(143), "{t_}");
+    assert!(t.elapsed() < Duration::from_secs(20), "{:?}", t.elapsed());
+    assert!(t_.contains("terminate (SIGTERM)"), "{t_}");
+    assert!(
+        processes_mentioning(&tmp).is_empty(),
+        "{:?}",
+        processes_mentioning(&tmp)
+    );
+    let left: Vec<String> = files_under(dir.path())
+        .into_iter()
+        .filter(|f| f.contains("clevrtex-tmp") || f.starts_with("tmp/"))
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+    // Whatever was finished is whole (here: nothing, at 20,000 samples per image).
+    for f in files_under(&out).iter().filter(|f| f.ends_with(".json")) {
+        let stem = f.rsplit('/').next().unwrap().trim_end_matches(".json");
+        if stem.starts_with("CLEVRTEX_") {
+            assert!(out.join(f.replace(".json", "_flat.png")).is_file(), "{f}");
+        }
+    }
+}

@@ -258,6 +258,8 @@ pub fn run(args: Args) -> CmdResult {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create `{}`", args.out.display()))?;
+    // Ctrl-C / SIGTERM: stop between samples; the shard being written is removed (Drop).
+    let stop = crate::interrupt::flag(crate::interrupt::OnInterrupt::FlagOnly);
     let started = std::time::Instant::now();
     let mut index = Vec::new();
     let mut total_bytes = 0u64;
@@ -272,6 +274,9 @@ pub fn run(args: Args) -> CmdResult {
             let mut shard: Option<ShardWriter> = None;
             let mut n = 0;
             for s in list {
+                if stop.load(std::sync::atomic::Ordering::SeqCst) {
+                    return Err(exit::Interrupted.into());
+                }
                 if shard
                     .as_ref()
                     .is_some_and(|w| w.samples > 0 && w.bytes + s.bytes > args.shard_size)

@@ -439,7 +439,7 @@ pub(crate) fn run_jobs(
                 "error: {}\nhint: rerun the same command to go on; complete samples are skipped",
                 exit::Interrupted
             );
-            Ok(exit::INTERRUPTED)
+            Ok(crate::interrupt::exit_code())
         }
         Err(e) => Err(e.into()),
     }

@@ -7,6 +7,7 @@
 //! | 2    | usage error: the command line could not be parsed (unknown flag, missing or malformed argument) |
 //! | 3    | finished, but some items failed (see the ledger / report) |
 //! | 130  | interrupted by Ctrl-C; finished outputs are kept, no partial output is left |
+//! | 143  | stopped by SIGTERM (scheduler time limit, preemption, `timeout`): as 130 |
 
 /// Success.
 pub const OK: u8 = 0;
@@ -18,9 +19,11 @@ pub const USAGE: u8 = 2;
 pub const PARTIAL: u8 = 3;
 /// Interrupted by Ctrl-C (128 + SIGINT).
 pub const INTERRUPTED: u8 = 130;
+/// Stopped by SIGTERM (128 + SIGTERM): a scheduler's time limit or preemption, `timeout`.
+pub const TERMINATED: u8 = 143;
 
 /// Shown at the end of `--help`.
-pub const EXIT_CODES_HELP: &str = "Exit codes: 0 ok, 1 error, 2 usage error, 3 finished with some failed items, 130 interrupted (Ctrl-C)";
+pub const EXIT_CODES_HELP: &str = "Exit codes: 0 ok, 1 error, 2 usage error, 3 finished with some failed items, 130 interrupted (Ctrl-C), 143 stopped by SIGTERM";
 
 /// What a subcommand returns: `Ok(code)` for a finished run (0 or [`PARTIAL`]).
 pub type CmdResult = anyhow::Result<u8>;
@@ -44,7 +47,7 @@ pub fn report(result: CmdResult) -> u8 {
         Err(err) => {
             eprintln!("error: {err:#}");
             if err.downcast_ref::<Interrupted>().is_some() {
-                INTERRUPTED
+                crate::interrupt::exit_code()
             } else {
                 ERROR
             }

@@ -1,13 +1,17 @@
-//! Ctrl-C, the one place the process's interrupt handling is installed.
+//! Ctrl-C and SIGTERM, the one place the process's interrupt handling is installed.
 //!
 //! A command asks for the shared interrupt flag with [`flag`], saying what an interrupt means
 //! to it ([`OnInterrupt`]); the handler is installed on the first call only and every call
 //! hands out the same `Arc<AtomicBool>`, which the command gives to the render crate
-//! (`WorkerOptions::interrupt`, `PoolOptions::interrupt`) or checks itself. The handler only
-//! calls [`on_signal`]: another signal (e.g. SIGTERM) is added here by routing it there too,
-//! and no command changes.
+//! (`WorkerOptions::interrupt`, `PoolOptions::interrupt`) or checks itself. SIGINT (Ctrl-C)
+//! and SIGTERM (what `timeout`, SLURM at a time limit or preemption, and Kubernetes send) are
+//! handled alike: workers stopped, finished outputs kept, no partial output. The exit code
+//! says which came: 130 for SIGINT, 143 for SIGTERM ([`exit_code`]). Signals are received on
+//! a thread of signal-hook's (no code of ours runs in a signal handler).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
+
+use signal_hook::consts::{SIGINT, SIGTERM};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::exit;
@@ -32,13 +36,39 @@ struct Handler {
 }
 
 static HANDLER: OnceLock<Handler> = OnceLock::new();
+/// The last signal received (0: none yet).
+static LAST_SIGNAL: AtomicI32 = AtomicI32::new(0);
+
+/// The exit code of an interrupted run: 143 (128 + SIGTERM) after SIGTERM, else 130
+/// (128 + SIGINT).
+pub fn exit_code() -> u8 {
+    if LAST_SIGNAL.load(Ordering::SeqCst) == SIGTERM {
+        exit::TERMINATED
+    } else {
+        exit::INTERRUPTED
+    }
+}
+
+/// Receive SIGINT and SIGTERM on a thread and pass them to [`on_signal`].
+fn install() {
+    // Failing to install (e.g. no threads left) only loses the clean stop on a signal.
+    if let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]) {
+        let _ = std::thread::Builder::new()
+            .name("signals".into())
+            .spawn(move || {
+                for sig in signals.forever() {
+                    LAST_SIGNAL.store(sig, Ordering::SeqCst);
+                    on_signal();
+                }
+            });
+    }
+}
 
 /// The process's interrupt flag, installing the Ctrl-C handler on the first call; `on` is
 /// what an interrupt does from now on.
 pub fn flag(on: OnInterrupt) -> Arc<AtomicBool> {
     let handler = HANDLER.get_or_init(|| {
-        // Failing to install the handler (e.g. one is already set) only loses clean Ctrl-C.
-        let _ = ctrlc::set_handler(on_signal);
+        install();
         Handler {
             flag: Arc::new(AtomicBool::new(false)),
             on_interrupt: Mutex::new(on),
@@ -64,9 +94,14 @@ fn on_signal() {
         OnInterrupt::FlagOnly => handler.flag.store(true, Ordering::SeqCst),
         OnInterrupt::Stop { message } => {
             if handler.flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(i32::from(exit::INTERRUPTED));
+                std::process::exit(i32::from(exit_code()));
             }
-            eprintln!("\ninterrupt: {message} (Ctrl-C again to quit at once)");
+            let what = if LAST_SIGNAL.load(Ordering::SeqCst) == SIGTERM {
+                "terminate (SIGTERM)"
+            } else {
+                "interrupt"
+            };
+            eprintln!("\n{what}: {message} (Ctrl-C again to quit at once)");
         }
     }
 }
