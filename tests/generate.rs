@@ -1408,3 +1408,20 @@ fn sigterm_stops_workers_and_leaves_no_partial_output() {
         }
     }
 }
+
+/// A worker that never starts is given up on after `--startup-timeout` (not a fixed 120 s),
+/// and the hint names that flag, not `--timeout`.
+#[test]
+fn startup_timeout_is_a_flag_and_its_hint_names_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let t = Instant::now();
+    let out = generate_fake("deaf", dir.path(), &["-n", "1", "--startup-timeout", "1.5"]);
+    let t_ = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t_}");
+    assert!(
+        t_.contains("timed out after 1.5 s while starting up"),
+        "{t_}"
+    );
+    assert!(t_.contains("raise `--startup-timeout`"), "{t_}");
+    assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
+}

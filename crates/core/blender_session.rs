@@ -35,6 +35,8 @@ pub struct Settings {
     pub idle_timeout: Option<Duration>,
     /// Set by the command's Ctrl-C handler.
     pub interrupt: Arc<AtomicBool>,
+    /// Time limit for a worker to start.
+    pub startup_timeout: Duration,
 }
 
 /// A restartable Blender worker and the bridge folder it runs from.
@@ -54,7 +56,7 @@ impl BlenderSession {
                 script: bridge.worker_script(),
                 materials: bridge.materials_json(),
                 threads: settings.threads,
-                startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
+                startup_timeout: settings.startup_timeout,
                 interrupt: settings.interrupt,
             },
             settings.retries,

@@ -83,6 +83,9 @@ pub struct RenderArgs {
     /// Restarts of a crashed or hung Blender worker per render before the bench stops.
     #[arg(long, default_value_t = 2, value_name = "N")]
     retries: u32,
+    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds.
+    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
+    startup_timeout: f64,
     /// Blender executable (default: `blender` on PATH).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Option<PathBuf>,
@@ -297,6 +300,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
         retries: args.retries,
         idle_timeout: None,
         interrupt,
+        startup_timeout: crate::cmd_generate::seconds("--startup-timeout", args.startup_timeout)?,
     })?;
     let blender_version = session.ready()?.blender_version;
     let mut bench = Bench {

@@ -42,6 +42,9 @@ pub struct RunArgs {
     /// a worker silent for 300 s counts as hung.
     #[arg(long, value_name = "SECONDS")]
     timeout: Option<f64>,
+    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds.
+    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
+    startup_timeout: f64,
     /// Restarts of a crashed or hung worker per scene before it goes to the failure ledger.
     #[arg(long, default_value_t = 2, value_name = "N")]
     retries: u32,
@@ -278,6 +281,14 @@ fn positive(flag: &str, v: u32) -> anyhow::Result<u32> {
     Ok(v)
 }
 
+/// A positive, finite number of seconds given as `flag`.
+pub(crate) fn seconds(flag: &str, v: f64) -> anyhow::Result<Duration> {
+    if !(v > 0.0 && v.is_finite()) {
+        bail!("`{flag} {v}` must be a positive number of seconds\nhint: e.g. `{flag} 120`");
+    }
+    Ok(Duration::from_secs_f64(v))
+}
+
 fn within(flag: &str, v: u32, max: u32) -> anyhow::Result<u32> {
     if v > max {
         bail!("`{flag} {v}` is more than the {max} allowed\nhint: pass 1 to {max}");
@@ -337,7 +348,7 @@ pub(crate) fn run_jobs(
         workers: args.workers.unwrap_or_else(pool::default_workers),
         threads: args.threads.unwrap_or(0),
         timeout: args.timeout.map(Duration::from_secs_f64),
-        startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
+        startup_timeout: seconds("--startup-timeout", args.startup_timeout)?,
         retries: args.retries,
         max_attempts: max_attempts.max(1),
         visibility_check: true,

@@ -99,6 +99,9 @@ struct BatchArgs {
     /// Restarts of a crashed or hung Blender worker per material before the command stops.
     #[arg(long, default_value_t = 2, value_name = "N")]
     retries: u32,
+    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds.
+    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
+    startup_timeout: f64,
 }
 
 #[derive(Debug, clap::Args)]
@@ -220,6 +223,7 @@ fn session(cat: &Catalogue, names: &[&str], a: &BatchArgs) -> anyhow::Result<Ble
             .is_none()
             .then_some(clevrtex_render::pool::IDLE_TIMEOUT),
         interrupt,
+        startup_timeout: crate::cmd_generate::seconds("--startup-timeout", a.startup_timeout)?,
     })
 }
 
