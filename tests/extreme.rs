@@ -387,6 +387,7 @@ fn render(blender: PathBuf, out: &Path, scenes: &[SceneFile]) -> Vec<SampleStats
                     Arc::new(move |_| Ok((*s).clone()))
                 },
                 resample: false,
+                source: None,
             }
         })
         .collect();

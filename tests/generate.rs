@@ -824,6 +824,7 @@ fn render_fixtures(blender: PathBuf, out: &Path, scenes: Vec<SceneFile>) -> Vec<
                     Arc::new(move |_| Ok((*s).clone()))
                 },
                 resample: false,
+                source: None,
             }
         })
         .collect();
@@ -1424,4 +1425,35 @@ fn startup_timeout_is_a_flag_and_its_hint_names_it() {
     );
     assert!(t_.contains("raise `--startup-timeout`"), "{t_}");
     assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
+}
+
+/// A scene file the bridge cannot build is named as the user's file in the message (not the
+/// worker's temporary copy), with what was wrong.
+#[test]
+fn bridge_errors_name_the_users_scene_file() {
+    let Some(blender) = blender_or_skip("bridge_errors_name_the_users_scene_file") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene: Value =
+        serde_json::from_str(&std::fs::read_to_string(data("scenes/tiny3.json")).unwrap()).unwrap();
+    scene["objects"][0]["material"]["name"] = Value::from("no_such_material");
+    let file = dir.path().join("scenes/odd.json");
+    std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+    std::fs::write(&file, scene.to_string()).unwrap();
+    let out = clevrtex()
+        .args(["render", "--retries", "0", "--blender"])
+        .arg(&blender)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .arg(&file)
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains(&format!("(scene file `{}`)", file.display())),
+        "{t}"
+    );
+    assert!(t.contains("no_such_material"), "{t}");
 }

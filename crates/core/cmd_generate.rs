@@ -196,6 +196,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
                     .map_err(|e| e.to_string())
                 }),
                 resample: true,
+                source: None,
             }
         })
         .collect();

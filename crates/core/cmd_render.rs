@@ -83,6 +83,7 @@ pub fn run(args: Args) -> CmdResult {
             passes,
             scene: Arc::new(move |_| Ok((*scene).clone())),
             resample: false,
+            source: Some(f.clone()),
         });
     }
     let ledger = match variants.iter().next() {

@@ -41,6 +41,9 @@ pub struct Job {
     /// Whether a failed visibility check may resample (false for fixed scene files, whose
     /// visibility is only measured and recorded).
     pub resample: bool,
+    /// The user's scene file this job renders (`clevrtex render`), named in messages instead
+    /// of the worker's temporary copy.
+    pub source: Option<PathBuf>,
 }
 
 impl std::fmt::Debug for Job {
@@ -140,7 +143,10 @@ impl Slot<'_, '_> {
             post::write_file(&scene_path, text.as_bytes())?;
             let timeout = opts.timeout.unwrap_or_else(|| auto_timeout(&scene));
             let n = scene.objects.len();
-            let label = format!("{} attempt {attempt}", job.stem);
+            let label = match &job.source {
+                Some(file) => format!("{} (scene file `{}`)", job.stem, file.display()),
+                None => format!("{} attempt {attempt}", job.stem),
+            };
 
             let mut visibility_s = 0.0;
             if job.resample && opts.visibility_check {
