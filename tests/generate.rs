@@ -399,6 +399,9 @@ fn fake_garbage_is_a_protocol_error() {
     assert_eq!(out.status.code(), Some(3), "{t}");
     assert!(t.contains("malformed reply"), "{t}");
     assert!(t.contains("this is not json"), "{t}");
+    // Says what happened, not that the install is broken.
+    assert!(t.contains("a reply line was cut or garbled"), "{t}");
+    assert!(!t.contains("disagree") && !t.contains("reinstall"), "{t}");
 }
 
 #[test]
