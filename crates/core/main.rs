@@ -16,6 +16,7 @@ mod cmd_render;
 mod cmd_sample;
 mod cmd_verify;
 mod exit;
+mod font;
 mod interrupt;
 mod shard;
 

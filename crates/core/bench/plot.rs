@@ -1,8 +1,7 @@
 //! The error-against-time plot (log-log, one curve per sampling mode) as SVG and PNG.
 //!
-//! Text needs a font: plotters is built without font-kit (no fontconfig), so a TrueType font
-//! is loaded from the usual system places (DejaVu Sans, Liberation Sans). Without one the
-//! plot is drawn without text and the caller is told so.
+//! Text needs a font ([`crate::font`]); without one the plot is drawn without text and the
+//! caller is told so.
 
 use std::path::Path;
 
@@ -11,32 +10,6 @@ use plotters::prelude::*;
 
 /// One point of a curve: x = seconds, y = relative error.
 pub type Curve = (String, Vec<(f64, f64)>);
-
-const FONT_PATHS: &[&str] = &[
-    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/TTF/DejaVuSans.ttf",
-    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
-    "/Library/Fonts/Arial.ttf",
-    "C:\\Windows\\Fonts\\arial.ttf",
-];
-
-/// Register a system font for plotters once; `false` when none was found.
-fn font_available() -> bool {
-    static FOUND: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *FOUND.get_or_init(|| {
-        for p in FONT_PATHS {
-            if let Ok(bytes) = std::fs::read(p) {
-                // plotters wants 'static font data; one font per process, so leaking is fine.
-                let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-                if plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_ok() {
-                    return true;
-                }
-            }
-        }
-        false
-    })
-}
 
 const W: u32 = 900;
 const H: u32 = 600;
@@ -49,7 +22,7 @@ pub fn write(
     y_label: &str,
     curves: &[Curve],
 ) -> anyhow::Result<bool> {
-    let text = font_available();
+    let text = crate::font::available();
     let svg = stem.with_extension("svg");
     {
         let root = SVGBackend::new(&svg, (W, H)).into_drawing_area();
