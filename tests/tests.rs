@@ -10,6 +10,7 @@ mod extreme;
 mod generate;
 mod k8s;
 mod materials;
+mod preview;
 mod sample;
 mod slurm;
 mod verify;

@@ -12,6 +12,7 @@ mod cmd_eval;
 mod cmd_export;
 mod cmd_generate;
 mod cmd_materials;
+mod cmd_preview;
 mod cmd_render;
 mod cmd_sample;
 mod cmd_verify;
@@ -49,6 +50,8 @@ enum Command {
     Verify(cmd_verify::Args),
     /// Export a dataset as WebDataset tar shards.
     Export(cmd_export::Args),
+    /// Draw a contact sheet of a dataset's samples and passes.
+    Preview(cmd_preview::Args),
 }
 
 fn main() -> ExitCode {
@@ -73,6 +76,7 @@ fn main() -> ExitCode {
         Command::Doctor(args) => cmd_doctor::run(args),
         Command::Verify(args) => cmd_verify::run(args),
         Command::Export(args) => cmd_export::run(args),
+        Command::Preview(args) => cmd_preview::run(args),
     };
     ExitCode::from(exit::report(result))
 }

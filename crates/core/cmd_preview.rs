@@ -1,0 +1,435 @@
+//! `clevrtex preview DIR --out sheet.png`: a contact sheet to look at a dataset, one row per
+//! sample: RGB, the mask in distinct colours with each object's id at its `pixel_coords`, the
+//! mask's outlines over the RGB, depth colour-mapped with a metre scale, normal, albedo and
+//! shadow; passes the dataset lacks are left out. Each row is labelled with the stem, variant,
+//! split and materials. Works on our layout and on the downloaded ClevrTex (same names).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use clevrtex_render::post::decode_png;
+use clevrtex_scene::{layout, Pass};
+use image::{Rgb, RgbImage};
+use plotters::prelude::*;
+use serde_json::Value;
+
+use crate::exit::{self, CmdResult};
+
+/// Arguments of `clevrtex preview`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The dataset: an output folder of `clevrtex generate`, a `clevrtex_<variant>` folder, or
+    /// the downloaded ClevrTex.
+    #[arg(value_name = "DIR")]
+    dir: PathBuf,
+    /// The sheet to write (PNG).
+    #[arg(long, value_name = "FILE")]
+    out: PathBuf,
+    /// How many samples (the first N by index), unless `--indices` names them.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=256))]
+    n: u32,
+    /// These image indices, comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    indices: Vec<u64>,
+    /// Only this variant (when DIR holds several).
+    #[arg(long)]
+    variant: Option<String>,
+    /// Width of one cell in pixels.
+    #[arg(long, default_value_t = 192, value_parser = clap::value_parser!(u32).range(32..=1024))]
+    cell: u32,
+}
+
+/// Columns of the sheet, in order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Column {
+    Rgb,
+    Mask,
+    Outlines,
+    Depth,
+    Normal,
+    Albedo,
+    Shadow,
+}
+
+impl Column {
+    fn title(self) -> &'static str {
+        match self {
+            Column::Rgb => "rgb",
+            Column::Mask => "mask (ids)",
+            Column::Outlines => "outlines",
+            Column::Depth => "depth (m)",
+            Column::Normal => "normal",
+            Column::Albedo => "albedo",
+            Column::Shadow => "shadow",
+        }
+    }
+
+    /// The pass the column needs.
+    fn pass(self) -> Pass {
+        match self {
+            Column::Rgb => Pass::Rgb,
+            Column::Mask | Column::Outlines => Pass::Mask,
+            Column::Depth => Pass::Depth,
+            Column::Normal => Pass::Normal,
+            Column::Albedo => Pass::Albedo,
+            Column::Shadow => Pass::Shadow,
+        }
+    }
+}
+
+const ALL: [Column; 7] = [
+    Column::Rgb,
+    Column::Mask,
+    Column::Outlines,
+    Column::Depth,
+    Column::Normal,
+    Column::Albedo,
+    Column::Shadow,
+];
+
+/// One sample found: stem, folder, metadata.
+struct Sample {
+    stem: String,
+    dir: PathBuf,
+    meta: Value,
+}
+
+/// Distinct colour of instance id `i` (0 = background, black): hues by the golden ratio.
+fn id_colour(i: u16) -> Rgb<u8> {
+    if i == 0 {
+        return Rgb([0, 0, 0]);
+    }
+    let h = (f64::from(i) * 0.618_033_988_75).fract() * 6.0;
+    let (s, v) = (0.75, if i % 2 == 0 { 0.95 } else { 0.8 });
+    let c = v * s;
+    let x = c * (1.0 - ((h % 2.0) - 1.0).abs());
+    let (r, g, b) = match h as u32 {
+        0 => (c, x, 0.0),
+        1 => (x, c, 0.0),
+        2 => (0.0, c, x),
+        3 => (0.0, x, c),
+        4 => (x, 0.0, c),
+        _ => (c, 0.0, x),
+    };
+    let m = v - c;
+    let q = |t: f64| ((t + m) * 255.0).round() as u8;
+    Rgb([q(r), q(g), q(b)])
+}
+
+/// A perceptual-ish colour map (dark blue, purple, orange, yellow) of `t` in [0, 1].
+fn colour_map(t: f64) -> Rgb<u8> {
+    const STOPS: [[f64; 3]; 5] = [
+        [13.0, 8.0, 135.0],
+        [126.0, 3.0, 168.0],
+        [204.0, 71.0, 120.0],
+        [248.0, 149.0, 64.0],
+        [240.0, 249.0, 33.0],
+    ];
+    let t = t.clamp(0.0, 1.0) * 4.0;
+    let i = (t.floor() as usize).min(3);
+    let f = t - i as f64;
+    let c = |k: usize| (STOPS[i][k] + (STOPS[i + 1][k] - STOPS[i][k]) * f).round() as u8;
+    Rgb([c(0), c(1), c(2)])
+}
+
+/// Find the samples to show, in index order.
+fn find_samples(args: &Args) -> anyhow::Result<Vec<Sample>> {
+    let mut vdirs = Vec::new();
+    let name = args
+        .dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    if name.starts_with("clevrtex_") {
+        vdirs.push(args.dir.clone());
+    } else {
+        let rd = std::fs::read_dir(&args.dir).with_context(|| {
+            format!(
+                "cannot read `{}`\nhint: pass the `--out` folder of `clevrtex generate`",
+                args.dir.display()
+            )
+        })?;
+        let mut v: Vec<PathBuf> = rd.flatten().map(|e| e.path()).collect();
+        v.sort();
+        vdirs.extend(v.into_iter().filter(|p| {
+            p.is_dir()
+                && p.file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with("clevrtex_"))
+        }));
+    }
+    let mut found: Vec<(String, u64, String, PathBuf)> = Vec::new();
+    for vdir in vdirs {
+        let mut subs: Vec<PathBuf> = std::fs::read_dir(&vdir)
+            .with_context(|| format!("cannot read `{}`", vdir.display()))?
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.is_dir())
+            .collect();
+        subs.sort();
+        for sub in subs {
+            for e in std::fs::read_dir(&sub)?.flatten() {
+                let n = e.file_name().to_string_lossy().into_owned();
+                if let Some((stem, variant, index)) = layout::parse_stem(&n, ".json") {
+                    if args.variant.as_ref().is_none_or(|v| v == variant) {
+                        found.push((variant.to_string(), index, stem.to_string(), sub.clone()));
+                    }
+                }
+            }
+        }
+    }
+    found.sort();
+    let wanted: Vec<(String, u64, String, PathBuf)> = if args.indices.is_empty() {
+        found.into_iter().take(args.n as usize).collect()
+    } else {
+        let mut out = Vec::new();
+        for i in &args.indices {
+            match found.iter().find(|f| f.1 == *i) {
+                Some(f) => out.push(f.clone()),
+                None => bail!(
+                    "no sample with index {i} under `{}`\nhint: pass indices the dataset has (`clevrtex verify` lists them)",
+                    args.dir.display()
+                ),
+            }
+        }
+        out
+    };
+    if wanted.is_empty() {
+        bail!(
+            "no samples (`CLEVRTEX_<variant>_<index>.json`) under `{}`{}\nhint: pass the `--out` folder of `clevrtex generate`",
+            args.dir.display(),
+            args.variant.as_ref().map(|v| format!(" for variant `{v}`")).unwrap_or_default()
+        );
+    }
+    wanted
+        .into_iter()
+        .map(|(_, _, stem, dir)| {
+            let path = dir.join(layout::metadata_file(&stem));
+            let meta: Value = serde_json::from_slice(
+                &std::fs::read(&path)
+                    .with_context(|| format!("cannot read `{}`", path.display()))?,
+            )
+            .with_context(|| format!("`{}` is not valid metadata", path.display()))?;
+            Ok(Sample { stem, dir, meta })
+        })
+        .collect()
+}
+
+/// The file of `pass` of a sample, if it exists.
+fn pass_path(s: &Sample, pass: Pass) -> Option<PathBuf> {
+    let p = s.dir.join(layout::pass_file(&s.stem, pass));
+    p.is_file().then_some(p)
+}
+
+/// Scale `img` to `w` wide (nearest neighbour: masks stay exact).
+fn scaled(img: &RgbImage, w: u32) -> RgbImage {
+    let h = (u64::from(img.height()) * u64::from(w) / u64::from(img.width().max(1))).max(1) as u32;
+    image::imageops::resize(img, w, h, image::imageops::FilterType::Nearest)
+}
+
+/// One cell at its native size, and for depth the range drawn in metres (for the scale).
+type Cell = (RgbImage, Option<(f64, f64)>);
+
+/// The cell of column `col` of a sample; `None` when the sample lacks the pass.
+fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
+    let Some(path) = pass_path(s, col.pass()) else {
+        return Ok(None);
+    };
+    let bad = |e: &dyn std::fmt::Display| anyhow::anyhow!("`{}`: {e}", path.display());
+    let to_rgb = |p: &Path| -> anyhow::Result<RgbImage> {
+        Ok(image::open(p).map_err(|e| bad(&e))?.to_rgb8())
+    };
+    Ok(Some(match col {
+        Column::Rgb | Column::Normal | Column::Albedo | Column::Shadow => (to_rgb(&path)?, None),
+        Column::Mask | Column::Outlines => {
+            let m = decode_png(&path).map_err(|e| bad(&e))?;
+            let (w, h) = (m.width, m.height);
+            let id = |x: u32, y: u32| m.data[(y * w + x) as usize];
+            let mut img = if col == Column::Mask {
+                RgbImage::from_fn(w, h, |x, y| id_colour(id(x, y)))
+            } else {
+                match pass_path(s, Pass::Rgb) {
+                    Some(rgb) => to_rgb(&rgb)?,
+                    None => RgbImage::new(w, h),
+                }
+            };
+            if col == Column::Outlines {
+                for y in 0..h {
+                    for x in 0..w {
+                        let edge = (x + 1 < w && id(x + 1, y) != id(x, y))
+                            || (y + 1 < h && id(x, y + 1) != id(x, y));
+                        if edge {
+                            img.put_pixel(x, y, Rgb([255, 255, 255]));
+                        }
+                    }
+                }
+            }
+            (img, None)
+        }
+        Column::Depth => {
+            let d = decode_png(&path).map_err(|e| bad(&e))?;
+            let enc = &s.meta["passes"]["depth"];
+            let scale = enc["scale"].as_f64().unwrap_or(1.0);
+            let background = enc["background"].as_u64().unwrap_or(65535) as u16;
+            let valid = |v: u16| v != background && v != 0;
+            let (lo, hi) = d
+                .data
+                .iter()
+                .filter(|&&v| valid(v))
+                .fold((u16::MAX, 0), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            let span = f64::from(hi.saturating_sub(lo)).max(1.0);
+            let img = RgbImage::from_fn(d.width, d.height, |x, y| {
+                let v = d.data[(y * d.width + x) as usize];
+                if valid(v) {
+                    colour_map(f64::from(v - lo) / span)
+                } else {
+                    Rgb([0, 0, 0])
+                }
+            });
+            let range = (hi >= lo).then(|| (f64::from(lo) * scale, f64::from(hi) * scale));
+            (img, range)
+        }
+    }))
+}
+
+/// Run `clevrtex preview`.
+pub fn run(args: Args) -> CmdResult {
+    let samples = find_samples(&args)?;
+    // Columns: those some chosen sample has.
+    let cols: Vec<Column> = ALL
+        .into_iter()
+        .filter(|c| samples.iter().any(|s| pass_path(s, c.pass()).is_some()))
+        .collect();
+    let cw = args.cell;
+    let first = samples
+        .iter()
+        .find_map(|s| pass_path(s, Pass::Rgb).or_else(|| pass_path(s, Pass::Mask)))
+        .map(|p| image::image_dimensions(&p))
+        .transpose()
+        .context("cannot read an image of the dataset")?
+        .unwrap_or((4, 3));
+    let ch = (u64::from(first.1) * u64::from(cw) / u64::from(first.0.max(1))).max(1) as u32;
+    let (label_h, head_h, bar_w) = (18u32, 20u32, 10u32);
+    let width = cols.len() as u32 * (cw + bar_w) + bar_w;
+    let height = head_h + samples.len() as u32 * (label_h + ch + 6);
+    let mut sheet = RgbImage::from_pixel(width, height, Rgb([24, 24, 24]));
+    // Texts to draw, after the images: (x, y, text, size).
+    let mut texts: Vec<(i32, i32, String, u32)> = Vec::new();
+    for (c, col) in cols.iter().enumerate() {
+        texts.push((
+            (c as u32 * (cw + bar_w) + bar_w) as i32,
+            3,
+            col.title().into(),
+            14,
+        ));
+    }
+    for (r, s) in samples.iter().enumerate() {
+        let y0 = head_h + r as u32 * (label_h + ch + 6);
+        let materials: Vec<String> = s.meta["objects"]
+            .as_array()
+            .map(|o| {
+                let mut m: Vec<String> = o
+                    .iter()
+                    .filter_map(|o| o["material"].as_str().map(str::to_string))
+                    .collect();
+                m.sort();
+                m.dedup();
+                m
+            })
+            .unwrap_or_default();
+        texts.push((
+            bar_w as i32,
+            y0 as i32 + 2,
+            format!(
+                "{}  variant {}  split {}  ground {}  materials {}",
+                s.stem,
+                s.meta["variant"].as_str().unwrap_or("?"),
+                s.meta["split"].as_str().unwrap_or("?"),
+                s.meta["ground_material"].as_str().unwrap_or("?"),
+                materials.join(", ")
+            ),
+            12,
+        ));
+        for (c, col) in cols.iter().enumerate() {
+            let x0 = c as u32 * (cw + bar_w) + bar_w;
+            let Some((img, depth_range)) = cell(s, *col)? else {
+                continue;
+            };
+            let (nw, nh) = (img.width(), img.height());
+            let img = scaled(&img, cw);
+            image::imageops::replace(&mut sheet, &img, i64::from(x0), i64::from(y0 + label_h));
+            if *col == Column::Mask {
+                if let Some(objs) = s.meta["objects"].as_array() {
+                    for (i, o) in objs.iter().enumerate() {
+                        let p = &o["pixel_coords"];
+                        if let (Some(px), Some(py)) = (p[0].as_f64(), p[1].as_f64()) {
+                            let x = x0 as f64 + px * f64::from(cw) / f64::from(nw.max(1));
+                            let y = f64::from(y0 + label_h)
+                                + py * f64::from(img.height()) / f64::from(nh.max(1));
+                            texts.push((x as i32 - 4, y as i32 - 6, (i + 1).to_string(), 12));
+                        }
+                    }
+                }
+            }
+            if let Some((lo, hi)) = depth_range {
+                // A vertical scale bar right of the cell: near (top) to far (bottom).
+                let bx = x0 + cw + 1;
+                for y in 0..img.height() {
+                    let t = f64::from(y) / f64::from(img.height().max(2) - 1);
+                    for x in bx..bx + bar_w - 2 {
+                        sheet.put_pixel(x, y0 + label_h + y, colour_map(t));
+                    }
+                }
+                texts.push((
+                    x0 as i32 + 2,
+                    (y0 + label_h) as i32 + 1,
+                    format!("{lo:.1} m"),
+                    11,
+                ));
+                texts.push((
+                    x0 as i32 + 2,
+                    (y0 + label_h + img.height()) as i32 - 13,
+                    format!("{hi:.1} m"),
+                    11,
+                ));
+            }
+        }
+    }
+    let drew_text = crate::font::available();
+    if drew_text {
+        let (w, h) = sheet.dimensions();
+        let mut buf = sheet.into_raw();
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+            for (x, y, t, size) in &texts {
+                let style = ("sans-serif", *size).into_font().color(&WHITE);
+                root.draw_text(t, &style, (*x, *y))
+                    .map_err(|e| anyhow::anyhow!("cannot draw text: {e}"))?;
+            }
+            root.present()
+                .map_err(|e| anyhow::anyhow!("cannot draw text: {e}"))?;
+        }
+        sheet = RgbImage::from_raw(w, h, buf).expect("same size");
+    }
+    let tmp = args.out.with_extension("png.clevrtex-tmp");
+    sheet
+        .save_with_format(&tmp, image::ImageFormat::Png)
+        .with_context(|| format!("cannot write `{}`", tmp.display()))?;
+    std::fs::rename(&tmp, &args.out)
+        .with_context(|| format!("cannot write `{}`", args.out.display()))?;
+    println!(
+        "wrote `{}`: {} sample(s) x {} column(s) ({})",
+        args.out.display(),
+        samples.len(),
+        cols.len(),
+        cols.iter()
+            .map(|c| c.title())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    if !drew_text {
+        eprintln!(
+            "warning: no TrueType font found (install fonts-dejavu-core): the sheet has no labels"
+        );
+    }
+    Ok(exit::OK)
+}
