@@ -94,26 +94,9 @@ struct Sample {
     meta: Value,
 }
 
-/// Distinct colour of instance id `i` (0 = background, black): hues by the golden ratio.
+/// The colour of instance id `i`: the mask PNG's own palette (0 = background, black).
 fn id_colour(i: u16) -> Rgb<u8> {
-    if i == 0 {
-        return Rgb([0, 0, 0]);
-    }
-    let h = (f64::from(i) * 0.618_033_988_75).fract() * 6.0;
-    let (s, v) = (0.75, if i % 2 == 0 { 0.95 } else { 0.8 });
-    let c = v * s;
-    let x = c * (1.0 - ((h % 2.0) - 1.0).abs());
-    let (r, g, b) = match h as u32 {
-        0 => (c, x, 0.0),
-        1 => (x, c, 0.0),
-        2 => (0.0, c, x),
-        3 => (0.0, x, c),
-        4 => (x, 0.0, c),
-        _ => (c, 0.0, x),
-    };
-    let m = v - c;
-    let q = |t: f64| ((t + m) * 255.0).round() as u8;
-    Rgb([q(r), q(g), q(b)])
+    Rgb(clevrtex_render::post::id_colour(i.min(255) as u8))
 }
 
 /// A perceptual-ish colour map (dark blue, purple, orange, yellow) of `t` in [0, 1].

@@ -160,29 +160,32 @@ pub fn direct_light(
         .collect()
 }
 
-/// A distinct colour per instance id for the mask's palette (0 = black).
-fn palette() -> Vec<u8> {
-    let mut p = vec![0u8; 256 * 3];
-    for i in 1..256usize {
-        // Golden-angle hues with alternating brightness: neighbours look different.
-        let h = (i as f64 * 0.618_033_988_75).fract() * 6.0;
-        let v = if i % 2 == 0 { 0.75 } else { 1.0 };
-        let c = v * 0.85;
-        let x = c * (1.0 - ((h % 2.0) - 1.0).abs());
-        let (r, g, b) = match h as u32 {
-            0 => (c, x, 0.0),
-            1 => (x, c, 0.0),
-            2 => (0.0, c, x),
-            3 => (0.0, x, c),
-            4 => (x, 0.0, c),
-            _ => (c, 0.0, x),
-        };
-        let m = v - c;
-        p[i * 3] = ((r + m) * 255.0).round() as u8;
-        p[i * 3 + 1] = ((g + m) * 255.0).round() as u8;
-        p[i * 3 + 2] = ((b + m) * 255.0).round() as u8;
+/// The distinct colour of instance id `i` in the mask's palette (0 = black): golden-angle hues
+/// with alternating brightness, so neighbouring ids look different.
+pub fn id_colour(i: u8) -> [u8; 3] {
+    if i == 0 {
+        return [0, 0, 0];
     }
-    p
+    let h = (f64::from(i) * 0.618_033_988_75).fract() * 6.0;
+    let v = if i % 2 == 0 { 0.75 } else { 1.0 };
+    let c = v * 0.85;
+    let x = c * (1.0 - ((h % 2.0) - 1.0).abs());
+    let (r, g, b) = match h as u32 {
+        0 => (c, x, 0.0),
+        1 => (x, c, 0.0),
+        2 => (0.0, c, x),
+        3 => (0.0, x, c),
+        4 => (x, 0.0, c),
+        _ => (c, 0.0, x),
+    };
+    let m = v - c;
+    let q = |t: f64| ((t + m) * 255.0).round() as u8;
+    [q(r), q(g), q(b)]
+}
+
+/// The mask PNG's palette: [`id_colour`] of every id.
+fn palette() -> Vec<u8> {
+    (0..=255u8).flat_map(id_colour).collect()
 }
 
 /// Encode a PNG into memory. `data8` is used for 8-bit kinds, `data16` for 16-bit ones.
