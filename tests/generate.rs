@@ -230,7 +230,7 @@ fn ledger_has_one_entry_per_image_and_drops_truncated_lines() {
     );
 }
 
-/// A ledger that cannot be written (here: its temporary name is taken by a folder, as a full
+/// A ledger that cannot be written (here: its lock file's name is taken by a folder, as a full
 /// disk would fail the write) stops the run with a message that says the failure was NOT
 /// recorded, and leaves the ledger on disk as it was (no 0-byte file).
 #[test]
@@ -241,11 +241,8 @@ fn unwritable_ledger_says_so_and_keeps_the_old_one() {
     let old =
         r#"{"index":7,"stem":"CLEVRTEX_clevr_000007","variant":"clevr","error":"x","time_unix":0}"#;
     std::fs::write(&ledger, format!("{old}\n")).unwrap();
-    std::fs::create_dir_all(
-        dir.path()
-            .join("clevrtex_clevr/failures.jsonl.clevrtex-tmp"),
-    )
-    .unwrap();
+    // The ledger's lock file taken by a folder: the ledger cannot be written.
+    std::fs::create_dir_all(dir.path().join("clevrtex_clevr/.failures.jsonl.lock")).unwrap();
     let out = generate_fake("crash", dir.path(), &["-n", "1", "--retries", "0"]);
     let t = text(&out);
     assert_eq!(out.status.code(), Some(1), "{t}");
@@ -1459,4 +1456,52 @@ fn bridge_errors_name_the_users_scene_file() {
         "{t}"
     );
     assert!(t.contains("no_such_material"), "{t}");
+}
+
+/// Shards writing into one folder at the same time (a SLURM array, a Kubernetes Indexed Job)
+/// share the failure ledger: every shard's failures are kept, one entry per image.
+#[test]
+fn concurrent_shards_share_the_ledger_without_losing_entries() {
+    let dir = tempfile::tempdir().unwrap();
+    let spawn = |k: u32| {
+        clevrtex()
+            .env("FAKE_BLENDER_MODE", "crash")
+            .env_remove("CLEVRTEX_BLENDER")
+            .args([
+                "generate",
+                "--variant",
+                "clevr",
+                "-n",
+                "8",
+                "--retries",
+                "0",
+            ])
+            .args([
+                "--width",
+                "64",
+                "--height",
+                "48",
+                "--samples",
+                "1",
+                "--workers",
+                "2",
+            ])
+            .args(["--shard", &format!("{k}/2"), "--blender"])
+            .arg(fake_blender())
+            .arg("--out")
+            .arg(dir.path())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap()
+    };
+    let (mut a, mut b) = (spawn(0), spawn(1));
+    assert_eq!(a.wait().unwrap().code(), Some(3));
+    assert_eq!(b.wait().unwrap().code(), Some(3));
+    let mut indices: Vec<u64> = ledger_lines(dir.path())
+        .iter()
+        .map(|l| l["index"].as_u64().unwrap())
+        .collect();
+    indices.sort();
+    assert_eq!(indices, (0..8).collect::<Vec<u64>>());
 }

@@ -2,10 +2,13 @@
 //! `error`, `time_unix`), at most one per stem (a later failure of the same image replaces the
 //! earlier one).
 //!
-//! The file is never appended to: every change rewrites it through a temporary file and a
-//! rename, so a kill or a full disk leaves the previous ledger whole (never a 0-byte or
-//! half-written one). Lines that cannot be read (an older tool killed mid-append) are dropped
-//! at the next rewrite and counted, so the run can say so.
+//! Several runs may share one ledger: the shards of a SLURM array or a Kubernetes Indexed Job
+//! write into one variant folder. Every change therefore happens under an exclusive lock on
+//! `.failures.jsonl.lock` beside it: read the file as it is now, change it, write it through a
+//! temporary file and a rename. A kill or a full disk leaves the previous ledger whole (never a
+//! 0-byte or half-written one), and no run loses another's entries. Lines that cannot be read
+//! (an older tool killed mid-append) are dropped at the next rewrite and counted, so the run
+//! can say so.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
@@ -15,43 +18,41 @@ use crate::error::{RenderError, Result};
 use crate::job::Job;
 use crate::output;
 
-/// The ledger of one run, as loaded at its start.
+/// A run's handle on its ledger file.
 #[derive(Debug)]
 pub(crate) struct Ledger {
     path: PathBuf,
-    /// Entries by stem, each one JSON line (without the newline).
-    entries: BTreeMap<String, String>,
-    /// Lines of the file on disk that could not be read.
+    /// Unreadable lines of the file when the run started.
     unreadable: usize,
-    /// Whether `entries` differ from the file.
-    dirty: bool,
+}
+
+/// Entries by stem, each one JSON line (without the newline), and the unreadable lines.
+fn load(path: &Path) -> (BTreeMap<String, String>, usize) {
+    let mut entries = BTreeMap::new();
+    let mut unreadable = 0;
+    if let Ok(text) = std::fs::read_to_string(path) {
+        for line in text.lines().filter(|l| !l.trim().is_empty()) {
+            let stem = serde_json::from_str::<serde_json::Value>(line)
+                .ok()
+                .and_then(|v| v["stem"].as_str().map(str::to_string));
+            match stem {
+                // Older tools appended: the last line of a stem is its latest failure.
+                Some(stem) => {
+                    entries.insert(stem, line.to_string());
+                }
+                None => unreadable += 1,
+            }
+        }
+    }
+    (entries, unreadable)
 }
 
 impl Ledger {
-    /// Load the ledger at `path` (empty when there is none). A missing or unreadable file is
-    /// an empty ledger; its unreadable lines are counted.
+    /// The ledger at `path` (it need not exist), counting its unreadable lines.
     pub(crate) fn open(path: &Path) -> Ledger {
-        let mut entries = BTreeMap::new();
-        let mut unreadable = 0;
-        if let Ok(text) = std::fs::read_to_string(path) {
-            for line in text.lines().filter(|l| !l.trim().is_empty()) {
-                let stem = serde_json::from_str::<serde_json::Value>(line)
-                    .ok()
-                    .and_then(|v| v["stem"].as_str().map(str::to_string));
-                match stem {
-                    // Older tools appended: the last line of a stem is its latest failure.
-                    Some(stem) => {
-                        entries.insert(stem, line.to_string());
-                    }
-                    None => unreadable += 1,
-                }
-            }
-        }
         Ledger {
             path: path.to_path_buf(),
-            entries,
-            unreadable,
-            dirty: false,
+            unreadable: load(path).1,
         }
     }
 
@@ -60,14 +61,57 @@ impl Ledger {
         &self.path
     }
 
-    /// Lines of the file on disk that could not be read (dropped at the next rewrite).
+    /// Lines of the file that could not be read when the run started (dropped at the next
+    /// rewrite).
     pub(crate) fn unreadable(&self) -> usize {
         self.unreadable
     }
 
-    /// Record the failure of `job` (replacing an earlier one of the same stem) and rewrite the
-    /// file. On error the file on disk is unchanged.
-    pub(crate) fn record(&mut self, job: &Job, err: &RenderError) -> std::io::Result<()> {
+    /// Under the lock: load the file, let `change` edit the entries (it says whether it
+    /// changed anything), and write the result back (or remove the file when it is empty).
+    fn update(
+        &self,
+        change: impl FnOnce(&mut BTreeMap<String, String>) -> bool,
+    ) -> std::io::Result<()> {
+        let dir = self.path.parent().unwrap_or(Path::new("."));
+        std::fs::create_dir_all(dir)?;
+        let name = self.path.file_name().unwrap_or_default().to_string_lossy();
+        let lock = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(dir.join(format!(".{name}.lock")))?;
+        lock.lock()?;
+        let (mut entries, unreadable) = load(&self.path);
+        if !change(&mut entries) && unreadable == 0 {
+            return Ok(());
+        }
+        if entries.is_empty() {
+            return match std::fs::remove_file(&self.path) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+                _ => Ok(()),
+            };
+        }
+        let tmp = dir.join(format!(
+            "{name}.{}{}",
+            crate::tmp::owner_tag(),
+            output::TMP_SUFFIX
+        ));
+        let body: String = entries.values().map(|l| format!("{l}\n")).collect();
+        let written = std::fs::File::create(&tmp).and_then(|mut f| {
+            f.write_all(body.as_bytes())?;
+            f.sync_all()
+        });
+        let renamed = written.and_then(|()| std::fs::rename(&tmp, &self.path));
+        if renamed.is_err() {
+            let _ = std::fs::remove_file(&tmp);
+        }
+        renamed
+    }
+
+    /// Record the failure of `job` (replacing an earlier one of the same stem). On error the
+    /// file on disk is unchanged.
+    pub(crate) fn record(&self, job: &Job, err: &RenderError) -> std::io::Result<()> {
         let line = serde_json::json!({
             "index": job.index,
             "stem": job.stem,
@@ -78,66 +122,24 @@ impl Ledger {
                 .map(|d| d.as_secs())
                 .unwrap_or(0),
         });
-        let old = self.entries.insert(job.stem.clone(), line.to_string());
-        let result = self.write();
-        if result.is_err() {
-            // Keep memory and disk in agreement: the failure was not recorded.
-            match old {
-                Some(old) => self.entries.insert(job.stem.clone(), old),
-                None => self.entries.remove(&job.stem),
-            };
-        }
-        result
+        self.update(|entries| {
+            entries.insert(job.stem.clone(), line.to_string());
+            true
+        })
     }
 
     /// After a finished run: drop the entries of `ran` (the run's stems) that did not fail
-    /// now (a rerun made them), so the ledger lists only what is still missing; remove the file
-    /// when nothing is. Also rewrites a file that had unreadable lines.
-    pub(crate) fn prune(
-        &mut self,
-        ran: &BTreeSet<String>,
-        failed: &BTreeSet<String>,
-    ) -> Result<()> {
-        let before = self.entries.len();
-        self.entries
-            .retain(|stem, _| !ran.contains(stem) || failed.contains(stem));
-        if self.entries.len() != before || self.unreadable > 0 {
-            self.dirty = true;
-        }
-        if !self.dirty {
+    /// now (a rerun made them), so the ledger lists only what is still missing; the file goes
+    /// when nothing is. Entries of other runs (other shards) are kept.
+    pub(crate) fn prune(&self, ran: &BTreeSet<String>, failed: &BTreeSet<String>) -> Result<()> {
+        if !self.path.exists() {
             return Ok(());
         }
-        if self.entries.is_empty() {
-            return match std::fs::remove_file(&self.path) {
-                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                    Err(RenderError::write(&self.path, e))
-                }
-                _ => Ok(()),
-            };
-        }
-        self.write().map_err(|e| RenderError::write(&self.path, e))
-    }
-
-    /// Write every entry to a temporary file, flush it to disk and rename it over the ledger.
-    fn write(&mut self) -> std::io::Result<()> {
-        if let Some(parent) = self.path.parent() {
-            std::fs::create_dir_all(parent)?;
-        }
-        let tmp = self
-            .path
-            .with_extension(format!("jsonl{}", output::TMP_SUFFIX));
-        let body: String = self.entries.values().map(|l| format!("{l}\n")).collect();
-        let written = std::fs::File::create(&tmp).and_then(|mut f| {
-            f.write_all(body.as_bytes())?;
-            f.sync_all()
-        });
-        let renamed = written.and_then(|()| std::fs::rename(&tmp, &self.path));
-        if renamed.is_err() {
-            let _ = std::fs::remove_file(&tmp);
-        } else {
-            self.dirty = false;
-            self.unreadable = 0;
-        }
-        renamed
+        self.update(|entries| {
+            let before = entries.len();
+            entries.retain(|stem, _| !ran.contains(stem) || failed.contains(stem));
+            entries.len() != before
+        })
+        .map_err(|e| RenderError::write(&self.path, e))
     }
 }

@@ -43,12 +43,17 @@ pub fn remove_other_outputs(dir: &Path, stem: &str, passes: &[Pass], keep_exr: b
     }
 }
 
-/// Remove temporary files a killed run left in `dir` (not recursive).
+/// Remove temporary files a killed run left in `dir` (not recursive). Temporary names carry
+/// their writer's owner tag ([`crate::tmp::owner_tag`]): files of live runs (other shards
+/// writing into the same folder) and of other machines are left alone.
 pub fn remove_stale_temps(dir: &Path) {
     if let Ok(entries) = std::fs::read_dir(dir) {
         for e in entries.flatten() {
-            if e.file_name().to_string_lossy().ends_with(TMP_SUFFIX) {
-                let _ = std::fs::remove_file(e.path());
+            let name = e.file_name().to_string_lossy().into_owned();
+            if let Some(stem) = name.strip_suffix(TMP_SUFFIX) {
+                if crate::tmp::tagged_name_is_stale(stem) {
+                    let _ = std::fs::remove_file(e.path());
+                }
             }
         }
     }
@@ -94,7 +99,8 @@ impl Staged {
 
     fn names(&self, name: &str) -> (PathBuf, PathBuf) {
         (
-            self.dir.join(format!("{name}{TMP_SUFFIX}")),
+            self.dir
+                .join(format!("{name}.{}{TMP_SUFFIX}", crate::tmp::owner_tag())),
             self.dir.join(name),
         )
     }

@@ -279,7 +279,7 @@ impl Shared<'_> {
     }
 
     fn record_failure(&self, job: &Job, err: &RenderError) -> Result<()> {
-        let mut ledger = self.ledger.lock().unwrap();
+        let ledger = self.ledger.lock().unwrap();
         self.failed_stems.lock().unwrap().insert(job.stem.clone());
         ledger
             .record(job, err)

@@ -167,7 +167,7 @@ pub fn id_colour(i: u8) -> [u8; 3] {
         return [0, 0, 0];
     }
     let h = (f64::from(i) * 0.618_033_988_75).fract() * 6.0;
-    let v = if i % 2 == 0 { 0.75 } else { 1.0 };
+    let v = if i.is_multiple_of(2) { 0.75 } else { 1.0 };
     let c = v * 0.85;
     let x = c * (1.0 - ((h % 2.0) - 1.0).abs());
     let (r, g, b) = match h as u32 {

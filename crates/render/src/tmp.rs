@@ -82,6 +82,46 @@ pub fn remove_stale() -> usize {
     removed
 }
 
+/// This machine's name (`/proc/sys/kernel/hostname`), for owner tags.
+fn hostname() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+        .map(|h| h.trim().to_string())
+        .ok()
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "localhost".into())
+        .replace(|c: char| !(c.is_ascii_alphanumeric() || c == '-'), "_")
+}
+
+/// `<host>.<pid>.<start time>` of this process: put in the names of temporary files in shared
+/// output folders, so a run can tell its own and other live runs' files (SLURM tasks or
+/// Kubernetes pods writing into one folder) from those a killed run left.
+pub fn owner_tag() -> String {
+    static TAG: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    TAG.get_or_init(|| {
+        let pid = std::process::id();
+        format!("{}.{pid}.{}", hostname(), start_time(pid).unwrap_or(0))
+    })
+    .clone()
+}
+
+/// Whether a file name carrying an [`owner_tag`] (`<anything>.<host>.<pid>.<start>` before
+/// its suffix) belongs to a process that is gone. Files of another machine are never judged
+/// stale (their owner may be running there); names without a tag (older versions) are.
+pub fn tagged_name_is_stale(stem: &str) -> bool {
+    let mut parts = stem.rsplitn(4, '.');
+    let (Some(start), Some(pid), Some(host)) = (parts.next(), parts.next(), parts.next()) else {
+        return true;
+    };
+    let (Ok(start), Ok(pid)) = (start.parse::<u64>(), pid.parse::<u32>()) else {
+        return true;
+    };
+    if host != hostname() {
+        return false;
+    }
+    !start_time(pid).is_some_and(|s| start == 0 || s == start)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -105,5 +145,15 @@ mod tests {
         remove_stale();
         assert!(!dead.exists());
         assert!(mine.path().exists(), "a live owner's folder is kept");
+    }
+
+    #[test]
+    fn owner_tags_tell_live_dead_and_foreign_owners() {
+        let me = format!("x.png.{}", owner_tag());
+        assert!(!tagged_name_is_stale(&me));
+        let dead = format!("x.png.{}.4194303.1", hostname());
+        assert!(tagged_name_is_stale(&dead));
+        assert!(!tagged_name_is_stale("x.png.some-other-host.4194303.1"));
+        assert!(tagged_name_is_stale("x.png"));
     }
 }
