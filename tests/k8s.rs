@@ -158,7 +158,10 @@ fn job_completion_index_shards_make_the_same_union_as_one_run() {
     run(&one, None);
     let (a, b) = (comparable(&pods), comparable(&one));
     assert_eq!(a.len(), 24);
-    assert_eq!(a, b, "the pods' union differs from one run");
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    for (name, bytes) in &a {
+        crate::util::assert_same_sample_file(name, bytes, &b[name]);
+    }
     let v = clevrtex().arg("verify").arg(&pods).output().unwrap();
     assert_eq!(v.status.code(), Some(0), "{}", text(&v));
     assert!(text(&v).contains("3 manifest(s)"), "{}", text(&v));
