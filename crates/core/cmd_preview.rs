@@ -39,6 +39,32 @@ pub struct Args {
     cell: u32,
 }
 
+impl Args {
+    /// The arguments for the first `n` samples of `dir` (the report's preview sheet).
+    pub fn first(dir: PathBuf, n: u32, cell: u32) -> Args {
+        Args {
+            dir,
+            out: PathBuf::new(),
+            n,
+            indices: Vec::new(),
+            variant: None,
+            cell,
+        }
+    }
+}
+
+/// A drawn sheet: the image, how many samples, the column titles, whether labels were drawn.
+pub struct Sheet {
+    /// The sheet.
+    pub image: RgbImage,
+    /// Rows.
+    pub samples: usize,
+    /// Column titles, in order.
+    pub columns: Vec<&'static str>,
+    /// Whether a font was found for the labels.
+    pub labelled: bool,
+}
+
 /// Columns of the sheet, in order.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Column {
@@ -274,9 +300,9 @@ fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
     }))
 }
 
-/// Run `clevrtex preview`.
-pub fn run(args: Args) -> CmdResult {
-    let samples = find_samples(&args)?;
+/// Draw the sheet of `args` (without writing it).
+pub fn draw(args: &Args) -> anyhow::Result<Sheet> {
+    let samples = find_samples(args)?;
     // Columns: those some chosen sample has.
     let cols: Vec<Column> = ALL
         .into_iter()
@@ -393,6 +419,22 @@ pub fn run(args: Args) -> CmdResult {
         }
         sheet = RgbImage::from_raw(w, h, buf).expect("same size");
     }
+    Ok(Sheet {
+        image: sheet,
+        samples: samples.len(),
+        columns: cols.iter().map(|c| c.title()).collect(),
+        labelled: drew_text,
+    })
+}
+
+/// Run `clevrtex preview`.
+pub fn run(args: Args) -> CmdResult {
+    let Sheet {
+        image: sheet,
+        samples,
+        columns,
+        labelled: drew_text,
+    } = draw(&args)?;
     let tmp = args.out.with_extension("png.clevrtex-tmp");
     sheet
         .save_with_format(&tmp, image::ImageFormat::Png)
@@ -402,12 +444,9 @@ pub fn run(args: Args) -> CmdResult {
     println!(
         "wrote `{}`: {} sample(s) x {} column(s) ({})",
         args.out.display(),
-        samples.len(),
-        cols.len(),
-        cols.iter()
-            .map(|c| c.title())
-            .collect::<Vec<_>>()
-            .join(", ")
+        samples,
+        columns.len(),
+        columns.join(", ")
     );
     if !drew_text {
         eprintln!(

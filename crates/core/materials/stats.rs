@@ -19,26 +19,42 @@ pub struct Features {
 /// Compute the features of a PNG tile.
 pub fn features(path: &Path) -> Result<Features, image::ImageError> {
     let img = image::open(path)?.to_rgb8();
+    Ok(region_features(&img, |_, _| true))
+}
+
+/// The features of the pixels of `img` where `inside(x, y)`: the histogram counts those
+/// pixels, the gradients only boxes whose pixels are all inside (and their right and lower
+/// neighbours), so a region's features do not see its surroundings. With every pixel inside,
+/// these are the tile's features.
+pub fn region_features(img: &image::RgbImage, inside: impl Fn(u32, u32) -> bool) -> Features {
     let (w, h) = img.dimensions();
     let mut histogram = vec![0.0; 64];
     let mut lum = vec![0.0f64; (w * h) as usize];
+    let mut mask = vec![false; (w * h) as usize];
+    let mut n = 0.0f64;
     for (x, y, p) in img.enumerate_pixels() {
+        if !inside(x, y) {
+            continue;
+        }
         let [r, g, b] = p.0;
         let bin = (r as usize / 64) * 16 + (g as usize / 64) * 4 + b as usize / 64;
         histogram[bin] += 1.0;
+        n += 1.0;
+        mask[(y * w + x) as usize] = true;
         lum[(y * w + x) as usize] =
             (0.2126 * r as f64 + 0.7152 * g as f64 + 0.0722 * b as f64) / 255.0;
     }
-    let n = (w * h) as f64;
-    histogram.iter_mut().for_each(|v| *v /= n);
+    histogram.iter_mut().for_each(|v| *v /= n.max(1.0));
     let mut texture = Vec::new();
     let mut orient = [0.0f64; 4];
     for scale in [1usize, 2, 4] {
         let (sw, sh) = (w as usize / scale, h as usize / scale);
         let mut small = vec![0.0; sw * sh];
+        let mut full = vec![true; sw * sh];
         for y in 0..sh * scale {
             for x in 0..sw * scale {
                 small[(y / scale) * sw + x / scale] += lum[y * w as usize + x];
+                full[(y / scale) * sw + x / scale] &= mask[y * w as usize + x];
             }
         }
         small.iter_mut().for_each(|v| *v /= (scale * scale) as f64);
@@ -46,6 +62,9 @@ pub fn features(path: &Path) -> Result<Features, image::ImageError> {
         let mut count = 0.0f64;
         for y in 0..sh.saturating_sub(1) {
             for x in 0..sw.saturating_sub(1) {
+                if !(full[y * sw + x] && full[y * sw + x + 1] && full[(y + 1) * sw + x]) {
+                    continue;
+                }
                 let c = small[y * sw + x];
                 let gx = small[y * sw + x + 1] - c;
                 let gy = small[(y + 1) * sw + x] - c;
@@ -64,7 +83,7 @@ pub fn features(path: &Path) -> Result<Features, image::ImageError> {
     }
     let total: f64 = orient.iter().sum::<f64>().max(1e-12);
     texture.extend(orient.iter().map(|o| o / total));
-    Ok(Features { histogram, texture })
+    Features { histogram, texture }
 }
 
 /// Distance between two feature sets (0 = identical).
