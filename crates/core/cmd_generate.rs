@@ -3,6 +3,7 @@
 //! their run options ([`RunArgs`]), `--passes` ([`parse_passes`]) and the pool run with its
 //! progress and summary ([`run_jobs`]).
 
+use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -231,8 +232,16 @@ pub(crate) struct ManifestPlan {
 
 impl ManifestPlan {
     /// Write the manifest of the run's complete samples (hashing their files).
-    fn write(&self, out: &Path) -> anyhow::Result<PathBuf> {
+    /// `seconds`: time per sample made by this run, by index; those of complete samples an
+    /// earlier run made are kept from its manifest.
+    fn write(&self, out: &Path, seconds: &BTreeMap<u64, f64>) -> anyhow::Result<PathBuf> {
         let vdir = layout::variant_dir(out, &self.variant);
+        let earlier = clevrtex_render::manifest::Manifest::read(
+            &vdir.join(clevrtex_render::manifest::file_name(self.shard[0], self.shard[1])),
+        )
+        .map(|m| m.sample_seconds)
+        .unwrap_or_default();
+        let mut sample_seconds = BTreeMap::new();
         let shard = crate::shard::Shard {
             k: self.shard[0],
             n: self.shard[1],
@@ -252,6 +261,9 @@ impl ManifestPlan {
                 let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap_or_default();
                 blender_version = meta["blender_version"].as_str().unwrap_or("").to_string();
             }
+            if let Some(s) = seconds.get(&index).or_else(|| earlier.get(&stem)) {
+                sample_seconds.insert(stem.clone(), (s * 1000.0).round() / 1000.0);
+            }
             let sub = (index / 1000).to_string();
             files.extend(names.into_iter().map(|n| format!("{sub}/{n}")));
         }
@@ -270,6 +282,7 @@ impl ManifestPlan {
             blender_version,
             command: std::env::args().collect(),
             files: clevrtex_render::manifest::hash_files(&vdir, &files)?,
+            sample_seconds,
         };
         Ok(manifest.write(&vdir)?)
     }
@@ -364,6 +377,8 @@ pub(crate) fn run_jobs(
     let bar = progress_bar(total);
     let (done, rejects, failures) = (AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0));
     let started = std::time::Instant::now();
+    // Seconds per finished sample, by index, for the manifest (`clevrtex report` plots them).
+    let seconds = std::sync::Mutex::new(std::collections::BTreeMap::<u64, f64>::new());
     let plain = bar.is_hidden();
     // A hidden bar swallows `println`: then messages go straight to stderr.
     let say = |msg: String| {
@@ -385,6 +400,8 @@ pub(crate) fn run_jobs(
             }
             PoolEvent::Done { sample } => {
                 let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+                let s = sample.visibility_s + sample.reject_s + sample.final_request_s + sample.post_s;
+                seconds.lock().unwrap_or_else(|e| e.into_inner()).insert(sample.index, s);
                 bar.inc(1);
                 if plain {
                     eprintln!(
@@ -433,7 +450,8 @@ pub(crate) fn run_jobs(
         Ok(report) => {
             print_summary(&report, &args.out, &ledger);
             if let Some(plan) = manifest {
-                let path = plan.write(&args.out)?;
+                let seconds = seconds.into_inner().unwrap_or_else(|e| e.into_inner());
+                let path = plan.write(&args.out, &seconds)?;
                 println!(
                     "manifest: {} (check with `clevrtex verify {}`)",
                     path.display(),

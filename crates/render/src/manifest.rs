@@ -59,6 +59,11 @@ pub struct Manifest {
     pub command: Vec<String>,
     /// Every file of the run's complete samples, by path relative to the variant folder.
     pub files: BTreeMap<String, FileEntry>,
+    /// Seconds one worker spent on each complete sample, by stem: its visibility passes,
+    /// rejected layouts, final render and writing (what `clevrtex report` plots). Kept from
+    /// the previous manifest for samples an earlier run made; absent in older manifests.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub sample_seconds: BTreeMap<String, f64>,
 }
 
 /// xxh3-64 of `bytes` as 16 hex digits ([`clevrtex_materials::content_hash`], the one content
