@@ -21,7 +21,7 @@ use crate::interrupt::{self, OnInterrupt};
 #[path = "materials/sheet.rs"]
 mod sheet;
 #[path = "materials/stats.rs"]
-mod stats;
+pub(crate) mod stats;
 
 /// Arguments of `clevrtex materials`.
 #[derive(Debug, clap::Args)]

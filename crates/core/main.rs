@@ -14,6 +14,7 @@ mod cmd_generate;
 mod cmd_materials;
 mod cmd_preview;
 mod cmd_render;
+mod cmd_report;
 mod cmd_sample;
 mod cmd_verify;
 mod exit;
@@ -52,6 +53,8 @@ enum Command {
     Export(cmd_export::Args),
     /// Draw a contact sheet of a dataset's samples and passes.
     Preview(cmd_preview::Args),
+    /// Write an HTML report of a dataset's statistics (or two side by side).
+    Report(cmd_report::Args),
 }
 
 fn main() -> ExitCode {
@@ -77,6 +80,7 @@ fn main() -> ExitCode {
         Command::Verify(args) => cmd_verify::run(args),
         Command::Export(args) => cmd_export::run(args),
         Command::Preview(args) => cmd_preview::run(args),
+        Command::Report(args) => cmd_report::run(args),
     };
     ExitCode::from(exit::report(result))
 }

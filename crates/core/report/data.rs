@@ -1,0 +1,307 @@
+//! Reading a dataset for the report: every sample's metadata (in parallel), the manifests and
+//! the failure ledgers. Works on our output and on the published ClevrTex layout, whose
+//! metadata lacks our keys (those come back as `None`).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use clevrtex_render::manifest::Manifest;
+use clevrtex_scene::layout;
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+use serde_json::Value;
+
+/// One object of a sample's metadata.
+#[derive(Debug, Clone)]
+pub struct Object {
+    pub shape: String,
+    pub size: String,
+    pub color: Option<String>,
+    pub material: String,
+    /// World position; z is the scale (objects rest on the floor).
+    pub coords: [f64; 3],
+    /// Visible pixels in the mask (ours only).
+    pub visible_pixels: Option<u64>,
+    /// Estimated share of the object hidden by others (ours only; cube, cylinder, sphere).
+    pub occluded: Option<f64>,
+}
+
+/// One sample's metadata, the parts the report uses.
+#[derive(Debug, Clone)]
+pub struct Sample {
+    pub variant: String,
+    pub index: u64,
+    pub stem: String,
+    pub dir: PathBuf,
+    pub split: String,
+    pub ground_material: String,
+    pub objects: Vec<Object>,
+    /// Accepted layout attempt = rejected layouts before it (ours only).
+    pub attempt: Option<u32>,
+    pub seed: Option<u64>,
+    /// Camera position (ours only).
+    pub camera_location: Option<[f64; 3]>,
+    pub blender_version: Option<String>,
+    pub clevrtex_version: Option<String>,
+    pub visibility_threshold_px: Option<u64>,
+    /// Depth pass encoding `(scale in metres, background value)` (ours only).
+    pub depth_encoding: Option<(f64, u16)>,
+    /// Image size from the metadata's render settings (ours only).
+    pub size: Option<(u32, u32)>,
+}
+
+/// A failure ledger entry.
+#[derive(Debug, Clone)]
+pub struct Failure {
+    pub variant: String,
+    pub index: u64,
+    pub error: String,
+}
+
+/// A dataset read for the report.
+pub struct Dataset {
+    pub root: PathBuf,
+    /// Samples in (variant, index) order.
+    pub samples: Vec<Sample>,
+    pub manifests: Vec<Manifest>,
+    pub failures: Vec<Failure>,
+    /// Manifests that could not be read: (path, why).
+    pub bad_manifests: Vec<(PathBuf, String)>,
+}
+
+impl Dataset {
+    /// Seconds per sample from the manifests, by stem.
+    pub fn sample_seconds(&self) -> BTreeMap<String, f64> {
+        self.manifests
+            .iter()
+            .flat_map(|m| m.sample_seconds.iter().map(|(k, v)| (k.clone(), *v)))
+            .collect()
+    }
+}
+
+/// The `clevrtex_<variant>` folders of `dir` (or `dir` itself).
+fn variant_dirs(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let hint = "hint: pass the `--out` folder of `clevrtex generate`, a `clevrtex_<variant>` folder, or the downloaded ClevrTex";
+    if !dir.is_dir() {
+        bail!("dataset folder `{}` does not exist\n{hint}", dir.display());
+    }
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    if name.starts_with("clevrtex_") {
+        return Ok(vec![dir.to_path_buf()]);
+    }
+    let rd = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read `{}`\n{hint}", dir.display()))?;
+    let mut v: Vec<PathBuf> = rd
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.is_dir()
+                && p.file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with("clevrtex_"))
+        })
+        .collect();
+    v.sort();
+    if v.is_empty() {
+        bail!(
+            "no `clevrtex_<variant>` folder under `{}`\n{hint}",
+            dir.display()
+        );
+    }
+    Ok(v)
+}
+
+/// Read the dataset under `dir`, with a progress bar over the samples.
+pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
+    let mut found: Vec<(String, u64, String, PathBuf)> = Vec::new();
+    let mut manifests = Vec::new();
+    let mut bad_manifests = Vec::new();
+    let mut failures = Vec::new();
+    for vdir in variant_dirs(dir)? {
+        let mut subs = Vec::new();
+        for e in std::fs::read_dir(&vdir)
+            .with_context(|| format!("cannot read `{}`", vdir.display()))?
+            .flatten()
+        {
+            let p = e.path();
+            let n = e.file_name().to_string_lossy().into_owned();
+            if p.is_dir() {
+                subs.push(p);
+            } else if n.starts_with("MANIFEST-") && n.ends_with(".json") {
+                match Manifest::read(&p) {
+                    Ok(m) => manifests.push(m),
+                    Err(e) => bad_manifests.push((p, e)),
+                }
+            } else if n == "failures.jsonl" {
+                let text = std::fs::read_to_string(&p).unwrap_or_default();
+                for line in text.lines() {
+                    let Ok(v) = serde_json::from_str::<Value>(line) else {
+                        continue;
+                    };
+                    failures.push(Failure {
+                        variant: v["variant"].as_str().unwrap_or("?").to_string(),
+                        index: v["index"].as_u64().unwrap_or(0),
+                        error: v["error"].as_str().unwrap_or("").to_string(),
+                    });
+                }
+            }
+        }
+        subs.sort();
+        for sub in subs {
+            for e in std::fs::read_dir(&sub)
+                .with_context(|| format!("cannot read `{}`", sub.display()))?
+                .flatten()
+            {
+                let n = e.file_name().to_string_lossy().into_owned();
+                if let Some((stem, variant, index)) = layout::parse_stem(&n, ".json") {
+                    found.push((variant.to_string(), index, stem.to_string(), sub.clone()));
+                }
+            }
+        }
+    }
+    found.sort();
+    if found.is_empty() {
+        bail!(
+            "no samples (`CLEVRTEX_<variant>_<index>.json`) under `{}`\nhint: pass the `--out` folder of `clevrtex generate` or the downloaded ClevrTex",
+            dir.display()
+        );
+    }
+    bar.set_length(found.len() as u64);
+    let samples = found
+        .into_par_iter()
+        .map(|(variant, index, stem, dir)| {
+            let path = dir.join(layout::metadata_file(&stem));
+            let bytes =
+                std::fs::read(&path).with_context(|| format!("cannot read `{}`", path.display()))?;
+            let meta: Value = serde_json::from_slice(&bytes).with_context(|| {
+                format!(
+                    "`{}` is not valid metadata\nhint: `clevrtex verify` finds broken samples and `--remove-broken` deletes them for a rerun",
+                    path.display()
+                )
+            })?;
+            bar.inc(1);
+            parse(variant, index, stem, dir, &meta)
+                .with_context(|| format!("`{}` is not valid metadata", path.display()))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(Dataset {
+        root: dir.to_path_buf(),
+        samples,
+        manifests,
+        failures,
+        bad_manifests,
+    })
+}
+
+fn parse(
+    variant: String,
+    index: u64,
+    stem: String,
+    dir: PathBuf,
+    m: &Value,
+) -> anyhow::Result<Sample> {
+    let Some(objs) = m["objects"].as_array() else {
+        bail!("no `objects` list");
+    };
+    let camera = Camera::of(m);
+    let size = match (m["render"]["width"].as_u64(), m["render"]["height"].as_u64()) {
+        (Some(w), Some(h)) => Some((w as u32, h as u32)),
+        _ => None,
+    };
+    let objects = objs
+        .iter()
+        .map(|o| {
+            let c = &o["3d_coords"];
+            let coords = [
+                c[0].as_f64().unwrap_or(f64::NAN),
+                c[1].as_f64().unwrap_or(f64::NAN),
+                c[2].as_f64().unwrap_or(f64::NAN),
+            ];
+            let shape = o["shape"].as_str().unwrap_or("?").to_string();
+            let rotation = o["rotation"].as_f64().unwrap_or(0.0);
+            let visible_pixels = o["visible_pixels"].as_u64();
+            let occluded = match (&camera, size, visible_pixels) {
+                (Some(cam), Some(wh), Some(px)) => {
+                    super::geometry::silhouette_area(cam, wh, &shape, coords, rotation)
+                        .map(|area| (1.0 - px as f64 / area.max(1.0)).clamp(0.0, 1.0))
+                }
+                _ => None,
+            };
+            Object {
+                shape,
+                size: o["size"].as_str().unwrap_or("?").to_string(),
+                color: o["color"].as_str().map(str::to_string),
+                material: o["material"].as_str().unwrap_or("?").to_string(),
+                coords,
+                visible_pixels,
+                occluded,
+            }
+        })
+        .collect();
+    let depth = &m["passes"]["depth"];
+    Ok(Sample {
+        variant,
+        index,
+        stem,
+        dir,
+        split: m["split"].as_str().unwrap_or("?").to_string(),
+        ground_material: m["ground_material"].as_str().unwrap_or("?").to_string(),
+        objects,
+        attempt: m["attempt"].as_u64().map(|a| a as u32),
+        seed: m["seed"].as_u64(),
+        camera_location: camera.as_ref().map(|c| c.location),
+        blender_version: m["blender_version"].as_str().map(str::to_string),
+        clevrtex_version: m["clevrtex_version"].as_str().map(str::to_string),
+        visibility_threshold_px: m["visibility_threshold_px"].as_u64(),
+        depth_encoding: depth["scale"]
+            .as_f64()
+            .map(|s| (s, depth["background"].as_u64().unwrap_or(65535) as u16)),
+        size,
+    })
+}
+
+/// The camera of a sample's metadata (ours only): `K` and world-to-camera `E` (OpenCV axes).
+#[derive(Debug, Clone)]
+pub struct Camera {
+    pub k: [[f64; 3]; 3],
+    pub e: [[f64; 4]; 4],
+    pub location: [f64; 3],
+}
+
+impl Camera {
+    fn of(m: &Value) -> Option<Camera> {
+        let c = &m["camera"];
+        let num = |v: &Value| v.as_f64();
+        let mut k = [[0.0; 3]; 3];
+        let mut e = [[0.0; 4]; 4];
+        for r in 0..3 {
+            for col in 0..3 {
+                k[r][col] = num(&c["intrinsics"][r][col])?;
+            }
+        }
+        for (r, row) in e.iter_mut().enumerate() {
+            for (col, v) in row.iter_mut().enumerate() {
+                *v = num(&c["extrinsics"][r][col])?;
+            }
+        }
+        let w = &c["matrix_world"];
+        let location = [num(&w[0][3])?, num(&w[1][3])?, num(&w[2][3])?];
+        Some(Camera { k, e, location })
+    }
+
+    /// Pixel coordinates of world point `p` (x right, y down), `None` behind the camera.
+    pub fn project(&self, p: [f64; 3]) -> Option<[f64; 2]> {
+        let c: Vec<f64> = (0..3)
+            .map(|r| self.e[r][0] * p[0] + self.e[r][1] * p[1] + self.e[r][2] * p[2] + self.e[r][3])
+            .collect();
+        if c[2] <= 1e-6 {
+            return None;
+        }
+        let u = self.k[0][0] * c[0] + self.k[0][1] * c[1] + self.k[0][2] * c[2];
+        let v = self.k[1][0] * c[0] + self.k[1][1] * c[1] + self.k[1][2] * c[2];
+        Some([u / c[2], v / c[2]])
+    }
+}

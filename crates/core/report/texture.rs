@@ -1,0 +1,220 @@
+//! Per-image measurements that need the pixels, made on a capped sample of each variant:
+//! how much each object stands out from the background ring around it (mean colour
+//! difference in CIELAB, ΔE*76, and the distinctness tool's texture-feature distance), and
+//! the depth range of the image.
+//!
+//! The ring is the background (mask id 0) within `max(2, W / 40)` pixels (8 at 320 px wide)
+//! of the object, found with a separable square dilation of the object's mask.
+
+use clevrtex_render::post::decode_png;
+use clevrtex_scene::{layout, Pass};
+use image::RgbImage;
+
+use crate::cmd_materials::stats::{distance, region_features};
+
+use super::data::Sample;
+
+/// One object's contrast to its surroundings.
+#[derive(Debug, Clone, Copy)]
+pub struct Contrast {
+    /// ΔE*76 between the object's mean Lab colour and the ring's.
+    pub delta_e: f64,
+    /// Texture-feature distance (0 = identical; colour histogram plus gradient statistics).
+    pub feature_distance: f64,
+}
+
+/// What one image gave.
+#[derive(Debug, Clone, Default)]
+pub struct ImageMeasures {
+    pub contrasts: Vec<Contrast>,
+    /// Nearest and farthest valid depth, metres (with a depth pass and its encoding).
+    pub depth_range: Option<(f64, f64)>,
+}
+
+fn srgb_to_linear(c: u8) -> f64 {
+    let c = f64::from(c) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// CIELAB (D65) of an sRGB pixel.
+pub fn lab(p: [u8; 3]) -> [f64; 3] {
+    let [r, g, b] = p.map(srgb_to_linear);
+    let x = (0.4124 * r + 0.3576 * g + 0.1805 * b) / 0.95047;
+    let y = 0.2126 * r + 0.7152 * g + 0.0722 * b;
+    let z = (0.0193 * r + 0.1192 * g + 0.9505 * b) / 1.08883;
+    let f = |t: f64| {
+        if t > 216.0 / 24389.0 {
+            t.cbrt()
+        } else {
+            (24389.0 / 27.0 * t + 16.0) / 116.0
+        }
+    };
+    let (fx, fy, fz) = (f(x), f(y), f(z));
+    [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
+}
+
+/// Measure one sample; passes it lacks give nothing.
+pub fn measure(s: &Sample) -> anyhow::Result<ImageMeasures> {
+    let mut out = ImageMeasures::default();
+    let path = |p: Pass| s.dir.join(layout::pass_file(&s.stem, p));
+    let (rgb, mask) = (path(Pass::Rgb), path(Pass::Mask));
+    if rgb.is_file() && mask.is_file() {
+        let img = image::open(&rgb)
+            .map_err(|e| anyhow::anyhow!("`{}`: {e}", rgb.display()))?
+            .to_rgb8();
+        let m = decode_png(&mask).map_err(|e| anyhow::anyhow!("`{}`: {e}", mask.display()))?;
+        if (m.width, m.height) == img.dimensions() {
+            out.contrasts = contrasts(&img, &m.data, s.objects.len());
+        }
+    }
+    let depth = path(Pass::Depth);
+    if let (Some((scale, background)), true) = (s.depth_encoding, depth.is_file()) {
+        let d = decode_png(&depth).map_err(|e| anyhow::anyhow!("`{}`: {e}", depth.display()))?;
+        let (lo, hi) = d
+            .data
+            .iter()
+            .filter(|&&v| v != background && v != 0)
+            .fold((u16::MAX, 0u16), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        if hi >= lo {
+            out.depth_range = Some((f64::from(lo) * scale, f64::from(hi) * scale));
+        }
+    }
+    Ok(out)
+}
+
+/// Contrast of each object `1..=n` of `ids` to its background ring.
+pub fn contrasts(img: &RgbImage, ids: &[u16], n: usize) -> Vec<Contrast> {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let r = (w / 40).max(2);
+    let mut out = Vec::new();
+    for id in 1..=n as u16 {
+        // The object's box, grown by the ring width.
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        for (i, &v) in ids.iter().enumerate() {
+            if v == id {
+                let (x, y) = (i % w, i / w);
+                x0 = x0.min(x);
+                y0 = y0.min(y);
+                x1 = x1.max(x);
+                y1 = y1.max(y);
+            }
+        }
+        if x0 == usize::MAX {
+            continue;
+        }
+        let (bx0, by0) = (x0.saturating_sub(r), y0.saturating_sub(r));
+        let (bx1, by1) = ((x1 + r).min(w - 1), (y1 + r).min(h - 1));
+        let (bw, bh) = (bx1 - bx0 + 1, by1 - by0 + 1);
+        let obj = |x: usize, y: usize| ids[(by0 + y) * w + bx0 + x] == id;
+        // Dilate along rows, then columns, with running counts.
+        let mut rows = vec![false; bw * bh];
+        for y in 0..bh {
+            let mut count = 0i64;
+            for x in 0..(bw + r) {
+                if x < bw && obj(x, y) {
+                    count += 1;
+                }
+                if x >= 2 * r + 1 && obj(x - 2 * r - 1, y) {
+                    count -= 1;
+                }
+                if x >= r && x - r < bw {
+                    rows[y * bw + x - r] = count > 0;
+                }
+            }
+        }
+        let mut ring = vec![false; bw * bh];
+        for x in 0..bw {
+            let mut count = 0i64;
+            for y in 0..(bh + r) {
+                if y < bh && rows[y * bw + x] {
+                    count += 1;
+                }
+                if y >= 2 * r + 1 && rows[(y - 2 * r - 1) * bw + x] {
+                    count -= 1;
+                }
+                if y >= r && y - r < bh {
+                    let yy = y - r;
+                    ring[yy * bw + x] = count > 0 && ids[(by0 + yy) * w + bx0 + x] == 0;
+                }
+            }
+        }
+        let in_obj = |x: u32, y: u32| {
+            let (x, y) = (x as usize, y as usize);
+            x >= bx0 && x <= bx1 && y >= by0 && y <= by1 && ids[y * w + x] == id
+        };
+        let in_ring = |x: u32, y: u32| {
+            let (x, y) = (x as usize, y as usize);
+            x >= bx0 && x <= bx1 && y >= by0 && y <= by1 && ring[(y - by0) * bw + x - bx0]
+        };
+        let mean_lab = |inside: &dyn Fn(u32, u32) -> bool| {
+            let (mut s, mut c) = ([0.0f64; 3], 0.0);
+            for y in by0..=by1 {
+                for x in bx0..=bx1 {
+                    if inside(x as u32, y as u32) {
+                        let l = lab(img.get_pixel(x as u32, y as u32).0);
+                        (0..3).for_each(|k| s[k] += l[k]);
+                        c += 1.0;
+                    }
+                }
+            }
+            (s.map(|v| v / f64::max(c, 1.0)), c)
+        };
+        let (lo, no) = mean_lab(&in_obj);
+        let (lr, nr) = mean_lab(&in_ring);
+        if no < 16.0 || nr < 16.0 {
+            continue;
+        }
+        let delta_e = ((lo[0] - lr[0]).powi(2) + (lo[1] - lr[1]).powi(2) + (lo[2] - lr[2]).powi(2))
+            .sqrt();
+        let feature_distance = distance(
+            &region_features(img, in_obj),
+            &region_features(img, in_ring),
+        );
+        out.push(Contrast {
+            delta_e,
+            feature_distance,
+        });
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lab_of_white_and_black() {
+        let w = lab([255, 255, 255]);
+        assert!((w[0] - 100.0).abs() < 0.01 && w[1].abs() < 0.05 && w[2].abs() < 0.05);
+        assert!(lab([0, 0, 0])[0].abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_red_square_on_grey_stands_out_and_a_grey_one_does_not() {
+        let (w, h) = (64u32, 48u32);
+        let mut ids = vec![0u16; (w * h) as usize];
+        for y in 10..30 {
+            for x in 10..30 {
+                ids[(y * w + x) as usize] = 1;
+            }
+        }
+        let grey = image::Rgb([128, 128, 128]);
+        let red = RgbImage::from_fn(w, h, |x, y| {
+            if ids[(y * w + x) as usize] == 1 {
+                image::Rgb([200, 30, 30])
+            } else {
+                grey
+            }
+        });
+        let c = contrasts(&red, &ids, 1);
+        assert_eq!(c.len(), 1);
+        assert!(c[0].delta_e > 40.0, "{c:?}");
+        let flat = RgbImage::from_pixel(w, h, grey);
+        let c = contrasts(&flat, &ids, 1);
+        assert!(c[0].delta_e < 1e-9 && c[0].feature_distance < 1e-9, "{c:?}");
+    }
+}
