@@ -11,6 +11,7 @@ mod generate;
 mod k8s;
 mod materials;
 mod preview;
+mod report;
 mod sample;
 mod slurm;
 mod verify;

@@ -91,6 +91,26 @@ pub fn test_python_or_skip(test: &str, module: &str) -> Option<PathBuf> {
     None
 }
 
+/// A headless Chromium for the report's browser test: `CLEVRTEX_CHROMIUM`, else `chromium`
+/// (Debian's package) or `chromium-browser` on `PATH`. `None` (a visible skip) when absent,
+/// unless `CLEVRTEX_REQUIRE_BLENDER=1` makes it required.
+pub fn chromium_or_skip(test: &str) -> Option<PathBuf> {
+    let candidate = std::env::var_os("CLEVRTEX_CHROMIUM")
+        .map(PathBuf::from)
+        .or_else(|| find_on_path("chromium"))
+        .or_else(|| find_on_path("chromium-browser"));
+    match candidate {
+        Some(p) if p.exists() => Some(p),
+        _ => {
+            if std::env::var("CLEVRTEX_REQUIRE_BLENDER").as_deref() == Ok("1") {
+                panic!("{test}: Chromium is required (CLEVRTEX_REQUIRE_BLENDER=1) but was not found; run `./scripts/setup.sh --browser` or set CLEVRTEX_CHROMIUM");
+            }
+            eprintln!("SKIPPED {test}: Chromium not found (run `./scripts/setup.sh --browser` or set CLEVRTEX_CHROMIUM; set CLEVRTEX_REQUIRE_BLENDER=1 to make this a failure)");
+            None
+        }
+    }
+}
+
 /// The fake Blender of `tests/fake_blender/` (its modes are listed at its top).
 pub fn fake_blender() -> PathBuf {
     repo_root().join("tests/fake_blender/blender")

@@ -1,0 +1,307 @@
+//! `clevrtex report`: an HTML page of a real generated dataset, of a hand-made one in the
+//! published ClevrTex layout, the two compared, bad input, and the page loaded by a real
+//! headless Chromium (no broken images, no console messages, a non-blank screenshot).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use serde_json::Value;
+
+use crate::util::{blender_or_skip, chromium_or_skip, clevrtex, text};
+
+/// Generate `n` images of each of `variants` (64x48, 1 sample, rgb, mask and depth).
+fn generate(blender: &Path, out: &Path, variants: &[&str], n: u32) {
+    for v in variants {
+        let o = clevrtex()
+            .args(["generate", "--variant", v, "-n", &n.to_string(), "--seed", "5"])
+            .args(["--width", "64", "--height", "48", "--samples", "1"])
+            .args(["--passes", "rgb,mask,depth", "--blender"])
+            .arg(blender)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    }
+}
+
+/// Copy `variant` of our dataset into the published layout: the same files, metadata with
+/// only the published keys, no manifest.
+fn published_copy(ours: &Path, variant: &str, dst: &Path) {
+    let sub = dst.join(format!("clevrtex_{variant}/0"));
+    std::fs::create_dir_all(&sub).unwrap();
+    for e in std::fs::read_dir(ours.join(format!("clevrtex_{variant}/0")))
+        .unwrap()
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.ends_with(".json") {
+            let mut meta: Value =
+                serde_json::from_slice(&std::fs::read(e.path()).unwrap()).unwrap();
+            let keep = [
+                "num_objects",
+                "split",
+                "image_index",
+                "image_filename",
+                "ground_material",
+                "directions",
+                "objects",
+                "relationships",
+                "mask_filename",
+                "depth_filename",
+            ];
+            meta.as_object_mut()
+                .unwrap()
+                .retain(|k, _| keep.contains(&k.as_str()));
+            for o in meta["objects"].as_array_mut().unwrap() {
+                o.as_object_mut()
+                    .unwrap()
+                    .retain(|k, _| k != "visible_pixels" && k != "bbox");
+            }
+            std::fs::write(sub.join(&name), meta.to_string()).unwrap();
+        } else {
+            std::fs::copy(e.path(), sub.join(&name)).unwrap();
+        }
+    }
+}
+
+fn report(args: &[&Path], extra: &[&str], out: &Path) -> (Option<i32>, String) {
+    let mut c = clevrtex();
+    c.arg("report").args(extra).arg("--out").arg(out);
+    for a in args {
+        c.arg(a);
+    }
+    let o = c.output().unwrap();
+    (o.status.code(), text(&o))
+}
+
+/// The median ΔE of `variant` in the contrast table of a one-dataset report.
+fn median_delta_e(html: &str, variant: &str) -> f64 {
+    let cells = html
+        .split("<tr>")
+        .map(|row| {
+            row.split("<td>")
+                .skip(1)
+                .map(|c| c.split('<').next().unwrap())
+                .collect::<Vec<&str>>()
+        })
+        .find(|c| c.len() >= 5 && c[1] == variant && c[2].contains(" of "))
+        .unwrap_or_else(|| panic!("no contrast row for {variant}"));
+    // dataset, variant, images measured, objects, ΔE median, ...
+    cells[4].parse().unwrap()
+}
+
+/// Every `<img>`'s `src` (the report must embed them all).
+fn img_sources(html: &str) -> Vec<&str> {
+    html.split("<img ")
+        .skip(1)
+        .map(|t| t.split("src=\"").nth(1).unwrap().split('"').next().unwrap())
+        .collect()
+}
+
+#[test]
+fn report_of_a_generated_and_a_published_layout_dataset_and_both_compared() {
+    let Some(blender) = blender_or_skip("report_of_a_generated_dataset") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    generate(&blender, &data, &["clevr", "camo"], 5);
+    let page = dir.path().join("report.html");
+    let (code, t) = report(&[&data], &["--preview", "3"], &page);
+    assert_eq!(code, Some(0), "{t}");
+    assert!(t.contains("10 image(s) read, 10 measured"), "{t}");
+    let html = std::fs::read_to_string(&page).unwrap();
+    // Self-contained: no script, nothing fetched, every image a data URI.
+    assert!(!html.contains("<script"));
+    assert!(!html.contains("http://") && !html.contains("https://"));
+    let srcs = img_sources(&html);
+    assert!(srcs.len() >= 15, "{}", srcs.len());
+    assert!(srcs.iter().all(|s| s.starts_with("data:image/")), "{srcs:?}");
+    assert_eq!(srcs.iter().filter(|s| s.starts_with("data:image/png")).count(), 1);
+    for section in [
+        "Images per variant and split",
+        "Failure ledger",
+        "Objects per image",
+        "vs uniform 3..10",
+        "Visible pixels per object",
+        "more than 8 px at this resolution",
+        "Share of each object occluded",
+        "Camera jitter",
+        "Time per image (s)",
+        "Rejected layouts per image",
+        "Nearest depth per image (m)",
+        "Provenance",
+        "seed",
+    ] {
+        assert!(html.contains(section), "missing `{section}`");
+    }
+    // The lights of every image are recomputed from its seed (the built-in configs).
+    assert!(html.contains("10 of 10 images recomputed"), "lights not recomputed");
+    // Camo objects are made to blend in: far less colour contrast than clevr's plain colours.
+    let (clevr, camo) = (median_delta_e(&html, "clevr"), median_delta_e(&html, "camo"));
+    assert!(camo < clevr, "camo ΔE {camo} >= clevr ΔE {clevr}");
+    // Our metadata has everything: nothing is "not in this dataset" but the colours of camo
+    // (the colour plot pools both variants, so not even that).
+    assert!(!html.contains("not in this dataset"), "something missing");
+
+    // The published layout: no manifest, no visibility, no camera.
+    let published = dir.path().join("clevrtex");
+    published_copy(&data, "clevr", &published);
+    let page2 = dir.path().join("published.html");
+    let (code, t) = report(&[&published], &["--preview", "2"], &page2);
+    assert_eq!(code, Some(0), "{t}");
+    let html2 = std::fs::read_to_string(&page2).unwrap();
+    assert!(html2.contains("run manifest: not in this dataset"));
+    assert!(html2.contains("Visible pixels per object</h3><p class=\"na\">not in this dataset"));
+    assert!(html2.contains("Light jitter</h3><p class=\"na\">not in this dataset"));
+    // Its pixels are there: the contrast and depth need only the passes.
+    assert!(html2.contains("Objects per image"));
+
+    // Compared: every statistic with a two-sample test; the same images give high p-values.
+    let page3 = dir.path().join("compare.html");
+    let (code, t) = report(&[&data.join("clevrtex_clevr")], &["--compare", published.to_str().unwrap(), "--preview", "1"], &page3);
+    assert_eq!(code, Some(0), "{t}");
+    let html3 = std::fs::read_to_string(&page3).unwrap();
+    assert!(html3.contains("A clevrtex_clevr") && html3.contains("B clevrtex"));
+    assert!(html3.contains("two-sample chi-square: χ² = 0.00"), "shapes of equal data differ");
+    assert!(html3.contains("two-sample Kolmogorov-Smirnov on x: D = 0.0000"));
+    assert!(html3.contains("B clevrtex: not in this dataset"));
+}
+
+#[test]
+fn report_names_a_missing_or_broken_dataset_and_keeps_the_old_page() {
+    let dir = tempfile::tempdir().unwrap();
+    let page = dir.path().join("r.html");
+    let (code, t) = report(&[&dir.path().join("nope")], &[], &page);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(t.contains("dataset folder") && t.contains("does not exist") && t.contains("hint:"), "{t}");
+    assert!(!page.exists());
+
+    // A broken metadata file: the error names it, the page written before is kept.
+    let sub = dir.path().join("ds/clevrtex_clevr/0");
+    std::fs::create_dir_all(&sub).unwrap();
+    std::fs::write(sub.join("CLEVRTEX_clevr_000000.json"), "{\"objects\": [").unwrap();
+    std::fs::write(&page, "old").unwrap();
+    let (code, t) = report(&[&dir.path().join("ds")], &[], &page);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(t.contains("CLEVRTEX_clevr_000000.json` is not valid metadata"), "{t}");
+    assert_eq!(std::fs::read_to_string(&page).unwrap(), "old");
+
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let (code, t) = report(&[&empty], &[], &page);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(t.contains("no `clevrtex_<variant>` folder"), "{t}");
+}
+
+/// Run headless Chromium with the flags that work as root in a container.
+fn chromium(bin: &Path, profile: &Path, extra: &[String], url: &str) -> std::process::Output {
+    Command::new(bin)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--hide-scrollbars",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .args(extra)
+        .arg(url)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn report_loads_in_headless_chromium_without_broken_images_or_console_messages() {
+    let Some(blender) = blender_or_skip("report_loads_in_headless_chromium") else {
+        return;
+    };
+    let Some(browser) = chromium_or_skip("report_loads_in_headless_chromium") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    generate(&blender, &data, &["full"], 3);
+    let page = dir.path().join("report.html");
+    let (code, t) = report(&[&data], &[], &page);
+    assert_eq!(code, Some(0), "{t}");
+    let html = std::fs::read_to_string(&page).unwrap();
+    let images = html.matches("<img ").count();
+    let url = |p: &Path| format!("file://{}", p.display());
+    let profile = |n: &str| -> PathBuf {
+        let p = dir.path().join(n);
+        std::fs::create_dir_all(&p).unwrap();
+        p
+    };
+
+    // 1. The page itself, with Chromium's log on stderr: the page has no script, so any
+    //    console line (an error loading something, a CSP or parse complaint) is a failure.
+    let o = chromium(
+        &browser,
+        &profile("p1"),
+        &[
+            "--enable-logging=stderr".into(),
+            "--v=0".into(),
+            "--virtual-time-budget=5000".into(),
+            "--dump-dom".into(),
+        ],
+        &url(&page),
+    );
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "chromium failed:\n{stderr}");
+    let console: Vec<&str> = stderr.lines().filter(|l| l.contains(":CONSOLE")).collect();
+    assert!(console.is_empty(), "console messages: {console:#?}");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("Dataset report"));
+
+    // 2. A copy with a check appended: after load, every <img> decoded (naturalWidth > 0).
+    let check = r#"<script>window.addEventListener("load",()=>{const i=[...document.images];const d=document.createElement("pre");d.id="clevrtex-check";d.textContent=JSON.stringify({images:i.length,broken:i.filter(x=>!(x.complete&&x.naturalWidth>0)).map(x=>x.alt)});document.body.appendChild(d);});</script></body>"#;
+    let checked = dir.path().join("checked.html");
+    std::fs::write(&checked, html.replace("</body>", check)).unwrap();
+    let o = chromium(
+        &browser,
+        &profile("p2"),
+        &[
+            "--virtual-time-budget=5000".into(),
+            "--run-all-compositor-stages-before-draw".into(),
+            "--dump-dom".into(),
+        ],
+        &url(&checked),
+    );
+    let dom = String::from_utf8_lossy(&o.stdout);
+    let json = dom
+        .split("<pre id=\"clevrtex-check\">")
+        .nth(1)
+        .and_then(|t| t.split("</pre>").next())
+        .unwrap_or_else(|| panic!("the check did not run:\n{}", String::from_utf8_lossy(&o.stderr)));
+    let v: Value = serde_json::from_str(&json.replace("&amp;", "&")).unwrap();
+    assert_eq!(v["images"].as_u64(), Some(images as u64), "{v}");
+    assert_eq!(v["broken"], serde_json::json!([]), "broken images: {v}");
+
+    // 3. A screenshot of the right size that is not blank.
+    let shot = dir.path().join("shot.png");
+    let o = chromium(
+        &browser,
+        &profile("p3"),
+        &[
+            "--window-size=1200,2400".into(),
+            "--virtual-time-budget=5000".into(),
+            format!("--screenshot={}", shot.display()),
+        ],
+        &url(&page),
+    );
+    assert!(shot.is_file(), "no screenshot:\n{}", String::from_utf8_lossy(&o.stderr));
+    let img = image::open(&shot).unwrap().to_luma8();
+    assert_eq!(img.dimensions(), (1200, 2400));
+    let n = img.len() as f64;
+    let mean = img.iter().map(|&p| f64::from(p)).sum::<f64>() / n;
+    let var = img.iter().map(|&p| (f64::from(p) - mean).powi(2)).sum::<f64>() / n;
+    // A blank page has variance 0; text, plots and the sheet give hundreds.
+    assert!(var > 100.0, "screenshot looks blank: mean {mean:.1}, variance {var:.1}");
+    let dark = img.iter().filter(|&&p| p < 128).count() as f64 / n;
+    assert!(dark > 0.01, "almost nothing drawn: {dark}");
+}
