@@ -5,21 +5,27 @@
 #   ./scripts/setup.sh               Blender (apt) and the Rust components
 #   ./scripts/setup.sh --test-venv   also `.venv-test/`: a Python venv with the libraries the
 #                                    tests read our files with (webdataset, PyYAML)
+#   ./scripts/setup.sh --browser     also Debian's `chromium`, for the report's browser test
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 test_venv=0
+browser=0
 for arg in "$@"; do
   case "$arg" in
     --test-venv) test_venv=1 ;;
-    *) echo "setup.sh: unknown option \`$arg\` (known: --test-venv)" >&2; exit 2 ;;
+    --browser) browser=1 ;;
+    *) echo "setup.sh: unknown option \`$arg\` (known: --test-venv, --browser)" >&2; exit 2 ;;
   esac
 done
 need=()
 command -v blender >/dev/null 2>&1 || need+=(blender)
 if [ "$test_venv" = 1 ] && ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
   need+=(python3-venv)
+fi
+if [ "$browser" = 1 ] && ! command -v chromium >/dev/null 2>&1; then
+  need+=(chromium)
 fi
 if [ ${#need[@]} -gt 0 ]; then
   $SUDO apt-get update
@@ -36,3 +42,6 @@ if [ "$test_venv" = 1 ]; then
   echo "test venv: $(.venv-test/bin/python -c 'import webdataset, sys; print(sys.version.split()[0], "webdataset", getattr(webdataset, "__version__", "?"))')"
 fi
 echo "blender: $(blender --version 2>/dev/null | head -n 1)"
+if [ "$browser" = 1 ]; then
+  echo "browser: $(chromium --version 2>/dev/null | head -n 1)"
+fi
