@@ -24,12 +24,14 @@ command -v blender >/dev/null 2>&1 || need+=(blender)
 if [ "$test_venv" = 1 ] && ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
   need+=(python3-venv)
 fi
-if [ "$browser" = 1 ] && ! command -v chromium >/dev/null 2>&1; then
-  need+=(chromium)
-fi
 if [ ${#need[@]} -gt 0 ]; then
   $SUDO apt-get update
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y "${need[@]}"
+fi
+# Chromium alone (no recommends: 122 MB of packages instead of a desktop's worth).
+if [ "$browser" = 1 ] && ! command -v chromium >/dev/null 2>&1; then
+  [ ${#need[@]} -gt 0 ] || $SUDO apt-get update
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends chromium
 fi
 if command -v rustup >/dev/null 2>&1; then
   rustup component add rustfmt clippy >/dev/null 2>&1 || true

@@ -13,7 +13,15 @@ use crate::util::{blender_or_skip, chromium_or_skip, clevrtex, text};
 fn generate(blender: &Path, out: &Path, variants: &[&str], n: u32) {
     for v in variants {
         let o = clevrtex()
-            .args(["generate", "--variant", v, "-n", &n.to_string(), "--seed", "5"])
+            .args([
+                "generate",
+                "--variant",
+                v,
+                "-n",
+                &n.to_string(),
+                "--seed",
+                "5",
+            ])
             .args(["--width", "64", "--height", "48", "--samples", "1"])
             .args(["--passes", "rgb,mask,depth", "--blender"])
             .arg(blender)
@@ -117,8 +125,16 @@ fn report_of_a_generated_and_a_published_layout_dataset_and_both_compared() {
     assert!(!html.contains("http://") && !html.contains("https://"));
     let srcs = img_sources(&html);
     assert!(srcs.len() >= 15, "{}", srcs.len());
-    assert!(srcs.iter().all(|s| s.starts_with("data:image/")), "{srcs:?}");
-    assert_eq!(srcs.iter().filter(|s| s.starts_with("data:image/png")).count(), 1);
+    assert!(
+        srcs.iter().all(|s| s.starts_with("data:image/")),
+        "{srcs:?}"
+    );
+    assert_eq!(
+        srcs.iter()
+            .filter(|s| s.starts_with("data:image/png"))
+            .count(),
+        1
+    );
     for section in [
         "Images per variant and split",
         "Failure ledger",
@@ -137,9 +153,15 @@ fn report_of_a_generated_and_a_published_layout_dataset_and_both_compared() {
         assert!(html.contains(section), "missing `{section}`");
     }
     // The lights of every image are recomputed from its seed (the built-in configs).
-    assert!(html.contains("10 of 10 images recomputed"), "lights not recomputed");
+    assert!(
+        html.contains("10 of 10 images recomputed"),
+        "lights not recomputed"
+    );
     // Camo objects are made to blend in: far less colour contrast than clevr's plain colours.
-    let (clevr, camo) = (median_delta_e(&html, "clevr"), median_delta_e(&html, "camo"));
+    let (clevr, camo) = (
+        median_delta_e(&html, "clevr"),
+        median_delta_e(&html, "camo"),
+    );
     assert!(camo < clevr, "camo ΔE {camo} >= clevr ΔE {clevr}");
     // Our metadata has everything: nothing is "not in this dataset" but the colours of camo
     // (the colour plot pools both variants, so not even that).
@@ -160,11 +182,18 @@ fn report_of_a_generated_and_a_published_layout_dataset_and_both_compared() {
 
     // Compared: every statistic with a two-sample test; the same images give high p-values.
     let page3 = dir.path().join("compare.html");
-    let (code, t) = report(&[&data.join("clevrtex_clevr")], &["--compare", published.to_str().unwrap(), "--preview", "1"], &page3);
+    let (code, t) = report(
+        &[&data.join("clevrtex_clevr")],
+        &["--compare", published.to_str().unwrap(), "--preview", "1"],
+        &page3,
+    );
     assert_eq!(code, Some(0), "{t}");
     let html3 = std::fs::read_to_string(&page3).unwrap();
     assert!(html3.contains("A clevrtex_clevr") && html3.contains("B clevrtex"));
-    assert!(html3.contains("two-sample chi-square: χ² = 0.00"), "shapes of equal data differ");
+    assert!(
+        html3.contains("two-sample chi-square: χ² = 0.00"),
+        "shapes of equal data differ"
+    );
     assert!(html3.contains("two-sample Kolmogorov-Smirnov on x: D = 0.0000"));
     assert!(html3.contains("B clevrtex: not in this dataset"));
 }
@@ -175,7 +204,10 @@ fn report_names_a_missing_or_broken_dataset_and_keeps_the_old_page() {
     let page = dir.path().join("r.html");
     let (code, t) = report(&[&dir.path().join("nope")], &[], &page);
     assert_eq!(code, Some(1), "{t}");
-    assert!(t.contains("dataset folder") && t.contains("does not exist") && t.contains("hint:"), "{t}");
+    assert!(
+        t.contains("dataset folder") && t.contains("does not exist") && t.contains("hint:"),
+        "{t}"
+    );
     assert!(!page.exists());
 
     // A broken metadata file: the error names it, the page written before is kept.
@@ -185,7 +217,10 @@ fn report_names_a_missing_or_broken_dataset_and_keeps_the_old_page() {
     std::fs::write(&page, "old").unwrap();
     let (code, t) = report(&[&dir.path().join("ds")], &[], &page);
     assert_eq!(code, Some(1), "{t}");
-    assert!(t.contains("CLEVRTEX_clevr_000000.json` is not valid metadata"), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000000.json` is not valid metadata"),
+        "{t}"
+    );
     assert_eq!(std::fs::read_to_string(&page).unwrap(), "old");
 
     let empty = dir.path().join("empty");
@@ -277,7 +312,12 @@ fn report_loads_in_headless_chromium_without_broken_images_or_console_messages()
         .split("<pre id=\"clevrtex-check\">")
         .nth(1)
         .and_then(|t| t.split("</pre>").next())
-        .unwrap_or_else(|| panic!("the check did not run:\n{}", String::from_utf8_lossy(&o.stderr)));
+        .unwrap_or_else(|| {
+            panic!(
+                "the check did not run:\n{}",
+                String::from_utf8_lossy(&o.stderr)
+            )
+        });
     let v: Value = serde_json::from_str(&json.replace("&amp;", "&")).unwrap();
     assert_eq!(v["images"].as_u64(), Some(images as u64), "{v}");
     assert_eq!(v["broken"], serde_json::json!([]), "broken images: {v}");
@@ -294,14 +334,25 @@ fn report_loads_in_headless_chromium_without_broken_images_or_console_messages()
         ],
         &url(&page),
     );
-    assert!(shot.is_file(), "no screenshot:\n{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        shot.is_file(),
+        "no screenshot:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let img = image::open(&shot).unwrap().to_luma8();
     assert_eq!(img.dimensions(), (1200, 2400));
     let n = img.len() as f64;
     let mean = img.iter().map(|&p| f64::from(p)).sum::<f64>() / n;
-    let var = img.iter().map(|&p| (f64::from(p) - mean).powi(2)).sum::<f64>() / n;
+    let var = img
+        .iter()
+        .map(|&p| (f64::from(p) - mean).powi(2))
+        .sum::<f64>()
+        / n;
     // A blank page has variance 0; text, plots and the sheet give hundreds.
-    assert!(var > 100.0, "screenshot looks blank: mean {mean:.1}, variance {var:.1}");
+    assert!(
+        var > 100.0,
+        "screenshot looks blank: mean {mean:.1}, variance {var:.1}"
+    );
     let dark = img.iter().filter(|&&p| p < 128).count() as f64 / n;
     assert!(dark > 0.01, "almost nothing drawn: {dark}");
 }

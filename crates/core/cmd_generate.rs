@@ -236,9 +236,9 @@ impl ManifestPlan {
     /// earlier run made are kept from its manifest.
     fn write(&self, out: &Path, seconds: &BTreeMap<u64, f64>) -> anyhow::Result<PathBuf> {
         let vdir = layout::variant_dir(out, &self.variant);
-        let earlier = clevrtex_render::manifest::Manifest::read(
-            &vdir.join(clevrtex_render::manifest::file_name(self.shard[0], self.shard[1])),
-        )
+        let earlier = clevrtex_render::manifest::Manifest::read(&vdir.join(
+            clevrtex_render::manifest::file_name(self.shard[0], self.shard[1]),
+        ))
         .map(|m| m.sample_seconds)
         .unwrap_or_default();
         let mut sample_seconds = BTreeMap::new();
@@ -400,8 +400,12 @@ pub(crate) fn run_jobs(
             }
             PoolEvent::Done { sample } => {
                 let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-                let s = sample.visibility_s + sample.reject_s + sample.final_request_s + sample.post_s;
-                seconds.lock().unwrap_or_else(|e| e.into_inner()).insert(sample.index, s);
+                let s =
+                    sample.visibility_s + sample.reject_s + sample.final_request_s + sample.post_s;
+                seconds
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .insert(sample.index, s);
                 bar.inc(1);
                 if plain {
                     eprintln!(

@@ -127,40 +127,41 @@ fn summarise(dir: &Path, args: &Args) -> anyhow::Result<Summary> {
         .keys()
         .map(|v| (*v, Config::builtin(v).ok()))
         .collect();
-    let lights: Vec<Option<Vec<f64>>> = data
-        .samples
-        .par_iter()
-        .map(|s| {
-            let config = configs.get(s.variant.as_str())?.as_ref()?;
-            let scene = clevrtex_scene::sample(
-                config,
-                &SampleRequest {
-                    seed: s.seed?,
-                    index: s.index,
-                    attempt: s.attempt?,
-                    total: totals
-                        .get(s.variant.as_str())
-                        .copied()
-                        .unwrap_or(max_index + 1),
-                },
-            )
-            .ok()?;
-            let same = scene.objects.len() == s.objects.len()
-                && scene.objects.iter().zip(&s.objects).all(|(a, b)| {
-                    (0..3).all(|k| (a.location[k] - b.coords[k]).abs() < 1e-6)
-                });
-            same.then(|| {
-                scene
-                    .lights
-                    .iter()
-                    .filter_map(|l| {
-                        let rig = config.base.lights.iter().find(|r| r.name == l.name)?;
-                        Some(dist(l.location, rig.location))
-                    })
-                    .collect()
+    let lights: Vec<Option<Vec<f64>>> =
+        data.samples
+            .par_iter()
+            .map(|s| {
+                let config = configs.get(s.variant.as_str())?.as_ref()?;
+                let scene = clevrtex_scene::sample(
+                    config,
+                    &SampleRequest {
+                        seed: s.seed?,
+                        index: s.index,
+                        attempt: s.attempt?,
+                        total: totals
+                            .get(s.variant.as_str())
+                            .copied()
+                            .unwrap_or(max_index + 1),
+                    },
+                )
+                .ok()?;
+                let same =
+                    scene.objects.len() == s.objects.len()
+                        && scene.objects.iter().zip(&s.objects).all(|(a, b)| {
+                            (0..3).all(|k| (a.location[k] - b.coords[k]).abs() < 1e-6)
+                        });
+                same.then(|| {
+                    scene
+                        .lights
+                        .iter()
+                        .filter_map(|l| {
+                            let rig = config.base.lights.iter().find(|r| r.name == l.name)?;
+                            Some(dist(l.location, rig.location))
+                        })
+                        .collect()
+                })
             })
-        })
-        .collect();
+            .collect();
     let tried = data.samples.iter().filter(|s| s.seed.is_some()).count();
     let matched = lights.iter().filter(|l| l.is_some()).count();
     let label = dir
@@ -280,7 +281,11 @@ impl Page {
             .collect();
         let vecs: Vec<Vec<f64>> = counts
             .iter()
-            .map(|c| cats.iter().map(|k| c.get(k).copied().unwrap_or(0.0)).collect())
+            .map(|c| {
+                cats.iter()
+                    .map(|k| c.get(k).copied().unwrap_or(0.0))
+                    .collect()
+            })
             .collect();
         let series: Vec<plot::Series> = present
             .iter()
@@ -495,12 +500,20 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
         let f = &s.data.failures;
         let _ = write!(page.html, "<h3>{}</h3>", esc(l));
         if f.is_empty() {
-            page.html += "<p>No failures recorded (no <code>failures.jsonl</code>, or an empty one).</p>";
+            page.html +=
+                "<p>No failures recorded (no <code>failures.jsonl</code>, or an empty one).</p>";
             continue;
         }
         let mut groups: BTreeMap<String, Vec<String>> = BTreeMap::new();
         for e in f {
-            let first = e.error.lines().next().unwrap_or("").chars().take(160).collect();
+            let first = e
+                .error
+                .lines()
+                .next()
+                .unwrap_or("")
+                .chars()
+                .take(160)
+                .collect();
             groups
                 .entry(first)
                 .or_default()
@@ -577,7 +590,10 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
             let n = s.data.samples.len() as f64;
             let outside = n - c.iter().sum::<f64>();
             let e = vec![c.iter().sum::<f64>() / cats.len() as f64; cats.len()];
-            page.html += &test_line(&format!("{} vs uniform 3..10", esc(l)), stats::chi2_fit(c, &e));
+            page.html += &test_line(
+                &format!("{} vs uniform 3..10", esc(l)),
+                stats::chi2_fit(c, &e),
+            );
             if outside > 0.0 {
                 let _ = write!(
                     page.html,
@@ -596,11 +612,26 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
     }
     let cat_obj = |f: &dyn Fn(&data::Object) -> Option<&str>| -> Vec<BTreeMap<String, f64>> {
         sums.iter()
-            .map(|s| count_by(s.data.samples.iter().flat_map(|x| x.objects.iter().filter_map(f))))
+            .map(|s| {
+                count_by(
+                    s.data
+                        .samples
+                        .iter()
+                        .flat_map(|x| x.objects.iter().filter_map(f)),
+                )
+            })
             .collect()
     };
-    page.categorical("Shapes", "Share of objects per shape.", &cat_obj(&|o| Some(&o.shape)))?;
-    page.categorical("Sizes", "Share of objects per size.", &cat_obj(&|o| Some(&o.size)))?;
+    page.categorical(
+        "Shapes",
+        "Share of objects per shape.",
+        &cat_obj(&|o| Some(&o.shape)),
+    )?;
+    page.categorical(
+        "Sizes",
+        "Share of objects per size.",
+        &cat_obj(&|o| Some(&o.size)),
+    )?;
     page.categorical(
         "Colours",
         "Share of objects per colour name (only the variants with colours, vbg and clevr, have them).",
@@ -657,7 +688,12 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
     page.html += "<div class=\"figs\">";
     let threshold = sums
         .iter()
-        .flat_map(|s| s.data.samples.iter().filter_map(|x| x.visibility_threshold_px))
+        .flat_map(|s| {
+            s.data
+                .samples
+                .iter()
+                .filter_map(|x| x.visibility_threshold_px)
+        })
         .next();
     page.continuous(
         "Visible pixels per object",
@@ -747,7 +783,12 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
     )?;
     let depth = |pick: fn((f64, f64)) -> f64| -> Vec<Vec<f64>> {
         sums.iter()
-            .map(|s| s.measures.iter().filter_map(|m| m.1.depth_range.map(pick)).collect())
+            .map(|s| {
+                s.measures
+                    .iter()
+                    .filter_map(|m| m.1.depth_range.map(pick))
+                    .collect()
+            })
             .collect()
     };
     page.continuous(
@@ -827,7 +868,10 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
         if series.is_empty() {
             continue;
         }
-        let s: Vec<plot::Series> = series.iter().map(|(n, v)| (n.as_str(), v.clone())).collect();
+        let s: Vec<plot::Series> = series
+            .iter()
+            .map(|(n, v)| (n.as_str(), v.clone()))
+            .collect();
         let svg = plot::histogram(title, &s, None, false)?;
         let _ = write!(page.html, "<div class=\"fig\"><h3>{}</h3>", esc(title));
         page.html += &svg_img(&svg, title);
@@ -866,10 +910,7 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
     for (s, l) in sums.iter().zip(&labels) {
         let _ = write!(page.html, "<h3>{}</h3>", esc(l));
         if s.data.manifests.is_empty() {
-            let _ = write!(
-                page.html,
-                "<p class=\"na\">run manifest: {NOT_HERE}</p>"
-            );
+            let _ = write!(page.html, "<p class=\"na\">run manifest: {NOT_HERE}</p>");
         } else {
             page.html += "<table><tr><th>variant</th><th>seed</th><th>config hash</th><th>indices</th><th>shard</th><th>clevrtex</th><th>Blender</th><th>command</th></tr>";
             for m in &s.data.manifests {
@@ -900,7 +941,8 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
             );
         }
         let distinct = |f: &dyn Fn(&data::Sample) -> Option<String>| {
-            let v: std::collections::BTreeSet<String> = s.data.samples.iter().filter_map(f).collect();
+            let v: std::collections::BTreeSet<String> =
+                s.data.samples.iter().filter_map(f).collect();
             if v.is_empty() {
                 NOT_HERE.to_string()
             } else {
@@ -923,7 +965,9 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
 /// Run `clevrtex report`.
 pub fn run(args: Args) -> CmdResult {
     if args.max_texture_samples == 0 {
-        anyhow::bail!("`--max-texture-samples 0` measures nothing\nhint: pass at least 1 (default 200)");
+        anyhow::bail!(
+            "`--max-texture-samples 0` measures nothing\nhint: pass at least 1 (default 200)"
+        );
     }
     let started = std::time::Instant::now();
     let mut sums = vec![summarise(&args.dir, &args)?];

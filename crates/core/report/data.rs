@@ -207,7 +207,10 @@ fn parse(
         bail!("no `objects` list");
     };
     let camera = Camera::of(m);
-    let size = match (m["render"]["width"].as_u64(), m["render"]["height"].as_u64()) {
+    let size = match (
+        m["render"]["width"].as_u64(),
+        m["render"]["height"].as_u64(),
+    ) {
         (Some(w), Some(h)) => Some((w as u32, h as u32)),
         _ => None,
     };

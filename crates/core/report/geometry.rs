@@ -50,7 +50,7 @@ pub fn silhouette_area(
     rotation_deg: f64,
 ) -> Option<f64> {
     let scale = coords[2];
-    if !(scale > 0.0) {
+    if scale.is_nan() || scale <= 0.0 {
         return None;
     }
     let (s, c) = rotation_deg.to_radians().sin_cos();
@@ -104,7 +104,13 @@ fn clip_to_rect(poly: &[[f64; 2]], w: f64, h: f64) -> Vec<[f64; 2]> {
     let mut out = poly.to_vec();
     // (axis, bound, keep when coordinate <= bound?)
     for (axis, bound, below) in [(0, 0.0, false), (0, w, true), (1, 0.0, false), (1, h, true)] {
-        let inside = |p: [f64; 2]| if below { p[axis] <= bound } else { p[axis] >= bound };
+        let inside = |p: [f64; 2]| {
+            if below {
+                p[axis] <= bound
+            } else {
+                p[axis] >= bound
+            }
+        };
         let input = std::mem::take(&mut out);
         for i in 0..input.len() {
             let (a, b) = (input[i], input[(i + 1) % input.len()]);
@@ -145,7 +151,13 @@ mod tests {
 
     #[test]
     fn hull_and_clip_of_a_square() {
-        let sq = convex_hull(vec![[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0], [1.0, 1.0]]);
+        let sq = convex_hull(vec![
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+            [1.0, 1.0],
+        ]);
         assert_eq!(sq.len(), 4);
         assert!((area(&sq) - 4.0).abs() < 1e-12);
         // Half of it lies right of x = 1.

@@ -190,7 +190,11 @@ pub fn histogram(x_label: &str, series: &[Series], marker: Option<f64>, log_x: b
         .map(|(_, v)| {
             let mut h = vec![0.0; bins];
             let mut n = 0.0;
-            for x in v.iter().copied().filter(|v| v.is_finite() && (!log_x || *v > 0.0)) {
+            for x in v
+                .iter()
+                .copied()
+                .filter(|v| v.is_finite() && (!log_x || *v > 0.0))
+            {
                 let b = (((tf(x) - lo) / width) as usize).min(bins - 1);
                 h[b] += 1.0;
                 n += 1.0;
@@ -198,7 +202,12 @@ pub fn histogram(x_label: &str, series: &[Series], marker: Option<f64>, log_x: b
             h.iter().map(|c| c / f64::max(n, 1.0)).collect()
         })
         .collect();
-    let top = shares.iter().flatten().fold(0.0f64, |a, &b| a.max(b)).max(1e-3) * 1.15;
+    let top = shares
+        .iter()
+        .flatten()
+        .fold(0.0f64, |a, &b| a.max(b))
+        .max(1e-3)
+        * 1.15;
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (W, H)).into_drawing_area();
@@ -262,10 +271,16 @@ pub fn histogram(x_label: &str, series: &[Series], marker: Option<f64>, log_x: b
 pub fn scatter(x_label: &str, y_label: &str, series: &[(&str, Vec<(f64, f64)>)]) -> Res {
     let text = crate::font::available();
     let all = || series.iter().flat_map(|s| s.1.iter().copied());
-    let (mut x0, mut x1, mut y0, mut y1) = all().filter(|p| p.0.is_finite() && p.1.is_finite()).fold(
-        (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY),
-        |(a, b, c, d), (x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
-    );
+    let (mut x0, mut x1, mut y0, mut y1) =
+        all().filter(|p| p.0.is_finite() && p.1.is_finite()).fold(
+            (
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+            ),
+            |(a, b, c, d), (x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
+        );
     if !x0.is_finite() {
         (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
     }

@@ -118,7 +118,7 @@ pub fn contrasts(img: &RgbImage, ids: &[u16], n: usize) -> Vec<Contrast> {
                 if x < bw && obj(x, y) {
                     count += 1;
                 }
-                if x >= 2 * r + 1 && obj(x - 2 * r - 1, y) {
+                if x > 2 * r && obj(x - 2 * r - 1, y) {
                     count -= 1;
                 }
                 if x >= r && x - r < bw {
@@ -133,7 +133,7 @@ pub fn contrasts(img: &RgbImage, ids: &[u16], n: usize) -> Vec<Contrast> {
                 if y < bh && rows[y * bw + x] {
                     count += 1;
                 }
-                if y >= 2 * r + 1 && rows[(y - 2 * r - 1) * bw + x] {
+                if y > 2 * r && rows[(y - 2 * r - 1) * bw + x] {
                     count -= 1;
                 }
                 if y >= r && y - r < bh {
@@ -168,8 +168,8 @@ pub fn contrasts(img: &RgbImage, ids: &[u16], n: usize) -> Vec<Contrast> {
         if no < 16.0 || nr < 16.0 {
             continue;
         }
-        let delta_e = ((lo[0] - lr[0]).powi(2) + (lo[1] - lr[1]).powi(2) + (lo[2] - lr[2]).powi(2))
-            .sqrt();
+        let delta_e =
+            ((lo[0] - lr[0]).powi(2) + (lo[1] - lr[1]).powi(2) + (lo[2] - lr[2]).powi(2)).sqrt();
         let feature_distance = distance(
             &region_features(img, in_obj),
             &region_features(img, in_ring),
