@@ -115,6 +115,21 @@ fn report_of_a_generated_and_a_published_layout_dataset_and_both_compared() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     generate(&blender, &data, &["clevr", "camo"], 5);
+    // The run manifest records the seconds spent on each sample (the report plots them).
+    let manifest: Value = serde_json::from_slice(
+        &std::fs::read(data.join("clevrtex_clevr/MANIFEST-0of1.json")).unwrap(),
+    )
+    .unwrap();
+    let secs = manifest["sample_seconds"].as_object().unwrap();
+    assert_eq!(secs.len(), 5, "{secs:?}");
+    assert!(secs.values().all(|s| s.as_f64().unwrap() > 0.0), "{secs:?}");
+    // A rerun that skips the finished samples keeps their times.
+    generate(&blender, &data, &["clevr"], 5);
+    let again: Value = serde_json::from_slice(
+        &std::fs::read(data.join("clevrtex_clevr/MANIFEST-0of1.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(again["sample_seconds"], manifest["sample_seconds"]);
     let page = dir.path().join("report.html");
     let (code, t) = report(&[&data], &["--preview", "3"], &page);
     assert_eq!(code, Some(0), "{t}");

@@ -104,3 +104,31 @@ pub fn distance(a: &Features, b: &Features) -> f64 {
         / a.texture.len() as f64;
     hist + tex
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_region_has_the_features_of_the_same_pixels_cut_out() {
+        // A textured image: stripes on the left half, noise-like values on the right.
+        let img = image::RgbImage::from_fn(48, 32, |x, y| {
+            let v = if x < 24 {
+                if (x / 3) % 2 == 0 {
+                    200
+                } else {
+                    40
+                }
+            } else {
+                ((x * 37 + y * 91) % 251) as u8
+            };
+            image::Rgb([v, v / 2, 255 - v])
+        });
+        let left = image::imageops::crop_imm(&img, 0, 0, 24, 32).to_image();
+        let region = region_features(&img, |x, _| x < 24);
+        let cut = region_features(&left, |_, _| true);
+        assert_eq!(region, cut);
+        // And it differs from the whole image's.
+        assert!(distance(&region, &region_features(&img, |_, _| true)) > 0.1);
+    }
+}
