@@ -85,7 +85,7 @@ pub struct SampleStats {
     pub visibility_build_s: f64,
     /// See [`SampleStats::visibility_build_s`].
     pub visibility_render_s: f64,
-    /// Cycles render time of the final render (including the no-shadow render).
+    /// Cycles render time of the final render (including the shadow pass's two renders).
     pub render_s: f64,
     /// Whole final request, as seen from Rust.
     pub final_request_s: f64,
@@ -218,7 +218,7 @@ impl Slot<'_, '_> {
             stats.metadata = dir.join(meta_name);
             stats.build_s = reply.timings.build_s;
             stats.visibility_s = visibility_s;
-            stats.render_s = reply.timings.render_s + reply.timings.noshadow_render_s;
+            stats.render_s = reply.timings.render_s + reply.timings.shadow_render_s;
             stats.final_request_s = final_request_s;
             stats.post_s = t_post.elapsed().as_secs_f64();
             stats.projected = reply.projected.clone();
