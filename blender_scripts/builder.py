@@ -25,16 +25,22 @@ SCENE_VERSION = 1
 # object shadows (`direct.exr`) and one with objects casting none (`noshadow.exr`), with the
 # same samples and Cycles seed: both trace the same rays and pick the same light samples, so
 # they differ only where an object blocks a shadow ray, and Rust computes
-# shadow = 1 - with / without (clevrtex_render::post::encode_shadow). SHADOW_SAMPLES each
-# (capped at the scene's samples), unless the request says otherwise. Measured with
-# blender_scripts/dev/shadow_measure.py at 320x240 against the same pair at 256 spp per
-# render with another seed, and extra time over a 64-spp final render (docs/performance.md,
-# "Shadow pass"): 16 spp ~0.025 RMSE at ~9% extra on `full` scenes (more on `clevr`,
-# whose final render is cheap); an open floor is exactly 0. Halving the RMSE takes 4x the
-# samples (visibility noise of the big area lights in penumbrae; correlated seeds cancel
-# everything else). The pass up to 0.9 (lit from the final render, textured, 8-spp
-# no-shadow render) had RMSE ~0.1 and up to 0.6 on an open floor at the same cost.
-SHADOW_SAMPLES = 16
+# shadow = 1 - with / without (clevrtex_render::post::encode_shadow). Samples of each: the
+# request's `shadow_samples`, else a quarter of the scene's samples (16 at the default 64),
+# at most SHADOW_SAMPLES_MAX. Measured with blender_scripts/dev/shadow_measure.py against the
+# same pair at 256 spp per render with another seed (docs/performance.md, "Shadow pass"):
+# RMSE 0.035 / 0.025 / 0.018 / 0.013 at 8 / 16 / 32 / 64 samples (visibility noise in the
+# penumbrae of the big area lights; correlated seeds cancel everything else), an open floor
+# exactly 0; extra time at 16 over a 64-spp final render 9% on `full` scenes with a flat
+# floor, 26% with a displaced one, 25-30% on `clevr` (whose final render is cheap). The pass
+# up to 0.9 (lit from the textured final render, an 8-spp textured no-shadow render) had
+# RMSE ~0.1 and up to 0.6 on an open floor, at 10-15%.
+SHADOW_SAMPLES_MAX = 64
+
+
+def default_shadow_samples(samples):
+    """Samples of each shadow render for a final render of `samples`."""
+    return max(1, min(SHADOW_SAMPLES_MAX, (samples + 3) // 4))
 
 # Cycles seed: fixed, so two renders of one scene are identical (and visibility's single
 # sample is the final render's first sample).
@@ -457,8 +463,9 @@ def render_final(built, out_dir, shadow_samples=None):
         _save(files["passes"], "EXR")
     timings["write_s"] = time.perf_counter() - t0
     if "shadow" in wanted:
+        samples = shadow_samples or default_shadow_samples(scene.cycles.samples)
         shadow_files, timings["shadow_render_s"], write_s = _render_shadow(
-            built, out_dir, shadow_samples or SHADOW_SAMPLES)
+            built, out_dir, samples)
         files.update(shadow_files)
         timings["write_s"] += write_s
     return files, timings
@@ -503,14 +510,14 @@ class WhiteSurfaces:
 
 
 def _render_shadow(built, out_dir, samples):
-    """The shadow pass's two renders (see SHADOW_SAMPLES): direct light on white surfaces
-    with and without object shadows, same samples and seed. Returns (files, render seconds
-    of both, write seconds)."""
+    """The shadow pass's two renders (see SHADOW_SAMPLES_MAX): direct light on white
+    surfaces with and without object shadows, `samples` each, same seed. Returns (files,
+    render seconds of both, write seconds)."""
     scene = bpy.context.scene
     passes.enable(bpy.context.view_layer, ["shadow"])
     c = scene.cycles
     saved = (c.samples, c.max_bounces, c.use_adaptive_sampling)
-    c.samples = max(1, min(samples, saved[0]))
+    c.samples = max(1, samples)
     c.max_bounces = 0
     # Adaptive sampling would stop the two renders at different samples where they differ.
     c.use_adaptive_sampling = False

@@ -26,8 +26,8 @@ Methods (N = samples of each extra render):
   white-M     method M with every material's surface replaced by a white diffuse BSDF
               (displacement kept; builder.WhiteSurfaces): the shadow of the direct
               irradiance, no texture or glossy noise, cheaper shading. Compared with the
-              white reference. `white-paired-16` is what the bridge does since 0.10
-              (builder.SHADOW_SAMPLES).
+              white reference. `white-paired-16` is what the bridge does at 64 samples
+              (builder.default_shadow_samples).
   perlight-N  paired, one pair of renders per light (the others hidden), N spp each: no
               light-selection noise.
   catcher-N   one direct-light-only render at N spp with the floor as Cycles' shadow catcher

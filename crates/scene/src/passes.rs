@@ -51,7 +51,7 @@ pub enum Source {
     PassesExr,
     /// The same layers of the shadow pass's own two renders, `direct.exr` and `noshadow.exr`:
     /// direct light only, every surface a white diffuse BSDF, objects casting shadows and
-    /// not, same samples and seed (`blender_scripts/builder.py`, `SHADOW_SAMPLES`).
+    /// not, same samples and seed (`blender_scripts/builder.py`, `SHADOW_SAMPLES_MAX`).
     ShadowExrs,
 }
 
