@@ -26,21 +26,22 @@ SCENE_VERSION = 1
 # same samples and Cycles seed: both trace the same rays and pick the same light samples, so
 # they differ only where an object blocks a shadow ray, and Rust computes
 # shadow = 1 - with / without (clevrtex_render::post::encode_shadow). Samples of each: the
-# request's `shadow_samples`, else a quarter of the scene's samples (16 at the default 64),
-# at most SHADOW_SAMPLES_MAX. Measured with blender_scripts/dev/shadow_measure.py against the
-# same pair at 256 spp per render with another seed (docs/performance.md, "Shadow pass"):
-# RMSE 0.035 / 0.025 / 0.018 / 0.013 at 8 / 16 / 32 / 64 samples (visibility noise in the
-# penumbrae of the big area lights; correlated seeds cancel everything else), an open floor
-# exactly 0; extra time at 16 over a 64-spp final render 9% on `full` scenes with a flat
-# floor, 26% with a displaced one, 25-30% on `clevr` (whose final render is cheap). The pass
-# up to 0.9 (lit from the textured final render, an 8-spp textured no-shadow render) had
-# RMSE ~0.1 and up to 0.6 on an open floor, at 10-15%.
+# request's `shadow_samples`, else an eighth of the scene's samples (8 at the default 64:
+# about the cost of the pass up to 0.9, near the 10% goal), at most SHADOW_SAMPLES_MAX.
+# Measured with blender_scripts/dev/shadow_measure.py against the same pair at 256 spp per
+# render with another seed (docs/performance.md, "Shadow pass"): RMSE 0.035 / 0.025 /
+# 0.018 / 0.013 at 8 / 16 / 32 / 64 samples (visibility noise in the penumbrae of the big
+# area lights; the shared seed cancels everything else), an open floor exactly 0; extra time
+# at 8 over a 64-spp final render 5-17% (flat floors cheapest, displaced ones dearest, `clevr`
+# ~16% as its final render is cheap). The pass up to 0.9 (lit from the textured final
+# render, an 8-spp textured no-shadow render) had RMSE ~0.1 and up to 0.6 on an open floor,
+# at 8-16%.
 SHADOW_SAMPLES_MAX = 64
 
 
 def default_shadow_samples(samples):
     """Samples of each shadow render for a final render of `samples`."""
-    return max(1, min(SHADOW_SAMPLES_MAX, (samples + 3) // 4))
+    return max(1, min(SHADOW_SAMPLES_MAX, (samples + 7) // 8))
 
 # Cycles seed: fixed, so two renders of one scene are identical (and visibility's single
 # sample is the final render's first sample).

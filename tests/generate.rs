@@ -961,8 +961,8 @@ fn shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube() {
         s.objects.truncate(objects);
         s
     };
-    let floor = with_index(fixture("full8", 64, 48, 16), 100, 0);
-    let cube = with_index(fixture("full8", 64, 48, 16), 101, 1);
+    let floor = with_index(fixture("full8", 64, 48, 32), 100, 0);
+    let cube = with_index(fixture("full8", 64, 48, 32), 101, 1);
     assert_eq!(cube.objects[0].shape, "cube");
     let stats = render_fixtures(blender, dir.path(), vec![floor.clone(), cube.clone()]);
     assert!(stats[0].render_s > 0.0 && stats[1].render_s > 0.0);

@@ -26,8 +26,10 @@ Methods (N = samples of each extra render):
   white-M     method M with every material's surface replaced by a white diffuse BSDF
               (displacement kept; builder.WhiteSurfaces): the shadow of the direct
               irradiance, no texture or glossy noise, cheaper shading. Compared with the
-              white reference. `white-paired-16` is what the bridge does at 64 samples
+              white reference. `white-paired-8` is what the bridge does at 64 samples
               (builder.default_shadow_samples).
+  nobd-M      method M with the backdrop casting no shadows (its relief then shadows it in
+              neither render; shadow rays skip its dense displaced mesh).
   perlight-N  paired, one pair of renders per light (the others hidden), N spp each: no
               light-selection noise.
   catcher-N   one direct-light-only render at N spp with the floor as Cycles' shadow catcher
@@ -222,6 +224,12 @@ def run_method(built, method, d, final_exr, seed=None):
     if kind.startswith("white-"):
         with builder.WhiteSurfaces(built):
             return run_method(built, method[len("white-"):], d, final_exr, seed)
+    if kind.startswith("nobd-"):
+        compat.set_cast_shadow(built.backdrop, False)
+        try:
+            return run_method(built, method[len("nobd-"):], d, final_exr, seed)
+        finally:
+            compat.set_cast_shadow(built.backdrop, True)
     if kind.startswith("adaptive"):
         thr = float(kind[len("adaptive"):])
         lit = os.path.join(d, "%s_lit.exr" % method)
