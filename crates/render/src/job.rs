@@ -57,7 +57,7 @@ impl std::fmt::Debug for Job {
 
 /// A generous per-request time limit for a scene: 10 minutes plus 8 s per sample at
 /// 320x240 (about 15x what one CPU thread needs, so a crowded machine does not trip it),
-/// doubled for the shadow pass's extra render. Hangs are caught sooner by [`IDLE_TIMEOUT`].
+/// doubled for the shadow pass's extra renders. Hangs are caught sooner by [`IDLE_TIMEOUT`].
 pub fn auto_timeout(scene: &SceneFile) -> Duration {
     let pixels = scene.render.width as f64 * scene.render.height as f64 / (320.0 * 240.0);
     let mut secs = 600.0 + 8.0 * scene.render.samples as f64 * pixels.max(0.05);
