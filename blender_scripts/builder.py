@@ -32,10 +32,10 @@ SCENE_VERSION = 1
 # render with another seed (docs/performance.md, "Shadow pass"): RMSE 0.035 / 0.025 /
 # 0.018 / 0.013 at 8 / 16 / 32 / 64 samples (visibility noise in the penumbrae of the big
 # area lights; the shared seed cancels everything else), an open floor exactly 0; extra time
-# at 8 over a 64-spp final render 5-17% (flat floors cheapest, displaced ones dearest, `clevr`
-# ~16% as its final render is cheap). The pass up to 0.9 (lit from the textured final
-# render, an 8-spp textured no-shadow render) had RMSE ~0.1 and up to 0.6 on an open floor,
-# at 8-16%.
+# at 8 over a 64-spp final render at 320x240 5-13% on `full` scenes (flat floors cheapest,
+# displaced ones dearest), 16-19% on `clevr` (its final render is cheap). The pass up to 0.9
+# (lit from the textured final render, an 8-spp textured no-shadow render) had RMSE ~0.1 and
+# up to 0.6 on an open floor, at 10-13%.
 SHADOW_SAMPLES_MAX = 64
 
 
