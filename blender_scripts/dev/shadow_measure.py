@@ -9,11 +9,16 @@
 `--floor SCENE.json` adds that scene with its objects removed: a lit open floor where the
 shadow pass should be 0 everywhere (reported as its maximum and 99.9th percentile).
 
-For every scene: the final render at the scene's samples (64 for every variant), then each
-candidate method, then the reference, all at `--size` (scene files are 320x240). A method
-gives the direct light with object shadows (`lit`) and without (`un`); the shadow is the
-bridge's formula, `1 - lum(lit) / lum(un)` with lit/un = diffuse direct * diffuse colour +
-glossy direct * glossy colour (crates/render/src/post.rs), clamped, quantised to 8 bits.
+For every scene: the final render at the scene's samples (64 for every variant), then the
+references, then each candidate method, all at `--size` (scene files are 320x240). A method
+gives the direct light with object shadows (`lit`) and without (`un`); the shadow is
+`1 - lum(lit) / lum(un)` with lit/un = diffuse direct * diffuse colour + glossy direct *
+glossy colour (the colours of the `lit` render), clamped, quantised to 8 bits: the bridge's
+formula up to 0.9, and the same as today's (`DiffDir` alone) for the white methods, whose
+colours are 1 and glossy light 0. Reference: textured methods are compared with the textured
+pair at `--ref-samples` (256) per render, white methods with the white pair; both use
+another seed (7919) than every candidate, so their noise is independent of the candidates'.
+`--no-textured-ref` skips the textured reference; `--ref-samples 0` skips both (timings).
 
 Methods (N = samples of each extra render):
   noshadow-N  the bridge up to 0.9: lit from the final render, un from a direct-light-only
@@ -34,8 +39,6 @@ Methods (N = samples of each extra render):
               light-selection noise.
   catcher-N   one direct-light-only render at N spp with the floor as Cycles' shadow catcher
               and a transparent film: shadow = 1 - lum(Shadow Catcher pass) (floor only).
-Reference: paired at 256 spp per render, with another seed (7919) than every candidate, so
-its noise is independent of theirs.
 
 Reported per scene and method: RMSE of the shadow against the reference, the open floor's
 maximum, and the extra render time (wall and process CPU seconds; CPU is less disturbed by
