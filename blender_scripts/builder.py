@@ -20,12 +20,28 @@ import shapes
 SCENE_FORMAT = "clevrtex-scene"
 SCENE_VERSION = 1
 
-# Samples of the extra render with no object shadows (shadow pass only), unless the request
-# says otherwise. Measured on tests/data/scenes/typical8.json against a 64-sample reference,
-# shadow RMSE: 1 spp 0.29 and 2 spp 0.24 (biased: Cycles picks one light per sample, so some
-# lights go unsampled), 4 spp 0.032, 8 spp 0.023, 16 spp 0.017; cost ~0.18 s per sample at
-# 320x240. 8 is the knee.
-NOSHADOW_SAMPLES = 8
+# The shadow pass: two direct-light-only renders (no bounces) in which every surface is a
+# white diffuse BSDF (displacement kept, so the geometry is the final render's), one with
+# object shadows (`direct.exr`) and one with objects casting none (`noshadow.exr`), with the
+# same samples and Cycles seed: both trace the same rays and pick the same light samples, so
+# they differ only where an object blocks a shadow ray, and Rust computes
+# shadow = 1 - with / without (clevrtex_render::post::encode_shadow). Samples of each: the
+# request's `shadow_samples`, else an eighth of the scene's samples (8 at the default 64:
+# about the cost of the pass up to 0.9, near the 10% goal), at most SHADOW_SAMPLES_MAX.
+# Measured with blender_scripts/dev/shadow_measure.py against the same pair at 256 spp per
+# render with another seed (docs/performance.md, "Shadow pass"): RMSE 0.035 / 0.025 /
+# 0.018 / 0.013 at 8 / 16 / 32 / 64 samples (visibility noise in the penumbrae of the big
+# area lights; the shared seed cancels everything else), an open floor exactly 0; extra time
+# at 8 over a 64-spp final render at 320x240 5-13% on `full` scenes (flat floors cheapest,
+# displaced ones dearest), 16-19% on `clevr` (its final render is cheap). The pass up to 0.9
+# (lit from the textured final render, an 8-spp textured no-shadow render) had RMSE ~0.1 and
+# up to 0.6 on an open floor, at 10-13%.
+SHADOW_SAMPLES_MAX = 64
+
+
+def default_shadow_samples(samples):
+    """Samples of each shadow render for a final render of `samples`."""
+    return max(1, min(SHADOW_SAMPLES_MAX, (samples + 7) // 8))
 
 # Cycles seed: fixed, so two renders of one scene are identical (and visibility's single
 # sample is the final render's first sample).
@@ -432,11 +448,11 @@ def render_visibility(built, out_dir):
     return {"visibility": path}, {"render_s": render_s, "write_s": time.perf_counter() - t0}
 
 
-def render_final(built, out_dir, noshadow_samples=None):
+def render_final(built, out_dir, shadow_samples=None):
     scene = bpy.context.scene
     view_layer = bpy.context.view_layer
     wanted = list(built.spec["passes"])
-    passes.enable(view_layer, wanted)
+    passes.enable(view_layer, passes.final_passes(wanted))
     timings = {"render_s": _render()}
     files = {}
     t0 = time.perf_counter()
@@ -448,32 +464,77 @@ def render_final(built, out_dir, noshadow_samples=None):
         _save(files["passes"], "EXR")
     timings["write_s"] = time.perf_counter() - t0
     if "shadow" in wanted:
-        files["noshadow"], timings["noshadow_render_s"] = _render_noshadow(
-            built, out_dir, noshadow_samples or NOSHADOW_SAMPLES)
+        samples = shadow_samples or default_shadow_samples(scene.cycles.samples)
+        shadow_files, timings["shadow_render_s"], write_s = _render_shadow(
+            built, out_dir, samples)
+        files.update(shadow_files)
+        timings["write_s"] += write_s
     return files, timings
 
 
-def _render_noshadow(built, out_dir, samples):
-    """Direct diffuse light with objects casting no shadows, for shadow = 1 - with/without.
+class WhiteSurfaces:
+    """Within `with`: every material of `built` shows a white diffuse BSDF instead of its
+    surface, and keeps its displacement (the geometry stays the final render's; checked:
+    identical first-sample depth on the displaced `full8.json` floor). Restored on exit."""
 
-    Only direct light matters, so bounces are off; displacement stays as in the final render
-    so the surfaces match.
-    """
+    def __init__(self, built):
+        mats = set()
+        for obj in [built.backdrop] + built.objects:
+            for slot in obj.material_slots:
+                if slot.material is not None and slot.material.use_nodes:
+                    mats.add(slot.material)
+        self.materials = sorted(mats, key=lambda m: m.name)
+        self.swapped = []
+
+    def __enter__(self):
+        for mat in self.materials:
+            nt = mat.node_tree
+            out = next((n for n in nt.nodes
+                        if n.type == "OUTPUT_MATERIAL" and n.is_active_output), None)
+            if out is None:
+                continue
+            sock = out.inputs["Surface"]
+            old = sock.links[0].from_socket if sock.is_linked else None
+            node = nt.nodes.new("ShaderNodeBsdfDiffuse")
+            node.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+            nt.links.new(node.outputs["BSDF"], sock)
+            self.swapped.append((nt, sock, old, node))
+        return self
+
+    def __exit__(self, *exc):
+        for nt, sock, old, node in reversed(self.swapped):
+            nt.nodes.remove(node)
+            if old is not None:
+                nt.links.new(old, sock)
+        self.swapped = []
+        return False
+
+
+def _render_shadow(built, out_dir, samples):
+    """The shadow pass's two renders (see SHADOW_SAMPLES_MAX): direct light on white
+    surfaces with and without object shadows, `samples` each, same seed. Returns (files,
+    render seconds of both, write seconds)."""
     scene = bpy.context.scene
     passes.enable(bpy.context.view_layer, ["shadow"])
     c = scene.cycles
     saved = (c.samples, c.max_bounces, c.use_adaptive_sampling)
-    c.samples = max(1, min(samples, saved[0]))
+    c.samples = max(1, samples)
     c.max_bounces = 0
+    # Adaptive sampling would stop the two renders at different samples where they differ.
     c.use_adaptive_sampling = False
-    for obj in built.objects:
-        compat.set_cast_shadow(obj, False)
+    files, render_s, write_s = {}, 0.0, 0.0
     try:
-        render_s = _render()
+        with WhiteSurfaces(built):
+            for name, cast in (("direct", True), ("noshadow", False)):
+                for obj in built.objects:
+                    compat.set_cast_shadow(obj, cast)
+                render_s += _render()
+                t0 = time.perf_counter()
+                files[name] = os.path.join(out_dir, name + ".exr")
+                _save(files[name], "EXR")
+                write_s += time.perf_counter() - t0
     finally:
         c.samples, c.max_bounces, c.use_adaptive_sampling = saved
         for obj in built.objects:
             compat.set_cast_shadow(obj, True)
-    path = os.path.join(out_dir, "noshadow.exr")
-    _save(path, "EXR")
-    return path, render_s
+    return files, render_s, write_s

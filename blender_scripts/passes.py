@@ -5,7 +5,9 @@ pass needs (`flags`) and the layers it puts into the multilayer `passes.exr` as
 {layer: channel letters} (`exr`; the files hold `ViewLayer.<layer>.<letter>`). The Rust pass
 table (`crates/scene/src/passes.rs`) lists the same passes with the same EXR layers; the test
 `generate::pass_table_rust_and_bridge_agree` checks both, in Blender's own Python. Adding a
-pass is one entry here plus one there. Keep it a plain literal.
+pass is one entry here plus one there. Keep it a plain literal. `render` says which render
+makes the pass: `final` (the default) or `shadow` (the shadow pass's own renders, whose
+files hold the pass's layers instead of `passes.exr`).
 """
 
 PASSES = {
@@ -14,12 +16,21 @@ PASSES = {
     "depth": {"flags": ["use_pass_z"], "exr": {"Depth": "Z"}},
     "normal": {"flags": ["use_pass_normal"], "exr": {"Normal": "XYZ"}},
     "albedo": {"flags": ["use_pass_diffuse_color"], "exr": {"DiffCol": "RGB"}},
-    "shadow": {"flags": ["use_pass_diffuse_direct", "use_pass_diffuse_color", "use_pass_glossy_direct", "use_pass_glossy_color"],
-               "exr": {"DiffDir": "RGB", "DiffCol": "RGB", "GlossDir": "RGB", "GlossCol": "RGB"}},
+    # From its own two renders (`direct.exr`, `noshadow.exr`; builder.SHADOW_SAMPLES_MAX),
+    # not the final render.
+    "shadow": {"flags": ["use_pass_diffuse_direct"], "exr": {"DiffDir": "RGB"},
+               "render": "shadow"},
 }
 
-# Passes whose data lives in the multilayer `passes.exr` (rgb goes to `rgb.png` instead).
-EXR_PASSES = tuple(name for name, p in PASSES.items() if p["exr"])
+# Passes whose data lives in the multilayer `passes.exr` of the final render (rgb goes to
+# `rgb.png` instead, shadow to its own renders).
+EXR_PASSES = tuple(name for name, p in PASSES.items()
+                   if p["exr"] and p.get("render", "final") == "final")
+
+
+def final_passes(pass_names):
+    """The passes of `pass_names` that the final render makes (all but shadow)."""
+    return [n for n in pass_names if PASSES[n].get("render", "final") == "final"]
 
 
 def all_flags():

@@ -119,7 +119,7 @@ class Worker:
         if mode == "visibility":
             files, timings = b.render_visibility(self.built, out_dir)
         else:
-            files, timings = b.render_final(self.built, out_dir, req.get("noshadow_samples"))
+            files, timings = b.render_final(self.built, out_dir, req.get("shadow_samples"))
         timings["build_s"] = build_s
         return {
             "type": "done",

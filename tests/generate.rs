@@ -942,6 +942,70 @@ fn camera_model_depth_and_shadow_match_blender() {
         .all(|v| v.is_finite()));
 }
 
+/// The shadow pass on a textured, displaced floor (`full8.json`'s cobblestones), tiny and
+/// few samples: with no object the pass is <= 0.02 everywhere (the pass up to 0.9, an
+/// 8-sample no-shadow render against the final render, reached ~0.6 on such a floor), and
+/// with one cube the cube's shadow is there while most of the floor stays exactly 0 (the two
+/// shadow renders share their samples, so only blocked shadow rays differ).
+#[test]
+fn shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube() {
+    let Some(blender) =
+        blender_or_skip("shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let with_index = |mut s: SceneFile, index: u64, objects: usize| {
+        s.index = index;
+        s.stem = format!("CLEVRTEX_full_{index:06}");
+        s.objects.truncate(objects);
+        s
+    };
+    let floor = with_index(fixture("full8", 64, 48, 32), 100, 0);
+    let cube = with_index(fixture("full8", 64, 48, 32), 101, 1);
+    assert_eq!(cube.objects[0].shape, "cube");
+    let stats = render_fixtures(blender, dir.path(), vec![floor.clone(), cube.clone()]);
+    assert!(stats[0].render_s > 0.0 && stats[1].render_s > 0.0);
+    let sub = dir.path().join("clevrtex_full/0");
+    let shadow = |stem: &str| decode_png(&sub.join(format!("{stem}_shadow_0001.png"))).unwrap();
+
+    let open = shadow(&floor.stem);
+    let max = open.data.iter().copied().max().unwrap();
+    assert!(
+        f64::from(max) / 255.0 <= 0.02,
+        "open floor: shadow up to {max}/255"
+    );
+    for name in ["direct", "noshadow"] {
+        assert!(sub.join(format!("{}_{name}.exr", floor.stem)).is_file());
+    }
+
+    let ids = decode_png(&sub.join(format!("{}_flat.png", cube.stem))).unwrap();
+    let s = shadow(&cube.stem);
+    let on_floor: Vec<u16> = (0..s.data.len())
+        .filter(|&i| ids.data[i] == 0)
+        .map(|i| s.data[i])
+        .collect();
+    // Its shadow is soft (four big lights; measured here with 4 shadow samples: up to 0.93,
+    // 2.4% of the floor >= 0.2).
+    let darkest = on_floor.iter().copied().max().unwrap();
+    let dark = on_floor.iter().filter(|&&v| v >= 51).count();
+    let zero = on_floor.iter().filter(|&&v| v == 0).count();
+    assert!(
+        darkest >= 102,
+        "the cube's shadow reaches only {darkest}/255"
+    );
+    assert!(
+        dark * 100 >= on_floor.len(),
+        "only {dark} of {} floor pixels beside the cube have shadow >= 0.2",
+        on_floor.len()
+    );
+    assert!(
+        zero * 2 >= on_floor.len(),
+        "only {zero} of {} floor pixels are exactly unshadowed",
+        on_floor.len()
+    );
+}
+
 #[test]
 fn doctor_reports_blender_and_devices() {
     let Some(blender) = blender_or_skip("doctor_reports_blender_and_devices") else {

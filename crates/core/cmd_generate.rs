@@ -49,7 +49,8 @@ pub struct RunArgs {
     /// Restarts of a crashed or hung worker per scene before it goes to the failure ledger.
     #[arg(long, default_value_t = 2, value_name = "N")]
     retries: u32,
-    /// Also keep the float EXRs (`<stem>_passes.exr`, `<stem>_noshadow.exr`).
+    /// Also keep the float EXRs (`<stem>_passes.exr`, and with the shadow pass
+    /// `<stem>_direct.exr` and `<stem>_noshadow.exr`).
     #[arg(long)]
     keep_exr: bool,
     /// Redo samples that are already complete (default: skip them, i.e. resume).

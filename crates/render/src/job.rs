@@ -57,7 +57,7 @@ impl std::fmt::Debug for Job {
 
 /// A generous per-request time limit for a scene: 10 minutes plus 8 s per sample at
 /// 320x240 (about 15x what one CPU thread needs, so a crowded machine does not trip it),
-/// doubled for the shadow pass's extra render. Hangs are caught sooner by [`IDLE_TIMEOUT`].
+/// doubled for the shadow pass's extra renders. Hangs are caught sooner by [`IDLE_TIMEOUT`].
 pub fn auto_timeout(scene: &SceneFile) -> Duration {
     let pixels = scene.render.width as f64 * scene.render.height as f64 / (320.0 * 240.0);
     let mut secs = 600.0 + 8.0 * scene.render.samples as f64 * pixels.max(0.05);
@@ -85,7 +85,7 @@ pub struct SampleStats {
     pub visibility_build_s: f64,
     /// See [`SampleStats::visibility_build_s`].
     pub visibility_render_s: f64,
-    /// Cycles render time of the final render (including the no-shadow render).
+    /// Cycles render time of the final render (including the shadow pass's two renders).
     pub render_s: f64,
     /// Whole final request, as seen from Rust.
     pub final_request_s: f64,
@@ -218,7 +218,7 @@ impl Slot<'_, '_> {
             stats.metadata = dir.join(meta_name);
             stats.build_s = reply.timings.build_s;
             stats.visibility_s = visibility_s;
-            stats.render_s = reply.timings.render_s + reply.timings.noshadow_render_s;
+            stats.render_s = reply.timings.render_s + reply.timings.shadow_render_s;
             stats.final_request_s = final_request_s;
             stats.post_s = t_post.elapsed().as_secs_f64();
             stats.projected = reply.projected.clone();

@@ -23,13 +23,6 @@ fn layer(ch: &Channels, pass: Pass, layer: usize) -> Result<Vec<&[f32]>> {
         .collect()
 }
 
-/// Whether `ch` has every channel of layer `layer` of `pass`.
-fn has_layer(ch: &Channels, pass: Pass, layer: usize) -> bool {
-    pass.spec().exr_channels()[layer]
-        .iter()
-        .all(|name| ch.channels.contains_key(name))
-}
-
 /// The instance-id channel of the mask pass (also what the visibility render writes).
 pub(crate) fn index_channel() -> String {
     Pass::Mask.spec().exr_channels()[0][0].clone()
@@ -41,9 +34,21 @@ enum Pixels {
     Sixteen(Vec<u16>),
 }
 
+/// The shadow pass's two renders: with object shadows (`direct.exr`) and without
+/// (`noshadow.exr`).
+struct ShadowRenders {
+    direct: Channels,
+    noshadow: Channels,
+}
+
 /// Encode `pass` (any but the copied RGB) from the final render's channels `fin`, the
-/// no-shadow render's `ns` (shadow only) and the decoded instance ids.
-fn encode(pass: Pass, fin: &Channels, ns: Option<&Channels>, ids: &[u8]) -> Result<Pixels> {
+/// shadow pass's renders (shadow only) and the decoded instance ids.
+fn encode(
+    pass: Pass,
+    fin: &Channels,
+    shadow: Option<&ShadowRenders>,
+    ids: &[u8],
+) -> Result<Pixels> {
     Ok(match pass {
         Pass::Rgb => unreachable!("the RGB pass is the bridge's PNG, copied"),
         Pass::Mask => Pixels::Eight(ids.to_vec()),
@@ -57,40 +62,36 @@ fn encode(pass: Pass, fin: &Channels, ns: Option<&Channels>, ids: &[u8]) -> Resu
             Pixels::Eight(post::encode_albedo(c[0], c[1], c[2]))
         }
         Pass::Shadow => {
-            let ns = ns.expect("the shadow pass reads the no-shadow render");
-            let (lit, un) = shadow_inputs(fin, ns)?;
+            let s = shadow.expect("the shadow pass reads its own renders");
+            // Direct light on white diffuse surfaces: `DiffDir` is the light itself.
+            let (lit, un) = (layer(&s.direct, pass, 0)?, layer(&s.noshadow, pass, 0)?);
             Pixels::Eight(post::encode_shadow(
-                [&lit[0], &lit[1], &lit[2]],
-                [&un[0], &un[1], &un[2]],
+                [lit[0], lit[1], lit[2]],
+                [un[0], un[1], un[2]],
             ))
         }
     })
 }
 
-/// Three planes of float samples (R, G, B).
-type Rgb = [Vec<f32>; 3];
-
-/// The direct light with and without object shadows, per RGB channel: diffuse + glossy
-/// (weighted by the colours of the final render) when the bridge wrote the glossy layers,
-/// else diffuse direct light alone. The shadow pass's layers: 0 diffuse direct, 1 diffuse
-/// colour, 2 glossy direct, 3 glossy colour.
-fn shadow_inputs(fin: &Channels, ns: &Channels) -> Result<(Rgb, Rgb)> {
-    let p = Pass::Shadow;
-    let has_gloss = (1..4).all(|l| has_layer(fin, p, l)) && has_layer(ns, p, 2);
-    let mut lit: Rgb = Default::default();
-    let mut un: Rgb = Default::default();
-    let (fin_dd, ns_dd) = (layer(fin, p, 0)?, layer(ns, p, 0)?);
-    for k in 0..3 {
-        if has_gloss {
-            let (dc, gc) = (layer(fin, p, 1)?[k], layer(fin, p, 3)?[k]);
-            lit[k] = post::direct_light(fin_dd[k], dc, layer(fin, p, 2)?[k], gc);
-            un[k] = post::direct_light(ns_dd[k], dc, layer(ns, p, 2)?[k], gc);
-        } else {
-            lit[k] = fin_dd[k].to_vec();
-            un[k] = ns_dd[k].to_vec();
-        }
+/// Read one of the shadow pass's EXRs (`role` in the reply's files), checking its size.
+fn read_shadow_exr(
+    reply: &RenderReply,
+    role: &str,
+    work: &Path,
+    size: (usize, usize),
+) -> Result<Channels> {
+    let path = reply_file(reply, role, work)?;
+    let ch = Channels::read(&path)?;
+    if (ch.width, ch.height) != size {
+        return Err(RenderError::BadOutput {
+            path,
+            problem: format!(
+                "size {}x{} but the final render is {}x{}",
+                ch.width, ch.height, size.0, size.1
+            ),
+        });
     }
-    Ok((lit, un))
+    Ok(ch)
 }
 
 /// Decode the bridge's files, encode every requested pass into `staged`, and return the
@@ -119,11 +120,11 @@ pub(crate) fn write_passes(
     let n = scene.objects.len();
     let ids = post::instance_ids(ch.get(&index_channel())?, n, &exr_path)?;
     let objects = post::object_pixels(&ids, ch.width, n);
-    let noshadow = match passes
-        .iter()
-        .any(|p| p.spec().source == Source::PassesAndNoShadowExr)
-    {
-        true => Some(Channels::read(&reply_file(reply, "noshadow", work)?)?),
+    let shadow = match passes.iter().any(|p| p.spec().source == Source::ShadowExrs) {
+        true => Some(ShadowRenders {
+            direct: read_shadow_exr(reply, "direct", work, (ch.width, ch.height))?,
+            noshadow: read_shadow_exr(reply, "noshadow", work, (ch.width, ch.height))?,
+        }),
         false => None,
     };
     for &pass in passes {
@@ -143,7 +144,7 @@ pub(crate) fn write_passes(
             continue;
         }
         let kind = pass.spec().png;
-        let bytes = match encode(pass, &ch, noshadow.as_ref(), &ids)? {
+        let bytes = match encode(pass, &ch, shadow.as_ref(), &ids)? {
             Pixels::Eight(d) => post::encode_png(kind, w, h, &d, &[]),
             Pixels::Sixteen(d) => post::encode_png(kind, w, h, &[], &d),
         }
@@ -156,8 +157,9 @@ pub(crate) fn write_passes(
     if keep_exr {
         let names = layout::exr_files(stem, passes.contains(&Pass::Shadow));
         staged.copy(&names[0], &exr_path)?;
-        if let Some(ns) = names.get(1) {
-            staged.copy(ns, &reply_file(reply, "noshadow", work)?)?;
+        if names.len() == 3 {
+            staged.copy(&names[1], &reply_file(reply, "direct", work)?)?;
+            staged.copy(&names[2], &reply_file(reply, "noshadow", work)?)?;
         }
     }
     Ok(objects)

@@ -129,8 +129,9 @@ fn srgb8(v: f32) -> u8 {
     (s * 255.0).round() as u8
 }
 
-/// Shadow amount `1 - L_shadowed / L_unshadowed` of direct reflected light (luminance),
-/// clamped to [0, 1], as 8-bit (255 = fully shadowed). Where the unshadowed light is below
+/// Shadow amount `1 - L_shadowed / L_unshadowed` of direct light (luminance; the bridge
+/// renders it on white diffuse surfaces), clamped to [0, 1], as 8-bit (255 = fully
+/// shadowed). Where the unshadowed light is below
 /// [`SHADOW_EPS`] the ratio is undefined and the value is [`SHADOW_UNDEFINED`].
 pub fn encode_shadow(lit: [&[f32]; 3], unshadowed: [&[f32]; 3]) -> Vec<u8> {
     let lum = |c: [&[f32]; 3], i: usize| 0.2126 * c[0][i] + 0.7152 * c[1][i] + 0.0722 * c[2][i];
@@ -143,20 +144,6 @@ pub fn encode_shadow(lit: [&[f32]; 3], unshadowed: [&[f32]; 3]) -> Vec<u8> {
                 ((1.0 - l / u).clamp(0.0, 1.0) * 255.0).round() as u8
             }
         })
-        .collect()
-}
-
-/// Direct reflected light per channel, `diff_dir * diff_col + gloss_dir * gloss_col`: the
-/// quantity whose shadowed/unshadowed ratio is the shadow pass. The glossy term matters on
-/// metals, whose diffuse lobe is ~0.
-pub fn direct_light(
-    diff_dir: &[f32],
-    diff_col: &[f32],
-    gloss_dir: &[f32],
-    gloss_col: &[f32],
-) -> Vec<f32> {
-    (0..diff_dir.len())
-        .map(|i| diff_dir[i] * diff_col[i] + gloss_dir[i] * gloss_col[i])
         .collect()
 }
 

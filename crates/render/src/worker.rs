@@ -94,15 +94,15 @@ pub struct BridgeTimings {
     /// Writing the output files.
     #[serde(default)]
     pub write_s: f64,
-    /// The extra no-shadow render of the shadow pass (0 without it).
+    /// The shadow pass's two direct-light renders, together (0 without the pass).
     #[serde(default)]
-    pub noshadow_render_s: f64,
+    pub shadow_render_s: f64,
 }
 
 /// The reply to a `render` request.
 #[derive(Debug, Clone, Deserialize)]
 pub struct RenderReply {
-    /// Files written, by role (`visibility`, `rgb`, `passes`, `noshadow`).
+    /// Files written, by role (`visibility`, `rgb`, `passes`, `direct`, `noshadow`).
     #[serde(default)]
     pub files: BTreeMap<String, PathBuf>,
     /// Where the time went.

@@ -49,10 +49,11 @@ pub fn metadata_file(stem: &str) -> String {
 }
 
 /// File names of the float EXRs kept with `--keep-exr`: the final render's passes, and the
-/// no-shadow render when the shadow pass was made.
+/// shadow pass's two renders (with and without object shadows) when it was made.
 pub fn exr_files(stem: &str, shadow: bool) -> Vec<String> {
     let mut v = vec![format!("{stem}_passes.exr")];
     if shadow {
+        v.push(format!("{stem}_direct.exr"));
         v.push(format!("{stem}_noshadow.exr"));
     }
     v
@@ -142,7 +143,10 @@ mod tests {
         assert_eq!(pass_file("S", Pass::Albedo), "S_albedo_0001.png");
         assert_eq!(pass_file("S", Pass::Shadow), "S_shadow_0001.png");
         assert_eq!(metadata_file("S"), "S.json");
-        assert_eq!(exr_files("S", true), ["S_passes.exr", "S_noshadow.exr"]);
+        assert_eq!(
+            exr_files("S", true),
+            ["S_passes.exr", "S_direct.exr", "S_noshadow.exr"]
+        );
     }
 
     #[test]

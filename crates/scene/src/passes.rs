@@ -49,9 +49,10 @@ pub enum Source {
     RgbPng,
     /// Layers of the multilayer `passes.exr` of the final render.
     PassesExr,
-    /// Layers of `passes.exr`, and the same light layers of `noshadow.exr` (the final render
-    /// again with objects casting no shadows).
-    PassesAndNoShadowExr,
+    /// The same layers of the shadow pass's own two renders, `direct.exr` and `noshadow.exr`:
+    /// direct light only, every surface a white diffuse BSDF, objects casting shadows and
+    /// not, same samples and seed (`blender_scripts/builder.py`, `SHADOW_SAMPLES_MAX`).
+    ShadowExrs,
 }
 
 /// The colour layout of a published PNG.
@@ -215,13 +216,8 @@ const SPECS: [PassSpec; 6] = [
     PassSpec {
         pass: Pass::Shadow,
         name: "shadow",
-        source: Source::PassesAndNoShadowExr,
-        exr_layers: &[
-            ("DiffDir", "RGB"),
-            ("DiffCol", "RGB"),
-            ("GlossDir", "RGB"),
-            ("GlossCol", "RGB"),
-        ],
+        source: Source::ShadowExrs,
+        exr_layers: &[("DiffDir", "RGB")],
         file_suffix: "_shadow_0001",
         png: PngKind::Gray8,
         encoding: Encoding {
@@ -231,7 +227,7 @@ const SPECS: [PassSpec; 6] = [
             ..encoding(
                 8,
                 "gray",
-                "shadow = value / 255 = 1 - direct diffuse light / the same with objects casting no shadows (luminance)",
+                "shadow = value / 255 = 1 - direct light / the same with objects casting no shadows, both on white diffuse surfaces (luminance)",
             )
         },
     },
