@@ -4,7 +4,8 @@
 #
 #   ./scripts/setup.sh               Blender (apt) and the Rust components
 #   ./scripts/setup.sh --test-venv   also `.venv-test/`: a Python venv with the libraries the
-#                                    tests read our files with (webdataset, PyYAML)
+#                                    tests read our files with (webdataset, PyYAML) and the
+#                                    eval reference harness's (numpy, scipy, scikit-learn, Pillow)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SUDO=""
@@ -32,6 +33,10 @@ if [ "$test_venv" = 1 ]; then
   if ! .venv-test/bin/python -c 'import webdataset, yaml' >/dev/null 2>&1; then
     python3 -m venv .venv-test
     .venv-test/bin/pip install --quiet --disable-pip-version-check 'webdataset>=0.2,<2' 'pyyaml>=6'
+  fi
+  # tests/eval_reference/harness.py (the public evaluators in numpy; see docs/eval.md).
+  if ! .venv-test/bin/python -c 'import numpy, scipy, sklearn, PIL' >/dev/null 2>&1; then
+    .venv-test/bin/pip install --quiet --disable-pip-version-check numpy scipy scikit-learn pillow
   fi
   echo "test venv: $(.venv-test/bin/python -c 'import webdataset, sys; print(sys.version.split()[0], "webdataset", getattr(webdataset, "__version__", "?"))')"
 fi

@@ -5,6 +5,7 @@ mod util;
 
 mod bench;
 mod eval;
+mod eval_protocols;
 mod export;
 mod extreme;
 mod generate;
