@@ -12,6 +12,7 @@ mod generate;
 mod k8s;
 mod materials;
 mod preview;
+mod python_package;
 mod sample;
 mod slurm;
 mod verify;

@@ -365,3 +365,176 @@ if __name__ == "__main__":
         sys.exit(f"unknown mode {mode}")
     with open(path, "w") as f:
         json.dump(out, f)
+
+
+# ---------------------------------------------------------------------------------------------
+# karazijal/clevrtex: CLEVRTEX_Evaluator, statement by statement (torch there, numpy here).
+
+
+class _RunningMean:
+    def __init__(self):
+        self.v = 0.0
+        self.n = 0
+
+    def update(self, v, n=1):
+        self.v += v * n
+        self.n += n
+
+    def value(self):
+        return self.v / self.n if self.n else float("nan")
+
+
+class ClevrTexEvaluator:
+    def __init__(self, masks_have_background=True):
+        self.masks_have_background = masks_have_background
+        self.stats = defaultdict(_RunningMean)
+        self.tags = defaultdict(lambda: defaultdict(lambda: defaultdict(_RunningMean)))
+
+    def ari(self, pred_mask, true_mask, skip_0=False):
+        B = pred_mask.shape[0]
+        pm = np.squeeze(pred_mask.argmax(axis=1)).reshape(B, -1)
+        tm = np.squeeze(true_mask.argmax(axis=1)).reshape(B, -1)
+        aris = []
+        for bi in range(B):
+            t = tm[bi]
+            p = pm[bi]
+            if skip_0:
+                p = p[t > 0]
+                t = t[t > 0]
+            aris.append(adjusted_rand_score(t, p))
+        return np.array(aris)
+
+    def msc(self, pred_mask, true_mask):
+        B = pred_mask.shape[0]
+        bpm = np.squeeze(pred_mask.argmax(axis=1))
+        btm = np.squeeze(true_mask.argmax(axis=1))
+        if B == 1:
+            bpm, btm = bpm[None], btm[None]
+        covering = np.zeros(B, dtype=np.float32)
+        for bi in range(B):
+            score = 0.0
+            norms = 0.0
+            for ti in range(btm[bi].max()):
+                tm = btm[bi] == ti
+                if not np.any(tm):
+                    continue
+                iou_max = 0.0
+                for pi in range(bpm[bi].max()):
+                    pm = bpm[bi] == pi
+                    if not np.any(pm):
+                        continue
+                    iou = np.float32((tm & pm).sum()) / np.float32((tm | pm).sum())
+                    if iou > iou_max:
+                        iou_max = iou
+                r = np.float32(tm.sum())
+                score += r * iou_max
+                norms += r
+            covering[bi] = score / norms
+        return covering
+
+    def reindex(self, tensor, reindex_tensor, dim=1):
+        alignment_index = reindex_tensor.reshape(*reindex_tensor.shape, *([1] * (tensor.ndim - reindex_tensor.ndim)))
+        return np.take_along_axis(tensor, np.broadcast_to(alignment_index, tensor.shape), axis=dim)
+
+    def ious_alignment(self, pred_masks, true_masks):
+        iou_matrix = np.zeros((pred_masks.shape[0], pred_masks.shape[1], true_masks.shape[1]), dtype=np.float32)
+        true_masks_sums = true_masks.sum((-1, -2, -3))
+        pred_masks_sums = pred_masks.sum((-1, -2, -3))
+        pred_masks = pred_masks.astype(bool)
+        true_masks = true_masks.astype(bool)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for pi in range(pred_masks.shape[1]):
+                pandt = (pred_masks[:, pi : pi + 1] & true_masks).astype(np.float32).sum((-1, -2, -3))
+                port = (pred_masks[:, pi : pi + 1] | true_masks).astype(np.float32).sum((-1, -2, -3))
+                iou_matrix[:, pi] = pandt / port
+                iou_matrix[pred_masks_sums[:, pi] == 0.0, pi] = 0.0
+        for ti in range(true_masks.shape[1]):
+            iou_matrix[true_masks_sums[:, ti] == 0.0, :, ti] = 0.0
+        iou_matrix = np.nan_to_num(iou_matrix, nan=0.0, posinf=0.0, neginf=0.0)
+        cost_matrix = iou_matrix
+        ious = np.zeros(pred_masks.shape[:2])
+        pred_inds = np.zeros(pred_masks.shape[:2], dtype=int)
+        for bi in range(cost_matrix.shape[0]):
+            true_ind, pred_ind = linear_sum_assignment(cost_matrix[bi].T, maximize=True)
+            ious[bi] = cost_matrix[bi].T[true_ind, pred_ind]
+            pred_inds[bi] = pred_ind
+        return pred_inds, ious, iou_matrix
+
+    def add_statistic(self, name, value, **tags):
+        n = 1
+        value = np.asarray(value)
+        if len(value.shape):
+            n = value.shape[0]
+            value = np.mean(value)
+        value = float(value)
+        self.stats[name].update(value, n)
+        for k, v in tags.items():
+            self.tags[name][k][v].update(value, n)
+
+    def statistic(self, name, tag=None):
+        if tag is None:
+            return self.stats[name].value()
+        return sorted([(k, rm.value()) for k, rm in self.tags[name][tag].items()], key=lambda x: x[1])
+
+    def update(self, pred_image, pred_masks, true_image, true_masks, true_metadata=None):
+        assert len(pred_image.shape) == 4
+        assert 4 <= len(pred_masks.shape) <= 5
+        pred_masks = pred_masks.reshape(pred_image.shape[0], -1, 1, *pred_image.shape[-2:])
+        total_pred_masks = pred_masks.sum(1, keepdims=True)
+        if not self.masks_have_background:
+            pred_masks = np.concatenate([1.0 - total_pred_masks, pred_masks], axis=1)
+        K = pred_masks.shape[1]
+        pred_masks = pred_masks.argmax(axis=1)
+        pred_masks = (pred_masks[:, None] == np.arange(K).reshape(1, -1, 1, 1, 1)).astype(np.float32)
+        if len(true_masks.shape) == 4:
+            if true_masks.shape[1] == 1:
+                true_masks = (
+                    true_masks[:, None] == np.arange(max(true_masks.max() + 1, pred_masks.shape[1])).reshape(1, -1, 1, 1, 1)
+                ).astype(pred_image.dtype)
+            else:
+                true_masks = true_masks[:, :, None]
+        true_masks = true_masks.reshape(pred_image.shape[0], -1, 1, *pred_image.shape[-2:])
+        K = max(true_masks.shape[1], pred_masks.shape[1])
+        if true_masks.shape[1] < K:
+            pad = np.zeros((true_masks.shape[0], K - true_masks.shape[1], 1, *true_masks.shape[-2:]), true_masks.dtype)
+            true_masks = np.concatenate([true_masks, pad], axis=1)
+        if pred_masks.shape[1] < K:
+            pad = np.zeros((pred_masks.shape[0], K - pred_masks.shape[1], 1, *pred_masks.shape[-2:]), pred_masks.dtype)
+            pred_masks = np.concatenate([pred_masks, pad], axis=1)
+        # torch sums the float32 squares in float32; float64 here (and in clevrtex), see docs.
+        d = (pred_image - true_image).astype(np.float32)
+        mse = (d * d).astype(np.float64).sum((1, 2, 3))
+        self.add_statistic("MSE", mse)
+        pred_count = (pred_masks >= 0.5).any(-1).any(-1).any(-1).astype(np.float32).sum(-1)
+        true_count = (true_masks >= 0.5).any(-1).any(-1).any(-1).astype(np.float32).sum(-1)
+        self.add_statistic("acc", (true_count == pred_count).astype(np.float32))
+        pred_reindex, ious, _ = self.ious_alignment(pred_masks, true_masks)
+        pred_masks = self.reindex(pred_masks, pred_reindex, dim=1)
+        truem = true_masks.any(-1).any(-1).any(-1)
+        predm = pred_masks.any(-1).any(-1).any(-1)
+        vism = truem | predm
+        num_pairs = vism.astype(np.float32).sum(-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.add_statistic("mIoU", ious.sum(-1) / num_pairs)
+            self.add_statistic("mIoU_fg", ious[:, 1:].sum(-1) / (num_pairs - 1))
+            self.add_statistic("mIoU_gt", ious.sum(-1) / truem.astype(np.float32).sum(-1))
+            self.add_statistic("mSC", self.msc(pred_masks, true_masks))
+            dices = 2 * (pred_masks * true_masks).sum((-3, -2, -1)) / (pred_masks.sum((-3, -2, -1)) + true_masks.sum((-3, -2, -1)))
+        dices = np.nan_to_num(dices, nan=0.0, posinf=0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.add_statistic("DICE", dices.sum(-1) / num_pairs)
+            self.add_statistic("DICE_FG", dices[:, 1:].sum(-1) / (num_pairs - 1))
+        self.add_statistic("ARI", self.ari(pred_masks, true_masks))
+        self.add_statistic("ARI_FG", self.ari(pred_masks, true_masks, skip_0=True))
+        if true_metadata is not None:
+            d = (pred_image[:, None] * true_masks - true_image[:, None] * true_masks).astype(np.float32)
+            smses = (d * d).astype(np.float64).sum((-1, -2, -3))
+            for bi, meta in enumerate(true_metadata):
+                self.add_statistic("ground_mse", smses[bi, 0], ground_material=meta["ground_material"])
+                self.add_statistic("ground_iou", ious[bi, 0], ground_material=meta["ground_material"])
+                for i, obj in enumerate(meta["objects"]):
+                    tags = {k: v for k, v in obj.items() if k != "rotation"}
+                    if truem[bi, i + 1]:
+                        self.add_statistic("obj_mse", smses[bi, i + 1], **tags)
+                        self.add_statistic("obj_iou", ious[bi, i + 1], **tags)
+        return pred_masks, true_masks
