@@ -36,6 +36,27 @@ fn f32s(b: &[u8]) -> Vec<f32> {
         .collect()
 }
 
+/// [`argmax_masks`] (first index on ties, NaN the maximum) read straight from little-endian
+/// f32 bytes `(k, n)`, without a copy of the masks.
+fn argmax_le_bytes(m: &[u8], k: usize, n: usize) -> Vec<u32> {
+    let at = |slot: usize, i: usize| {
+        let o = 4 * (slot * n + i);
+        f32::from_le_bytes([m[o], m[o + 1], m[o + 2], m[o + 3]])
+    };
+    let mut best: Vec<f32> = (0..n).map(|i| at(0, i)).collect();
+    let mut idx = vec![0u32; n];
+    for slot in 1..k {
+        for i in 0..n {
+            let (b, v) = (best[i], at(slot, i));
+            if !b.is_nan() && (v.is_nan() || v > b) {
+                best[i] = v;
+                idx[i] = slot as u32;
+            }
+        }
+    }
+    idx
+}
+
 /// One image's scores: every metric (indexed like `metric_names()`), the matched IoU and size
 /// of each true slot, and each true slot's squared error when images were given.
 type ImageOut = (Vec<Option<f64>>, Vec<f64>, Vec<u64>, Option<Vec<f64>>);
@@ -83,11 +104,13 @@ fn score(
                     let slots = p.iter().max().map_or(1, |&m| m as usize + 1);
                     (p, slots)
                 } else {
-                    let m = f32s(&pred[4 * b * per * pixels..4 * (b + 1) * per * pixels]);
-                    (
-                        argmax_masks(&m, masks, pixels, no_background),
-                        masks + usize::from(no_background),
-                    )
+                    let m = &pred[4 * b * per * pixels..4 * (b + 1) * per * pixels];
+                    let labels = if no_background {
+                        argmax_masks(&f32s(m), masks, pixels, true)
+                    } else {
+                        argmax_le_bytes(m, masks, pixels)
+                    };
+                    (labels, masks + usize::from(no_background))
                 };
                 let mut s = score_image(&t, &p, slots.max(min_slots), None);
                 let mut sq = None;
