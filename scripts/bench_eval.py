@@ -36,6 +36,9 @@ import clevrtex  # noqa: E402
 def make_dataset(out, n, rng):
     gt = os.path.join(out, "gt", "clevrtex_full")
     preds = os.path.join(out, "preds")
+    last = os.path.join(gt, str((n - 1) // 1000), f"CLEVRTEX_full_{n - 1:06}.json")
+    if os.path.exists(last):  # made by an earlier run with the same --out and --images
+        return os.path.join(out, "gt"), preds
     os.makedirs(preds, exist_ok=True)
     yy, xx = np.mgrid[0:240, 0:320]
     for i in range(n):

@@ -39,19 +39,25 @@ fn f32s(b: &[u8]) -> Vec<f32> {
 /// [`argmax_masks`] (first index on ties, NaN the maximum) read straight from little-endian
 /// f32 bytes `(k, n)`, without a copy of the masks.
 fn argmax_le_bytes(m: &[u8], k: usize, n: usize) -> Vec<u32> {
-    let at = |slot: usize, i: usize| {
-        let o = 4 * (slot * n + i);
-        f32::from_le_bytes([m[o], m[o + 1], m[o + 2], m[o + 3]])
+    let decode = |s: usize, out: &mut [f32]| {
+        for (o, c) in out
+            .iter_mut()
+            .zip(m[4 * s * n..4 * (s + 1) * n].chunks_exact(4))
+        {
+            *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+        }
     };
-    let mut best: Vec<f32> = (0..n).map(|i| at(0, i)).collect();
+    let mut best = vec![0.0f32; n];
+    decode(0, &mut best);
+    let mut cur = vec![0.0f32; n];
     let mut idx = vec![0u32; n];
-    for slot in 1..k {
-        for i in 0..n {
-            let (b, v) = (best[i], at(slot, i));
-            if !b.is_nan() && (v.is_nan() || v > b) {
-                best[i] = v;
-                idx[i] = slot as u32;
-            }
+    for s in 1..k {
+        decode(s, &mut cur);
+        // Branch-free, so it vectorises: the first maximum wins, a NaN is kept once taken.
+        for ((b, i), &v) in best.iter_mut().zip(idx.iter_mut()).zip(&cur) {
+            let take = !b.is_nan() & (v.is_nan() | (v > *b));
+            *b = if take { v } else { *b };
+            *i = if take { s as u32 } else { *i };
         }
     }
     idx
