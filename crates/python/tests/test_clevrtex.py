@@ -186,8 +186,15 @@ def test_dataset_equals_the_public_loader():
 def test_the_gil_is_released_while_scoring():
     # 300 segments per image: the matching is cubic, so one call takes a while.
     rng = np.random.default_rng(0)
-    truth = np.tile((np.arange(64 * 64).reshape(64, 64) // 13) % 300, (48, 1, 1))
+    truth = np.tile((np.arange(64 * 64).reshape(64, 64) // 13) % 300, (16, 1, 1))
     pred = np.where(rng.random(truth.shape) < 0.3, rng.integers(0, 300, truth.shape), (truth * 7 + 3) % 300)
+    # Grow the batch until one call takes at least half a second on this machine.
+    while True:
+        t0 = time.perf_counter()
+        clevrtex.evaluate(pred, truth)
+        if time.perf_counter() - t0 >= 0.5 or len(truth) >= 1 << 14:
+            break
+        truth, pred = np.concatenate([truth, truth]), np.concatenate([pred, pred])
     done = threading.Event()
     took = []
 
@@ -207,6 +214,6 @@ def test_the_gil_is_released_while_scoring():
         last = now
     th.join()
     # With the GIL held for the whole call this thread would stall for about its length.
-    assert took[0] > 0.2, f"scoring took {took[0]:.3f} s: too short to show anything"
+    assert took[0] > 0.25, f"scoring took {took[0]:.3f} s: too short to show anything"
     assert max(gaps) < took[0] / 2, f"this thread stalled {max(gaps):.3f} s of {took[0]:.3f} s"
     assert ticks > 1000
