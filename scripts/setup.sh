@@ -4,7 +4,9 @@
 #
 #   ./scripts/setup.sh               Blender (apt) and the Rust components
 #   ./scripts/setup.sh --test-venv   also `.venv-test/`: a Python venv with the libraries the
-#                                    tests read our files with (webdataset, PyYAML)
+#                                    tests read our files with (webdataset, PyYAML) and the
+#                                    eval reference harness's (numpy, scipy, scikit-learn, Pillow),
+#                                    and the Python package `clevrtex` (crates/python) with pytest
 #   ./scripts/setup.sh --browser     also Debian's `chromium`, for the report's browser test
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -41,6 +43,13 @@ if [ "$test_venv" = 1 ]; then
     python3 -m venv .venv-test
     .venv-test/bin/pip install --quiet --disable-pip-version-check 'webdataset>=0.2,<2' 'pyyaml>=6'
   fi
+  # tests/eval_reference/harness.py (the public evaluators in numpy; see docs/eval.md).
+  if ! .venv-test/bin/python -c 'import numpy, scipy, sklearn, PIL' >/dev/null 2>&1; then
+    .venv-test/bin/pip install --quiet --disable-pip-version-check numpy scipy scikit-learn pillow
+  fi
+  # The Python package (crates/python, PyO3 + maturin) and pytest for its tests; rebuilt each
+  # time so it follows the sources (cargo reuses crates/python/target).
+  .venv-test/bin/pip install --quiet --disable-pip-version-check pytest ./crates/python
   echo "test venv: $(.venv-test/bin/python -c 'import webdataset, sys; print(sys.version.split()[0], "webdataset", getattr(webdataset, "__version__", "?"))')"
 fi
 echo "blender: $(blender --version 2>/dev/null | head -n 1)"

@@ -5,12 +5,14 @@ mod util;
 
 mod bench;
 mod eval;
+mod eval_protocols;
 mod export;
 mod extreme;
 mod generate;
 mod k8s;
 mod materials;
 mod preview;
+mod python_package;
 mod report;
 mod sample;
 mod slurm;

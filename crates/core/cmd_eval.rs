@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use clevrtex_eval::{evaluate, output, Options, Protocol, Split};
+use clevrtex_eval::{evaluate, output, Metric, Options, Protocol, Split};
 
 use crate::exit::{CmdResult, OK, USAGE};
 
@@ -27,9 +27,19 @@ pub struct Args {
     /// Which samples to score, by position in the index sequence [default: test; all for outd].
     #[arg(long, value_enum)]
     pub split: Option<SplitArg>,
-    /// `clevrtex`: crop the centre 80% square and resize to 128x128; `native`: no resize.
+    /// Whose metrics to report by default, and the crop: `clevrtex` (the public ClevrTex
+    /// evaluator; crop the centre 80% square and resize to 128x128), `native` (the same metrics,
+    /// no resize), `deepmind` (FG-ARI of multi_object_datasets), `ocl` (ARI, mIoU, mBO, CorLoc of
+    /// the object-centric learning framework); see docs/eval.md.
     #[arg(long, value_enum, default_value = "clevrtex")]
     pub protocol: ProtocolArg,
+    /// Metrics to report, by name, comma-separated, from any protocol (`all` for every one)
+    /// [default: the protocol's].
+    #[arg(long, value_name = "A,B,C", value_delimiter = ',', value_parser = parse_metric)]
+    pub metrics: Vec<MetricSel>,
+    /// Score at the dataset's own resolution (no crop, no resize) under any protocol.
+    #[arg(long)]
+    pub native_size: bool,
     /// Soft masks hold foreground slots only: put a background `1 - sum(masks)` in front.
     #[arg(long)]
     pub no_background: bool,
@@ -66,10 +76,33 @@ pub enum SplitArg {
 /// `--protocol` values.
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum ProtocolArg {
-    /// The benchmark's crop and resize to 128x128.
+    /// The public ClevrTex evaluator's metrics; the benchmark's crop and resize to 128x128.
     Clevrtex,
-    /// Predictions at the dataset's own resolution.
+    /// The same metrics at the dataset's own resolution.
     Native,
+    /// DeepMind's FG-ARI (multi_object_datasets).
+    Deepmind,
+    /// The object-centric learning framework's ARI, mIoU, mBO and CorLoc.
+    Ocl,
+}
+
+/// One `--metrics` entry: a metric, or `all`.
+#[derive(Clone, Debug)]
+pub enum MetricSel {
+    /// Every metric.
+    All,
+    /// One metric.
+    One(Metric),
+}
+
+fn parse_metric(s: &str) -> Result<MetricSel, String> {
+    if s == "all" {
+        return Ok(MetricSel::All);
+    }
+    Metric::from_name(s).map(MetricSel::One).ok_or_else(|| {
+        let names: Vec<&str> = Metric::ALL.iter().map(|m| m.name()).collect();
+        format!("unknown metric `{s}`; known: {}, all", names.join(", "))
+    })
 }
 
 /// Write `text` to `path` through a temporary file, so no partial file is left behind.
@@ -95,7 +128,25 @@ pub fn run(args: Args) -> CmdResult {
         protocol: match args.protocol {
             ProtocolArg::Clevrtex => Protocol::Clevrtex,
             ProtocolArg::Native => Protocol::Native,
+            ProtocolArg::Deepmind => Protocol::Deepmind,
+            ProtocolArg::Ocl => Protocol::Ocl,
         },
+        metrics: {
+            let mut chosen: Vec<Metric> = Vec::new();
+            for sel in &args.metrics {
+                let add: &[Metric] = match sel {
+                    MetricSel::All => &Metric::ALL,
+                    MetricSel::One(m) => std::slice::from_ref(m),
+                };
+                for m in add {
+                    if !chosen.contains(m) {
+                        chosen.push(*m);
+                    }
+                }
+            }
+            chosen
+        },
+        native_size: args.native_size,
         split: args.split.map(|s| match s {
             SplitArg::Test => Split::Test,
             SplitArg::Val => Split::Val,

@@ -9,17 +9,26 @@ use xxhash_rust::xxh3::xxh3_64;
 
 use crate::dataset::{discover_gt, index_preds, PredFiles, Split};
 use crate::error::{corrupt, EvalError, MAX_SLOTS};
-use crate::metrics::{score_image, Metric, Recon, Scores};
+use crate::metrics::{score_image, Metric, Recon, Scores, METRICS};
 use crate::resize::{crop_resize_bilinear_rgb, crop_resize_nearest, EVAL_SIDE};
 use crate::{meta, predict, read};
 
-/// How ground truth is brought to the predictions' resolution.
+/// Which community's metrics are reported by default, and how ground truth is brought to the
+/// predictions' resolution (`docs/eval.md` has a table of how the protocols differ).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Protocol {
-    /// Centre crop of side `int(0.8 min(W, H))`, resized to 128x128 (the benchmark's).
+    /// The public ClevrTex evaluator's metrics; centre crop of side `int(0.8 min(W, H))`,
+    /// resized to 128x128 (the benchmark's).
     Clevrtex,
-    /// No crop or resize: predictions at the ground truth's resolution.
+    /// The ClevrTex metrics without crop or resize: predictions at the ground truth's
+    /// resolution.
     Native,
+    /// DeepMind's FG-ARI (`multi_object_datasets/segmentation_metrics.py`); same crop and resize
+    /// as `clevrtex`.
+    Deepmind,
+    /// The object-centric learning framework's ARI, mIoU, mBO and CorLoc
+    /// (`ocl/metrics/masks.py`); same crop and resize as `clevrtex`.
+    Ocl,
 }
 
 impl Protocol {
@@ -28,6 +37,50 @@ impl Protocol {
         match self {
             Protocol::Clevrtex => "clevrtex",
             Protocol::Native => "native",
+            Protocol::Deepmind => "deepmind",
+            Protocol::Ocl => "ocl",
+        }
+    }
+
+    /// The protocol called `name`, if any.
+    pub fn from_name(name: &str) -> Option<Protocol> {
+        [
+            Protocol::Clevrtex,
+            Protocol::Native,
+            Protocol::Deepmind,
+            Protocol::Ocl,
+        ]
+        .into_iter()
+        .find(|p| p.name() == name)
+    }
+
+    /// The metrics reported when none are chosen.
+    pub fn default_metrics(self) -> &'static [Metric] {
+        match self {
+            Protocol::Clevrtex | Protocol::Native => &Metric::CLEVRTEX,
+            Protocol::Deepmind => &Metric::DEEPMIND,
+            Protocol::Ocl => &Metric::OCL,
+        }
+    }
+
+    /// Whether ground truth is centre-cropped and resized to 128x128 (unless the options ask
+    /// for the native size).
+    pub fn crops(self) -> bool {
+        self != Protocol::Native
+    }
+
+    /// Where the protocol's definitions come from, for the report's header.
+    pub fn source(self) -> &'static str {
+        match self {
+            Protocol::Clevrtex | Protocol::Native => {
+                "karazijal/clevrtex `CLEVRTEX_Evaluator` (ool/clevrtex_eval.py)"
+            }
+            Protocol::Deepmind => {
+                "deepmind/multi_object_datasets `adjusted_rand_index` (segmentation_metrics.py)"
+            }
+            Protocol::Ocl => {
+                "amazon-science/object-centric-learning-framework (ocl/metrics/masks.py)"
+            }
         }
     }
 }
@@ -35,8 +88,12 @@ impl Protocol {
 /// Options of an evaluation.
 #[derive(Clone, Debug)]
 pub struct Options {
-    /// Crop/resize protocol.
+    /// Protocol: the default metrics and the crop/resize.
     pub protocol: Protocol,
+    /// Metrics to report; empty for the protocol's own.
+    pub metrics: Vec<Metric>,
+    /// Score at the dataset's own resolution whatever the protocol (no crop, no resize).
+    pub native_size: bool,
     /// Which split; `None` is the default (`test`; all of `outd`).
     pub split: Option<Split>,
     /// Variant name; `None` to infer it from the files.
@@ -51,10 +108,19 @@ pub struct Options {
     pub seed: u64,
 }
 
+impl Options {
+    /// Whether ground truth is centre-cropped and resized to 128x128.
+    pub fn crops(&self) -> bool {
+        self.protocol.crops() && !self.native_size
+    }
+}
+
 impl Default for Options {
     fn default() -> Self {
         Options {
             protocol: Protocol::Clevrtex,
+            metrics: Vec::new(),
+            native_size: false,
             split: None,
             variant: None,
             no_background: false,
@@ -72,6 +138,8 @@ pub struct ObjectScore {
     pub groups: Vec<(&'static str, String)>,
     /// Matched IoU of the object's true slot.
     pub iou: f64,
+    /// Best overlap of the object's true slot (largest f64 IoU over predicted segments).
+    pub best_overlap: f64,
     /// Squared error summed over its pixels and channels, with a reconstruction.
     pub mse: Option<f64>,
 }
@@ -150,6 +218,8 @@ pub struct Group {
     pub count: usize,
     /// Mean matched IoU.
     pub iou: f64,
+    /// Mean best overlap (the objects' share of `mBO`).
+    pub best_overlap: f64,
     /// Mean per-object squared error, over objects with a reconstruction.
     pub mse: Option<f64>,
     /// Objects with a reconstruction.
@@ -170,7 +240,11 @@ pub struct Report {
     /// Per-image results, in index order.
     pub images: Vec<ImageResult>,
     /// Per-metric summaries, indexed like [`Metric::ALL`].
-    pub summaries: [Summary; 10],
+    pub summaries: [Summary; METRICS],
+    /// The metrics reported, in report order.
+    pub metrics: Vec<Metric>,
+    /// Ground truth was cropped and resized to 128x128.
+    pub cropped: bool,
     /// Breakdowns: kind (`material`, `shape`, `size`, `color`, `ground_material`) -> value ->
     /// group.
     pub breakdowns: BTreeMap<&'static str, BTreeMap<String, Group>>,
@@ -213,7 +287,7 @@ impl Report {
 
     /// Summary of one metric.
     pub fn summary(&self, m: Metric) -> Summary {
-        self.summaries[Metric::ALL.iter().position(|&x| x == m).unwrap_or(0)]
+        self.summaries[m.index()]
     }
 }
 
@@ -284,11 +358,11 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
         })
         .collect::<Result<Vec<_>, _>>()?;
 
-    let values: Vec<[Option<f64>; 10]> = images.iter().map(|r| r.scores.values).collect();
+    let values: Vec<[Option<f64>; METRICS]> = images.iter().map(|r| r.scores.values).collect();
     let summaries = summarise(&values, opts.bootstrap, opts.seed);
 
-    // kind -> value -> (objects, IoU sum, objects with MSE, MSE sum)
-    type Sums = BTreeMap<&'static str, BTreeMap<String, (usize, f64, usize, f64)>>;
+    // kind -> value -> (objects, IoU sum, objects with MSE, MSE sum, best-overlap sum)
+    type Sums = BTreeMap<&'static str, BTreeMap<String, (usize, f64, usize, f64, f64)>>;
     let mut sums: Sums = BTreeMap::new();
     for r in &images {
         for o in &r.objects {
@@ -300,6 +374,7 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
                     .or_default();
                 g.0 += 1;
                 g.1 += o.iou;
+                g.4 += o.best_overlap;
                 if let Some(e) = o.mse {
                     g.2 += 1;
                     g.3 += e;
@@ -312,10 +387,11 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
         .map(|(k, groups)| {
             let groups = groups
                 .into_iter()
-                .map(|(v, (n, iou, mn, mse))| {
+                .map(|(v, (n, iou, mn, mse, bo))| {
                     let g = Group {
                         count: n,
                         iou: iou / n as f64,
+                        best_overlap: bo / n as f64,
                         mse: (mn > 0).then(|| mse / mn as f64),
                         mse_count: mn,
                     };
@@ -336,6 +412,12 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
         variant,
         split,
         protocol: opts.protocol,
+        metrics: if opts.metrics.is_empty() {
+            opts.protocol.default_metrics().to_vec()
+        } else {
+            opts.metrics.clone()
+        },
+        cropped: opts.crops(),
         no_background: opts.no_background,
         images,
         summaries,
@@ -350,9 +432,13 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
 /// Per metric: the mean over images where it is defined, and a 95% percentile bootstrap over
 /// images. Each resample draws image indices once for all metrics; resample `r` uses ChaCha
 /// stream `r` of `seed`, so the intervals do not depend on the number of threads.
-pub fn summarise(values: &[[Option<f64>; 10]], bootstrap: usize, seed: u64) -> [Summary; 10] {
+pub fn summarise(
+    values: &[[Option<f64>; METRICS]],
+    bootstrap: usize,
+    seed: u64,
+) -> [Summary; METRICS] {
     let n = values.len();
-    let mut out = [Summary::default(); 10];
+    let mut out = [Summary::default(); METRICS];
     for (m, s) in out.iter_mut().enumerate() {
         let defined: Vec<f64> = values.iter().filter_map(|v| v[m]).collect();
         if !defined.is_empty() {
@@ -363,16 +449,16 @@ pub fn summarise(values: &[[Option<f64>; 10]], bootstrap: usize, seed: u64) -> [
     if bootstrap == 0 || n == 0 {
         return out;
     }
-    let resamples: Vec<[Option<f64>; 10]> = (0..bootstrap)
+    let resamples: Vec<[Option<f64>; METRICS]> = (0..bootstrap)
         .into_par_iter()
         .map(|r| {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
             rng.set_stream(r as u64);
-            let mut sum = [0.0f64; 10];
-            let mut count = [0usize; 10];
+            let mut sum = [0.0f64; METRICS];
+            let mut count = [0usize; METRICS];
             for _ in 0..n {
                 let v = &values[rng.random_range(0..n)];
-                for m in 0..10 {
+                for m in 0..METRICS {
                     if let Some(x) = v[m] {
                         sum[m] += x;
                         count[m] += 1;
@@ -425,9 +511,9 @@ fn score_sample(
     }
     let sample_meta = meta::parse(&meta_bytes).map_err(|r| corrupt(&s.meta, r, GT_HINT))?;
     let (gw, gh) = (gt_mask.width, gt_mask.height);
-    let (truth, hw) = match opts.protocol {
-        Protocol::Native => (gt_mask.labels, (gw, gh)),
-        Protocol::Clevrtex => {
+    let (truth, hw) = match opts.crops() {
+        false => (gt_mask.labels, (gw, gh)),
+        true => {
             let t = crop_resize_nearest(&gt_mask.labels, gw, gh, EVAL_SIDE).ok_or_else(|| {
                 corrupt(
                     &s.mask,
@@ -476,9 +562,9 @@ fn score_sample(
                     GT_HINT,
                 ));
             }
-            Some(match opts.protocol {
-                Protocol::Native => img.rgb,
-                Protocol::Clevrtex => crop_resize_bilinear_rgb(&img.rgb, gw, gh, EVAL_SIDE)
+            Some(match opts.crops() {
+                false => img.rgb,
+                true => crop_resize_bilinear_rgb(&img.rgb, gw, gh, EVAL_SIDE)
                     .ok_or_else(|| corrupt(&s.image, "too small to crop", GT_HINT))?,
             })
         }
@@ -518,6 +604,7 @@ fn score_sample(
             objects.push(ObjectScore {
                 groups: vec![("ground_material", g.clone())],
                 iou: scores.iou_per_true[0],
+                best_overlap: scores.best_overlap_per_true[0],
                 mse: mse_of(0),
             });
         }
@@ -546,6 +633,7 @@ fn score_sample(
         objects.push(ObjectScore {
             groups,
             iou: scores.iou_per_true[t],
+            best_overlap: scores.best_overlap_per_true[t],
             mse: mse_of(t),
         });
     }

@@ -4,7 +4,8 @@ use serde::Serialize;
 
 use crate::lsa::min_cost_assignment;
 
-/// The ten dataset metrics, in report order.
+/// Every dataset metric of every protocol, in report order (`docs/eval.md` defines them and
+/// names the code each one equals).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
 pub enum Metric {
     /// Mean matched IoU over slots that are non-empty on either side (background included).
@@ -27,11 +28,32 @@ pub enum Metric {
     Acc,
     /// Mean segmentation covering, weighted by true segment size.
     MSc,
+    /// DeepMind's FG-ARI (`multi_object_datasets/segmentation_metrics.py`): ARI over pixels
+    /// with a true object, 1 when both partitions are one cluster, undefined where the
+    /// original divides 0 by 0.
+    DmFgAri,
+    /// The object-centric learning framework's ARI over all pixels (`ARIMetric(foreground=False)`).
+    OclAri,
+    /// Its ARI over true-object pixels (`ARIMetric(foreground=True)`), 1 where degenerate.
+    OclFgAri,
+    /// Its Hungarian-matched IoU per non-empty true segment, background included
+    /// (`UnsupervisedMaskIoUMetric(matching="hungarian")`).
+    OclMIoU,
+    /// The same over the true objects only (`ignore_background=True`).
+    OclMIoUFg,
+    /// Mean best overlap: per true object the best IoU over the predicted masks, averaged
+    /// (`UnsupervisedMaskIoUMetric(matching="best_overlap", ignore_background=True)`).
+    MBo,
+    /// 1 when some true object has a best overlap above 0.5 (`MaskCorLocMetric`, objects only).
+    CorLoc,
 }
 
+/// Number of metrics in [`Metric::ALL`].
+pub const METRICS: usize = 17;
+
 impl Metric {
-    /// All metrics, in report order.
-    pub const ALL: [Metric; 10] = [
+    /// The `clevrtex` protocol's metrics (the public ClevrTex evaluator's), in report order.
+    pub const CLEVRTEX: [Metric; 10] = [
         Metric::MIoU,
         Metric::MIoUFg,
         Metric::MIoUGt,
@@ -43,6 +65,50 @@ impl Metric {
         Metric::Acc,
         Metric::MSc,
     ];
+
+    /// The `deepmind` protocol's metrics.
+    pub const DEEPMIND: [Metric; 1] = [Metric::DmFgAri];
+
+    /// The `ocl` protocol's metrics.
+    pub const OCL: [Metric; 6] = [
+        Metric::OclAri,
+        Metric::OclFgAri,
+        Metric::OclMIoU,
+        Metric::OclMIoUFg,
+        Metric::MBo,
+        Metric::CorLoc,
+    ];
+
+    /// Every metric, in report order: the `clevrtex` ones, then `deepmind`'s, then `ocl`'s.
+    pub const ALL: [Metric; METRICS] = [
+        Metric::MIoU,
+        Metric::MIoUFg,
+        Metric::MIoUGt,
+        Metric::Ari,
+        Metric::AriFg,
+        Metric::Mse,
+        Metric::Dice,
+        Metric::DiceFg,
+        Metric::Acc,
+        Metric::MSc,
+        Metric::DmFgAri,
+        Metric::OclAri,
+        Metric::OclFgAri,
+        Metric::OclMIoU,
+        Metric::OclMIoUFg,
+        Metric::MBo,
+        Metric::CorLoc,
+    ];
+
+    /// Position in [`Metric::ALL`] (and in [`Scores::values`]).
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The metric called `name` (as in reports), if any.
+    pub fn from_name(name: &str) -> Option<Metric> {
+        Metric::ALL.into_iter().find(|m| m.name() == name)
+    }
 
     /// The metric's name in reports, JSON and CSV.
     pub fn name(self) -> &'static str {
@@ -57,6 +123,13 @@ impl Metric {
             Metric::DiceFg => "DICE_fg",
             Metric::Acc => "acc",
             Metric::MSc => "mSC",
+            Metric::DmFgAri => "dm_FG_ARI",
+            Metric::OclAri => "ocl_ARI",
+            Metric::OclFgAri => "ocl_FG_ARI",
+            Metric::OclMIoU => "ocl_mIoU",
+            Metric::OclMIoUFg => "ocl_mIoU_fg",
+            Metric::MBo => "mBO",
+            Metric::CorLoc => "CorLoc",
         }
     }
 }
@@ -65,7 +138,7 @@ impl Metric {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Scores {
     /// Values indexed like [`Metric::ALL`].
-    pub values: [Option<f64>; 10],
+    pub values: [Option<f64>; METRICS],
     /// Number of non-empty true segments (background included).
     pub true_segments: usize,
     /// Number of non-empty predicted segments.
@@ -74,6 +147,9 @@ pub struct Scores {
     pub num_pairs: usize,
     /// Matched IoU of each true slot `t` (`iou_t`), for the per-object breakdown.
     pub iou_per_true: Vec<f64>,
+    /// Best overlap (largest IoU over predicted segments, in f64 as the `ocl` protocol
+    /// computes it) of each true slot, 0 for empty ones; for the per-object breakdown.
+    pub best_overlap_per_true: Vec<f64>,
     /// Pixels of each true slot.
     pub true_sizes: Vec<u64>,
     /// Squared error summed over each true slot's pixels and channels, when a reconstruction
@@ -84,7 +160,7 @@ pub struct Scores {
 impl Scores {
     /// The value of `metric`, `None` if undefined for this image.
     pub fn get(&self, metric: Metric) -> Option<f64> {
-        self.values[Metric::ALL.iter().position(|&m| m == metric).unwrap_or(0)]
+        self.values[metric.index()]
     }
 }
 
@@ -238,6 +314,38 @@ pub fn score_image(truth: &[u32], pred: &[u32], pred_slots: usize, recon: Option
     }
     let msc = (n > 0).then(|| covered / n as f64);
 
+    let (dm_fg_ari, ocl_ari, ocl_fg_ari) = if n > 0 {
+        let single = true_sizes.iter().skip(2).all(|&s| s == 0) && pred_segments <= 1;
+        (
+            dm_fg_ari(&counts, k, single),
+            Some(ocl_ari(&counts, k, 0)),
+            Some(ocl_ari(&counts, k, 1)),
+        )
+    } else {
+        (None, None, None)
+    };
+    let ocl = ocl_iou(&counts, k, &true_sizes, &pred_sizes);
+
+    let values = [
+        miou,
+        miou_fg,
+        miou_gt,
+        ari,
+        ari_fg,
+        None, // MSE, below
+        dice,
+        dice_fg,
+        acc,
+        msc,
+        dm_fg_ari,
+        ocl_ari,
+        ocl_fg_ari,
+        ocl.miou,
+        ocl.miou_fg,
+        ocl.mbo,
+        ocl.corloc,
+    ];
+
     let (mse, sq_err_per_true) = match recon {
         Some(r) if r.truth_rgb.len() == 3 * n && r.pred_rgb.len() == 3 * n => {
             let (total, per_true) = match r.pred_rgb {
@@ -252,14 +360,15 @@ pub fn score_image(truth: &[u32], pred: &[u32], pred_slots: usize, recon: Option
         _ => (None, None),
     };
 
+    let mut values = values;
+    values[Metric::Mse.index()] = mse;
     Scores {
-        values: [
-            miou, miou_fg, miou_gt, ari, ari_fg, mse, dice, dice_fg, acc, msc,
-        ],
+        values,
         true_segments,
         pred_segments,
         num_pairs,
         iou_per_true,
+        best_overlap_per_true: ocl.best_overlap,
         true_sizes,
         sq_err_per_true,
     }
@@ -315,5 +424,139 @@ pub fn ari_from_sums(n: i128, s: i128, a: i128, b: i128) -> f64 {
         score
     } else {
         0.0
+    }
+}
+
+/// Pair counts `Σ n(n - 1)` of the contingency table restricted to true rows `>= first_row`:
+/// `(rindex, aindex (true), bindex (predicted), points)`, exact.
+fn pair_indices(counts: &[u64], k: usize, first_row: usize) -> (i128, i128, i128, i128) {
+    let (mut r, mut a, mut n) = (0i128, 0i128, 0i128);
+    let mut col = vec![0i128; k];
+    for t in first_row..k {
+        let mut row = 0i128;
+        for p in 0..k {
+            let c = counts[t * k + p] as i128;
+            r += c * (c - 1);
+            row += c;
+            col[p] += c;
+        }
+        a += row * (row - 1);
+        n += row;
+    }
+    let b = col.iter().map(|c| c * (c - 1)).sum();
+    (r, a, b, n)
+}
+
+/// DeepMind's FG-ARI of one image: ARI over the pixels with a true object (rows `t >= 1`).
+/// The original (`segmentation_metrics.py`) returns 1 when the true group ids (the argmax of
+/// a one-hot without the background, so background and object 1 share id 0) and the predicted
+/// ids are each constant over *all* pixels (`single`); otherwise it divides, and where the
+/// divisor is zero (one object predicted whole, or no object pixels) it yields NaN: undefined
+/// here. Computed exactly; the original's float32 differs by rounding only.
+fn dm_fg_ari(counts: &[u64], k: usize, single: bool) -> Option<f64> {
+    if single {
+        return Some(1.0);
+    }
+    let (r, a, b, n) = pair_indices(counts, k, 1);
+    let pairs = n * (n - 1);
+    // ari = (r - a b / N) / ((a + b) / 2 - a b / N) = 2 (r N - a b) / ((a + b) N - 2 a b).
+    let num = r.checked_mul(pairs)?.checked_sub(a.checked_mul(b)?)?;
+    let den = (a + b)
+        .checked_mul(pairs)?
+        .checked_sub(2 * a.checked_mul(b)?)?;
+    if pairs == 0 || den == 0 {
+        return None;
+    }
+    Some(2.0 * num as f64 / den as f64)
+}
+
+/// The object-centric learning framework's ARI (`ocl/metrics/utils.py`) over true rows
+/// `t >= first_row`, with its float64 operations in its order (so the same rounding), and its
+/// degenerate value: 1 wherever the divisor is not positive.
+fn ocl_ari(counts: &[u64], k: usize, first_row: usize) -> f64 {
+    let (r, a, b, n) = pair_indices(counts, k, first_row);
+    let (r, a, b) = (r as f64, a as f64, b as f64);
+    let pairs = ((n * (n - 1)) as f64).max(1.0);
+    let expected = a * b / pairs;
+    let max = (a + b) / 2.0;
+    let den = max - expected;
+    if den > 0.0 {
+        (r - expected) / den
+    } else {
+        1.0
+    }
+}
+
+/// The `ocl` protocol's IoU metrics of one image.
+struct OclIou {
+    miou: Option<f64>,
+    miou_fg: Option<f64>,
+    mbo: Option<f64>,
+    corloc: Option<f64>,
+    best_overlap: Vec<f64>,
+}
+
+/// `UnsupervisedMaskIoUMetric` (`ocl/metrics/masks.py`): IoU in f64 between every predicted
+/// slot and every non-empty true segment; `hungarian` averages the optimally matched IoU over
+/// the true segments (an unmatched one counts 0; the optimum's total does not depend on ties),
+/// `best_overlap` the largest IoU of each. An image without a true segment is skipped by the
+/// original (left out of the mean): undefined here.
+fn ocl_iou(counts: &[u64], k: usize, true_sizes: &[u64], pred_sizes: &[u64]) -> OclIou {
+    let iou = |t: usize, p: usize| {
+        let inter = counts[t * k + p];
+        let union = true_sizes[t] + pred_sizes[p] - inter;
+        if union == 0 {
+            0.0
+        } else {
+            inter as f64 / union as f64
+        }
+    };
+    let best_overlap: Vec<f64> = (0..k)
+        .map(|t| {
+            if true_sizes[t] == 0 {
+                return 0.0;
+            }
+            (0..k).map(|p| iou(t, p)).fold(0.0, f64::max)
+        })
+        .collect();
+    let hungarian = |first: usize| -> Option<f64> {
+        let rows = (first..k).filter(|&t| true_sizes[t] > 0).count();
+        if rows == 0 {
+            return None;
+        }
+        // Empty (or left-out) true rows cost 0 whatever they get, so the square problem has
+        // the rectangular one's optimum.
+        let mut cost = vec![0.0f64; k * k];
+        for t in (first..k).filter(|&t| true_sizes[t] > 0) {
+            for p in 0..k {
+                cost[t * k + p] = -iou(t, p);
+            }
+        }
+        let sigma = min_cost_assignment(k, &cost);
+        let total: f64 = (first..k)
+            .filter(|&t| true_sizes[t] > 0)
+            .map(|t| iou(t, sigma[t].min(k - 1)))
+            .sum();
+        Some(total / rows as f64)
+    };
+    let objects: Vec<f64> = (1..k)
+        .filter(|&t| true_sizes[t] > 0)
+        .map(|t| best_overlap[t])
+        .collect();
+    let (mbo, corloc) = if objects.is_empty() {
+        (None, None)
+    } else {
+        let found = objects.iter().any(|&v| v > 0.5);
+        (
+            Some(objects.iter().sum::<f64>() / objects.len() as f64),
+            Some(if found { 1.0 } else { 0.0 }),
+        )
+    };
+    OclIou {
+        miou: hungarian(0),
+        miou_fg: hungarian(1),
+        mbo,
+        corloc,
+        best_overlap,
     }
 }

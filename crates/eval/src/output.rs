@@ -11,13 +11,13 @@ fn num(v: Option<f64>) -> Value {
     v.filter(|x| x.is_finite()).map_or(Value::Null, Value::from)
 }
 
-/// The JSON report: `metrics` (name -> number, `null` where no image defines it), `ci`,
-/// `counts`, `breakdowns` and `provenance`.
+/// The JSON report: `metrics` (name -> number, `null` where no image defines it; the metrics
+/// reported, by default the protocol's), `ci95`, `counts`, `breakdowns` and `provenance`.
 pub fn to_json(r: &Report, tool_version: &str) -> Value {
     let mut metrics = Map::new();
     let mut ci = Map::new();
     let mut undefined = Map::new();
-    for &m in &Metric::ALL {
+    for &m in &r.metrics {
         let s = r.summary(m);
         metrics.insert(m.name().into(), num(s.mean));
         ci.insert(
@@ -32,7 +32,7 @@ pub fn to_json(r: &Report, tool_version: &str) -> Value {
         for (name, grp) in groups {
             g.insert(
                 name.clone(),
-                json!({"count": grp.count, "mIoU": grp.iou, "MSE": num(grp.mse)}),
+                json!({"count": grp.count, "mIoU": grp.iou, "MSE": num(grp.mse), "mBO": grp.best_overlap}),
             );
         }
         breakdowns.insert((*kind).into(), Value::Object(g));
@@ -55,6 +55,9 @@ pub fn to_json(r: &Report, tool_version: &str) -> Value {
             "variant": r.variant,
             "split": r.split.name(),
             "protocol": r.protocol.name(),
+            "protocol_source": r.protocol.source(),
+            "metrics": r.metrics.iter().map(|m| m.name()).collect::<Vec<_>>(),
+            "crop_resize": r.cropped,
             "no_background": r.no_background,
             "bootstrap": r.bootstrap,
             "seed": r.seed,
@@ -72,13 +75,13 @@ pub fn to_json(r: &Report, tool_version: &str) -> Value {
 /// `num_pairs` and whether the prediction was missing.
 pub fn to_csv(r: &Report) -> String {
     let mut s = String::from("index,stem");
-    for m in Metric::ALL {
+    for &m in &r.metrics {
         let _ = write!(s, ",{}", m.name());
     }
     s.push_str(",true_segments,pred_segments,num_pairs,missing\n");
     for img in &r.images {
         let _ = write!(s, "{},{}", img.index, img.stem);
-        for m in Metric::ALL {
+        for &m in &r.metrics {
             match img.scores.get(m) {
                 Some(v) if v.is_finite() => {
                     let _ = write!(s, ",{v}");
@@ -109,6 +112,17 @@ pub fn to_table(r: &Report) -> String {
         r.images.len(),
         r.protocol.name()
     );
+    let _ = writeln!(
+        s,
+        "protocol `{}`: definitions of {}; ground truth {}",
+        r.protocol.name(),
+        r.protocol.source(),
+        if r.cropped {
+            "centre-cropped and resized to 128x128"
+        } else {
+            "at its own size"
+        }
+    );
     let ci_head = if r.bootstrap > 0 {
         "95% CI (bootstrap)"
     } else {
@@ -116,10 +130,10 @@ pub fn to_table(r: &Report) -> String {
     };
     let _ = writeln!(
         s,
-        "\n{:<8} {:>10}  {:<24} {:>7}",
+        "\n{:<11} {:>10}  {:<24} {:>7}",
         "metric", "value", ci_head, "images"
     );
-    for &m in &Metric::ALL {
+    for &m in &r.metrics {
         let sm = r.summary(m);
         let value = sm.mean.map_or("n/a".to_string(), |v| fmt_val(m, v));
         let ci = sm.ci.map_or(String::new(), |(a, b)| {
@@ -127,14 +141,14 @@ pub fn to_table(r: &Report) -> String {
         });
         let _ = writeln!(
             s,
-            "{:<8} {:>10}  {:<24} {:>7}",
+            "{:<11} {:>10}  {:<24} {:>7}",
             m.name(),
             value,
             ci,
             sm.defined
         );
     }
-    if r.summary(Metric::Mse).mean.is_none() {
+    if r.metrics.contains(&Metric::Mse) && r.summary(Metric::Mse).mean.is_none() {
         s.push_str(
             "\nMSE: no reconstructions given (`<stem>_recon.png` or `recon` in the `.npz`)\n",
         );
@@ -149,18 +163,19 @@ pub fn to_table(r: &Report) -> String {
     for (kind, groups) in &r.breakdowns {
         let _ = writeln!(
             s,
-            "\n{:<30} {:>6} {:>8} {:>10}",
+            "\n{:<30} {:>6} {:>8} {:>8} {:>10}",
             format!("by {kind}"),
             "count",
             "mIoU",
+            "mBO",
             "MSE"
         );
         for (name, g) in groups {
             let mse = g.mse.map_or("n/a".to_string(), |v| format!("{v:.3}"));
             let _ = writeln!(
                 s,
-                "  {:<28} {:>6} {:>8.4} {:>10}",
-                name, g.count, g.iou, mse
+                "  {:<28} {:>6} {:>8.4} {:>8.4} {:>10}",
+                name, g.count, g.iou, g.best_overlap, mse
             );
         }
     }

@@ -57,7 +57,7 @@ fn shape_str(dims: &[usize]) -> String {
     )
 }
 
-const SHAPE_HINT: &str = "predictions must have the ground truth's evaluation shape: 128x128 under `--protocol clevrtex` (crop then resize), the dataset's own size under `--protocol native`; they are never reshaped";
+const SHAPE_HINT: &str = "predictions must have the ground truth's evaluation shape: 128x128 (crop then resize; every protocol but `native`), the dataset's own size under `--protocol native` or `--native-size`; they are never reshaped";
 
 fn mismatch(path: &Path, pred: &[usize], truth: &[usize]) -> EvalError {
     EvalError::ShapeMismatch {

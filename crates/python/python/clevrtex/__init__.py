@@ -1,0 +1,296 @@
+"""The ClevrTex benchmark's metrics from Python, exact and fast (the Rust `clevrtex eval`).
+
+- `Evaluator`: a drop-in for the public `CLEVRTEX_Evaluator` (same `update` and `statistic`),
+  taking numpy arrays or torch tensors (torch is never imported).
+- `evaluate(preds, gt, protocol=...)`: every protocol's metrics on arrays, in one call.
+- `Dataset`: the published layout (ours or the downloaded ClevrTex) read like the public
+  `CLEVRTEX` loader, as numpy arrays.
+
+Scoring runs in Rust with the GIL released, in parallel over the images of a batch. Metric
+definitions and how the protocols differ: docs/eval.md.
+"""
+
+import json
+from collections import defaultdict
+from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _native
+
+__all__ = ["Evaluator", "evaluate", "Dataset", "METRICS", "protocol_metrics"]
+
+#: Every metric's name, in report order.
+METRICS: Tuple[str, ...] = tuple(_native.metric_names())
+_INDEX = {name: i for i, name in enumerate(METRICS)}
+# The public evaluator's statistic names that differ from ours.
+_PUBLIC_NAMES = {"DICE_FG": "DICE_fg"}
+MAX_SLOTS = 1024
+
+
+def protocol_metrics(protocol: str) -> List[str]:
+    """The metrics a protocol (`clevrtex`, `native`, `deepmind`, `ocl`) reports by default."""
+    return list(_native.protocol_metrics(protocol))
+
+
+def _numpy(x: Any, what: str) -> np.ndarray:
+    """A numpy view of `x`: numpy arrays as they are, torch tensors through
+    `.detach().cpu().numpy()` (without importing torch), anything else through `__array__`."""
+    if isinstance(x, np.ndarray):
+        return x
+    for step in ("detach", "cpu"):
+        if hasattr(x, step):
+            x = getattr(x, step)()
+    if hasattr(x, "numpy"):
+        return np.asarray(x.numpy())
+    try:
+        return np.asarray(x)
+    except Exception as e:  # pragma: no cover - message only
+        raise TypeError(f"`{what}` must be a numpy array or a torch tensor, not {type(x).__name__}") from e
+
+
+def _f32(x: np.ndarray) -> bytes:
+    return np.ascontiguousarray(x, dtype="<f4").tobytes()
+
+
+def _ids(x: np.ndarray, what: str) -> bytes:
+    """Integer (or integral float) ids as little-endian u32 bytes, checked to be in 0..1024."""
+    if x.size and not np.issubdtype(x.dtype, np.integer):
+        if np.issubdtype(x.dtype, np.bool_):
+            x = x.astype(np.uint8)
+        elif not np.all(np.isfinite(x)) or not np.all(np.floor(x) == x):
+            raise ValueError(f"`{what}` must hold integer segment ids")
+    if x.size:
+        lo, hi = x.min(), x.max()
+        if lo < 0 or hi >= MAX_SLOTS:
+            bad = lo if lo < 0 else hi
+            raise ValueError(f"`{what}` holds segment id `{int(bad)}`, outside 0..{MAX_SLOTS}")
+    return np.ascontiguousarray(x, dtype="<u4").tobytes()
+
+
+def _score(truth, pred, masks, no_background, min_slots, true_rgb=None, pred_rgb=None):
+    b = truth.shape[0]
+    pixels = int(np.prod(truth.shape[1:])) if truth.ndim > 1 else 0
+    return _native.score(
+        _ids(truth, "true_masks"),
+        _ids(pred, "pred") if masks == 0 else _f32(pred),
+        b,
+        pixels,
+        masks,
+        no_background,
+        min_slots,
+        None if true_rgb is None else _f32(true_rgb),
+        None if pred_rgb is None else _f32(pred_rgb),
+    )
+
+
+class _RunningMean:
+    __slots__ = ("v", "n")
+
+    def __init__(self) -> None:
+        self.v = 0.0
+        self.n = 0
+
+    def update(self, v: float, n: int = 1) -> None:
+        self.v += v * n
+        self.n += n
+
+    def value(self) -> float:
+        return self.v / self.n if self.n else float("nan")
+
+    def __str__(self) -> str:
+        return str(self.value())
+
+
+def _tag(v: Any) -> Any:
+    try:
+        hash(v)
+        return v
+    except TypeError:
+        return json.dumps(v)
+
+
+class Evaluator:
+    """Drop-in for the public `CLEVRTEX_Evaluator`: `update(pred_image, pred_masks, true_image,
+    true_masks, true_metadata=None)` per batch, then `statistic(name, tag=None)`.
+
+    Statistics: `mIoU`, `mIoU_fg`, `mIoU_gt`, `ARI`, `ARI_FG`, `MSE`, `DICE`, `DICE_FG` (also
+    `DICE_fg`), `acc`, `mSC`, `ground_mse`, `ground_iou`, `obj_mse`, `obj_iou` (tagged by the
+    metadata), and every other protocol's metric by its name (`mBO`, `dm_FG_ARI`, ...). Values
+    undefined for an image (e.g. `mIoU_fg` with nothing but background) are left out of the mean
+    where the public code would make the running mean NaN; `mSC` is the correct covering
+    (docs/eval.md says how the public loop differs).
+    """
+
+    def __init__(self, masks_have_background: bool = True) -> None:
+        self.masks_have_background = masks_have_background
+        self.stats: Dict[str, _RunningMean] = defaultdict(_RunningMean)
+        self.tags: Dict[str, Dict[str, Dict[Any, _RunningMean]]] = defaultdict(
+            lambda: defaultdict(lambda: defaultdict(_RunningMean))
+        )
+
+    def add_statistic(self, name: str, value: float, **tags: Any) -> None:
+        """Add one value (as the public evaluator's `add_statistic` with a scalar)."""
+        self.stats[name].update(float(value), 1)
+        for k, v in tags.items():
+            self.tags[name][k][_tag(v)].update(float(value), 1)
+
+    def statistic(self, name: str, tag: Optional[str] = None) -> Union[float, List[Tuple[Any, float]]]:
+        """The running mean of `name` (NaN if nothing was added), or with `tag` the
+        `(value, mean)` pairs of that tag sorted by mean, as the public evaluator returns them."""
+        name = _PUBLIC_NAMES.get(name, name)
+        if tag is None:
+            return self.stats[name].value()
+        return sorted(((k, rm.value()) for k, rm in self.tags[name][tag].items()), key=lambda x: x[1])
+
+    def update(self, pred_image: Any, pred_masks: Any, true_image: Any, true_masks: Any, true_metadata: Optional[Sequence[dict]] = None) -> None:
+        """Score a batch: images `(B, 3, H, W)` in [0, 1]; predicted masks `(B, K, 1, H, W)` or
+        `(B, K, H, W)` (argmax over K); true masks `(B, 1, H, W)` ids or `(B, K, H, W)` /
+        `(B, K, 1, H, W)` one-hot; metadata: one dict per image (`ground_material`, `objects`)."""
+        pi = _numpy(pred_image, "pred_image")
+        ti = _numpy(true_image, "true_image")
+        pm = _numpy(pred_masks, "pred_masks")
+        tm = _numpy(true_masks, "true_masks")
+        if pi.ndim != 4:
+            raise ValueError(f"images should be in (B, C, H, W) shape, `pred_image` is {pi.shape}")
+        if ti.shape != pi.shape:
+            raise ValueError(f"`true_image` is {ti.shape} but `pred_image` is {pi.shape}")
+        b, _, h, w = pi.shape
+        if not 4 <= pm.ndim <= 5:
+            raise ValueError(f"masks should be in (B, K, 1, H, W) shape, `pred_masks` is {pm.shape}")
+        pm = pm.reshape(b, -1, h * w)
+        k_pred = pm.shape[1] + (0 if self.masks_have_background else 1)
+        if tm.ndim == 4 and tm.shape[1] == 1:
+            truth = tm.reshape(b, h * w)
+            k_true = int(truth.max()) + 1 if truth.size else 1
+        else:
+            one_hot = tm.reshape(b, -1, h * w)
+            k_true = one_hot.shape[1]
+            truth = np.argmax(one_hot, axis=1)
+        out = _score(
+            truth,
+            pm,
+            pm.shape[1],
+            not self.masks_have_background,
+            max(k_true, k_pred),
+            ti[:, :3].reshape(b, 3, h * w),
+            pi[:, :3].reshape(b, 3, h * w),
+        )
+        for bi, (values, ious, sizes, sq) in enumerate(out):
+            for name, v in zip(METRICS, values):
+                if v is not None:
+                    self.stats[name].update(v, 1)
+            if true_metadata is None:
+                continue
+            meta = true_metadata[bi]
+            ground = meta.get("ground_material")
+            self.add_statistic("ground_mse", sq[0], ground_material=ground)
+            self.add_statistic("ground_iou", ious[0], ground_material=ground)
+            for i, obj in enumerate(meta.get("objects", [])):
+                if i + 1 < len(sizes) and sizes[i + 1] > 0:
+                    tags = {k: v for k, v in obj.items() if k != "rotation"}
+                    self.add_statistic("obj_mse", sq[i + 1], **tags)
+                    self.add_statistic("obj_iou", ious[i + 1], **tags)
+
+
+def evaluate(
+    preds: Any,
+    gt: Any,
+    protocol: str = "clevrtex",
+    metrics: Optional[Iterable[str]] = None,
+    no_background: bool = False,
+    per_image: bool = False,
+) -> Dict[str, Any]:
+    """Score predictions against ground truth held in arrays, as `clevrtex eval` scores files.
+
+    `preds`: `(B, H, W)` integer segment ids, or `(B, K, H, W)` soft masks (argmax over K,
+    first index on ties; `no_background`: the K masks are foreground only). `gt`: `(B, H, W)`
+    true ids (0 = background). Returns `{metric: mean over the images where it is defined, or
+    None}` for the protocol's metrics (or `metrics`, any names from `METRICS`); with `per_image`
+    also `"per_image": {metric: [value or None, ...]}`."""
+    names = list(metrics) if metrics is not None else protocol_metrics(protocol)
+    for n in names:
+        if n not in _INDEX:
+            raise ValueError(f"unknown metric `{n}`; known: {', '.join(METRICS)}")
+    p = _numpy(preds, "preds")
+    t = _numpy(gt, "gt")
+    if t.ndim != 3:
+        raise ValueError(f"`gt` must be (B, H, W) ids, it is {t.shape}")
+    b, h, w = t.shape
+    if p.ndim == 3:
+        if p.shape != t.shape:
+            raise ValueError(f"`preds` is {p.shape} but `gt` is {t.shape}")
+        out = _score(t.reshape(b, h * w), p.reshape(b, h * w), 0, False, 0)
+    elif p.ndim == 4:
+        if (p.shape[0], p.shape[2], p.shape[3]) != (b, h, w):
+            raise ValueError(f"`preds` is {p.shape}, expected (B, K, H, W) with (B, H, W) = {t.shape}")
+        out = _score(t.reshape(b, h * w), p.reshape(b, p.shape[1], h * w), p.shape[1], no_background, 0)
+    else:
+        raise ValueError(f"`preds` must be (B, H, W) ids or (B, K, H, W) masks, it is {p.shape}")
+    result: Dict[str, Any] = {}
+    per: Dict[str, List[Optional[float]]] = {}
+    for n in names:
+        vals = [o[0][_INDEX[n]] for o in out]
+        defined = [v for v in vals if v is not None]
+        result[n] = float(np.mean(defined)) if defined else None
+        per[n] = vals
+    if per_image:
+        result["per_image"] = per
+    return result
+
+
+class Dataset:
+    """A ClevrTex dataset in the published layout (made by `clevrtex generate` or downloaded),
+    read like the public `CLEVRTEX` loader: `ds[i]` is `(index, image, mask)` or, with
+    `return_metadata`, `(index, image, mask, metadata)`; `image` is `(3, H, W)` float32 in
+    [0, 1], `mask` `(1, H, W)` ids (uint8 when they fit). The crop (centre square of side
+    `int(0.8 min(W, H))`) and the resize (Pillow-exact bilinear, nearest for the mask) equal
+    the public loader's bit for bit. No torch needed."""
+
+    ccrop_frac = 0.8
+    splits = {"test": (0.0, 0.1), "val": (0.1, 0.2), "train": (0.2, 1.0)}
+
+    def __init__(
+        self,
+        path: str,
+        dataset_variant: Optional[str] = "full",
+        split: str = "train",
+        crop: bool = True,
+        resize: Optional[Tuple[int, int]] = (128, 128),
+        return_metadata: bool = True,
+    ) -> None:
+        if split not in self.splits and split != "all":
+            raise ValueError(f"unknown split `{split}`; known: test, val, train, all")
+        if resize is not None and (len(resize) != 2 or resize[0] != resize[1]):
+            raise ValueError(f"`resize` must be square (the benchmark's is (128, 128)), not {resize}")
+        self.crop = crop
+        self.side = None if resize is None else int(resize[0])
+        self.return_metadata = return_metadata
+        self.dataset_variant, self._samples = _native.discover(str(path), dataset_variant, split)
+        self.split = split
+
+    def __len__(self) -> int:
+        return len(self._samples)
+
+    def _format_metadata(self, meta: dict) -> dict:
+        objs = []
+        for obj in meta.get("objects", []):
+            o = {k: obj.get(k) for k in ("material", "shape", "size", "rotation")}
+            if self.dataset_variant == "vbg":
+                o["color"] = obj.get("color")
+            objs.append(o)
+        return {"ground_material": meta.get("ground_material"), "objects": objs}
+
+    def __getitem__(self, ind: int):
+        n = len(self._samples)
+        if ind < -n or ind >= n:
+            raise IndexError(ind)
+        index, image, mask, meta = self._samples[ind]
+        rgb, labels, h, w = _native.load_sample(image, mask, self.crop, self.side)
+        img = np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).transpose(2, 0, 1).astype(np.float32) / np.float32(255)
+        msk = np.frombuffer(labels, dtype="<u4").reshape(1, h, w)
+        msk = msk.astype(np.uint8) if (msk.size == 0 or msk.max() < 256) else msk.astype(np.int64)
+        if not self.return_metadata:
+            return index, img, msk
+        with open(meta) as f:
+            return index, img, msk, self._format_metadata(json.load(f))

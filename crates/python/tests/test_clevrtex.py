@@ -1,0 +1,219 @@
+"""Tests of the Python package `clevrtex` (run by `tests/python_package.rs`, or by hand:
+`.venv-test/bin/python -m pytest crates/python/tests` with `CLEVRTEX_BIN` naming the CLI).
+
+The package must equal the public evaluator (the numpy port in tests/eval_reference/harness.py)
+and the CLI on the same fixtures, read datasets like the public loader, and release the GIL.
+"""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import clevrtex
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
+sys.path.insert(0, os.path.join(ROOT, "tests", "eval_reference"))
+import harness  # noqa: E402
+
+GT = os.path.join(ROOT, "tests", "data", "eval", "gt")
+NPZ = os.path.join(ROOT, "tests", "data", "eval", "preds", "npz")
+PUBLIC = ["mIoU", "mIoU_fg", "mIoU_gt", "ARI", "ARI_FG", "MSE", "DICE", "DICE_FG", "acc"]
+
+
+class FakeTensor:
+    """Quacks like a torch tensor (detach, cpu, numpy) without torch."""
+
+    def __init__(self, a):
+        self.a = a
+
+    def detach(self):
+        return self
+
+    def cpu(self):
+        return self
+
+    def numpy(self):
+        return self.a
+
+
+def batch(rng, b=6, h=16, w=16, k=5, kt=4, soft=True):
+    truth = np.kron(rng.integers(0, kt, size=(b, 1, h // 2, w // 2)), np.ones((1, 1, 2, 2), dtype=np.int64))
+    truth[:, :, 0, 0] = 1  # at least one object pixel: the public mIoU_fg is NaN otherwise
+    truth[:, :, 0, 1] = 0
+    if soft:
+        masks = rng.random((b, k, 1, h, w)).astype(np.float32)
+        masks[rng.random((b, k, 1, h, w)) < 0.3] = 0.5  # ties
+    else:
+        perm = rng.permutation(max(k, kt))
+        labels = np.where(rng.random(truth.shape) < 0.2, rng.integers(0, k, truth.shape), perm[truth] % k)
+        masks = (labels[:, None] == np.arange(k)[None, :, None, None, None]).astype(np.float32)[:, :, 0]
+    img_t = rng.random((b, 3, h, w)).astype(np.float32)
+    img_p = rng.random((b, 3, h, w)).astype(np.float32)
+    meta = [
+        {"ground_material": f"g{i % 2}", "objects": [{"material": f"m{j % 3}", "shape": "cube", "size": "large", "rotation": 1.0} for j in range(kt)]}
+        for i in range(b)
+    ]
+    return img_p, masks, img_t, truth, meta
+
+
+@pytest.mark.parametrize("soft,have_bg", [(True, True), (False, True), (True, False)])
+def test_evaluator_equals_the_public_evaluator(soft, have_bg):
+    rng = np.random.default_rng(7)
+    ours = clevrtex.Evaluator(masks_have_background=have_bg)
+    public = harness.ClevrTexEvaluator(masks_have_background=have_bg)
+    for step in range(4):
+        img_p, masks, img_t, truth, meta = batch(rng, soft=soft)
+        if not have_bg:
+            masks = masks / np.float32(masks.shape[1])
+        public.update(img_p, masks, img_t, truth, meta)
+        args = (img_p, masks, img_t, truth, meta)
+        if step % 2:
+            args = tuple(FakeTensor(a) for a in args[:4]) + (meta,)
+        ours.update(*args)
+    for name in PUBLIC:
+        want = public.statistic(name)
+        assert np.isfinite(want), name
+        assert abs(ours.statistic(name) - want) <= 1e-6, (name, ours.statistic(name), want)
+    for name, tag in [("obj_iou", "material"), ("obj_mse", "material"), ("ground_iou", "ground_material")]:
+        got, want = ours.statistic(name, tag), public.statistic(name, tag)
+        assert [k for k, _ in got] == [k for k, _ in want], name
+        assert all(abs(a - b) <= 1e-6 for (_, a), (_, b) in zip(got, want)), (name, got, want)
+
+
+def test_evaluator_takes_one_hot_truth():
+    rng = np.random.default_rng(8)
+    img_p, masks, img_t, truth, _ = batch(rng)
+    one_hot = (truth == np.arange(6)[None, :, None, None]).astype(np.float32)  # padded to 6
+    a, b = clevrtex.Evaluator(), harness.ClevrTexEvaluator()
+    a.update(img_p, masks, img_t, one_hot)
+    b.update(img_p, masks, img_t, one_hot)
+    for name in PUBLIC:
+        assert abs(a.statistic(name) - b.statistic(name)) <= 1e-6, name
+
+
+def cli(*args):
+    exe = os.environ.get("CLEVRTEX_BIN")
+    if not exe:
+        pytest.skip("CLEVRTEX_BIN is not set (tests/python_package.rs sets it)")
+    with tempfile.TemporaryDirectory() as d:
+        j = os.path.join(d, "r.json")
+        subprocess.run([exe, "eval", *args, "--json", j], check=True, capture_output=True)
+        with open(j) as f:
+            return json.load(f)
+
+
+def test_evaluate_equals_the_cli_on_the_fixture_dataset():
+    ds = clevrtex.Dataset(GT, "vbg", split="all", return_metadata=False)
+    assert len(ds) == 10
+    truth = np.stack([ds[i][2][0] for i in range(len(ds))]).astype(np.int64)
+    # The fixture's predictions have different numbers of masks: one call per image.
+    masks = [np.load(os.path.join(NPZ, f"CLEVRTEX_vbg_{i:06}.npz"))["masks"] for i in range(len(ds))]
+    assert len({m.shape[0] for m in masks}) > 1
+    names = [m for m in clevrtex.METRICS if m != "MSE"]
+    for no_bg in (False, True):
+        flags = ["--no-background"] if no_bg else []
+        r = cli(NPZ, GT, "--split", "all", "--bootstrap", "0", "--metrics", "all", *flags)
+        per = [clevrtex.evaluate(m[None], t[None], metrics=names, no_background=no_bg) for m, t in zip(masks, truth)]
+        got = {}
+        for m in names:
+            vals = [p[m] for p in per if p[m] is not None]
+            got[m] = float(np.mean(vals)) if vals else None
+        for m in names:
+            want = r["metrics"][m]
+            assert (got[m] is None) == (want is None), m
+            if want is not None:
+                assert abs(got[m] - want) <= 1e-9, (m, got[m], want)
+
+
+def test_evaluate_equals_the_reference_protocols():
+    cases = harness.make_cases()
+    for c in cases:
+        truth = np.array(c["truth"], dtype=np.int64).reshape(1, c["h"], c["w"])
+        masks = np.array(c["masks"], dtype=np.float32).reshape(1, c["k"], c["h"], c["w"])
+        got = clevrtex.evaluate(masks, truth, metrics=list(c["expected"]))
+        for m, want in c["expected"].items():
+            if want == "refused":
+                continue
+            assert (got[m] is None) == (want is None), (c["name"], m, got[m], want)
+            if want is not None:
+                assert abs(got[m] - want) <= 1e-6, (c["name"], m, got[m], want)
+
+
+def test_protocol_defaults():
+    assert clevrtex.protocol_metrics("deepmind") == ["dm_FG_ARI"]
+    rng = np.random.default_rng(3)
+    t = rng.integers(0, 4, size=(3, 8, 8))
+    r = clevrtex.evaluate(t, t, protocol="ocl", per_image=True)
+    assert set(r) == set(clevrtex.protocol_metrics("ocl")) | {"per_image"}
+    assert r["mBO"] == 1.0 and len(r["per_image"]["mBO"]) == 3
+    with pytest.raises(ValueError, match="unknown protocol"):
+        clevrtex.evaluate(t, t, protocol="nope")
+    with pytest.raises(ValueError, match="segment id `-1`"):
+        clevrtex.evaluate(t - 1, t)
+    with pytest.raises(ValueError, match=r"\(3, 8, 7\)"):
+        clevrtex.evaluate(t[:, :, :7], t)
+
+
+def test_dataset_equals_the_public_loader():
+    ds = clevrtex.Dataset(GT, "vbg", split="all")
+    for i in range(len(ds)):
+        index, img, msk, meta = ds[i]
+        stem = os.path.join(GT, "clevrtex_vbg", "0", f"CLEVRTEX_vbg_{index:06}")
+        want_img, want_msk = harness.clevrtex_load(stem + ".png", stem + "_flat.png")
+        assert img.dtype == np.float32 and img.shape == (3, 128, 128)
+        assert np.array_equal(img, want_img), f"image {index}"
+        assert np.array_equal(msk[0], want_msk), f"mask {index}"
+        assert set(meta) == {"ground_material", "objects"}
+        assert all("color" in o for o in meta["objects"])  # vbg keeps colours
+    # Splits as the public loader: test is the first int(0.1 N).
+    assert len(clevrtex.Dataset(GT, "vbg", split="test")) == 1
+    assert len(clevrtex.Dataset(GT, "vbg", split="train")) == 8
+    native = clevrtex.Dataset(GT, "vbg", split="all", crop=False, resize=None)
+    assert native[0][1].shape == (3, 30, 40)
+    with pytest.raises(ValueError, match="no ground-truth samples"):
+        clevrtex.Dataset(GT, "camo")
+    with pytest.raises(IndexError):
+        ds[10]
+
+
+def test_the_gil_is_released_while_scoring():
+    # 300 segments per image: the matching is cubic, so one call takes a while.
+    rng = np.random.default_rng(0)
+    truth = np.tile((np.arange(64 * 64).reshape(64, 64) // 13) % 300, (16, 1, 1))
+    pred = np.where(rng.random(truth.shape) < 0.3, rng.integers(0, 300, truth.shape), (truth * 7 + 3) % 300)
+    # Grow the batch until one call takes at least half a second on this machine.
+    while True:
+        t0 = time.perf_counter()
+        clevrtex.evaluate(pred, truth)
+        if time.perf_counter() - t0 >= 0.5 or len(truth) >= 1 << 14:
+            break
+        truth, pred = np.concatenate([truth, truth]), np.concatenate([pred, pred])
+    done = threading.Event()
+    took = []
+
+    def work():
+        t0 = time.perf_counter()
+        clevrtex.evaluate(pred, truth)
+        took.append(time.perf_counter() - t0)
+        done.set()
+
+    ticks, gaps, last = 0, [], time.perf_counter()
+    th = threading.Thread(target=work)
+    th.start()
+    while not done.is_set():
+        ticks += 1
+        now = time.perf_counter()
+        gaps.append(now - last)
+        last = now
+    th.join()
+    # With the GIL held for the whole call this thread would stall for about its length.
+    assert took[0] > 0.25, f"scoring took {took[0]:.3f} s: too short to show anything"
+    assert max(gaps) < took[0] / 2, f"this thread stalled {max(gaps):.3f} s of {took[0]:.3f} s"
+    assert ticks > 1000
