@@ -7,7 +7,6 @@ displacement method, light power, smooth shading, shadow visibility, the output 
 format and colour management (view transform and look).
 """
 
-import importlib.util
 import os
 
 import bpy
@@ -17,6 +16,18 @@ VERSION = bpy.app.version
 
 def version_string():
     return bpy.app.version_string.split(" ")[0]
+
+
+def is_module():
+    """Whether bpy runs as a Python module (PyPI's `bpy` wheel) rather than inside Blender."""
+    return bool(getattr(bpy.app, "is_module", False)) or not bpy.app.binary_path
+
+
+def factory_startup():
+    """What `blender --factory-startup` gives, for bpy as a module (which has no command
+    line): factory preferences (no user add-ons, default Cycles settings) and the factory
+    startup scene, which the builder clears like Blender's."""
+    bpy.ops.wm.read_factory_settings(use_empty=False)
 
 
 def set_view_look(view_settings, view_transform, look):
@@ -152,24 +163,20 @@ def cycles_devices():
     return devices
 
 
-def load_teapot_module():
-    """The bundled "extra objects" add-on's teapot module, loaded on its own.
+TEAPOT_MESH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "teapot_mesh.json")
 
-    Debian's build cannot enable the whole add-on headless (another of its modules needs
-    numpy, which Debian's Blender lacks), but its teapot module only needs bpy and mathutils,
-    so we load that one file directly. Blender 4.2+ moved the add-on to the online
-    extensions platform, where it may be absent: then this raises.
+
+def teapot_mesh():
+    """The Utah teapot's vertices and faces, as Blender 3.4's bundled "extra objects" add-on
+    makes them (`make_teapot("1", 6)`), from `teapot_mesh.json`.
+
+    Blender 4.2+ moved that add-on to the online extensions platform (absent from PyPI's
+    `bpy` and from offline installs), and Debian's build cannot enable it headless; the mesh
+    is stored once instead (regenerate with `dev/dump_teapot.py`), which also makes the
+    teapot the same vertex for vertex on every Blender version.
     """
-    import addon_utils
+    import json
 
-    for root in addon_utils.paths():
-        path = os.path.join(root, "add_mesh_extra_objects", "add_mesh_teapot.py")
-        if os.path.isfile(path):
-            spec = importlib.util.spec_from_file_location("clevrtex_extra_teapot", path)
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
-            return module
-    raise RuntimeError(
-        "the teapot needs Blender's bundled `add_mesh_extra_objects` add-on, not found in %s"
-        % addon_utils.paths()
-    )
+    with open(TEAPOT_MESH, "r", encoding="utf-8") as f:
+        doc = json.load(f)
+    return [tuple(v) for v in doc["verts"]], [tuple(f) for f in doc["faces"]]

@@ -2,7 +2,9 @@
 the material checks) on request, over the protocol of docs/bridge-protocol.md.
 
 Run as `blender -b --factory-startup --python-exit-code 1 --python worker.py -- --tag TAG
-[--threads T] [--materials materials.json]`.
+[--threads T] [--materials materials.json]`, or, with PyPI's `bpy` module, as `python
+worker.py -- --tag TAG ... --factory-startup` (the module has no command line of its own, so
+`--factory-startup` asks the bridge to reset to factory settings itself).
 
 Stdout discipline: before anything else the worker keeps a private duplicate of stdout for
 its replies and points file descriptor 1 (C stdio, Python's print, add-ons, Cycles' progress)
@@ -57,6 +59,8 @@ def _parse_args(argv):
     p.add_argument("--tag", required=True)
     p.add_argument("--threads", type=int, default=0)
     p.add_argument("--materials", default=None)
+    p.add_argument("--factory-startup", action="store_true",
+                   help="reset to factory settings first (bpy as a Python module)")
     return p.parse_args(argv)
 
 
@@ -70,8 +74,11 @@ def _load_catalogue(path):
 
 class Worker:
     def __init__(self, args, replier):
-        import builder
         import compat
+
+        if args.factory_startup:
+            compat.factory_startup()
+        import builder
         import materials
 
         self.builder = builder

@@ -9,7 +9,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::hash::{BuildHasher, Hasher};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
+use std::process::{Child, ChildStdin, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
@@ -227,20 +227,18 @@ impl Worker {
     pub fn start(opts: &WorkerOptions) -> Result<Worker> {
         let started = Instant::now();
         let tag = fresh_tag();
-        let mut cmd = Command::new(&opts.blender);
-        cmd.args([
-            "-b",
-            "--factory-startup",
-            "--python-exit-code",
-            "1",
-            "--python",
-        ])
-        .arg(&opts.script)
-        .arg("--")
-        .args(["--tag", &tag, "--threads", &opts.threads.to_string()])
-        .arg("--materials")
-        .arg(&opts.materials)
-        .stdin(Stdio::piped())
+        let flavour = crate::blender::flavour(&opts.blender);
+        let bridge_args: Vec<std::ffi::OsString> = vec![
+            "--tag".into(),
+            tag.clone().into(),
+            "--threads".into(),
+            opts.threads.to_string().into(),
+            "--materials".into(),
+            opts.materials.clone().into_os_string(),
+        ];
+        let mut cmd =
+            crate::blender::worker_command(&opts.blender, flavour, &opts.script, &bridge_args);
+        cmd        .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
         // Blender's own temporary files (`blender_*` folders, left behind whenever a worker is
