@@ -15,7 +15,7 @@ use clevrtex_render::post::{self, decode_png};
 use clevrtex_scene::{Pass, SceneFile};
 use serde_json::Value;
 
-use crate::util::{blender_or_skip, clevrtex, data, repo_root, text};
+use crate::util::{blender_or_skip, clevrtex, data, repo_root, test_blenders, text};
 
 fn fake_blender() -> PathBuf {
     repo_root().join("tests/fake_blender/blender")
@@ -537,10 +537,8 @@ fn check_mask(dir: &Path, stem: &str) -> Value {
 
 #[test]
 fn generate_writes_every_pass_with_exact_masks_and_resumes() {
-    let Some(blender) = blender_or_skip("generate_writes_every_pass_with_exact_masks_and_resumes")
-    else {
-        return;
-    };
+    // On every Blender found: Debian's, and PyPI's bpy when installed.
+    for blender in test_blenders("generate_writes_every_pass_with_exact_masks_and_resumes") {
     let dir = tempfile::tempdir().unwrap();
     let run = |extra: &[&str]| {
         clevrtex()
@@ -643,6 +641,7 @@ fn generate_writes_every_pass_with_exact_masks_and_resumes() {
         before
     );
     assert_eq!(files_under(dir.path()), expected);
+    }
 }
 
 #[test]
@@ -729,11 +728,8 @@ fn interrupted_run_leaves_no_partial_sample_and_resumes() {
 
 #[test]
 fn every_variant_renders_and_only_requested_passes_are_written() {
-    let Some(blender) =
-        blender_or_skip("every_variant_renders_and_only_requested_passes_are_written")
-    else {
-        return;
-    };
+    // On every Blender found: Debian's, and PyPI's bpy when installed.
+    for blender in test_blenders("every_variant_renders_and_only_requested_passes_are_written") {
     let dir = tempfile::tempdir().unwrap();
     let scenes = dir.path().join("scenes");
     std::fs::create_dir_all(&scenes).unwrap();
@@ -796,6 +792,7 @@ fn every_variant_renders_and_only_requested_passes_are_written() {
         let rgb = decode_png(&out_dir.join(format!("{stem}.png"))).unwrap();
         let spread = rgb.data.iter().max().unwrap() - rgb.data.iter().min().unwrap();
         assert!(spread > 20, "{v}: the image is flat (spread {spread})");
+    }
     }
 }
 
