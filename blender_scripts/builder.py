@@ -330,7 +330,7 @@ def _set_adaptive(obj, enabled, simple):
         mod.subdivision_type = "SIMPLE" if simple else "CATMULL_CLARK"
         mod.levels = 0
         mod.render_levels = 0
-    obj.cycles.use_adaptive_subdivision = enabled
+    compat.set_adaptive_subdivision(obj, mod, enabled)
     if not enabled and simple and mod is not None:
         obj.modifiers.remove(mod)
 
@@ -364,7 +364,7 @@ def assign_materials(built, catalogue, build_material, displacement):
         any_displaced = any_displaced or displaces
         _set_adaptive(obj, displaces, simple)
     scene = bpy.context.scene
-    scene.cycles.feature_set = "EXPERIMENTAL" if any_displaced else "SUPPORTED"
+    compat.set_experimental_features(scene, any_displaced)
     keep = set(m.name for m in made.values())
     for name in old:
         mat = bpy.data.materials.get(name)

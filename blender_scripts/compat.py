@@ -87,9 +87,9 @@ def sun_strength(irradiance):
 
 def _set_media_type(image_settings, media_type):
     """Blender 5.0 splits the output format into a media type (`IMAGE`,
-    `MULTI_LAYER_IMAGE`, `VIDEO`) and a file format (multilayer EXR is then `OPEN_EXR` of
-    media type `MULTI_LAYER_IMAGE`, no longer `OPEN_EXR_MULTILAYER`). Returns whether this
-    Blender has media types."""
+    `VIDEO`) and a file format: `OPEN_EXR_MULTILAYER` is only offered once the media type is
+    `MULTI_LAYER_IMAGE` (measured on bpy 5.0). Returns whether this Blender has media
+    types."""
     if hasattr(image_settings, "media_type"):
         image_settings.media_type = media_type
         return True
@@ -108,10 +108,8 @@ def set_png_output(image_settings, compression=None):
 
 def set_exr_multilayer_output(image_settings, codec):
     """Save renders as 32-bit float RGBA multilayer OpenEXR with `codec` (e.g. `RLE`)."""
-    if _set_media_type(image_settings, "MULTI_LAYER_IMAGE"):
-        image_settings.file_format = "OPEN_EXR"
-    else:
-        image_settings.file_format = "OPEN_EXR_MULTILAYER"
+    _set_media_type(image_settings, "MULTI_LAYER_IMAGE")
+    image_settings.file_format = "OPEN_EXR_MULTILAYER"
     image_settings.color_mode = "RGBA"
     image_settings.color_depth = "32"
     image_settings.exr_codec = codec
@@ -175,6 +173,27 @@ def set_displacement_method(mat, method):
         mat.displacement_method = method
     else:
         mat.cycles.displacement_method = method
+
+
+def set_adaptive_subdivision(obj, modifier, enabled):
+    """Adaptive subdivision (true displacement) of `obj`, whose last modifier `modifier` is a
+    subdivision modifier (None when disabled and absent). Up to 4.5 a Cycles object setting
+    (the scene's `dicing_rate` applies); 5.0 moved it onto the modifier, in pixels, set to
+    the same rate."""
+    if modifier is not None and hasattr(modifier, "use_adaptive_subdivision"):
+        modifier.use_adaptive_subdivision = enabled
+        if enabled:
+            modifier.adaptive_space = "PIXEL"
+            modifier.adaptive_pixel_size = bpy.context.scene.cycles.dicing_rate
+    elif hasattr(obj.cycles, "use_adaptive_subdivision"):
+        obj.cycles.use_adaptive_subdivision = enabled
+
+
+def set_experimental_features(scene, enabled):
+    """Cycles' experimental feature set (adaptive subdivision needs it up to 4.5; 5.0 made
+    adaptive subdivision a regular feature and removed the setting)."""
+    if hasattr(scene.cycles, "feature_set"):
+        scene.cycles.feature_set = "EXPERIMENTAL" if enabled else "SUPPORTED"
 
 
 def set_cast_shadow(obj, enabled):

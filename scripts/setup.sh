@@ -5,20 +5,33 @@
 #   ./scripts/setup.sh               Blender (apt) and the Rust components
 #   ./scripts/setup.sh --test-venv   also `.venv-test/`: a Python venv with the libraries the
 #                                    tests read our files with (webdataset, PyYAML)
+#   ./scripts/setup.sh --bpy 4.5     also `.venv-bpy/`: a Python venv with PyPI's `bpy` 4.5 LTS
+#                                    (or `--bpy 5.0`), a second Blender: pass
+#                                    `--blender .venv-bpy/bin/python` to clevrtex
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 test_venv=0
-for arg in "$@"; do
-  case "$arg" in
+bpy=""
+while [ $# -gt 0 ]; do
+  case "$1" in
     --test-venv) test_venv=1 ;;
-    *) echo "setup.sh: unknown option \`$arg\` (known: --test-venv)" >&2; exit 2 ;;
+    --bpy)
+      bpy="${2:-}"
+      shift
+      case "$bpy" in
+        4.5|5.0) ;;
+        *) echo "setup.sh: \`--bpy ${bpy}\` is not a supported bpy version (known: 4.5, 5.0)" >&2; exit 2 ;;
+      esac
+      ;;
+    *) echo "setup.sh: unknown option \`$1\` (known: --test-venv, --bpy 4.5|5.0)" >&2; exit 2 ;;
   esac
+  shift
 done
 need=()
 command -v blender >/dev/null 2>&1 || need+=(blender)
-if [ "$test_venv" = 1 ] && ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
+if { [ "$test_venv" = 1 ] || [ -n "$bpy" ]; } && ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
   need+=(python3-venv)
 fi
 if [ ${#need[@]} -gt 0 ]; then
@@ -34,5 +47,26 @@ if [ "$test_venv" = 1 ]; then
     .venv-test/bin/pip install --quiet --disable-pip-version-check 'webdataset>=0.2,<2' 'pyyaml>=6'
   fi
   echo "test venv: $(.venv-test/bin/python -c 'import webdataset, sys; print(sys.version.split()[0], "webdataset", getattr(webdataset, "__version__", "?"))')"
+fi
+if [ -n "$bpy" ]; then
+  # PyPI's bpy wheels need the Python minor version Blender was built with (3.11 for 4.5 and
+  # 5.0, Debian 12's python3) and a few X/GL libraries even headless.
+  libs=()
+  for p in libtbb12 libvulkan1 libx11-6 libxrender1 libxxf86vm1 libxfixes3 libxi6 libxkbcommon0 \
+           libsm6 libgl1 libegl1; do
+    dpkg -s "$p" >/dev/null 2>&1 || libs+=("$p")
+  done
+  if [ ${#libs[@]} -gt 0 ]; then
+    $SUDO apt-get update
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y "${libs[@]}"
+  fi
+  want="${bpy}."
+  have="$(.venv-bpy/bin/python -c 'import bpy; print(bpy.app.version_string)' 2>/dev/null || true)"
+  if [ "${have#"$want"}" = "$have" ]; then
+    rm -rf .venv-bpy
+    python3 -m venv .venv-bpy
+    .venv-bpy/bin/pip install --quiet --disable-pip-version-check "bpy==${bpy}.*"
+  fi
+  echo "bpy venv: .venv-bpy/bin/python: Blender $(.venv-bpy/bin/python -c 'import bpy; print(bpy.app.version_string)' 2>/dev/null)"
 fi
 echo "blender: $(blender --version 2>/dev/null | head -n 1)"
