@@ -217,7 +217,7 @@ def _build_world(scene):
 def apply_render_settings(scene, spec, threads):
     r = spec["render"]
     scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
+    compat.apply_device(scene)
     scene.render.resolution_x = r["width"]
     scene.render.resolution_y = r["height"]
     scene.render.resolution_percentage = 100

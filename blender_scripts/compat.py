@@ -217,6 +217,72 @@ def cycles_devices():
     return devices
 
 
+def cycles_gpus():
+    """The GPUs Cycles can render on: `[{"kind": "CUDA"|"OPTIX"|"HIP"|..., "name", "id"}]`, in
+    the order Cycles lists them (the index a worker is pinned to counts within one kind)."""
+    out = []
+    try:
+        prefs = bpy.context.preferences.addons["cycles"].preferences
+        for kind in cycles_devices():
+            if kind == "CPU":
+                continue
+            for dev in prefs.get_devices_for_type(kind):
+                if dev.type != "CPU":
+                    out.append({"kind": kind, "name": dev.name, "id": dev.id})
+    except Exception:  # device probing is informational only
+        pass
+    return out
+
+
+def features():
+    """What this build offers beyond 3.4's Cycles: OpenImageDenoise, path guiding (CPU only),
+    the light tree (4.0+) and the sampling patterns (names)."""
+    out = {"oidn": False, "path_guiding": False}
+    try:
+        import _cycles
+
+        out["oidn"] = bool(getattr(_cycles, "with_openimagedenoise", False))
+        out["path_guiding"] = bool(getattr(_cycles, "with_path_guiding", False))
+    except Exception:  # informational only
+        pass
+    cycles = bpy.context.scene.cycles
+    out["light_tree"] = hasattr(cycles, "use_light_tree")
+    try:
+        out["sampling_patterns"] = [
+            item.identifier for item in cycles.bl_rna.properties["sampling_pattern"].enum_items
+        ]
+    except Exception:
+        out["sampling_patterns"] = []
+    return out
+
+
+# The device this worker renders on: ("CPU", 0) or (GPU kind, index within it); set once by
+# the worker from its `--device` argument.
+DEVICE = ("CPU", 0)
+
+
+def apply_device(scene):
+    """Render `scene` on this worker's [`DEVICE`] ([`use_device`])."""
+    use_device(scene, DEVICE[0], DEVICE[1])
+
+
+def use_device(scene, kind, index):
+    """Render `scene` on device `kind` (`CPU`, `CUDA`, `OPTIX`, `HIP`, ...): for a GPU, enable
+    exactly the `index`-th GPU of that kind (one worker per GPU) and nothing else."""
+    if kind == "CPU":
+        scene.cycles.device = "CPU"
+        return
+    prefs = bpy.context.preferences.addons["cycles"].preferences
+    prefs.compute_device_type = kind
+    gpus = [d for d in prefs.get_devices_for_type(kind) if d.type != "CPU"]
+    if not 0 <= index < len(gpus):
+        raise ValueError("no %s device %d (this worker sees %d)" % (kind, index, len(gpus)))
+    for d in prefs.get_devices_for_type(kind):
+        d.use = False
+    gpus[index].use = True
+    scene.cycles.device = "GPU"
+
+
 TEAPOT_MESH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "teapot_mesh.json")
 
 

@@ -59,6 +59,8 @@ def _parse_args(argv):
     p.add_argument("--tag", required=True)
     p.add_argument("--threads", type=int, default=0)
     p.add_argument("--materials", default=None)
+    p.add_argument("--device", default="CPU",
+                   help="CPU, or KIND:INDEX, e.g. CUDA:1: the index-th GPU of that kind")
     p.add_argument("--factory-startup", action="store_true",
                    help="reset to factory settings first (bpy as a Python module)")
     return p.parse_args(argv)
@@ -78,6 +80,8 @@ class Worker:
 
         if args.factory_startup:
             compat.factory_startup()
+        kind, _, index = args.device.partition(":")
+        compat.DEVICE = (kind.upper(), int(index or 0))
         import builder
         import materials
 
@@ -95,6 +99,8 @@ class Worker:
             "bridge_version": BRIDGE_VERSION,
             "blender_version": self.compat.version_string(),
             "cycles_devices": self.compat.cycles_devices(),
+            "gpus": self.compat.cycles_gpus(),
+            "features": self.compat.features(),
         })
 
     def _scene_key(self, path):

@@ -99,7 +99,10 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
         let meta_b: serde_json::Value =
             serde_json::from_slice(&std::fs::read(sub(&b, stem, ".json")).unwrap()).unwrap();
         let version = meta_b["blender_version"].as_str().unwrap_or("");
-        assert!(version.starts_with('4') || version.starts_with('5'), "{version}");
+        assert!(
+            version.starts_with('4') || version.starts_with('5'),
+            "{version}"
+        );
 
         let ma = decode_png(&sub(&a, stem, "_flat.png")).unwrap();
         let mb = decode_png(&sub(&b, stem, "_flat.png")).unwrap();

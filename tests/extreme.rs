@@ -407,6 +407,7 @@ fn render(blender: PathBuf, out: &Path, scenes: &[SceneFile]) -> Vec<SampleStats
         out: out.to_path_buf(),
         ledger: out.join("failures.jsonl"),
         interrupt: Arc::new(AtomicBool::new(false)),
+        devices: Vec::new(),
     };
     let stats = Mutex::new(Vec::new());
     let report = pool::run(&opts, jobs, &|ev| {

@@ -75,6 +75,7 @@ pub fn run(args: Args) -> CmdResult {
         threads: 1,
         startup_timeout: deadline,
         interrupt: Arc::new(AtomicBool::new(false)),
+        device: Default::default(),
     }) {
         Ok(worker) => {
             let ready = worker.ready().clone();

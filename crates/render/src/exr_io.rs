@@ -54,7 +54,10 @@ impl Channels {
                 } else {
                     format!("{prefix}{full}")
                 };
-                channels.insert(short_pass_name(&name), ch.sample_data.values_as_f32().collect());
+                channels.insert(
+                    short_pass_name(&name),
+                    ch.sample_data.values_as_f32().collect(),
+                );
             }
         }
         let (width, height) = size.ok_or_else(|| bad("no layers".into()))?;
@@ -128,8 +131,14 @@ mod tests {
             short_pass_name("ViewLayer.Diffuse Color.R"),
             "ViewLayer.DiffCol.R"
         );
-        assert_eq!(short_pass_name("ViewLayer.IndexOB.X"), "ViewLayer.IndexOB.X");
-        assert_eq!(short_pass_name("ViewLayer.Combined.R"), "ViewLayer.Combined.R");
+        assert_eq!(
+            short_pass_name("ViewLayer.IndexOB.X"),
+            "ViewLayer.IndexOB.X"
+        );
+        assert_eq!(
+            short_pass_name("ViewLayer.Combined.R"),
+            "ViewLayer.Combined.R"
+        );
         assert_eq!(short_pass_name("R"), "R");
     }
 }

@@ -46,6 +46,8 @@ pub struct WorkerOptions {
     /// Set to `true` (e.g. by a Ctrl-C handler) to abort any wait: the worker is killed and
     /// the call returns [`RenderError::Interrupted`].
     pub interrupt: Arc<AtomicBool>,
+    /// The Cycles device this worker renders on (the CPU by default).
+    pub device: crate::device::Placement,
 }
 
 /// The worker's `ready` message.
@@ -58,9 +60,32 @@ pub struct Ready {
     /// Cycles devices the bridge found, e.g. `["CPU"]`.
     #[serde(default)]
     pub cycles_devices: Vec<String>,
+    /// The GPUs Cycles can render on, in its order.
+    #[serde(default)]
+    pub gpus: Vec<crate::device::Gpu>,
+    /// What this build offers beyond 3.4's Cycles.
+    #[serde(default)]
+    pub features: Features,
     /// Anything else the bridge reported.
     #[serde(flatten)]
     pub extra: BTreeMap<String, serde_json::Value>,
+}
+
+/// Optional Cycles features of a Blender build (`features` of the `ready` reply).
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct Features {
+    /// OpenImageDenoise compiled in.
+    #[serde(default)]
+    pub oidn: bool,
+    /// Path guiding compiled in (CPU rendering only).
+    #[serde(default)]
+    pub path_guiding: bool,
+    /// The light tree setting exists (4.0+).
+    #[serde(default)]
+    pub light_tree: bool,
+    /// Names of the sampling patterns offered.
+    #[serde(default)]
+    pub sampling_patterns: Vec<String>,
 }
 
 /// Render mode of a request.
@@ -235,12 +260,14 @@ impl Worker {
             opts.threads.to_string().into(),
             "--materials".into(),
             opts.materials.clone().into_os_string(),
+            "--device".into(),
+            opts.device.arg().into(),
         ];
         let mut cmd =
             crate::blender::worker_command(&opts.blender, flavour, &opts.script, &bridge_args);
-        cmd        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
+        cmd.stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
         // Blender's own temporary files (`blender_*` folders, left behind whenever a worker is
         // killed) go into a private folder removed with the worker, or by the next run if we
         // are killed ourselves.
@@ -318,6 +345,8 @@ impl Worker {
                 bridge_version: 0,
                 blender_version: String::new(),
                 cycles_devices: Vec::new(),
+                gpus: Vec::new(),
+                features: Features::default(),
                 extra: BTreeMap::new(),
             },
             startup: Duration::ZERO,
