@@ -942,19 +942,39 @@ fn camera_model_depth_and_shadow_match_blender() {
 
 #[test]
 fn doctor_reports_blender_and_devices() {
-    let Some(blender) = blender_or_skip("doctor_reports_blender_and_devices") else {
-        return;
-    };
-    let out = clevrtex()
-        .arg("doctor")
-        .arg("--blender")
-        .arg(&blender)
-        .output()
-        .unwrap();
-    let t = text(&out);
-    assert_eq!(out.status.code(), Some(0), "{t}");
-    assert!(t.contains("version: "), "{t}");
-    assert!(t.contains("cycles devices: ") && t.contains("CPU"), "{t}");
+    // Each Blender found, checked on its own (`--blender`); the list names every one.
+    let blenders = test_blenders("doctor_reports_blender_and_devices");
+    for blender in &blenders {
+        let out = clevrtex()
+            .arg("doctor")
+            .arg("--blender")
+            .arg(blender)
+            .env("CLEVRTEX_BLENDER", blenders.last().unwrap())
+            .output()
+            .unwrap();
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(0), "{t}");
+        assert!(t.contains("version: "), "{t}");
+        assert!(t.contains("cycles devices: ") && t.contains("CPU"), "{t}");
+        assert!(t.contains("oidn: ") && t.contains("path guiding: "), "{t}");
+        for b in &blenders {
+            assert!(
+                t.contains(&format!("{} [", b.display())),
+                "{} not listed: {t}",
+                b.display()
+            );
+        }
+        let marked = format!("  * {} [", blender.display());
+        assert!(t.contains(&marked), "{marked}: {t}");
+        if blender
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("python")
+        {
+            assert!(t.contains("(python with bpy)"), "{t}");
+        }
+    }
 }
 
 #[test]

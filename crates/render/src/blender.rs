@@ -131,7 +131,8 @@ pub fn worker_command(
 }
 
 /// Find Blender: `explicit` if given (it must exist), else `$CLEVRTEX_BLENDER`, else
-/// `blender` on `PATH`.
+/// `blender` on `PATH`, else the project venv's `./.venv-bpy/bin/python`. Each may be a
+/// Blender executable or a Python with `bpy` ([`flavour`]).
 pub fn locate(explicit: Option<&Path>) -> Result<PathBuf> {
     let given = explicit.map(Path::to_path_buf).or_else(|| {
         std::env::var_os(BLENDER_ENV)
@@ -150,7 +151,40 @@ pub fn locate(explicit: Option<&Path>) -> Result<PathBuf> {
             Err(RenderError::BlenderNotFound { tried: Some(path) })
         };
     }
-    find_on_path("blender").ok_or(RenderError::BlenderNotFound { tried: None })
+    find_on_path("blender")
+        .or_else(|| Some(PathBuf::from(PROJECT_VENV_PYTHON)).filter(|p| p.is_file()))
+        .ok_or(RenderError::BlenderNotFound { tried: None })
+}
+
+/// Every Blender this machine offers, for `clevrtex doctor`: `blender` on `PATH`,
+/// `$CLEVRTEX_BLENDER`, and the project venv's Python (`./.venv-bpy/bin/python`), each once
+/// (by canonical path), with where it was found.
+pub fn candidates() -> Vec<(PathBuf, &'static str)> {
+    let mut out: Vec<(PathBuf, &'static str)> = Vec::new();
+    let mut push = |p: PathBuf, from: &'static str| {
+        let key = std::fs::canonicalize(&p).unwrap_or_else(|_| p.clone());
+        if p.is_file()
+            && !out
+                .iter()
+                .any(|(q, _)| std::fs::canonicalize(q).unwrap_or_else(|_| q.clone()) == key)
+        {
+            out.push((p, from));
+        }
+    };
+    if let Some(p) = std::env::var_os(BLENDER_ENV).filter(|v| !v.is_empty()) {
+        let p = PathBuf::from(p);
+        let p = if p.components().count() == 1 && !p.exists() {
+            find_on_path(&p.to_string_lossy()).unwrap_or(p)
+        } else {
+            p
+        };
+        push(p, BLENDER_ENV);
+    }
+    if let Some(p) = find_on_path("blender") {
+        push(p, "PATH");
+    }
+    push(PathBuf::from(PROJECT_VENV_PYTHON), "./.venv-bpy");
+    out
 }
 
 fn find_on_path(name: &str) -> Option<PathBuf> {
