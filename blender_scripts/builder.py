@@ -258,6 +258,7 @@ def apply_render_settings(scene, spec, threads):
     c.blur_glossy = r["blur_glossy"]
     c.use_denoising = False
     c.use_preview_denoising = False
+    compat.apply_levers(c, r)
     c.seed = r.get("cycles_seed", CYCLES_SEED)
     c.use_animated_seed = False
     c.time_limit = 0.0

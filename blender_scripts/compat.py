@@ -196,6 +196,35 @@ def set_experimental_features(scene, enabled):
         scene.cycles.feature_set = "EXPERIMENTAL" if enabled else "SUPPORTED"
 
 
+def apply_levers(cycles, r):
+    """Cycles 4.x levers from a scene file's `render` (absent: this version's default, and
+    ignored where this build lacks them, as 3.4 lacks all four):
+
+    - `light_tree` (4.0+): `use_light_tree`;
+    - `path_guiding` (CPU only, builds with it): surface guiding;
+    - `blue_noise` (4.2+): `BLUE_NOISE` pattern when true, `TABULATED_SOBOL` when false;
+    - `denoise`: OpenImageDenoise on the combined (RGB) pass only: Cycles never denoises
+      the index, depth, normal or colour passes, so masks, depth and normals are unchanged.
+    """
+    if r.get("light_tree") is not None and hasattr(cycles, "use_light_tree"):
+        cycles.use_light_tree = bool(r["light_tree"])
+    if r.get("path_guiding") is not None and hasattr(cycles, "use_guiding"):
+        cycles.use_guiding = bool(r["path_guiding"])
+        cycles.use_surface_guiding = bool(r["path_guiding"])
+        cycles.use_volume_guiding = False
+    if r.get("blue_noise") is not None and hasattr(cycles, "sampling_pattern"):
+        try:
+            cycles.sampling_pattern = "BLUE_NOISE" if r["blue_noise"] else "TABULATED_SOBOL"
+        except TypeError:  # before 4.2: no such patterns
+            pass
+    if r.get("denoise") and features()["oidn"]:
+        cycles.use_denoising = True
+        cycles.denoiser = "OPENIMAGEDENOISE"
+        cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+        if hasattr(cycles, "denoising_use_gpu"):
+            cycles.denoising_use_gpu = False
+
+
 def set_cast_shadow(obj, enabled):
     """Whether an object casts shadows in Cycles (`visible_shadow` since 3.0)."""
     if hasattr(obj, "visible_shadow"):
