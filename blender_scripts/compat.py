@@ -206,15 +206,26 @@ def apply_levers(cycles, r):
     - `denoise`: OpenImageDenoise on the combined (RGB) pass only: Cycles never denoises
       the index, depth, normal or colour passes, so masks, depth and normals are unchanged.
     """
-    if r.get("light_tree") is not None and hasattr(cycles, "use_light_tree"):
-        cycles.use_light_tree = bool(r["light_tree"])
-    if r.get("path_guiding") is not None and hasattr(cycles, "use_guiding"):
-        cycles.use_guiding = bool(r["path_guiding"])
-        cycles.use_surface_guiding = bool(r["path_guiding"])
-        cycles.use_volume_guiding = False
-    if r.get("blue_noise") is not None and hasattr(cycles, "sampling_pattern"):
+    # The scene (and its Cycles settings) outlives one scene file: an absent lever is reset
+    # to the version's default, never left as the previous file set it.
+    def default(name):
+        return cycles.bl_rna.properties[name].default
+
+    if hasattr(cycles, "use_light_tree"):
+        light_tree = r.get("light_tree")
+        cycles.use_light_tree = default("use_light_tree") if light_tree is None else light_tree
+    if hasattr(cycles, "use_guiding"):
+        guiding = r.get("path_guiding")
+        cycles.use_guiding = default("use_guiding") if guiding is None else guiding
+        cycles.use_surface_guiding = default("use_surface_guiding") if guiding is None else guiding
+        cycles.use_volume_guiding = default("use_volume_guiding") if guiding is None else False
+    if hasattr(cycles, "sampling_pattern"):
+        blue = r.get("blue_noise")
         try:
-            cycles.sampling_pattern = "BLUE_NOISE" if r["blue_noise"] else "TABULATED_SOBOL"
+            if blue is None:
+                cycles.sampling_pattern = default("sampling_pattern") or "AUTOMATIC"
+            else:
+                cycles.sampling_pattern = "BLUE_NOISE" if blue else "TABULATED_SOBOL"
         except TypeError:  # before 4.2: no such patterns
             pass
     if r.get("denoise") and features()["oidn"]:
