@@ -149,3 +149,59 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
         }
     }
 }
+
+/// OIDN (`render.denoise`, an opt-in lever of bpy 4.5) changes the RGB only: the mask, depth,
+/// normal and albedo passes are byte-identical to those of the same scene without it.
+#[test]
+fn denoising_changes_the_rgb_only() {
+    let Some(bpy) = bpy_or_skip("denoising_changes_the_rgb_only") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = clevrtex_scene::Config::builtin("full").unwrap();
+    let mut scene = clevrtex_scene::sample(
+        &config,
+        &clevrtex_scene::SampleRequest {
+            seed: 0,
+            index: 1,
+            attempt: 0,
+            total: 2,
+        },
+    )
+    .unwrap();
+    scene.render.width = 64;
+    scene.render.height = 48;
+    scene.render.samples = 4;
+    let stem = scene.stem.clone();
+    let mut outputs = Vec::new();
+    for denoise in [false, true] {
+        let scenes = dir.path().join(format!("scenes-{denoise}"));
+        std::fs::create_dir_all(&scenes).unwrap();
+        scene.render.denoise = denoise;
+        std::fs::write(
+            scenes.join(format!("{stem}.json")),
+            serde_json::to_string(&scene).unwrap(),
+        )
+        .unwrap();
+        let out = dir.path().join(format!("out-{denoise}"));
+        render(&bpy, &scenes, &out);
+        outputs.push(out.join("clevrtex_full/0"));
+    }
+    let read = |i: usize, suffix: &str| std::fs::read(outputs[i].join(format!("{stem}{suffix}")));
+    for suffix in [
+        "_flat.png",
+        "_depth_0001.png",
+        "_normal_0001.png",
+        "_albedo_0001.png",
+    ] {
+        assert!(
+            read(0, suffix).unwrap() == read(1, suffix).unwrap(),
+            "{suffix} differs with denoising"
+        );
+    }
+    assert_ne!(
+        read(0, ".png").unwrap(),
+        read(1, ".png").unwrap(),
+        "denoising left the RGB unchanged: was OIDN applied?"
+    );
+}
