@@ -90,7 +90,8 @@ pub struct RenderArgs {
     /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds.
     #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
     startup_timeout: f64,
-    /// Blender executable (default: `blender` on PATH).
+    /// Blender: an executable, or a Python that imports `bpy` (default: `blender` on PATH, else
+    /// `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Option<PathBuf>,
 }

@@ -28,7 +28,8 @@ pub struct RunArgs {
     /// for `generate`; the scene files' own list for `render`).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     pub(crate) passes: Option<Vec<String>>,
-    /// Blender executable (default: `blender` on PATH).
+    /// Blender: an executable, or a Python that imports `bpy` (default: `blender` on PATH, else
+    /// `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Option<PathBuf>,
     /// Blender processes rendering in parallel (default: 2 on machines with 2+ cores).
