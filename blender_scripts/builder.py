@@ -233,7 +233,7 @@ def _build_world(scene):
 def apply_render_settings(scene, spec, threads):
     r = spec["render"]
     scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
+    compat.apply_device(scene)
     scene.render.resolution_x = r["width"]
     scene.render.resolution_y = r["height"]
     scene.render.resolution_percentage = 100
@@ -274,6 +274,7 @@ def apply_render_settings(scene, spec, threads):
     c.blur_glossy = r["blur_glossy"]
     c.use_denoising = False
     c.use_preview_denoising = False
+    compat.apply_levers(c, r)
     c.seed = r.get("cycles_seed", CYCLES_SEED)
     c.use_animated_seed = False
     c.time_limit = 0.0
@@ -346,7 +347,7 @@ def _set_adaptive(obj, enabled, simple):
         mod.subdivision_type = "SIMPLE" if simple else "CATMULL_CLARK"
         mod.levels = 0
         mod.render_levels = 0
-    obj.cycles.use_adaptive_subdivision = enabled
+    compat.set_adaptive_subdivision(obj, mod, enabled)
     if not enabled and simple and mod is not None:
         obj.modifiers.remove(mod)
 
@@ -380,7 +381,7 @@ def assign_materials(built, catalogue, build_material, displacement):
         any_displaced = any_displaced or displaces
         _set_adaptive(obj, displaces, simple)
     scene = bpy.context.scene
-    scene.cycles.feature_set = "EXPERIMENTAL" if any_displaced else "SUPPORTED"
+    compat.set_experimental_features(scene, any_displaced)
     keep = set(m.name for m in made.values())
     for name in old:
         mat = bpy.data.materials.get(name)

@@ -7,7 +7,7 @@ displacement method, light power, smooth shading, shadow visibility, the output 
 format and colour management (view transform and look).
 """
 
-import importlib.util
+import math
 import os
 
 import bpy
@@ -17,6 +17,18 @@ VERSION = bpy.app.version
 
 def version_string():
     return bpy.app.version_string.split(" ")[0]
+
+
+def is_module():
+    """Whether bpy runs as a Python module (PyPI's `bpy` wheel) rather than inside Blender."""
+    return bool(getattr(bpy.app, "is_module", False)) or not bpy.app.binary_path
+
+
+def factory_startup():
+    """What `blender --factory-startup` gives, for bpy as a module (which has no command
+    line): factory preferences (no user add-ons, default Cycles settings) and the factory
+    startup scene, which the builder clears like Blender's."""
+    bpy.ops.wm.read_factory_settings(use_empty=False)
 
 
 def set_view_look(view_settings, view_transform, look):
@@ -57,7 +69,14 @@ def set_color_management(scene, view_transform, look, exposure, gamma):
 
 
 def area_light_energy(watts):
-    """Area-light power in Blender's unit for the scene file's watts (same in 3.x and 4.x)."""
+    """Area-light power in Blender's unit for the scene file's watts, which are 3.x watts.
+
+    Blender 4.0 changed how an area light's power spreads: the same `energy` lights a diffuse
+    plane 4/pi brighter (measured: 0.8601 vs 0.6763 mean radiance under one 1 m square light,
+    ratio 1.272, with sun and point lights equal to 0.3%). So 4.0+ gets pi/4 of the watts.
+    """
+    if VERSION >= (4, 0, 0):
+        return watts * math.pi / 4.0
     return watts
 
 
@@ -66,8 +85,20 @@ def sun_strength(irradiance):
     return irradiance
 
 
+def _set_media_type(image_settings, media_type):
+    """Blender 5.0 splits the output format into a media type (`IMAGE`,
+    `VIDEO`) and a file format: `OPEN_EXR_MULTILAYER` is only offered once the media type is
+    `MULTI_LAYER_IMAGE` (measured on bpy 5.0). Returns whether this Blender has media
+    types."""
+    if hasattr(image_settings, "media_type"):
+        image_settings.media_type = media_type
+        return True
+    return False
+
+
 def set_png_output(image_settings, compression=None):
     """Save renders as 8-bit RGB PNG (`compression` in percent; None keeps Blender's)."""
+    _set_media_type(image_settings, "IMAGE")
     image_settings.file_format = "PNG"
     image_settings.color_mode = "RGB"
     image_settings.color_depth = "8"
@@ -77,14 +108,27 @@ def set_png_output(image_settings, compression=None):
 
 def set_exr_multilayer_output(image_settings, codec):
     """Save renders as 32-bit float RGBA multilayer OpenEXR with `codec` (e.g. `RLE`)."""
+    _set_media_type(image_settings, "MULTI_LAYER_IMAGE")
     image_settings.file_format = "OPEN_EXR_MULTILAYER"
     image_settings.color_mode = "RGBA"
     image_settings.color_depth = "32"
     image_settings.exr_codec = codec
 
 
+def setup_bump(node):
+    """Make a Bump node behave as in 3.x: 4.4 added a `Filter Width` input (in pixels) whose
+    default 0.1 gives a sharper, noisier bump than before; 1.0 is the earlier fixed width
+    (what Blender itself sets when it opens an older file)."""
+    width = node.inputs.get("Filter Width")
+    if width is not None:
+        width.default_value = 1.0
+
+
 def shade_smooth(mesh):
-    """Smooth-shade every face (4.1 has a dedicated call; setting the flag works everywhere)."""
+    """Smooth-shade every face (4.1 has a dedicated call; setting the flag works everywhere).
+
+    4.1 also removed `Mesh.use_auto_smooth` (auto smooth became a modifier); the bridge never
+    uses it: every mesh is either all smooth or all flat."""
     if hasattr(mesh, "shade_smooth"):
         mesh.shade_smooth()
     else:
@@ -131,6 +175,67 @@ def set_displacement_method(mat, method):
         mat.cycles.displacement_method = method
 
 
+def set_adaptive_subdivision(obj, modifier, enabled):
+    """Adaptive subdivision (true displacement) of `obj`, whose last modifier `modifier` is a
+    subdivision modifier (None when disabled and absent). Up to 4.5 a Cycles object setting
+    (the scene's `dicing_rate` applies); 5.0 moved it onto the modifier, in pixels, set to
+    the same rate."""
+    if modifier is not None and hasattr(modifier, "use_adaptive_subdivision"):
+        modifier.use_adaptive_subdivision = enabled
+        if enabled:
+            modifier.adaptive_space = "PIXEL"
+            modifier.adaptive_pixel_size = bpy.context.scene.cycles.dicing_rate
+    elif hasattr(obj.cycles, "use_adaptive_subdivision"):
+        obj.cycles.use_adaptive_subdivision = enabled
+
+
+def set_experimental_features(scene, enabled):
+    """Cycles' experimental feature set (adaptive subdivision needs it up to 4.5; 5.0 made
+    adaptive subdivision a regular feature and removed the setting)."""
+    if hasattr(scene.cycles, "feature_set"):
+        scene.cycles.feature_set = "EXPERIMENTAL" if enabled else "SUPPORTED"
+
+
+def apply_levers(cycles, r):
+    """Cycles 4.x levers from a scene file's `render` (absent: this version's default, and
+    ignored where this build lacks them, as 3.4 lacks all four):
+
+    - `light_tree` (4.0+): `use_light_tree`;
+    - `path_guiding` (CPU only, builds with it): surface guiding;
+    - `blue_noise` (4.2+): `BLUE_NOISE` pattern when true, `TABULATED_SOBOL` when false;
+    - `denoise`: OpenImageDenoise on the combined (RGB) pass only: Cycles never denoises
+      the index, depth, normal or colour passes, so masks, depth and normals are unchanged.
+    """
+    # The scene (and its Cycles settings) outlives one scene file: an absent lever is reset
+    # to the version's default, never left as the previous file set it.
+    def default(name):
+        return cycles.bl_rna.properties[name].default
+
+    if hasattr(cycles, "use_light_tree"):
+        light_tree = r.get("light_tree")
+        cycles.use_light_tree = default("use_light_tree") if light_tree is None else light_tree
+    if hasattr(cycles, "use_guiding"):
+        guiding = r.get("path_guiding")
+        cycles.use_guiding = default("use_guiding") if guiding is None else guiding
+        cycles.use_surface_guiding = default("use_surface_guiding") if guiding is None else guiding
+        cycles.use_volume_guiding = default("use_volume_guiding") if guiding is None else False
+    if hasattr(cycles, "sampling_pattern"):
+        blue = r.get("blue_noise")
+        try:
+            if blue is None:
+                cycles.sampling_pattern = default("sampling_pattern") or "AUTOMATIC"
+            else:
+                cycles.sampling_pattern = "BLUE_NOISE" if blue else "TABULATED_SOBOL"
+        except TypeError:  # before 4.2: no such patterns
+            pass
+    if r.get("denoise") and features()["oidn"]:
+        cycles.use_denoising = True
+        cycles.denoiser = "OPENIMAGEDENOISE"
+        cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+        if hasattr(cycles, "denoising_use_gpu"):
+            cycles.denoising_use_gpu = False
+
+
 def set_cast_shadow(obj, enabled):
     """Whether an object casts shadows in Cycles (`visible_shadow` since 3.0)."""
     if hasattr(obj, "visible_shadow"):
@@ -152,24 +257,86 @@ def cycles_devices():
     return devices
 
 
-def load_teapot_module():
-    """The bundled "extra objects" add-on's teapot module, loaded on its own.
+def cycles_gpus():
+    """The GPUs Cycles can render on: `[{"kind": "CUDA"|"OPTIX"|"HIP"|..., "name", "id"}]`, in
+    the order Cycles lists them (the index a worker is pinned to counts within one kind)."""
+    out = []
+    try:
+        prefs = bpy.context.preferences.addons["cycles"].preferences
+        for kind in cycles_devices():
+            if kind == "CPU":
+                continue
+            for dev in prefs.get_devices_for_type(kind):
+                if dev.type != "CPU":
+                    out.append({"kind": kind, "name": dev.name, "id": dev.id})
+    except Exception:  # device probing is informational only
+        pass
+    return out
 
-    Debian's build cannot enable the whole add-on headless (another of its modules needs
-    numpy, which Debian's Blender lacks), but its teapot module only needs bpy and mathutils,
-    so we load that one file directly. Blender 4.2+ moved the add-on to the online
-    extensions platform, where it may be absent: then this raises.
+
+def features():
+    """What this build offers beyond 3.4's Cycles: OpenImageDenoise, path guiding (CPU only),
+    the light tree (4.0+) and the sampling patterns (names)."""
+    out = {"oidn": False, "path_guiding": False}
+    try:
+        import _cycles
+
+        out["oidn"] = bool(getattr(_cycles, "with_openimagedenoise", False))
+        out["path_guiding"] = bool(getattr(_cycles, "with_path_guiding", False))
+    except Exception:  # informational only
+        pass
+    cycles = bpy.context.scene.cycles
+    out["light_tree"] = hasattr(cycles, "use_light_tree")
+    try:
+        out["sampling_patterns"] = [
+            item.identifier for item in cycles.bl_rna.properties["sampling_pattern"].enum_items
+        ]
+    except Exception:
+        out["sampling_patterns"] = []
+    return out
+
+
+# The device this worker renders on: ("CPU", 0) or (GPU kind, index within it); set once by
+# the worker from its `--device` argument.
+DEVICE = ("CPU", 0)
+
+
+def apply_device(scene):
+    """Render `scene` on this worker's [`DEVICE`] ([`use_device`])."""
+    use_device(scene, DEVICE[0], DEVICE[1])
+
+
+def use_device(scene, kind, index):
+    """Render `scene` on device `kind` (`CPU`, `CUDA`, `OPTIX`, `HIP`, ...): for a GPU, enable
+    exactly the `index`-th GPU of that kind (one worker per GPU) and nothing else."""
+    if kind == "CPU":
+        scene.cycles.device = "CPU"
+        return
+    prefs = bpy.context.preferences.addons["cycles"].preferences
+    prefs.compute_device_type = kind
+    gpus = [d for d in prefs.get_devices_for_type(kind) if d.type != "CPU"]
+    if not 0 <= index < len(gpus):
+        raise ValueError("no %s device %d (this worker sees %d)" % (kind, index, len(gpus)))
+    for d in prefs.get_devices_for_type(kind):
+        d.use = False
+    gpus[index].use = True
+    scene.cycles.device = "GPU"
+
+
+TEAPOT_MESH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "teapot_mesh.json")
+
+
+def teapot_mesh():
+    """The Utah teapot's vertices and faces, as Blender 3.4's bundled "extra objects" add-on
+    makes them (`make_teapot("1", 6)`), from `teapot_mesh.json`.
+
+    Blender 4.2+ moved that add-on to the online extensions platform (absent from PyPI's
+    `bpy` and from offline installs), and Debian's build cannot enable it headless; the mesh
+    is stored once instead (regenerate with `dev/dump_teapot.py`), which also makes the
+    teapot the same vertex for vertex on every Blender version.
     """
-    import addon_utils
+    import json
 
-    for root in addon_utils.paths():
-        path = os.path.join(root, "add_mesh_extra_objects", "add_mesh_teapot.py")
-        if os.path.isfile(path):
-            spec = importlib.util.spec_from_file_location("clevrtex_extra_teapot", path)
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
-            return module
-    raise RuntimeError(
-        "the teapot needs Blender's bundled `add_mesh_extra_objects` add-on, not found in %s"
-        % addon_utils.paths()
-    )
+    with open(TEAPOT_MESH, "r", encoding="utf-8") as f:
+        doc = json.load(f)
+    return [tuple(v) for v in doc["verts"]], [tuple(f) for f in doc["faces"]]

@@ -118,6 +118,7 @@ def _build_layers(nt, out, recipe, instance, displace):
     bump = surf.get("bump", 0.0)
     if height is not None and bump > 0 and hasattr(height, "node"):
         b = g.node("ShaderNodeBump")
+        compat.setup_bump(b)
         g.set(b.inputs["Height"], height)
         g.set(b.inputs["Distance"], bump)
         _set_bsdf(g, bsdf, "Normal", b.outputs["Normal"])

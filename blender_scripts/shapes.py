@@ -120,7 +120,7 @@ def _box_uvs(bm):
 
 
 def _make_teapot(bm):
-    verts, faces = compat.load_teapot_module().make_teapot("1", 6)
+    verts, faces = compat.teapot_mesh()
     bverts = [bm.verts.new(co) for co in verts]
     for face in faces:
         # Bezier patches collapse to points at the lid knob and the base: drop repeated

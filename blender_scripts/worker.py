@@ -2,7 +2,9 @@
 the material checks) on request, over the protocol of docs/bridge-protocol.md.
 
 Run as `blender -b --factory-startup --python-exit-code 1 --python worker.py -- --tag TAG
-[--threads T] [--materials materials.json]`.
+[--threads T] [--materials materials.json]`, or, with PyPI's `bpy` module, as `python
+worker.py -- --tag TAG ... --factory-startup` (the module has no command line of its own, so
+`--factory-startup` asks the bridge to reset to factory settings itself).
 
 Stdout discipline: before anything else the worker keeps a private duplicate of stdout for
 its replies and points file descriptor 1 (C stdio, Python's print, add-ons, Cycles' progress)
@@ -57,6 +59,10 @@ def _parse_args(argv):
     p.add_argument("--tag", required=True)
     p.add_argument("--threads", type=int, default=0)
     p.add_argument("--materials", default=None)
+    p.add_argument("--device", default="CPU",
+                   help="CPU, or KIND:INDEX, e.g. CUDA:1: the index-th GPU of that kind")
+    p.add_argument("--factory-startup", action="store_true",
+                   help="reset to factory settings first (bpy as a Python module)")
     return p.parse_args(argv)
 
 
@@ -70,8 +76,13 @@ def _load_catalogue(path):
 
 class Worker:
     def __init__(self, args, replier):
-        import builder
         import compat
+
+        if args.factory_startup:
+            compat.factory_startup()
+        kind, _, index = args.device.partition(":")
+        compat.DEVICE = (kind.upper(), int(index or 0))
+        import builder
         import materials
 
         self.builder = builder
@@ -88,6 +99,8 @@ class Worker:
             "bridge_version": BRIDGE_VERSION,
             "blender_version": self.compat.version_string(),
             "cycles_devices": self.compat.cycles_devices(),
+            "gpus": self.compat.cycles_gpus(),
+            "features": self.compat.features(),
         })
 
     def _scene_key(self, path):

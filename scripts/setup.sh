@@ -7,6 +7,9 @@
 #                                    tests read our files with (webdataset, PyYAML) and the
 #                                    eval reference harness's (numpy, scipy, scikit-learn, Pillow),
 #                                    and the Python package `clevrtex` (crates/python) with pytest
+#   ./scripts/setup.sh --bpy 4.5     also `.venv-bpy/`: a Python venv with PyPI's `bpy` 4.5 LTS
+#                                    (or `--bpy 5.0`), a second Blender: pass
+#                                    `--blender .venv-bpy/bin/python` to clevrtex
 #   ./scripts/setup.sh --browser     also Debian's `chromium`, for the report's browser test
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -14,26 +17,44 @@ SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 test_venv=0
 browser=0
-for arg in "$@"; do
-  case "$arg" in
+bpy=""
+while [ $# -gt 0 ]; do
+  case "$1" in
     --test-venv) test_venv=1 ;;
     --browser) browser=1 ;;
-    *) echo "setup.sh: unknown option \`$arg\` (known: --test-venv, --browser)" >&2; exit 2 ;;
+    --bpy)
+      bpy="${2:-}"
+      shift
+      case "$bpy" in
+        4.5|5.0) ;;
+        *) echo "setup.sh: \`--bpy ${bpy}\` is not a supported bpy version (known: 4.5, 5.0)" >&2; exit 2 ;;
+      esac
+      ;;
+    *) echo "setup.sh: unknown option \`$1\` (known: --test-venv, --bpy 4.5|5.0, --browser)" >&2; exit 2 ;;
   esac
+  shift
 done
+
+# Every Debian package in one apt run.
 need=()
 command -v blender >/dev/null 2>&1 || need+=(blender)
-if [ "$test_venv" = 1 ] && ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
+if { [ "$test_venv" = 1 ] || [ -n "$bpy" ]; } && ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
   need+=(python3-venv)
 fi
-if [ ${#need[@]} -gt 0 ]; then
-  $SUDO apt-get update
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y "${need[@]}"
+if [ -n "$bpy" ]; then
+  # PyPI's bpy wheels need a few X/GL libraries even headless.
+  for p in libtbb12 libvulkan1 libx11-6 libxrender1 libxxf86vm1 libxfixes3 libxi6 libxkbcommon0 \
+           libsm6 libgl1 libegl1; do
+    dpkg -s "$p" >/dev/null 2>&1 || need+=("$p")
+  done
 fi
 # Chromium alone (no recommends: 122 MB of packages instead of a desktop's worth).
 if [ "$browser" = 1 ] && ! command -v chromium >/dev/null 2>&1; then
-  [ ${#need[@]} -gt 0 ] || $SUDO apt-get update
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends chromium
+  need+=(chromium)
+fi
+if [ ${#need[@]} -gt 0 ]; then
+  $SUDO apt-get update
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${need[@]}"
 fi
 if command -v rustup >/dev/null 2>&1; then
   rustup component add rustfmt clippy >/dev/null 2>&1 || true
@@ -51,6 +72,18 @@ if [ "$test_venv" = 1 ]; then
   # time so it follows the sources (cargo reuses crates/python/target).
   .venv-test/bin/pip install --quiet --disable-pip-version-check pytest ./crates/python
   echo "test venv: $(.venv-test/bin/python -c 'import webdataset, sys; print(sys.version.split()[0], "webdataset", getattr(webdataset, "__version__", "?"))')"
+fi
+if [ -n "$bpy" ]; then
+  # PyPI's bpy wheels need the Python minor version Blender was built with (3.11 for 4.5 and
+  # 5.0, Debian 12's python3).
+  want="${bpy}."
+  have="$(.venv-bpy/bin/python -c 'import bpy; print(bpy.app.version_string)' 2>/dev/null || true)"
+  if [ "${have#"$want"}" = "$have" ]; then
+    rm -rf .venv-bpy
+    python3 -m venv .venv-bpy
+    .venv-bpy/bin/pip install --quiet --disable-pip-version-check "bpy==${bpy}.*"
+  fi
+  echo "bpy venv: .venv-bpy/bin/python: Blender $(.venv-bpy/bin/python -c 'import bpy; print(bpy.app.version_string)' 2>/dev/null)"
 fi
 echo "blender: $(blender --version 2>/dev/null | head -n 1)"
 if [ "$browser" = 1 ]; then

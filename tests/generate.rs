@@ -15,7 +15,7 @@ use clevrtex_render::post::{self, decode_png};
 use clevrtex_scene::{Pass, SceneFile};
 use serde_json::Value;
 
-use crate::util::{blender_or_skip, clevrtex, data, repo_root, text};
+use crate::util::{blender_or_skip, clevrtex, data, repo_root, test_blenders, text};
 
 fn fake_blender() -> PathBuf {
     repo_root().join("tests/fake_blender/blender")
@@ -537,112 +537,111 @@ fn check_mask(dir: &Path, stem: &str) -> Value {
 
 #[test]
 fn generate_writes_every_pass_with_exact_masks_and_resumes() {
-    let Some(blender) = blender_or_skip("generate_writes_every_pass_with_exact_masks_and_resumes")
-    else {
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let run = |extra: &[&str]| {
-        clevrtex()
-            .args(["generate", "--variant", "camo", "-n", "2", "--seed", "3"])
-            .args([
-                "--width",
-                "80",
-                "--height",
-                "60",
-                "--samples",
-                "2",
-                "--workers",
-                "1",
-            ])
-            .arg("--blender")
-            .arg(&blender)
-            .arg("--out")
-            .arg(dir.path())
-            .args(extra)
-            .output()
-            .unwrap()
-    };
-    let out = run(&[]);
-    let t = text(&out);
-    assert_eq!(out.status.code(), Some(0), "{t}");
-    assert!(t.contains("time split"), "{t}");
-    let sub = dir.path().join("clevrtex_camo/0");
-    let mut expected = Vec::new();
-    for i in 0..2 {
-        let stem = format!("CLEVRTEX_camo_{i:06}");
-        for suffix in [
-            ".json",
-            ".png",
-            "_albedo_0001.png",
-            "_depth_0001.png",
-            "_flat.png",
-            "_normal_0001.png",
-            "_shadow_0001.png",
-        ] {
-            expected.push(format!("clevrtex_camo/0/{stem}{suffix}"));
+    // On every Blender found: Debian's, and PyPI's bpy when installed.
+    for blender in test_blenders("generate_writes_every_pass_with_exact_masks_and_resumes") {
+        let dir = tempfile::tempdir().unwrap();
+        let run = |extra: &[&str]| {
+            clevrtex()
+                .args(["generate", "--variant", "camo", "-n", "2", "--seed", "3"])
+                .args([
+                    "--width",
+                    "80",
+                    "--height",
+                    "60",
+                    "--samples",
+                    "2",
+                    "--workers",
+                    "1",
+                ])
+                .arg("--blender")
+                .arg(&blender)
+                .arg("--out")
+                .arg(dir.path())
+                .args(extra)
+                .output()
+                .unwrap()
+        };
+        let out = run(&[]);
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(0), "{t}");
+        assert!(t.contains("time split"), "{t}");
+        let sub = dir.path().join("clevrtex_camo/0");
+        let mut expected = Vec::new();
+        for i in 0..2 {
+            let stem = format!("CLEVRTEX_camo_{i:06}");
+            for suffix in [
+                ".json",
+                ".png",
+                "_albedo_0001.png",
+                "_depth_0001.png",
+                "_flat.png",
+                "_normal_0001.png",
+                "_shadow_0001.png",
+            ] {
+                expected.push(format!("clevrtex_camo/0/{stem}{suffix}"));
+            }
+            let meta = check_mask(&sub, &stem);
+            for key in [
+                "num_objects",
+                "split",
+                "image_index",
+                "image_filename",
+                "ground_material",
+                "directions",
+                "objects",
+                "relationships",
+                "mask_filename",
+                "normal_filename",
+                "albedo_filename",
+                "depth_filename",
+                "shadow_filename",
+                "seed",
+                "attempt",
+                "camera",
+                "passes",
+                "render",
+                "blender_version",
+                "clevrtex_version",
+            ] {
+                assert!(meta.get(key).is_some(), "metadata lacks `{key}`");
+            }
+            assert_eq!(meta["image_filename"], format!("{stem}.png"));
+            assert_eq!(meta["seed"], 3);
+            assert_eq!(meta["render"]["width"], 80);
+            let depth = decode_png(&sub.join(format!("{stem}_depth_0001.png"))).unwrap();
+            assert_eq!(
+                (depth.bits, depth.channels, depth.width, depth.height),
+                (16, 1, 80, 60)
+            );
+            let normal = decode_png(&sub.join(format!("{stem}_normal_0001.png"))).unwrap();
+            assert_eq!((normal.bits, normal.channels), (16, 3));
+            let rgb = decode_png(&sub.join(format!("{stem}.png"))).unwrap();
+            assert_eq!((rgb.bits, rgb.width, rgb.height), (8, 80, 60));
         }
-        let meta = check_mask(&sub, &stem);
-        for key in [
-            "num_objects",
-            "split",
-            "image_index",
-            "image_filename",
-            "ground_material",
-            "directions",
-            "objects",
-            "relationships",
-            "mask_filename",
-            "normal_filename",
-            "albedo_filename",
-            "depth_filename",
-            "shadow_filename",
-            "seed",
-            "attempt",
-            "camera",
-            "passes",
-            "render",
-            "blender_version",
-            "clevrtex_version",
-        ] {
-            assert!(meta.get(key).is_some(), "metadata lacks `{key}`");
-        }
-        assert_eq!(meta["image_filename"], format!("{stem}.png"));
-        assert_eq!(meta["seed"], 3);
-        assert_eq!(meta["render"]["width"], 80);
-        let depth = decode_png(&sub.join(format!("{stem}_depth_0001.png"))).unwrap();
+        // The run's manifest (sizes and hashes of these files, for `clevrtex verify`).
+        expected.push("clevrtex_camo/MANIFEST-0of1.json".to_string());
+        expected.sort();
+        assert_eq!(files_under(dir.path()), expected);
+
+        // Rerun: everything is complete, nothing is rendered again.
+        let out = run(&[]);
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(0), "{t}");
+        assert!(t.contains("rendered 0 images (2 already complete"), "{t}");
+
+        // A sample with a missing file is incomplete and is redone; the other is kept.
+        let keep = sub.join("CLEVRTEX_camo_000000.json");
+        let before = std::fs::metadata(&keep).unwrap().modified().unwrap();
+        std::fs::remove_file(sub.join("CLEVRTEX_camo_000001_shadow_0001.png")).unwrap();
+        let out = run(&[]);
+        let t = text(&out);
+        assert!(t.contains("rendered 1 images (1 already complete"), "{t}");
         assert_eq!(
-            (depth.bits, depth.channels, depth.width, depth.height),
-            (16, 1, 80, 60)
+            std::fs::metadata(&keep).unwrap().modified().unwrap(),
+            before
         );
-        let normal = decode_png(&sub.join(format!("{stem}_normal_0001.png"))).unwrap();
-        assert_eq!((normal.bits, normal.channels), (16, 3));
-        let rgb = decode_png(&sub.join(format!("{stem}.png"))).unwrap();
-        assert_eq!((rgb.bits, rgb.width, rgb.height), (8, 80, 60));
+        assert_eq!(files_under(dir.path()), expected);
     }
-    // The run's manifest (sizes and hashes of these files, for `clevrtex verify`).
-    expected.push("clevrtex_camo/MANIFEST-0of1.json".to_string());
-    expected.sort();
-    assert_eq!(files_under(dir.path()), expected);
-
-    // Rerun: everything is complete, nothing is rendered again.
-    let out = run(&[]);
-    let t = text(&out);
-    assert_eq!(out.status.code(), Some(0), "{t}");
-    assert!(t.contains("rendered 0 images (2 already complete"), "{t}");
-
-    // A sample with a missing file is incomplete and is redone; the other is kept.
-    let keep = sub.join("CLEVRTEX_camo_000000.json");
-    let before = std::fs::metadata(&keep).unwrap().modified().unwrap();
-    std::fs::remove_file(sub.join("CLEVRTEX_camo_000001_shadow_0001.png")).unwrap();
-    let out = run(&[]);
-    let t = text(&out);
-    assert!(t.contains("rendered 1 images (1 already complete"), "{t}");
-    assert_eq!(
-        std::fs::metadata(&keep).unwrap().modified().unwrap(),
-        before
-    );
-    assert_eq!(files_under(dir.path()), expected);
 }
 
 #[test]
@@ -729,73 +728,71 @@ fn interrupted_run_leaves_no_partial_sample_and_resumes() {
 
 #[test]
 fn every_variant_renders_and_only_requested_passes_are_written() {
-    let Some(blender) =
-        blender_or_skip("every_variant_renders_and_only_requested_passes_are_written")
-    else {
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir_all(&scenes).unwrap();
-    let variants = ["full", "pbg", "vbg", "grassbg", "camo", "outd", "clevr"];
-    for (i, v) in variants.iter().enumerate() {
-        let config = clevrtex_scene::Config::builtin(v).unwrap();
-        let mut scene = clevrtex_scene::sample(
-            &config,
-            &clevrtex_scene::SampleRequest {
-                seed: 1,
-                index: i as u64,
-                attempt: 0,
-                total: 10,
-            },
-        )
-        .unwrap();
-        scene.render.width = 64;
-        scene.render.height = 48;
-        scene.render.samples = 1;
-        std::fs::write(
-            scenes.join(format!("{v}.json")),
-            serde_json::to_string(&scene).unwrap(),
-        )
-        .unwrap();
-    }
-    let out_dir = dir.path().join("out");
-    let out = clevrtex()
-        .args([
-            "render",
-            "--passes",
-            "rgb,mask",
-            "--workers",
-            "1",
-            "--blender",
-        ])
-        .arg(&blender)
-        .arg("--out")
-        .arg(&out_dir)
-        .arg(&scenes)
-        .output()
-        .unwrap();
-    let t = text(&out);
-    assert_eq!(out.status.code(), Some(0), "{t}");
-    let files = files_under(&out_dir);
-    assert_eq!(files.len(), 3 * variants.len(), "{files:?}");
-    for (i, v) in variants.iter().enumerate() {
-        let stem = format!("clevrtex_{v}/0/CLEVRTEX_{v}_{i:06}");
-        for suffix in [".json", ".png", "_flat.png"] {
-            assert!(
-                files.contains(&format!("{stem}{suffix}")),
-                "{stem}{suffix}: {files:?}"
-            );
+    // On every Blender found: Debian's, and PyPI's bpy when installed.
+    for blender in test_blenders("every_variant_renders_and_only_requested_passes_are_written") {
+        let dir = tempfile::tempdir().unwrap();
+        let scenes = dir.path().join("scenes");
+        std::fs::create_dir_all(&scenes).unwrap();
+        let variants = ["full", "pbg", "vbg", "grassbg", "camo", "outd", "clevr"];
+        for (i, v) in variants.iter().enumerate() {
+            let config = clevrtex_scene::Config::builtin(v).unwrap();
+            let mut scene = clevrtex_scene::sample(
+                &config,
+                &clevrtex_scene::SampleRequest {
+                    seed: 1,
+                    index: i as u64,
+                    attempt: 0,
+                    total: 10,
+                },
+            )
+            .unwrap();
+            scene.render.width = 64;
+            scene.render.height = 48;
+            scene.render.samples = 1;
+            std::fs::write(
+                scenes.join(format!("{v}.json")),
+                serde_json::to_string(&scene).unwrap(),
+            )
+            .unwrap();
         }
-        let meta = read_json(&out_dir.join(format!("{stem}.json")));
-        assert_eq!(meta["depth_filename"], Value::Null);
-        assert_eq!(meta["passes"].as_object().unwrap().len(), 2);
-        let mask = decode_png(&out_dir.join(format!("{stem}_flat.png"))).unwrap();
-        let n = meta["num_objects"].as_u64().unwrap() as u16;
-        assert!(mask.data.iter().all(|&v| v <= n));
-        let rgb = decode_png(&out_dir.join(format!("{stem}.png"))).unwrap();
-        let spread = rgb.data.iter().max().unwrap() - rgb.data.iter().min().unwrap();
-        assert!(spread > 20, "{v}: the image is flat (spread {spread})");
+        let out_dir = dir.path().join("out");
+        let out = clevrtex()
+            .args([
+                "render",
+                "--passes",
+                "rgb,mask",
+                "--workers",
+                "1",
+                "--blender",
+            ])
+            .arg(&blender)
+            .arg("--out")
+            .arg(&out_dir)
+            .arg(&scenes)
+            .output()
+            .unwrap();
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(0), "{t}");
+        let files = files_under(&out_dir);
+        assert_eq!(files.len(), 3 * variants.len(), "{files:?}");
+        for (i, v) in variants.iter().enumerate() {
+            let stem = format!("clevrtex_{v}/0/CLEVRTEX_{v}_{i:06}");
+            for suffix in [".json", ".png", "_flat.png"] {
+                assert!(
+                    files.contains(&format!("{stem}{suffix}")),
+                    "{stem}{suffix}: {files:?}"
+                );
+            }
+            let meta = read_json(&out_dir.join(format!("{stem}.json")));
+            assert_eq!(meta["depth_filename"], Value::Null);
+            assert_eq!(meta["passes"].as_object().unwrap().len(), 2);
+            let mask = decode_png(&out_dir.join(format!("{stem}_flat.png"))).unwrap();
+            let n = meta["num_objects"].as_u64().unwrap() as u16;
+            assert!(mask.data.iter().all(|&v| v <= n));
+            let rgb = decode_png(&out_dir.join(format!("{stem}.png"))).unwrap();
+            let spread = rgb.data.iter().max().unwrap() - rgb.data.iter().min().unwrap();
+            assert!(spread > 20, "{v}: the image is flat (spread {spread})");
+        }
     }
 }
 
@@ -844,6 +841,7 @@ fn render_fixtures(blender: PathBuf, out: &Path, scenes: Vec<SceneFile>) -> Vec<
         out: out.to_path_buf(),
         ledger: out.join("failures.jsonl"),
         interrupt: Arc::new(AtomicBool::new(false)),
+        devices: Vec::new(),
     };
     let stats = Mutex::new(Vec::new());
     let report = pool::run(&opts, jobs, &|ev| {
@@ -1008,19 +1006,39 @@ fn shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube() {
 
 #[test]
 fn doctor_reports_blender_and_devices() {
-    let Some(blender) = blender_or_skip("doctor_reports_blender_and_devices") else {
-        return;
-    };
-    let out = clevrtex()
-        .arg("doctor")
-        .arg("--blender")
-        .arg(&blender)
-        .output()
-        .unwrap();
-    let t = text(&out);
-    assert_eq!(out.status.code(), Some(0), "{t}");
-    assert!(t.contains("version: "), "{t}");
-    assert!(t.contains("cycles devices: ") && t.contains("CPU"), "{t}");
+    // Each Blender found, checked on its own (`--blender`); the list names every one.
+    let blenders = test_blenders("doctor_reports_blender_and_devices");
+    for blender in &blenders {
+        let out = clevrtex()
+            .arg("doctor")
+            .arg("--blender")
+            .arg(blender)
+            .env("CLEVRTEX_BLENDER", blenders.last().unwrap())
+            .output()
+            .unwrap();
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(0), "{t}");
+        assert!(t.contains("version: "), "{t}");
+        assert!(t.contains("cycles devices: ") && t.contains("CPU"), "{t}");
+        assert!(t.contains("oidn: ") && t.contains("path guiding: "), "{t}");
+        for b in &blenders {
+            assert!(
+                t.contains(&format!("{} [", b.display())),
+                "{} not listed: {t}",
+                b.display()
+            );
+        }
+        let marked = format!("  * {} [", blender.display());
+        assert!(t.contains(&marked), "{marked}: {t}");
+        if blender
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("python")
+        {
+            assert!(t.contains("(python with bpy)"), "{t}");
+        }
+    }
 }
 
 #[test]
@@ -1049,6 +1067,7 @@ fn a_silent_worker_is_hung_long_before_the_overall_limit() {
         threads: 1,
         startup_timeout: Duration::from_secs(30),
         interrupt: Arc::new(AtomicBool::new(false)),
+        device: Default::default(),
     })
     .unwrap();
     worker.set_idle_timeout(Some(Duration::from_secs(1)));

@@ -192,6 +192,7 @@ fn texture_density_is_invariant_across_object_sizes() {
             threads: 0,
             startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
             interrupt: Arc::new(AtomicBool::new(false)),
+            device: Default::default(),
         },
         0,
         None,

@@ -4,6 +4,7 @@
 mod util;
 
 mod bench;
+mod blenders;
 mod eval;
 mod eval_protocols;
 mod export;

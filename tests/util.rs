@@ -58,6 +58,35 @@ pub fn blender_or_skip(test: &str) -> Option<PathBuf> {
     }
 }
 
+/// A Python interpreter that imports PyPI's `bpy` (the second Blender of the real-render
+/// tests), or `None` to skip the bpy half of a test.
+///
+/// Looks at `CLEVRTEX_TEST_BPY`, then the project's `.venv-bpy/bin/python` (made by
+/// `./scripts/setup.sh --bpy 4.5`). When absent the bpy half is skipped with a visible message,
+/// unless `CLEVRTEX_REQUIRE_BPY=1` (set by `.ci/run`), in which case it panics.
+pub fn bpy_or_skip(test: &str) -> Option<PathBuf> {
+    let candidate = std::env::var_os("CLEVRTEX_TEST_BPY")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo_root().join(".venv-bpy/bin/python"));
+    if candidate.exists() {
+        return Some(candidate);
+    }
+    if std::env::var("CLEVRTEX_REQUIRE_BPY").as_deref() == Ok("1") {
+        panic!("{test}: a Python with `bpy` is required (CLEVRTEX_REQUIRE_BPY=1) but `{}` does not exist; run `./scripts/setup.sh --bpy 4.5` or set CLEVRTEX_TEST_BPY", candidate.display());
+    }
+    eprintln!("SKIPPED {test} on bpy: no `{}` (run `./scripts/setup.sh --bpy 4.5` or set CLEVRTEX_TEST_BPY; set CLEVRTEX_REQUIRE_BPY=1 to make this a failure)", candidate.display());
+    None
+}
+
+/// Every Blender a real-render test runs on: [`blender_or_skip`]'s, then [`bpy_or_skip`]'s
+/// (each may be absent, with its visible skip or its required failure).
+pub fn test_blenders(test: &str) -> Vec<PathBuf> {
+    blender_or_skip(test)
+        .into_iter()
+        .chain(bpy_or_skip(test))
+        .collect()
+}
+
 fn find_on_path(name: &str) -> Option<PathBuf> {
     let path = std::env::var_os("PATH")?;
     std::env::split_paths(&path)

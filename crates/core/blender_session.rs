@@ -58,6 +58,7 @@ impl BlenderSession {
                 threads: settings.threads,
                 startup_timeout: settings.startup_timeout,
                 interrupt: settings.interrupt,
+                device: Default::default(),
             },
             settings.retries,
             settings.idle_timeout,

@@ -71,6 +71,10 @@ pub struct RenderArgs {
     /// Skip rungs with more samples than this (e.g. to try the command quickly).
     #[arg(long, value_name = "N")]
     max_samples: Option<u32>,
+    /// Also the rungs of Cycles 4.x's levers (light tree off, path guiding, blue noise,
+    /// OIDN-denoised RGB); needs a Blender 4.x or 5.x (e.g. `--blender .venv-bpy/bin/python`).
+    #[arg(long)]
+    levers: bool,
     /// Only rungs whose label contains one of these (comma-separated), e.g. `original,preset`.
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     only: Option<Vec<String>>,
@@ -86,7 +90,8 @@ pub struct RenderArgs {
     /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds.
     #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
     startup_timeout: f64,
-    /// Blender executable (default: `blender` on PATH).
+    /// Blender: an executable, or a Python that imports `bpy` (default: `blender` on PATH, else
+    /// `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Option<PathBuf>,
 }
@@ -263,6 +268,11 @@ fn run_render(args: RenderArgs) -> CmdResult {
     }
     let settings: Vec<Setting> = ladder::ladder(quick)
         .into_iter()
+        .chain(if args.levers {
+            ladder::lever_rungs(quick)
+        } else {
+            Vec::new()
+        })
         .filter(|s| args.max_samples.is_none_or(|m| s.sampling.samples <= m))
         .filter(|s| {
             args.only
@@ -302,7 +312,13 @@ fn run_render(args: RenderArgs) -> CmdResult {
         interrupt,
         startup_timeout: crate::cmd_generate::seconds("--startup-timeout", args.startup_timeout)?,
     })?;
-    let blender_version = session.ready()?.blender_version;
+    let ready = session.ready()?;
+    let blender_version = ready.blender_version;
+    if args.levers && !ready.features.light_tree {
+        bail!(
+            "`--levers` needs Cycles 4.x levers, but Blender {blender_version} has none\nhint: pass a Blender 4.x or 5.x with `--blender` (e.g. `.venv-bpy/bin/python` from `./scripts/setup.sh --bpy 4.5`)"
+        );
+    }
     let mut bench = Bench {
         session,
         out: args.out.clone(),
@@ -671,6 +687,11 @@ fn from_csv(text: &str) -> anyhow::Result<Vec<Row>> {
                 "adaptive-lowbounce",
                 "adaptive-clamp",
                 "preset",
+                "notree",
+                "guiding",
+                "bluenoise",
+                "oidn",
+                "oidn-notree",
             ]
             .into_iter()
             .find(|m| *m == c[3])
@@ -696,6 +717,12 @@ fn from_csv(text: &str) -> anyhow::Result<Vec<Row>> {
                         transmission_bounces: u(11)?,
                         transparent_max_bounces: u(12)?,
                         clamp_indirect: f(13)? as f32,
+                        // Not in the CSV: the lever rungs are known by their labels.
+                        levers: ladder::lever_rungs(false)
+                            .into_iter()
+                            .chain(ladder::lever_rungs(true))
+                            .find(|s| s.label == c[2])
+                            .map_or(clevrtex_scene::quality::Levers::NONE, |s| s.sampling.levers),
                     },
                 },
                 wall_s: f(14)?,

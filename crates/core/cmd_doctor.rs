@@ -10,13 +10,14 @@ use clevrtex_render::{blender, BridgeDir, Worker, WorkerOptions};
 
 use crate::exit::{self, CmdResult};
 
-/// The Blender version the bridge is developed and tested against.
-const TARGET: (u32, u32) = (3, 4);
+/// The Blender versions the bridge supports (`blender_scripts/compat.py`), inclusive.
+const SUPPORTED: [(u32, u32); 2] = [(3, 4), (5, 0)];
 
 /// Arguments of `clevrtex doctor`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Blender executable to check (default: `blender` on PATH).
+    /// Blender to check: an executable or a Python with `bpy` (default: `blender` on PATH,
+    /// else `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Option<PathBuf>,
     /// Seconds each check may take (`blender --version`, the bridge's start-up) before the
@@ -48,10 +49,10 @@ pub fn run(args: Args) -> CmdResult {
     match blender::parse_version(&line) {
         Some((major, minor, patch)) => {
             println!("version: {major}.{minor}.{patch}");
-            if (major, minor) != TARGET {
+            if (major, minor) < SUPPORTED[0] || (major, minor) > SUPPORTED[1] {
                 println!(
-                    "  note: the bridge targets Blender {}.{}; other versions may differ in passes or looks",
-                    TARGET.0, TARGET.1
+                    "  note: the bridge supports Blender {}.{} to {}.{}; other versions may differ in passes or looks",
+                    SUPPORTED[0].0, SUPPORTED[0].1, SUPPORTED[1].0, SUPPORTED[1].1
                 );
             }
         }
@@ -75,6 +76,7 @@ pub fn run(args: Args) -> CmdResult {
         threads: 1,
         startup_timeout: deadline,
         interrupt: Arc::new(AtomicBool::new(false)),
+        device: Default::default(),
     }) {
         Ok(worker) => {
             let ready = worker.ready().clone();
@@ -91,6 +93,7 @@ pub fn run(args: Args) -> CmdResult {
                     ready.cycles_devices.join(", ")
                 }
             );
+            println!("{}", features_line(&ready));
             if !ready.cycles_devices.iter().any(|d| d == "CPU") {
                 problems.push("Cycles reports no CPU device".to_string());
             }
@@ -106,6 +109,7 @@ pub fn run(args: Args) -> CmdResult {
             problems.push(format!("the bridge does not start in this Blender: {text}"))
         }
     }
+    list_blenders(&path, args.blender.is_some(), deadline);
     if problems.is_empty() {
         println!("ok: everything `clevrtex generate` needs is here");
         Ok(exit::OK)
@@ -118,4 +122,109 @@ pub fn run(args: Args) -> CmdResult {
             problems.len()
         )
     }
+}
+
+fn yes_no(b: bool) -> &'static str {
+    if b {
+        "yes"
+    } else {
+        "no"
+    }
+}
+
+/// `gpus: ...; oidn: yes; path guiding: yes; light tree: yes` of a started worker.
+fn features_line(ready: &clevrtex_render::Ready) -> String {
+    let gpus = if ready.gpus.is_empty() {
+        "none".to_string()
+    } else {
+        ready
+            .gpus
+            .iter()
+            .map(|g| format!("{} `{}`", g.kind, g.name))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let f = &ready.features;
+    format!(
+        "gpus: {gpus}; oidn: {}; path guiding: {}; light tree: {}",
+        yes_no(f.oidn),
+        yes_no(f.path_guiding),
+        yes_no(f.light_tree)
+    )
+}
+
+/// One line per Blender found (PATH, `CLEVRTEX_BLENDER`, `./.venv-bpy`): its kind, version,
+/// Cycles devices and features, and which one `generate` uses. Probed in parallel; a
+/// Blender that does not start is listed with why, and is not a problem of this check.
+fn list_blenders(checked: &std::path::Path, explicit: bool, deadline: Duration) {
+    let found = blender::candidates();
+    let used = if explicit {
+        Some(checked.to_path_buf())
+    } else {
+        blender::locate(None).ok()
+    };
+    let same = |a: &std::path::Path, b: &std::path::Path| {
+        std::fs::canonicalize(a).ok() == std::fs::canonicalize(b).ok()
+    };
+    let (used, same) = (&used, &same);
+    let lines: Vec<String> = std::thread::scope(|s| {
+        let handles: Vec<_> = found
+            .iter()
+            .map(|(path, from)| {
+                s.spawn(move || {
+                    let flavour = blender::flavour(path);
+                    let version = blender::version_line_within(path, deadline)
+                        .unwrap_or_else(|e| format!("no version ({})", first_line(&e.to_string())));
+                    let detail = match BridgeDir::create("{\"materials\": {}}").and_then(|bridge| {
+                        Worker::start(&WorkerOptions {
+                            blender: path.clone(),
+                            script: bridge.worker_script(),
+                            materials: bridge.materials_json(),
+                            threads: 1,
+                            startup_timeout: deadline,
+                            interrupt: Arc::new(AtomicBool::new(false)),
+                            device: Default::default(),
+                        })
+                    }) {
+                        Ok(worker) => {
+                            let ready = worker.ready().clone();
+                            worker.quit();
+                            format!(
+                                "cycles devices: {}; {}",
+                                ready.cycles_devices.join(", "),
+                                features_line(&ready)
+                            )
+                        }
+                        Err(e) => {
+                            format!("the bridge does not start: {}", first_line(&e.to_string()))
+                        }
+                    };
+                    format!(
+                        "{}{} [{from}]: {version} ({})\n      {detail}",
+                        used.as_deref()
+                            .filter(|u| same(u, path))
+                            .map(|_| "  * ")
+                            .unwrap_or("    "),
+                        path.display(),
+                        flavour.describe()
+                    )
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_default())
+            .collect()
+    });
+    println!("blenders found (* = the one `generate` uses; pick another with `--blender PATH`):");
+    if lines.is_empty() {
+        println!("    (none on PATH, in CLEVRTEX_BLENDER or ./.venv-bpy)");
+    }
+    for line in lines {
+        println!("{line}");
+    }
+}
+
+fn first_line(text: &str) -> &str {
+    text.lines().next().unwrap_or("")
 }

@@ -29,12 +29,18 @@ pub struct RunArgs {
     /// for `generate`; the scene files' own list for `render`).
     #[arg(long, value_delimiter = ',', value_name = "LIST")]
     pub(crate) passes: Option<Vec<String>>,
-    /// Blender executable (default: `blender` on PATH).
+    /// Blender: an executable, or a Python that imports `bpy` (default: `blender` on PATH, else
+    /// `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Option<PathBuf>,
     /// Blender processes rendering in parallel (default: 2 on machines with 2+ cores).
     #[arg(long, value_name = "N")]
     workers: Option<usize>,
+    /// Cycles device: `auto` (the best GPU kind Blender reports: OptiX, CUDA, HIP; else the
+    /// CPU), `cpu`, `cuda`, `optix` or `hip`. With N GPUs, one worker per GPU (pinned by its
+    /// index) and `--workers` defaults to N.
+    #[arg(long, default_value = "auto", value_name = "DEVICE")]
+    device: String,
     /// Cycles threads per Blender process (default: cores / workers).
     #[arg(long, value_name = "T")]
     threads: Option<u32>,
@@ -357,10 +363,17 @@ pub(crate) fn run_jobs(
     if args.workers == Some(0) {
         bail!("`--workers 0` cannot render anything\nhint: pass at least 1");
     }
+    let devices = plan_devices(args, &blender, &materials_json, &interrupt)?;
+    if devices.iter().any(|d| d.is_gpu()) {
+        let names: Vec<String> = devices.iter().map(|d| d.describe()).collect();
+        eprintln!("devices: {}", names.join(", "));
+    }
     let opts = PoolOptions {
         blender,
         materials_json,
-        workers: args.workers.unwrap_or_else(pool::default_workers),
+        workers: args.workers.unwrap_or_else(|| {
+            clevrtex_render::device::default_workers(&devices, pool::default_workers())
+        }),
         threads: args.threads.unwrap_or(0),
         timeout: args.timeout.map(Duration::from_secs_f64),
         startup_timeout: seconds("--startup-timeout", args.startup_timeout)?,
@@ -373,6 +386,7 @@ pub(crate) fn run_jobs(
         out: args.out.clone(),
         ledger: ledger.clone(),
         interrupt: Arc::clone(&interrupt),
+        devices: devices.clone(),
     };
     let total = jobs.len() as u64;
     let bar = progress_bar(total);
@@ -572,4 +586,49 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
             ledger.display()
         );
     }
+}
+
+/// The devices the workers are spread over (`--device`): the CPU for `cpu`, and for `auto` on a
+/// machine without GPU device files; otherwise a first worker is asked which GPUs Cycles sees
+/// and [`clevrtex_render::device::plan`] chooses. For `auto`, a worker that does not start
+/// means the CPU (the pool then reports the start failure itself).
+fn plan_devices(
+    args: &RunArgs,
+    blender: &std::path::Path,
+    materials_json: &str,
+    interrupt: &std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> anyhow::Result<Vec<clevrtex_render::device::Placement>> {
+    use clevrtex_render::device::{self, DeviceChoice, Placement};
+    let Some(choice) = DeviceChoice::parse(&args.device) else {
+        bail!(
+            "unknown device `{}`\nhint: use one of {}",
+            args.device,
+            DeviceChoice::ALL.map(|(_, n)| n).join(", ")
+        );
+    };
+    if choice == DeviceChoice::Cpu
+        || (choice == DeviceChoice::Auto && !device::gpu_hardware_present())
+    {
+        return Ok(vec![Placement::cpu()]);
+    }
+    let bridge = clevrtex_render::BridgeDir::create(materials_json)?;
+    let started = clevrtex_render::Worker::start(&clevrtex_render::WorkerOptions {
+        blender: blender.to_path_buf(),
+        script: bridge.worker_script(),
+        materials: bridge.materials_json(),
+        threads: 1,
+        startup_timeout: seconds("--startup-timeout", args.startup_timeout)?,
+        interrupt: std::sync::Arc::clone(interrupt),
+        device: Placement::cpu(),
+    });
+    let gpus = match started {
+        Ok(worker) => {
+            let gpus = worker.ready().gpus.clone();
+            worker.quit();
+            gpus
+        }
+        Err(_) if choice == DeviceChoice::Auto => return Ok(vec![Placement::cpu()]),
+        Err(e) => return Err(e.into()),
+    };
+    device::plan(choice, &gpus).map_err(|e| anyhow::anyhow!(e))
 }

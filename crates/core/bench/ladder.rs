@@ -1,7 +1,7 @@
 //! The ladder of render settings `clevrtex bench render` tries, grouped into curves (one
 //! curve per sampling mode in the plot).
 
-use clevrtex_scene::quality::{Quality, Sampling};
+use clevrtex_scene::quality::{Levers, Quality, Sampling};
 
 /// One rung: a named setting on a curve.
 #[derive(Debug, Clone, PartialEq)]
@@ -60,6 +60,74 @@ fn preset(q: Quality) -> Setting {
         label: format!("preset-{}", q.name()),
         sampling: q.settings(),
     }
+}
+
+fn lever(mode: &'static str, samples: u32, levers: Levers) -> Setting {
+    Setting {
+        mode,
+        label: format!("{mode}-{samples}"),
+        sampling: Sampling {
+            samples,
+            levers,
+            ..Sampling::ORIGINAL
+        },
+    }
+}
+
+/// The rungs of Cycles 4.x's levers (only where the Blender has them: `clevrtex bench` asks the
+/// worker): fixed samples with the light tree off (4.x turns it on by default), with path
+/// guiding, with the blue-noise pattern, and OIDN-denoised RGB (opt-in).
+pub fn lever_rungs(quick: bool) -> Vec<Setting> {
+    let samples: &[u32] = if quick { &[16, 64] } else { &[16, 64, 256] };
+    let mut out = Vec::new();
+    for &s in samples {
+        let off = Levers {
+            light_tree: Some(false),
+            ..Levers::NONE
+        };
+        out.push(lever("notree", s, off));
+        out.push(lever(
+            "guiding",
+            s,
+            Levers {
+                path_guiding: Some(true),
+                ..Levers::NONE
+            },
+        ));
+        out.push(lever(
+            "bluenoise",
+            s,
+            Levers {
+                blue_noise: Some(true),
+                ..Levers::NONE
+            },
+        ));
+    }
+    let denoised: &[u32] = if quick {
+        &[4, 16, 64]
+    } else {
+        &[4, 16, 64, 256]
+    };
+    for &s in denoised {
+        out.push(lever(
+            "oidn",
+            s,
+            Levers {
+                denoise: true,
+                ..Levers::NONE
+            },
+        ));
+        out.push(lever(
+            "oidn-notree",
+            s,
+            Levers {
+                light_tree: Some(false),
+                denoise: true,
+                ..Levers::NONE
+            },
+        ));
+    }
+    out
 }
 
 /// The ladder. `quick` keeps the rungs that decide the presets (the original's 512 fixed

@@ -47,8 +47,17 @@ impl Channels {
                 .map(|n| format!("{n}."))
                 .unwrap_or_default();
             for ch in &layer.channel_data.list {
-                let name = format!("{prefix}{}", ch.name);
-                channels.insert(name, ch.sample_data.values_as_f32().collect());
+                let full = ch.name.to_string();
+                // Blender 5.0 writes one part per pass, named like its channels' prefix.
+                let name = if !prefix.is_empty() && full.starts_with(&prefix) {
+                    full
+                } else {
+                    format!("{prefix}{full}")
+                };
+                channels.insert(
+                    short_pass_name(&name),
+                    ch.sample_data.values_as_f32().collect(),
+                );
             }
         }
         let (width, height) = size.ok_or_else(|| bad("no layers".into()))?;
@@ -77,5 +86,59 @@ impl Channels {
     /// The file these channels came from.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+}
+
+/// Blender 5.0 names passes in EXR files by their long names (`ViewLayer.Object Index.X`);
+/// 3.x and 4.x by the short ones the pass tables use (`ViewLayer.IndexOB.X`). Measured on
+/// bpy 5.0's files; every other name is kept as it is.
+const LONG_PASS_NAMES: &[(&str, &str)] = &[
+    ("Object Index", "IndexOB"),
+    ("Material Index", "IndexMA"),
+    ("Diffuse Color", "DiffCol"),
+    ("Diffuse Direct", "DiffDir"),
+    ("Diffuse Indirect", "DiffInd"),
+    ("Glossy Color", "GlossCol"),
+    ("Glossy Direct", "GlossDir"),
+    ("Glossy Indirect", "GlossInd"),
+    ("Z", "Depth"),
+];
+
+/// `ViewLayer.<pass>.<channel>` with a long pass name made short (see [`LONG_PASS_NAMES`]).
+pub fn short_pass_name(name: &str) -> String {
+    let Some((layer_pass, channel)) = name.rsplit_once('.') else {
+        return name.to_string();
+    };
+    let (layer, pass) = layer_pass.split_once('.').unwrap_or(("", layer_pass));
+    match LONG_PASS_NAMES.iter().find(|(long, _)| *long == pass) {
+        Some((_, short)) if layer.is_empty() => format!("{short}.{channel}"),
+        Some((_, short)) => format!("{layer}.{short}.{channel}"),
+        None => name.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::short_pass_name;
+
+    #[test]
+    fn long_pass_names_of_blender_5_are_made_short() {
+        assert_eq!(
+            short_pass_name("ViewLayer.Object Index.X"),
+            "ViewLayer.IndexOB.X"
+        );
+        assert_eq!(
+            short_pass_name("ViewLayer.Diffuse Color.R"),
+            "ViewLayer.DiffCol.R"
+        );
+        assert_eq!(
+            short_pass_name("ViewLayer.IndexOB.X"),
+            "ViewLayer.IndexOB.X"
+        );
+        assert_eq!(
+            short_pass_name("ViewLayer.Combined.R"),
+            "ViewLayer.Combined.R"
+        );
+        assert_eq!(short_pass_name("R"), "R");
     }
 }

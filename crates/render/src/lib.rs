@@ -29,6 +29,7 @@
 //!     threads: 0,
 //!     startup_timeout: STARTUP_TIMEOUT,
 //!     interrupt: Arc::new(AtomicBool::new(false)),
+//!     device: Default::default(),
 //! })?;
 //! let out = std::path::Path::new("/tmp/out");
 //! let reply = worker.render(&out.join("scene.json"), Mode::Final, out, Duration::from_secs(600))?;
@@ -39,6 +40,7 @@
 
 pub mod blender;
 pub mod bridge;
+pub mod device;
 mod error;
 pub mod exr_io;
 mod job;

@@ -56,6 +56,9 @@ pub struct PoolOptions {
     pub ledger: PathBuf,
     /// Set by a Ctrl-C handler: stop at once, keep finished samples, leave no partial one.
     pub interrupt: Arc<AtomicBool>,
+    /// The devices to spread the workers over, round robin ([`crate::device::plan`]); empty:
+    /// the CPU.
+    pub devices: Vec<crate::device::Placement>,
 }
 
 /// Without `--timeout`, a worker that prints nothing at all for this long is hung (Cycles
@@ -246,8 +249,9 @@ pub fn run(
         on_event,
     };
     std::thread::scope(|s| {
-        for _ in 0..n_workers {
-            s.spawn(|| worker_thread(&shared));
+        for slot_index in 0..n_workers {
+            let shared = &shared;
+            s.spawn(move || worker_thread(shared, slot_index));
         }
     });
     let mut report = shared.report.into_inner().unwrap();
@@ -299,7 +303,7 @@ pub(crate) struct Slot<'s, 'a> {
     pub(crate) scratch: tempfile::TempDir,
 }
 
-fn worker_thread(shared: &Shared) {
+fn worker_thread(shared: &Shared, slot_index: usize) {
     let scratch = match crate::tmp::private_dir("clevrtex-work-") {
         Ok(d) => d,
         Err(e) => {
@@ -318,6 +322,7 @@ fn worker_thread(shared: &Shared) {
             threads: shared.threads,
             startup_timeout: opts.startup_timeout,
             interrupt: Arc::clone(&opts.interrupt),
+            device: crate::device::placement_for(&opts.devices, slot_index),
         },
         opts.retries,
         opts.timeout.is_none().then_some(IDLE_TIMEOUT),

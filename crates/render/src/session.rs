@@ -25,6 +25,7 @@
 //!         threads: 0,
 //!         startup_timeout: STARTUP_TIMEOUT,
 //!         interrupt: Arc::new(AtomicBool::new(false)),
+//!         device: Default::default(),
 //!     },
 //!     2,    // restarts per request
 //!     None, // no idle limit

@@ -9,7 +9,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::hash::{BuildHasher, Hasher};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
+use std::process::{Child, ChildStdin, Stdio};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
@@ -46,6 +46,8 @@ pub struct WorkerOptions {
     /// Set to `true` (e.g. by a Ctrl-C handler) to abort any wait: the worker is killed and
     /// the call returns [`RenderError::Interrupted`].
     pub interrupt: Arc<AtomicBool>,
+    /// The Cycles device this worker renders on (the CPU by default).
+    pub device: crate::device::Placement,
 }
 
 /// The worker's `ready` message.
@@ -58,9 +60,32 @@ pub struct Ready {
     /// Cycles devices the bridge found, e.g. `["CPU"]`.
     #[serde(default)]
     pub cycles_devices: Vec<String>,
+    /// The GPUs Cycles can render on, in its order.
+    #[serde(default)]
+    pub gpus: Vec<crate::device::Gpu>,
+    /// What this build offers beyond 3.4's Cycles.
+    #[serde(default)]
+    pub features: Features,
     /// Anything else the bridge reported.
     #[serde(flatten)]
     pub extra: BTreeMap<String, serde_json::Value>,
+}
+
+/// Optional Cycles features of a Blender build (`features` of the `ready` reply).
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct Features {
+    /// OpenImageDenoise compiled in.
+    #[serde(default)]
+    pub oidn: bool,
+    /// Path guiding compiled in (CPU rendering only).
+    #[serde(default)]
+    pub path_guiding: bool,
+    /// The light tree setting exists (4.0+).
+    #[serde(default)]
+    pub light_tree: bool,
+    /// Names of the sampling patterns offered.
+    #[serde(default)]
+    pub sampling_patterns: Vec<String>,
 }
 
 /// Render mode of a request.
@@ -227,22 +252,22 @@ impl Worker {
     pub fn start(opts: &WorkerOptions) -> Result<Worker> {
         let started = Instant::now();
         let tag = fresh_tag();
-        let mut cmd = Command::new(&opts.blender);
-        cmd.args([
-            "-b",
-            "--factory-startup",
-            "--python-exit-code",
-            "1",
-            "--python",
-        ])
-        .arg(&opts.script)
-        .arg("--")
-        .args(["--tag", &tag, "--threads", &opts.threads.to_string()])
-        .arg("--materials")
-        .arg(&opts.materials)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
+        let flavour = crate::blender::flavour(&opts.blender);
+        let bridge_args: Vec<std::ffi::OsString> = vec![
+            "--tag".into(),
+            tag.clone().into(),
+            "--threads".into(),
+            opts.threads.to_string().into(),
+            "--materials".into(),
+            opts.materials.clone().into_os_string(),
+            "--device".into(),
+            opts.device.arg().into(),
+        ];
+        let mut cmd =
+            crate::blender::worker_command(&opts.blender, flavour, &opts.script, &bridge_args);
+        cmd.stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped());
         // Blender's own temporary files (`blender_*` folders, left behind whenever a worker is
         // killed) go into a private folder removed with the worker, or by the next run if we
         // are killed ourselves.
@@ -320,6 +345,8 @@ impl Worker {
                 bridge_version: 0,
                 blender_version: String::new(),
                 cycles_devices: Vec::new(),
+                gpus: Vec::new(),
+                features: Features::default(),
                 extra: BTreeMap::new(),
             },
             startup: Duration::ZERO,

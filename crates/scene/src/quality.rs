@@ -49,6 +49,32 @@ pub struct Sampling {
     pub transparent_max_bounces: u32,
     /// Indirect light clamp (0 = off).
     pub clamp_indirect: f32,
+    /// Cycles 4.x levers (light tree, path guiding, blue noise, denoising).
+    pub levers: Levers,
+}
+
+/// The render levers of Cycles 4.x that 3.4 lacks ([`RenderSettings`]' `light_tree`,
+/// `path_guiding`, `blue_noise`, `denoise`); `None`: the version's default.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Levers {
+    /// The light tree (4.0+; on by default there).
+    pub light_tree: Option<bool>,
+    /// Path guiding (CPU only).
+    pub path_guiding: Option<bool>,
+    /// Blue-noise sampling pattern (4.2+).
+    pub blue_noise: Option<bool>,
+    /// OpenImageDenoise on the RGB only.
+    pub denoise: bool,
+}
+
+impl Levers {
+    /// Every lever at the version's default, no denoising.
+    pub const NONE: Levers = Levers {
+        light_tree: None,
+        path_guiding: None,
+        blue_noise: None,
+        denoise: false,
+    };
 }
 
 impl Sampling {
@@ -64,6 +90,7 @@ impl Sampling {
         transmission_bounces: 12,
         transparent_max_bounces: 8,
         clamp_indirect: 0.0,
+        levers: Levers::NONE,
     };
 
     /// Copy these fields into `render`.
@@ -76,6 +103,10 @@ impl Sampling {
         render.transmission_bounces = self.transmission_bounces;
         render.transparent_max_bounces = self.transparent_max_bounces;
         render.clamp_indirect = self.clamp_indirect;
+        render.light_tree = self.levers.light_tree;
+        render.path_guiding = self.levers.path_guiding;
+        render.blue_noise = self.levers.blue_noise;
+        render.denoise = self.levers.denoise;
     }
 
     /// The same fields read from `render`.
@@ -89,6 +120,12 @@ impl Sampling {
             transmission_bounces: render.transmission_bounces,
             transparent_max_bounces: render.transparent_max_bounces,
             clamp_indirect: render.clamp_indirect,
+            levers: Levers {
+                light_tree: render.light_tree,
+                path_guiding: render.path_guiding,
+                blue_noise: render.blue_noise,
+                denoise: render.denoise,
+            },
         }
     }
 }

@@ -94,10 +94,30 @@ pub struct RenderSettings {
     /// references with another seed.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub cycles_seed: u32,
+    /// Cycles 4.0+'s light tree (absent: the bridge's default for the version; 3.4 has none
+    /// and ignores it). See `docs/performance.md`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_tree: Option<bool>,
+    /// Path guiding (Cycles 3.4+ builds with it, CPU only; Debian's 3.4.1 lacks it and
+    /// ignores it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub path_guiding: Option<bool>,
+    /// Blue-noise sampling pattern (4.2+): `true` blue noise, `false` tabulated Sobol; absent:
+    /// the version's default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blue_noise: Option<bool>,
+    /// Denoise the RGB with OpenImageDenoise (opt-in; never the mask, depth, normal or
+    /// albedo passes, which Cycles does not denoise). Ignored where the build lacks OIDN.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub denoise: bool,
 }
 
 fn is_zero(v: &u32) -> bool {
     *v == 0
+}
+
+fn is_false(v: &bool) -> bool {
+    !*v
 }
 
 /// A perspective camera. `matrix_world` is authoritative; the other pose fields restate it.

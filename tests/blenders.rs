@@ -1,0 +1,207 @@
+//! One scene, two Blenders: Debian's 3.4.1 and PyPI's `bpy` 4.5 render the same scene files
+//! alike (`blender_scripts/compat.py` holds every version difference). Needs both; required
+//! under `CLEVRTEX_REQUIRE_BLENDER=1` plus `CLEVRTEX_REQUIRE_BPY=1` (what `.ci/run` sets).
+//!
+//! What "alike" means, and the tolerances (measured, see `docs/scene-format.md`, "What is
+//! byte-identical"):
+//! - masks: identical ids on every pixel;
+//! - depth: within 1 mm on every pixel, except on a truly displaced backdrop (there the two
+//!   versions dice and sample the relief's steep edges differently: measured on `full` image 0
+//!   of seed 0, bricks: median 1 mm, mean signed 0.1 mm, up to 72 mm at brick edges);
+//! - mean colour of the RGB: each channel's mean within [`MEAN_RGB_TOLERANCE`] of 255 levels
+//!   (4.0's Principled BSDF conserves energy between its specular and diffuse layers, so the
+//!   same material is a little darker; measured 4-10 levels at 160x120, 32 spp).
+
+use std::path::Path;
+
+use clevrtex_render::post::decode_png;
+use clevrtex_scene::SceneFile;
+
+use crate::util::{blender_or_skip, bpy_or_skip, clevrtex, text};
+
+/// Largest mean absolute depth difference on a truly displaced backdrop, mm.
+const MEAN_ABS_DISPLACED_DEPTH_MM: f64 = 6.0;
+
+/// Largest difference of a channel's mean (0..255) between 3.4 and 4.5 on one image.
+const MEAN_RGB_TOLERANCE: f64 = 14.0;
+
+fn scenes(dir: &Path) -> Vec<SceneFile> {
+    let config = clevrtex_scene::Config::builtin("full").unwrap();
+    let mut out = Vec::new();
+    for index in 0..3 {
+        let mut scene = clevrtex_scene::sample(
+            &config,
+            &clevrtex_scene::SampleRequest {
+                seed: 0,
+                index,
+                attempt: 0,
+                total: 3,
+            },
+        )
+        .unwrap();
+        scene.render.width = 96;
+        scene.render.height = 72;
+        scene.render.samples = 16;
+        std::fs::write(
+            dir.join(format!("{}.json", scene.stem)),
+            serde_json::to_string(&scene).unwrap(),
+        )
+        .unwrap();
+        out.push(scene);
+    }
+    out
+}
+
+fn render(blender: &Path, scenes: &Path, out: &Path) {
+    let run = clevrtex()
+        .args(["render", "--workers", "1", "--blender"])
+        .arg(blender)
+        .arg("--out")
+        .arg(out)
+        .arg(scenes)
+        .output()
+        .unwrap();
+    let t = text(&run);
+    assert_eq!(run.status.code(), Some(0), "{}: {t}", blender.display());
+}
+
+fn mean_rgb(path: &Path) -> [f64; 3] {
+    let png = decode_png(path).unwrap();
+    assert_eq!(png.channels, 3);
+    let mut sum = [0.0; 3];
+    for px in png.data.chunks(3) {
+        for c in 0..3 {
+            sum[c] += px[c] as f64;
+        }
+    }
+    let n = (png.data.len() / 3) as f64;
+    sum.map(|s| s / n)
+}
+
+#[test]
+fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
+    let test = "blender_3_4_and_bpy_4_5_render_a_scene_alike";
+    let (Some(blender), Some(bpy)) = (blender_or_skip(test), bpy_or_skip(test)) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let scene_dir = dir.path().join("scenes");
+    std::fs::create_dir_all(&scene_dir).unwrap();
+    let scenes = scenes(&scene_dir);
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    render(&blender, &scene_dir, &a);
+    render(&bpy, &scene_dir, &b);
+    let sub = |root: &Path, stem: &str, suffix: &str| {
+        root.join(format!("clevrtex_full/0/{stem}{suffix}"))
+    };
+    for scene in &scenes {
+        let stem = &scene.stem;
+        let meta_b: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(sub(&b, stem, ".json")).unwrap()).unwrap();
+        let version = meta_b["blender_version"].as_str().unwrap_or("");
+        assert!(
+            version.starts_with('4') || version.starts_with('5'),
+            "{version}"
+        );
+
+        let ma = decode_png(&sub(&a, stem, "_flat.png")).unwrap();
+        let mb = decode_png(&sub(&b, stem, "_flat.png")).unwrap();
+        let differing = ma.data.iter().zip(&mb.data).filter(|(x, y)| x != y).count();
+        assert_eq!(differing, 0, "{stem}: {differing} mask pixels differ");
+        assert!(ma.data.iter().any(|&v| v > 0), "{stem}: no object visible");
+
+        let da = decode_png(&sub(&a, stem, "_depth_0001.png")).unwrap();
+        let db = decode_png(&sub(&b, stem, "_depth_0001.png")).unwrap();
+        let displaced_backdrop = scene.backdrop.material.displacement.unwrap_or(0.0) > 0.0;
+        // On a displaced backdrop: the mean signed and mean absolute difference.
+        let (mut signed, mut abs, mut backdrop) = (0.0f64, 0.0f64, 0usize);
+        for (i, (&x, &y)) in da.data.iter().zip(&db.data).enumerate() {
+            let d = x as f64 - y as f64; // units of 1 mm
+            if displaced_backdrop && ma.data[i] == 0 {
+                if x != u16::MAX && y != u16::MAX {
+                    signed += d;
+                    abs += d.abs();
+                    backdrop += 1;
+                }
+            } else {
+                assert!(d.abs() <= 1.0, "{stem}: depth {x} vs {y} mm at pixel {i}");
+            }
+        }
+        if backdrop > 0 {
+            let (signed, abs) = (signed / backdrop as f64, abs / backdrop as f64);
+            eprintln!("{stem}: displaced backdrop depth: mean signed {signed:.2} mm, mean |d| {abs:.2} mm");
+            assert!(
+                signed.abs() <= 1.0 && abs <= MEAN_ABS_DISPLACED_DEPTH_MM,
+                "{stem}: displaced backdrop depth differs by {signed:.2} mm on average ({abs:.2} mm absolute)"
+            );
+        }
+
+        let (ra, rb) = (
+            mean_rgb(&sub(&a, stem, ".png")),
+            mean_rgb(&sub(&b, stem, ".png")),
+        );
+        eprintln!("{stem}: mean RGB 3.4 {ra:.1?} vs {version} {rb:.1?}");
+        for c in 0..3 {
+            assert!(
+                (ra[c] - rb[c]).abs() <= MEAN_RGB_TOLERANCE,
+                "{stem}: mean RGB {ra:?} (3.4) vs {rb:?} ({version})"
+            );
+        }
+    }
+}
+
+/// OIDN (`render.denoise`, an opt-in lever of bpy 4.5) changes the RGB only: the mask, depth,
+/// normal and albedo passes are byte-identical to those of the same scene without it.
+#[test]
+fn denoising_changes_the_rgb_only() {
+    let Some(bpy) = bpy_or_skip("denoising_changes_the_rgb_only") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = clevrtex_scene::Config::builtin("full").unwrap();
+    let mut scene = clevrtex_scene::sample(
+        &config,
+        &clevrtex_scene::SampleRequest {
+            seed: 0,
+            index: 1,
+            attempt: 0,
+            total: 2,
+        },
+    )
+    .unwrap();
+    scene.render.width = 64;
+    scene.render.height = 48;
+    scene.render.samples = 4;
+    let stem = scene.stem.clone();
+    let mut outputs = Vec::new();
+    for denoise in [false, true] {
+        let scenes = dir.path().join(format!("scenes-{denoise}"));
+        std::fs::create_dir_all(&scenes).unwrap();
+        scene.render.denoise = denoise;
+        std::fs::write(
+            scenes.join(format!("{stem}.json")),
+            serde_json::to_string(&scene).unwrap(),
+        )
+        .unwrap();
+        let out = dir.path().join(format!("out-{denoise}"));
+        render(&bpy, &scenes, &out);
+        outputs.push(out.join("clevrtex_full/0"));
+    }
+    let read = |i: usize, suffix: &str| std::fs::read(outputs[i].join(format!("{stem}{suffix}")));
+    for suffix in [
+        "_flat.png",
+        "_depth_0001.png",
+        "_normal_0001.png",
+        "_albedo_0001.png",
+    ] {
+        assert!(
+            read(0, suffix).unwrap() == read(1, suffix).unwrap(),
+            "{suffix} differs with denoising"
+        );
+    }
+    assert_ne!(
+        read(0, ".png").unwrap(),
+        read(1, ".png").unwrap(),
+        "denoising left the RGB unchanged: was OIDN applied?"
+    );
+}
