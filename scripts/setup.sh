@@ -49,12 +49,18 @@ if [ -n "$bpy" ]; then
   done
 fi
 # Chromium alone (no recommends: 122 MB of packages instead of a desktop's worth).
+bare=()
 if [ "$browser" = 1 ] && ! command -v chromium >/dev/null 2>&1; then
-  need+=(chromium)
+  bare+=(chromium)
+fi
+if [ ${#need[@]} -gt 0 ] || [ ${#bare[@]} -gt 0 ]; then
+  $SUDO apt-get update
 fi
 if [ ${#need[@]} -gt 0 ]; then
-  $SUDO apt-get update
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${need[@]}"
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y "${need[@]}"
+fi
+if [ ${#bare[@]} -gt 0 ]; then
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y --no-install-recommends "${bare[@]}"
 fi
 if command -v rustup >/dev/null 2>&1; then
   rustup component add rustfmt clippy >/dev/null 2>&1 || true
