@@ -1,13 +1,17 @@
 //! `clevrtex._native`: the Rust half of the Python package `clevrtex` (the Python half, in
-//! `python/clevrtex/`, turns numpy arrays and torch tensors into bytes and keeps the running
-//! statistics). Scoring and decoding run with the GIL released, in parallel over images.
+//! `python/clevrtex/`, turns torch tensors into numpy arrays, brings other dtypes and layouts
+//! to ones read here, and keeps the running statistics). Numpy arrays are read in place, not
+//! copied; scoring and decoding run with the GIL released, in parallel over images.
 
 use std::path::Path;
 
 use clevrtex_eval::dataset::discover_gt;
+use clevrtex_eval::error::MAX_SLOTS;
+#[cfg(doc)]
 use clevrtex_eval::predict::argmax_masks;
 use clevrtex_eval::resize::{crop_box, crop_resize_bilinear_rgb, crop_resize_nearest};
 use clevrtex_eval::{read, score_image, EvalError, Metric, Split};
+use numpy::{PyReadonlyArray, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
@@ -24,125 +28,397 @@ fn eval_error(e: EvalError) -> PyErr {
     }
 }
 
-fn u32s(b: &[u8]) -> Vec<u32> {
-    b.chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect()
+/// Segment ids as numpy hands them over: `(batch, pixels)`, C-contiguous, any integer dtype
+/// (the Python half converts everything else: bools, integral floats, other byte orders).
+#[derive(FromPyObject)]
+enum Ids<'py> {
+    U8(PyReadonlyArray2<'py, u8>),
+    U16(PyReadonlyArray2<'py, u16>),
+    U32(PyReadonlyArray2<'py, u32>),
+    U64(PyReadonlyArray2<'py, u64>),
+    I8(PyReadonlyArray2<'py, i8>),
+    I16(PyReadonlyArray2<'py, i16>),
+    I32(PyReadonlyArray2<'py, i32>),
+    I64(PyReadonlyArray2<'py, i64>),
 }
 
-fn f32s(b: &[u8]) -> Vec<f32> {
-    b.chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect()
+/// The numpy memory of an [`Ids`] array, borrowed without a copy (`Send`, so the scoring can
+/// read it with the GIL released).
+#[derive(Clone, Copy)]
+enum IdSlice<'a> {
+    U8(&'a [u8]),
+    U16(&'a [u16]),
+    U32(&'a [u32]),
+    U64(&'a [u64]),
+    I8(&'a [i8]),
+    I16(&'a [i16]),
+    I32(&'a [i32]),
+    I64(&'a [i64]),
 }
 
-/// [`argmax_masks`] (first index on ties, NaN the maximum) read straight from little-endian
-/// f32 bytes `(k, n)`, without a copy of the masks.
-fn argmax_le_bytes(m: &[u8], k: usize, n: usize) -> Vec<u32> {
-    let decode = |s: usize, out: &mut [f32]| {
-        for (o, c) in out
-            .iter_mut()
-            .zip(m[4 * s * n..4 * (s + 1) * n].chunks_exact(4))
-        {
-            *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+/// Soft masks or images: `(batch, channels, pixels)` float32 or float64, C-contiguous.
+#[derive(FromPyObject)]
+enum Floats<'py> {
+    F32(PyReadonlyArray3<'py, f32>),
+    F64(PyReadonlyArray3<'py, f64>),
+}
+
+/// The numpy memory of a [`Floats`] array, borrowed without a copy.
+#[derive(Clone, Copy)]
+enum FloatSlice<'a> {
+    F32(&'a [f32]),
+    F64(&'a [f64]),
+}
+
+/// Predictions: segment ids or soft masks.
+#[derive(FromPyObject)]
+enum Pred<'py> {
+    Ids(Ids<'py>),
+    Masks(Floats<'py>),
+}
+
+/// The C-order slice of a numpy array (`as_slice` also takes Fortran order, read wrongly here).
+fn c_slice<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
+    a: &'a PyReadonlyArray<'_, T, D>,
+) -> PyResult<(&'a [T], Vec<usize>)> {
+    let shape = a.shape().to_vec();
+    match a.as_slice() {
+        Ok(s) if a.is_c_contiguous() => Ok((s, shape)),
+        _ => Err(value_error("internal: an array is not C-contiguous")),
+    }
+}
+
+impl<'py> Ids<'py> {
+    fn slice(&self) -> PyResult<(IdSlice<'_>, Vec<usize>)> {
+        Ok(match self {
+            Ids::U8(a) => c_slice(a).map(|(s, d)| (IdSlice::U8(s), d))?,
+            Ids::U16(a) => c_slice(a).map(|(s, d)| (IdSlice::U16(s), d))?,
+            Ids::U32(a) => c_slice(a).map(|(s, d)| (IdSlice::U32(s), d))?,
+            Ids::U64(a) => c_slice(a).map(|(s, d)| (IdSlice::U64(s), d))?,
+            Ids::I8(a) => c_slice(a).map(|(s, d)| (IdSlice::I8(s), d))?,
+            Ids::I16(a) => c_slice(a).map(|(s, d)| (IdSlice::I16(s), d))?,
+            Ids::I32(a) => c_slice(a).map(|(s, d)| (IdSlice::I32(s), d))?,
+            Ids::I64(a) => c_slice(a).map(|(s, d)| (IdSlice::I64(s), d))?,
+        })
+    }
+}
+
+impl<'py> Floats<'py> {
+    fn slice(&self) -> PyResult<(FloatSlice<'_>, Vec<usize>)> {
+        Ok(match self {
+            Floats::F32(a) => c_slice(a).map(|(s, d)| (FloatSlice::F32(s), d))?,
+            Floats::F64(a) => c_slice(a).map(|(s, d)| (FloatSlice::F64(s), d))?,
+        })
+    }
+}
+
+/// An integer segment id type.
+trait Id: Copy + Ord + Into<i128> {
+    /// The id as `u64`; a negative id wraps to a huge one, so one comparison checks the range.
+    fn wide(self) -> u64;
+}
+
+macro_rules! id {
+    ($($t:ty),*) => {$(impl Id for $t {
+        #[inline(always)]
+        fn wide(self) -> u64 {
+            self as u64
         }
-    };
-    let mut best = vec![0.0f32; n];
-    decode(0, &mut best);
-    let mut cur = vec![0.0f32; n];
-    let mut idx = vec![0u32; n];
-    for s in 1..k {
-        decode(s, &mut cur);
-        // Branch-free, so it vectorises: the first maximum wins, a NaN is kept once taken.
-        for ((b, i), &v) in best.iter_mut().zip(idx.iter_mut()).zip(&cur) {
-            let take = !b.is_nan() & (v.is_nan() | (v > *b));
-            *b = if take { v } else { *b };
-            *i = if take { s as u32 } else { *i };
+    })*};
+}
+id!(u8, u16, u32, u64, i8, i16, i32, i64);
+
+/// Ids as `u32` labels, or `None` when one lies outside `0..MAX_SLOTS`.
+fn labels<T: Id>(v: &[T]) -> Option<Vec<u32>> {
+    const { assert!(MAX_SLOTS.is_power_of_two()) };
+    // Any bit at or above MAX_SLOTS's is out of range; OR-ing them vectorises (a flag set per
+    // id in the conversion loop does not).
+    let high = v.iter().fold(0u64, |acc, &x| {
+        acc | (x.wide() >> MAX_SLOTS.trailing_zeros())
+    });
+    (high == 0).then(|| v.iter().map(|&x| x.wide() as u32).collect())
+}
+
+/// Smallest and largest id of `v` (`None` when empty).
+fn min_max<T: Id>(v: &[T]) -> Option<(i128, i128)> {
+    let lo = v.iter().copied().min()?;
+    let hi = v.iter().copied().max()?;
+    Some((lo.into(), hi.into()))
+}
+
+impl IdSlice<'_> {
+    /// Ids `range` as `u32` labels, or `None` when one lies outside `0..MAX_SLOTS`.
+    fn labels(self, range: std::ops::Range<usize>) -> Option<Vec<u32>> {
+        match self {
+            IdSlice::U8(v) => labels(&v[range]),
+            IdSlice::U16(v) => labels(&v[range]),
+            IdSlice::U32(v) => labels(&v[range]),
+            IdSlice::U64(v) => labels(&v[range]),
+            IdSlice::I8(v) => labels(&v[range]),
+            IdSlice::I16(v) => labels(&v[range]),
+            IdSlice::I32(v) => labels(&v[range]),
+            IdSlice::I64(v) => labels(&v[range]),
         }
     }
-    idx
+
+    /// Smallest and largest id, for the message when one is out of range.
+    fn min_max(self) -> Option<(i128, i128)> {
+        match self {
+            IdSlice::U8(v) => min_max(v),
+            IdSlice::U16(v) => min_max(v),
+            IdSlice::U32(v) => min_max(v),
+            IdSlice::U64(v) => min_max(v),
+            IdSlice::I8(v) => min_max(v),
+            IdSlice::I16(v) => min_max(v),
+            IdSlice::I32(v) => min_max(v),
+            IdSlice::I64(v) => min_max(v),
+        }
+    }
+
+    /// Every image's labels (`batch` images of `pixels`), or the error naming `what` and the
+    /// offending id when one lies outside `0..MAX_SLOTS`.
+    fn batch_labels(self, batch: usize, pixels: usize, what: &str) -> PyResult<Vec<Vec<u32>>> {
+        let per: Option<Vec<Vec<u32>>> = (0..batch)
+            .into_par_iter()
+            .map(|b| self.labels(b * pixels..(b + 1) * pixels))
+            .collect();
+        per.ok_or_else(|| {
+            let (lo, hi) = self.min_max().unwrap_or((0, 0));
+            let bad = if lo < 0 { lo } else { hi };
+            value_error(format!(
+                "`{what}` holds segment id `{bad}`, outside 0..{MAX_SLOTS}"
+            ))
+        })
+    }
+}
+
+/// A soft-mask or image value, read as `f32` (a float64 rounds to nearest, as numpy's
+/// `astype(float32)`, so both dtypes score alike).
+trait Value: Copy {
+    fn f32(self) -> f32;
+}
+
+impl Value for f32 {
+    #[inline(always)]
+    fn f32(self) -> f32 {
+        self
+    }
+}
+
+impl Value for f64 {
+    #[inline(always)]
+    fn f32(self) -> f32 {
+        self as f32
+    }
+}
+
+/// Pixels per block of the argmax: its running maxima stay in L1 while the K masks stream by.
+const BLOCK: usize = 256;
+
+/// The argmax over `k` soft masks `m` (`(k, n)`) of one image, as [`argmax_masks`]: first index
+/// on ties, NaN the maximum; with `no_background` a background `1 - Σ_k m_k` (summed in k
+/// order) in front. Blocked over pixels and branch-free, so it vectorises and reads `m` once.
+fn argmax<T: Value>(m: &[T], k: usize, n: usize, no_background: bool) -> Vec<u32> {
+    let mut out = vec![0u32; n];
+    if k == 0 || n == 0 || m.len() < k * n {
+        return out;
+    }
+    // Two buffers each for the running maximum and its index, swapped per mask: writing a
+    // select into the other buffer keeps LLVM from turning it into a conditional store,
+    // which it cannot vectorise without AVX.
+    let (mut best, mut best2) = ([0.0f32; BLOCK], [0.0f32; BLOCK]);
+    let (mut idx, mut idx2) = ([0u32; BLOCK], [0u32; BLOCK]);
+    for (start, o) in (0..n).step_by(BLOCK).zip(out.chunks_mut(BLOCK)) {
+        let len = o.len();
+        let slot = |s: usize| &m[s * n + start..s * n + start + len];
+        let (mut b, mut b2) = (&mut best[..len], &mut best2[..len]);
+        let (mut i, mut i2) = (&mut idx[..len], &mut idx2[..len]);
+        i.fill(0);
+        let (first, offset) = if no_background {
+            b.fill(0.0);
+            for s in 0..k {
+                b.iter_mut().zip(slot(s)).for_each(|(b, v)| *b += v.f32());
+            }
+            b.iter_mut().for_each(|b| *b = 1.0 - *b);
+            (0, 1)
+        } else {
+            b.iter_mut().zip(slot(0)).for_each(|(b, v)| *b = v.f32());
+            (1, 0)
+        };
+        for s in first..k {
+            let label = (s + offset) as u32;
+            let src = b.iter().zip(i.iter()).zip(slot(s));
+            for ((nb, ni), ((&ob, &oi), v)) in b2.iter_mut().zip(i2.iter_mut()).zip(src) {
+                let v = v.f32();
+                let take = !ob.is_nan() & (v.is_nan() | (v > ob));
+                *nb = if take { v } else { ob };
+                *ni = if take { label } else { oi };
+            }
+            std::mem::swap(&mut b, &mut b2);
+            std::mem::swap(&mut i, &mut i2);
+        }
+        o.copy_from_slice(i);
+    }
+    out
+}
+
+/// Per true label, the squared error of `pred` against `truth` images (`(3, pixels)` each),
+/// and the total (difference and square in f32, sums in f64 in pixel order; docs/eval.md).
+fn squared_error<T: Value>(t: &[u32], tr: &[T], pr: &[T], slots: usize) -> (Vec<f64>, f64) {
+    let pixels = t.len();
+    let mut per_true = vec![0.0f64; slots];
+    let mut total = 0.0f64;
+    let mut e = [0.0f64; BLOCK];
+    let (mut label, mut run) = (0usize, 0.0f64);
+    for (start, t) in (0..pixels).step_by(BLOCK).zip(t.chunks(BLOCK)) {
+        // Each pixel's error (independent, so it vectorises), then the sums in pixel order.
+        let e = &mut e[..t.len()];
+        e.fill(0.0);
+        for c in 0..3 {
+            let range = c * pixels + start..c * pixels + start + t.len();
+            for ((e, p), t) in e.iter_mut().zip(&pr[range.clone()]).zip(&tr[range]) {
+                let d = p.f32() - t.f32();
+                *e += (d * d) as f64;
+            }
+        }
+        for (&l, &e) in t.iter().zip(e.iter()) {
+            // The running sum of a run of one label stays in a register (same additions in
+            // the same order as `per_true[l] += e`, without a store-to-load wait per pixel).
+            if l as usize != label {
+                per_true[label] = run;
+                label = l as usize;
+                run = per_true[label];
+            }
+            run += e;
+            total += e;
+        }
+    }
+    if !per_true.is_empty() {
+        per_true[label] = run;
+    }
+    (per_true, total)
 }
 
 /// One image's scores: every metric (indexed like `metric_names()`), the matched IoU and size
 /// of each true slot, and each true slot's squared error when images were given.
 type ImageOut = (Vec<Option<f64>>, Vec<f64>, Vec<u64>, Option<Vec<f64>>);
 
-/// Score a batch. `truth`: `batch * pixels` little-endian u32 ids. `pred`: u32 ids
-/// (`masks = 0`) or `batch * masks * pixels` f32 soft masks (argmax, first index on ties, NaN
-/// the maximum; `no_background` puts `1 - sum` in front). `min_slots`: the matching's size at
-/// least (the public evaluator pads both sides to `max(true slots, predicted slots)`).
-/// `true_rgb` / `pred_rgb`: `batch * 3 * pixels` f32 (planar, as torch holds them) for MSE.
+/// Score a batch, reading the numpy arrays in place. `truth`: `(batch, pixels)` integer ids.
+/// `pred`: `(batch, pixels)` ids, or `(batch, K, pixels)` float32/float64 soft masks (argmax,
+/// first index on ties, NaN the maximum; `no_background` puts `1 - sum` in front).
+/// `min_slots`: the matching's size at least (the public evaluator pads both sides to
+/// `max(true slots, predicted slots)`); with `pad_to_truth`, at least the batch's largest true
+/// id + 1 too. `true_rgb` / `pred_rgb`: `(batch, 3, pixels)` floats (planar, as torch holds
+/// them) for the MSE. `truth_name`, `pred_name`: what to call them in an error.
 #[pyfunction]
-#[pyo3(signature = (truth, pred, batch, pixels, masks, no_background, min_slots, true_rgb=None, pred_rgb=None))]
+#[pyo3(signature = (truth, pred, no_background, min_slots, pad_to_truth, true_rgb=None, pred_rgb=None, truth_name="true_masks", pred_name="pred"))]
 #[allow(clippy::too_many_arguments)]
 fn score(
     py: Python<'_>,
-    truth: &[u8],
-    pred: &[u8],
-    batch: usize,
-    pixels: usize,
-    masks: usize,
+    truth: Ids<'_>,
+    pred: Pred<'_>,
     no_background: bool,
     min_slots: usize,
-    true_rgb: Option<&[u8]>,
-    pred_rgb: Option<&[u8]>,
+    pad_to_truth: bool,
+    true_rgb: Option<Floats<'_>>,
+    pred_rgb: Option<Floats<'_>>,
+    truth_name: &str,
+    pred_name: &str,
 ) -> PyResult<Vec<ImageOut>> {
-    let n = batch * pixels;
-    let per = if masks == 0 { 1 } else { masks };
-    if truth.len() != 4 * n || pred.len() != 4 * n * per {
-        return Err(value_error(format!(
-            "internal: buffer sizes {} and {} do not fit {batch} images of {pixels} pixels",
-            truth.len(),
-            pred.len()
-        )));
+    let (t, t_shape) = truth.slice()?;
+    let (batch, pixels) = (t_shape[0], t_shape[1]);
+    let (p_ids, p_masks) = match &pred {
+        Pred::Ids(ids) => {
+            let (p, shape) = ids.slice()?;
+            if shape != t_shape {
+                return Err(value_error("internal: `pred` does not fit `truth`"));
+            }
+            (Some(p), None)
+        }
+        Pred::Masks(m) => {
+            let (m, shape) = m.slice()?;
+            if (shape[0], shape[2]) != (batch, pixels) {
+                return Err(value_error("internal: the masks do not fit `truth`"));
+            }
+            (None, Some((m, shape[1])))
+        }
+    };
+    fn rgb<'a>(x: &'a Option<Floats<'_>>, fit: [usize; 3]) -> PyResult<Option<FloatSlice<'a>>> {
+        let Some(x) = x else { return Ok(None) };
+        let (s, shape) = x.slice()?;
+        if shape != fit {
+            return Err(value_error("internal: the images do not fit the masks"));
+        }
+        Ok(Some(s))
     }
-    let rgb_ok = |b: Option<&[u8]>| b.is_none_or(|b| b.len() == 12 * n);
-    if !rgb_ok(true_rgb) || !rgb_ok(pred_rgb) {
-        return Err(value_error("internal: image buffers do not fit the masks"));
-    }
-    let out = py.allow_threads(|| {
-        (0..batch)
-            .into_par_iter()
-            .map(|b| {
-                let t = u32s(&truth[4 * b * pixels..4 * (b + 1) * pixels]);
-                let (p, slots) = if masks == 0 {
-                    let p = u32s(&pred[4 * b * pixels..4 * (b + 1) * pixels]);
-                    let slots = p.iter().max().map_or(1, |&m| m as usize + 1);
-                    (p, slots)
-                } else {
-                    let m = &pred[4 * b * per * pixels..4 * (b + 1) * per * pixels];
-                    let labels = if no_background {
-                        argmax_masks(&f32s(m), masks, pixels, true)
-                    } else {
-                        argmax_le_bytes(m, masks, pixels)
-                    };
-                    (labels, masks + usize::from(no_background))
-                };
-                let mut s = score_image(&t, &p, slots.max(min_slots), None);
-                let mut sq = None;
-                if let (Some(tr), Some(pr)) = (true_rgb, pred_rgb) {
-                    let range = 12 * b * pixels..12 * (b + 1) * pixels;
-                    let (tr, pr) = (f32s(&tr[range.clone()]), f32s(&pr[range]));
-                    // Difference and square in f32, sums in f64 (docs/eval.md).
-                    let mut per_true = vec![0.0f64; s.true_sizes.len()];
-                    let mut total = 0.0f64;
-                    for (i, &label) in t.iter().enumerate() {
-                        let mut e = 0.0f64;
-                        for c in 0..3 {
-                            let d = pr[c * pixels + i] - tr[c * pixels + i];
-                            e += (d * d) as f64;
-                        }
-                        per_true[label as usize] += e;
-                        total += e;
+    let fit = [batch, 3, pixels];
+    let images = match (rgb(&true_rgb, fit)?, rgb(&pred_rgb, fit)?) {
+        (Some(FloatSlice::F32(t)), Some(FloatSlice::F32(p))) => Some(Rgb::F32(t, p)),
+        (Some(FloatSlice::F64(t)), Some(FloatSlice::F64(p))) => Some(Rgb::F64(t, p)),
+        (None, None) => None,
+        _ => return Err(value_error("internal: the images differ in dtype")),
+    };
+    let out = py.allow_threads(|| -> PyResult<Vec<ImageOut>> {
+        let truth = t.batch_labels(batch, pixels, truth_name)?;
+        let pred = match p_ids {
+            Some(p) => Some(p.batch_labels(batch, pixels, pred_name)?),
+            None => None,
+        };
+        let slots = if pad_to_truth {
+            let max = truth.iter().filter_map(|t| t.iter().max()).max();
+            min_slots.max(max.map_or(1, |&m| m as usize + 1))
+        } else {
+            min_slots
+        };
+        Ok(truth
+            .par_iter()
+            .enumerate()
+            .map(|(b, t)| {
+                let (p, pred_slots) = match (&pred, p_masks) {
+                    (Some(pred), _) => {
+                        let p = &pred[b];
+                        (
+                            std::borrow::Cow::Borrowed(p),
+                            p.iter().max().map_or(1, |&m| m as usize + 1),
+                        )
                     }
+                    (None, Some((m, k))) => {
+                        let r = b * k * pixels..(b + 1) * k * pixels;
+                        let labels = match m {
+                            FloatSlice::F32(m) => argmax(&m[r], k, pixels, no_background),
+                            FloatSlice::F64(m) => argmax(&m[r], k, pixels, no_background),
+                        };
+                        (
+                            std::borrow::Cow::Owned(labels),
+                            k + usize::from(no_background),
+                        )
+                    }
+                    (None, None) => unreachable!("predictions are ids or masks"),
+                };
+                let mut s = score_image(t, &p, pred_slots.max(slots), None);
+                let mut sq = None;
+                if let Some(images) = images {
+                    let r = 3 * b * pixels..3 * (b + 1) * pixels;
+                    let k = s.true_sizes.len();
+                    let (per_true, total) = match images {
+                        Rgb::F32(tr, pr) => squared_error(t, &tr[r.clone()], &pr[r], k),
+                        Rgb::F64(tr, pr) => squared_error(t, &tr[r.clone()], &pr[r], k),
+                    };
                     s.values[Metric::Mse.index()] = total.is_finite().then_some(total);
                     sq = Some(per_true);
                 }
                 (s.values.to_vec(), s.iou_per_true, s.true_sizes, sq)
             })
-            .collect::<Vec<_>>()
-    });
+            .collect())
+    })?;
     Ok(out)
+}
+
+/// The true and predicted images of a batch, of one dtype.
+#[derive(Clone, Copy)]
+enum Rgb<'a> {
+    F32(&'a [f32], &'a [f32]),
+    F64(&'a [f64], &'a [f64]),
 }
 
 /// The names of every metric, in the order `score` returns them.

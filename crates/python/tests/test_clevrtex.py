@@ -98,6 +98,95 @@ def test_evaluator_takes_one_hot_truth():
         assert abs(a.statistic(name) - b.statistic(name)) <= 1e-6, name
 
 
+def layouts(a):
+    """`a` as C order, Fortran order, a strided view and big-endian: the Rust half reads C-order
+    arrays of native dtypes in place, the Python half copies the others once."""
+    strided = np.zeros(a.shape[:-1] + (2 * a.shape[-1],), a.dtype)[..., ::2]
+    strided[...] = a
+    return [a, np.asfortranarray(a), strided, a.astype(a.dtype.newbyteorder(">"))]
+
+
+def stats_of(ev):
+    """Every statistic of an evaluator (NaN as None, so equal results compare equal)."""
+    nan = lambda v: None if v != v else v  # noqa: E731
+    return {name: nan(ev.statistic(name)) for name in clevrtex.METRICS} | {
+        (name, tag): ev.statistic(name, tag) for name, tag in [("obj_iou", "material"), ("obj_mse", "shape"), ("ground_mse", "ground_material")]
+    }
+
+
+def test_every_dtype_and_layout_scores_alike():
+    rng = np.random.default_rng(11)
+    img_p, masks, img_t, truth, meta = batch(rng, b=5, k=6)
+    masks[rng.random(masks.shape) < 0.02] = np.nan  # NaN is the maximum, first one wins
+    ref = clevrtex.Evaluator()
+    ref.update(img_p, masks, img_t, truth, meta)
+    want = stats_of(ref)
+    public = harness.ClevrTexEvaluator()
+    public.update(img_p, masks, img_t, truth, meta)
+    for name in PUBLIC:
+        assert abs(ref.statistic(name) - public.statistic(name)) <= 1e-6, name
+    # Masks: float32 or float64 (rounded to float32, as before), in any layout.
+    mask_variants = layouts(masks) + layouts(masks.astype(np.float64))
+    for m in mask_variants:
+        ev = clevrtex.Evaluator()
+        ev.update(img_p, m, img_t, truth, meta)
+        assert stats_of(ev) == want, (m.dtype, m.flags.c_contiguous)
+    # Truth: every integer dtype, bool, integral floats; images float64 or mixed.
+    truth_variants = [truth.astype(t) for t in (np.uint8, np.int8, np.uint16, np.int16, np.uint32, np.int32, np.uint64, np.float32, np.float64)]
+    truth_variants += layouts(truth)
+    for t in truth_variants:
+        ev = clevrtex.Evaluator()
+        ev.update(img_p, masks, img_t, t, meta)
+        assert stats_of(ev) == want, (t.dtype, t.flags.c_contiguous)
+    # Images: float64 (read as float32, as before), mixed dtypes, Fortran order.
+    for a, b in [(img_p.astype(np.float64), img_t.astype(np.float64)), (img_p.astype(np.float64), img_t), (np.asfortranarray(img_p), img_t)]:
+        ev = clevrtex.Evaluator()
+        ev.update(a, masks, b, truth, meta)
+        assert stats_of(ev) == want, (a.dtype, b.dtype)
+    # evaluate: soft masks of either float dtype and ids of any dtype, in any layout.
+    t3, m4 = truth[:, 0], masks[:, :, 0]
+    want_e = clevrtex.evaluate(m4, t3, metrics=clevrtex.METRICS, per_image=True)
+    for m in layouts(m4) + [m4.astype(np.float64)]:
+        assert clevrtex.evaluate(m, t3, metrics=clevrtex.METRICS, per_image=True) == want_e, m.dtype
+    labels = np.argmax(m4, axis=1)
+    want_l = clevrtex.evaluate(labels, t3, per_image=True)
+    for p in layouts(labels) + [labels.astype(np.uint8), labels.astype(np.int16), labels.astype(np.float32)]:
+        assert clevrtex.evaluate(p, t3, per_image=True) == want_l, p.dtype
+    assert clevrtex.evaluate(labels > 0, t3 > 0) == clevrtex.evaluate((labels > 0) * 1, (t3 > 0) * 1)
+
+
+def test_bad_ids_are_named():
+    t = np.zeros((2, 4, 4), np.int64)
+    for dtype, bad in [(np.int64, -3), (np.int8, -1), (np.uint16, 1024), (np.uint64, 2**40), (np.float64, 4096.0)]:
+        p = np.zeros((2, 4, 4), dtype)
+        p[1, 2, 3] = bad
+        with pytest.raises(ValueError, match=f"`preds` holds segment id `{int(bad)}`, outside 0..1024"):
+            clevrtex.evaluate(p, t)
+        with pytest.raises(ValueError, match=f"`gt` holds segment id `{int(bad)}`, outside 0..1024"):
+            clevrtex.evaluate(t, p)
+    with pytest.raises(ValueError, match="`true_masks` holds segment id `-1`"):
+        clevrtex.Evaluator().update(np.zeros((2, 3, 4, 4)), np.zeros((2, 3, 4, 4)), np.zeros((2, 3, 4, 4)), t[:, None] - 1)
+    with pytest.raises(ValueError, match="`gt` must hold integer segment ids"):
+        clevrtex.evaluate(t, t + 0.5)
+
+
+def test_soft_masks_are_read_in_place():
+    # A copy of the masks (as `tobytes` made before) would show in the traced peak.
+    import tracemalloc
+
+    rng = np.random.default_rng(5)
+    img_p, _, img_t, truth, meta = batch(rng, b=8, h=64, w=64)
+    masks = rng.random((8, 11, 1, 64, 64)).astype(np.float32)
+    clevrtex.Evaluator().update(img_p, masks, img_t, truth, meta)  # warm up
+    tracemalloc.start()
+    try:
+        clevrtex.Evaluator().update(img_p, masks, img_t, truth, meta)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < masks.nbytes / 4, f"update allocated {peak} bytes for {masks.nbytes} bytes of masks"
+
+
 def cli(*args):
     exe = os.environ.get("CLEVRTEX_BIN")
     if not exe:

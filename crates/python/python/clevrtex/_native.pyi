@@ -1,15 +1,17 @@
 from typing import List, Optional, Tuple
 
+import numpy as np
+
 def score(
-    truth: bytes,
-    pred: bytes,
-    batch: int,
-    pixels: int,
-    masks: int,
+    truth: np.ndarray,
+    pred: np.ndarray,
     no_background: bool,
     min_slots: int,
-    true_rgb: Optional[bytes] = None,
-    pred_rgb: Optional[bytes] = None,
+    pad_to_truth: bool,
+    true_rgb: Optional[np.ndarray] = None,
+    pred_rgb: Optional[np.ndarray] = None,
+    truth_name: str = "true_masks",
+    pred_name: str = "pred",
 ) -> List[Tuple[List[Optional[float]], List[float], List[int], Optional[List[float]]]]: ...
 def metric_names() -> List[str]: ...
 def protocol_metrics(protocol: str) -> List[str]: ...
