@@ -11,7 +11,9 @@
 //! every method given, it prints the RMSE of the 8-bit pass (as published) for: no filter,
 //! the shipped filter, and variants (radius, tolerance, ratio of sums or mean of ratios),
 //! each against the unfiltered `paired-256` pair (the reference, another seed). The
-//! instance ids come from `final.exr` (its `IndexOB` pass).
+//! instance ids come from `final.exr` (its `IndexOB` pass). With `SPLIT=1` in the
+//! environment it also prints, on stderr, each variant's RMSE on the floor (id 0) and on the
+//! objects.
 
 use std::path::Path;
 
