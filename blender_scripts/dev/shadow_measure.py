@@ -102,7 +102,8 @@ def timed_render():
 def enable_light_passes(view_layer):
     """The light and colour passes every method here reads (more than the bridge's shadow
     pass needs since 0.10: the textured methods weigh diffuse and glossy light by colour)."""
-    passes.enable(view_layer, ["albedo"])
+    # Mask, depth and normal too: the Rust shadow filter's guides (`shadow_filter_measure`).
+    passes.enable(view_layer, ["albedo", "mask", "depth", "normal"])
     for flag in ("use_pass_diffuse_direct", "use_pass_diffuse_color",
                  "use_pass_glossy_direct", "use_pass_glossy_color"):
         setattr(view_layer, flag, True)

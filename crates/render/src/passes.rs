@@ -63,11 +63,15 @@ fn encode(
         }
         Pass::Shadow => {
             let s = shadow.expect("the shadow pass reads its own renders");
-            // Direct light on white diffuse surfaces: `DiffDir` is the light itself.
+            // Direct light on white diffuse surfaces: `DiffDir` is the light itself. Filtered
+            // within each instance of the final mask.
             let (lit, un) = (layer(&s.direct, pass, 0)?, layer(&s.noshadow, pass, 0)?);
             Pixels::Eight(post::encode_shadow(
                 [lit[0], lit[1], lit[2]],
                 [un[0], un[1], un[2]],
+                ids,
+                fin.width,
+                post::SHADOW_FILTER,
             ))
         }
     })

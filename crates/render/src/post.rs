@@ -129,20 +129,105 @@ fn srgb8(v: f32) -> u8 {
     (s * 255.0).round() as u8
 }
 
+/// Radius in pixels of the shadow pass's filter window ([`SHADOW_FILTER`]).
+pub const SHADOW_FILTER_RADIUS: usize = 1;
+/// Relative tolerance of the unshadowed light between a pixel and the neighbours it averages
+/// ([`SHADOW_FILTER`]).
+pub const SHADOW_FILTER_TOLERANCE: f32 = 0.25;
+
+/// The filter of the shipped shadow pass (measured in `docs/performance.md`, "Shadow pass").
+pub const SHADOW_FILTER: ShadowFilter = ShadowFilter {
+    radius: SHADOW_FILTER_RADIUS,
+    tolerance: SHADOW_FILTER_TOLERANCE,
+    ratio_of_sums: true,
+};
+
+/// An edge-aware box filter of the shadow ratio: a pixel averages the neighbours within
+/// `radius` (a `(2r+1)^2` window) that show the same instance id and whose unshadowed light
+/// is within `tolerance` (relative) of its own, i.e. the same surface, lit alike. Penumbrae
+/// are smooth, so this cuts their Monte-Carlo visibility noise by ~sqrt(pixels averaged);
+/// a different object or a crease (another normal sees the lights differently) is never
+/// mixed in, and where every neighbour is unshadowed (`lit == un`) the result stays exactly 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShadowFilter {
+    /// Window radius in pixels; 0 = no filtering.
+    pub radius: usize,
+    /// Largest relative difference `|u_j - u_i| / u_i` of unshadowed light admitted.
+    pub tolerance: f32,
+    /// `1 - sum(lit) / sum(un)` over the neighbours (true) or the mean of their
+    /// `1 - lit / un` (false).
+    pub ratio_of_sums: bool,
+}
+
+/// Luminance of pixel `i` of an RGB image.
+fn luminance(c: [&[f32]; 3], i: usize) -> f32 {
+    0.2126 * c[0][i] + 0.7152 * c[1][i] + 0.0722 * c[2][i]
+}
+
 /// Shadow amount `1 - L_shadowed / L_unshadowed` of direct light (luminance; the bridge
-/// renders it on white diffuse surfaces), clamped to [0, 1], as 8-bit (255 = fully
-/// shadowed). Where the unshadowed light is below
-/// [`SHADOW_EPS`] the ratio is undefined and the value is [`SHADOW_UNDEFINED`].
-pub fn encode_shadow(lit: [&[f32]; 3], unshadowed: [&[f32]; 3]) -> Vec<u8> {
-    let lum = |c: [&[f32]; 3], i: usize| 0.2126 * c[0][i] + 0.7152 * c[1][i] + 0.0722 * c[2][i];
-    (0..lit[0].len())
+/// renders it on white diffuse surfaces), filtered by `filter` within each instance of `ids`
+/// (row-major, `width` wide), clamped to [0, 1], as 8-bit (255 = fully shadowed). Where the
+/// unshadowed light is below [`SHADOW_EPS`] the ratio is undefined and the value is
+/// [`SHADOW_UNDEFINED`].
+pub fn encode_shadow(
+    lit: [&[f32]; 3],
+    unshadowed: [&[f32]; 3],
+    ids: &[u8],
+    width: usize,
+    filter: ShadowFilter,
+) -> Vec<u8> {
+    let l: Vec<f32> = (0..lit[0].len()).map(|i| luminance(lit, i)).collect();
+    let u: Vec<f32> = (0..lit[0].len())
+        .map(|i| luminance(unshadowed, i))
+        .collect();
+    filter_shadow(&l, &u, ids, width, filter)
+        .into_iter()
+        .map(|s| match s {
+            None => SHADOW_UNDEFINED,
+            Some(v) => (v.clamp(0.0, 1.0) * 255.0).round() as u8,
+        })
+        .collect()
+}
+
+/// The filtered shadow `1 - l / u` per pixel (see [`ShadowFilter`]) of the luminances `l`
+/// (with object shadows) and `u` (without), unclamped; `None` where the ratio is undefined
+/// (`u` below [`SHADOW_EPS`] or not finite).
+pub fn filter_shadow(
+    l: &[f32],
+    u: &[f32],
+    ids: &[u8],
+    width: usize,
+    filter: ShadowFilter,
+) -> Vec<Option<f32>> {
+    let valid = |i: usize| u[i].is_finite() && l[i].is_finite() && u[i] >= SHADOW_EPS;
+    let height = l.len().checked_div(width).unwrap_or(0);
+    let r = filter.radius;
+    (0..l.len())
         .map(|i| {
-            let (l, u) = (lum(lit, i), lum(unshadowed, i));
-            if !u.is_finite() || !l.is_finite() || u < SHADOW_EPS {
-                SHADOW_UNDEFINED
-            } else {
-                ((1.0 - l / u).clamp(0.0, 1.0) * 255.0).round() as u8
+            if !valid(i) {
+                return None;
             }
+            let (x, y) = (i % width, i / width);
+            let (mut sl, mut su, mut sr, mut n) = (0.0f64, 0.0f64, 0.0f64, 0u32);
+            for yy in y.saturating_sub(r)..=(y + r).min(height - 1) {
+                for xx in x.saturating_sub(r)..=(x + r).min(width - 1) {
+                    let j = yy * width + xx;
+                    if ids[j] != ids[i]
+                        || !valid(j)
+                        || (u[j] - u[i]).abs() > filter.tolerance * u[i]
+                    {
+                        continue;
+                    }
+                    sl += f64::from(l[j]);
+                    su += f64::from(u[j]);
+                    sr += f64::from(1.0 - l[j] / u[j]);
+                    n += 1;
+                }
+            }
+            Some(match filter.ratio_of_sums {
+                true => (1.0 - sl / su) as f32,
+                false => (sr / f64::from(n)) as f32,
+            })
         })
         .collect()
 }
@@ -404,8 +489,99 @@ mod tests {
     fn shadow_is_never_nan() {
         let z = [0.0f32, 1.0, 0.5];
         let u = [0.0f32, 1.0, 1.0];
-        let s = encode_shadow([&z, &z, &z], [&u, &u, &u]);
+        let s = encode_shadow([&z, &z, &z], [&u, &u, &u], &[0; 3], 3, SHADOW_FILTER);
+        // Pixels 1 and 2 are lit alike (u = 1) on one surface: filtered together.
+        assert_eq!(s, vec![SHADOW_UNDEFINED, 64, 64]);
+        let off = ShadowFilter {
+            radius: 0,
+            ..SHADOW_FILTER
+        };
+        let s = encode_shadow([&z, &z, &z], [&u, &u, &u], &[0; 3], 3, off);
         assert_eq!(s, vec![SHADOW_UNDEFINED, 0, 128]);
+    }
+
+    /// A deterministic noisy smooth ramp `w x h`: the true shadow, and `(lit, un)` with
+    /// visibility noise of +-0.1 on `lit`.
+    fn noisy_ramp(w: usize, h: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+        let mut state = 12345u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        };
+        let truth: Vec<f32> = (0..w * h)
+            .map(|i| (i % w) as f32 / w as f32 * 0.8)
+            .collect();
+        let un = vec![2.0f32; w * h];
+        let lit = truth
+            .iter()
+            .map(|t| (2.0 * (1.0 - t) + 0.4 * next()).max(0.0))
+            .collect();
+        (truth, lit, un)
+    }
+
+    fn rmse(a: &[Option<f32>], truth: &[f32]) -> f32 {
+        let se: f32 = a
+            .iter()
+            .zip(truth)
+            .map(|(a, t)| (a.unwrap() - t).powi(2))
+            .sum();
+        (se / truth.len() as f32).sqrt()
+    }
+
+    #[test]
+    fn shadow_filter_reduces_the_noise_of_a_smooth_ramp() {
+        let (w, h) = (64, 48);
+        let (truth, lit, un) = noisy_ramp(w, h);
+        let ids = vec![1u8; w * h];
+        let raw = filter_shadow(
+            &lit,
+            &un,
+            &ids,
+            w,
+            ShadowFilter {
+                radius: 0,
+                ..SHADOW_FILTER
+            },
+        );
+        for ratio_of_sums in [true, false] {
+            let f = ShadowFilter {
+                ratio_of_sums,
+                ..SHADOW_FILTER
+            };
+            let filtered = filter_shadow(&lit, &un, &ids, w, f);
+            let (e0, e1) = (rmse(&raw, &truth), rmse(&filtered, &truth));
+            assert!(e1 < e0 / 2.0, "{ratio_of_sums}: RMSE {e0} -> {e1}");
+        }
+    }
+
+    #[test]
+    fn shadow_filter_never_mixes_instances_nor_unlike_light_and_keeps_zeros() {
+        // Left half id 1 fully shadowed, right half id 2 unshadowed: no bleeding either way.
+        let (w, h) = (10, 6);
+        let ids: Vec<u8> = (0..w * h).map(|i| if i % w < 5 { 1 } else { 2 }).collect();
+        let un = vec![1.0f32; w * h];
+        let lit: Vec<f32> = ids
+            .iter()
+            .map(|&id| if id == 1 { 0.0 } else { 1.0 })
+            .collect();
+        let s = filter_shadow(&lit, &un, &ids, w, SHADOW_FILTER);
+        for (i, v) in s.iter().enumerate() {
+            assert_eq!(v.unwrap(), if ids[i] == 1 { 1.0 } else { 0.0 }, "pixel {i}");
+        }
+        // One id, but the right half lit 3x brighter (another face): not mixed either.
+        let ids = vec![1u8; w * h];
+        let un: Vec<f32> = (0..w * h)
+            .map(|i| if i % w < 5 { 1.0 } else { 3.0 })
+            .collect();
+        let s = filter_shadow(&lit, &un, &ids, w, SHADOW_FILTER);
+        for (i, v) in s.iter().enumerate() {
+            let want = if i % w < 5 { 1.0 } else { 1.0 - 1.0 / 3.0 };
+            assert!((v.unwrap() - want).abs() < 1e-6, "pixel {i}: {v:?}");
+        }
+        // A noisy, unshadowed surface (lit == un in every pixel) stays exactly 0.
+        let (_, noisy, _) = noisy_ramp(w, h);
+        let s = encode_shadow([&noisy; 3], [&noisy; 3], &ids, w, SHADOW_FILTER);
+        assert!(s.iter().all(|&v| v == 0 || v == SHADOW_UNDEFINED), "{s:?}");
     }
 
     #[test]
