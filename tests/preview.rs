@@ -1,9 +1,7 @@
 //! `clevrtex preview`: a contact sheet of a real generated dataset, and of a hand-made one in
 //! the published ClevrTex layout (metadata with only the published keys).
 
-use serde_json::Value;
-
-use crate::util::{blender_or_skip, clevrtex, text};
+use crate::util::{blender_or_skip, clevrtex, published_copy, text};
 
 #[test]
 fn preview_draws_one_row_per_sample_and_one_column_per_pass() {
@@ -47,36 +45,7 @@ fn preview_draws_one_row_per_sample_and_one_column_per_pass() {
 
     // The published ClevrTex layout: the same files with only the published metadata keys.
     let published = dir.path().join("clevrtex");
-    let sub = published.join("clevrtex_clevr/0");
-    std::fs::create_dir_all(&sub).unwrap();
-    for e in std::fs::read_dir(data.join("clevrtex_clevr/0"))
-        .unwrap()
-        .flatten()
-    {
-        let name = e.file_name().to_string_lossy().into_owned();
-        if name.ends_with(".json") {
-            let mut meta: Value =
-                serde_json::from_slice(&std::fs::read(e.path()).unwrap()).unwrap();
-            let keep = [
-                "num_objects",
-                "split",
-                "image_index",
-                "image_filename",
-                "ground_material",
-                "directions",
-                "objects",
-                "relationships",
-                "mask_filename",
-                "depth_filename",
-            ];
-            meta.as_object_mut()
-                .unwrap()
-                .retain(|k, _| keep.contains(&k.as_str()));
-            std::fs::write(sub.join(&name), meta.to_string()).unwrap();
-        } else {
-            std::fs::copy(e.path(), sub.join(&name)).unwrap();
-        }
-    }
+    published_copy(&data, "clevr", &published);
     let o = clevrtex()
         .args(["preview", "--indices", "2,0", "--out"])
         .arg(dir.path().join("published.png"))

@@ -210,3 +210,43 @@ pub fn assert_same_sample_file(name: &str, a: &[u8], b: &[u8]) {
         ia.as_raw().len()
     );
 }
+
+/// Copy `variant` of our dataset into the published layout: the same files, metadata with
+/// only the published keys, no manifest.
+pub fn published_copy(ours: &Path, variant: &str, dst: &Path) {
+    let sub = dst.join(format!("clevrtex_{variant}/0"));
+    std::fs::create_dir_all(&sub).unwrap();
+    for e in std::fs::read_dir(ours.join(format!("clevrtex_{variant}/0")))
+        .unwrap()
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.ends_with(".json") {
+            let mut meta: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(e.path()).unwrap()).unwrap();
+            let keep = [
+                "num_objects",
+                "split",
+                "image_index",
+                "image_filename",
+                "ground_material",
+                "directions",
+                "objects",
+                "relationships",
+                "mask_filename",
+                "depth_filename",
+            ];
+            meta.as_object_mut()
+                .unwrap()
+                .retain(|k, _| keep.contains(&k.as_str()));
+            for o in meta["objects"].as_array_mut().unwrap() {
+                o.as_object_mut()
+                    .unwrap()
+                    .retain(|k, _| k != "visible_pixels" && k != "bbox");
+            }
+            std::fs::write(sub.join(&name), meta.to_string()).unwrap();
+        } else {
+            std::fs::copy(e.path(), sub.join(&name)).unwrap();
+        }
+    }
+}
