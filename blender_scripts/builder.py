@@ -25,26 +25,29 @@ SCENE_VERSION = 1
 # object shadows (`direct.exr`) and one with objects casting none (`noshadow.exr`), with the
 # same samples and Cycles seed: both trace the same rays and pick the same light samples, so
 # they differ only where an object blocks a shadow ray, and Rust computes
-# shadow = 1 - with / without (clevrtex_render::post::encode_shadow). Samples of each: the
-# request's `shadow_samples`, else an eighth of the scene's samples (8 at the default 64:
-# about the cost of the pass up to 0.9, near the 10% goal), at most SHADOW_SAMPLES_MAX.
+# shadow = 1 - with / without (clevrtex_render::post::encode_shadow). Every sample of a pixel
+# goes through the pixel's centre (SHADOW_FILTER_WIDTH): the pass is the shadow of the one
+# surface point there, like the mask and depth, so there is no anti-aliasing noise (which
+# surface a sample hits) on silhouettes and shadow edges, and all the samples go to the
+# light. Samples of each: the request's `shadow_samples`, else a quarter of the scene's
+# samples (16 at the default 64), at most SHADOW_SAMPLES_MAX.
 # Measured with blender_scripts/dev/shadow_measure.py against the same pair at 256 spp per
-# render with another seed (docs/performance.md, "Shadow pass"): RMSE 0.035 / 0.025 /
-# 0.018 / 0.013 at 8 / 16 / 32 / 64 samples (visibility noise in the penumbrae of the big
-# area lights; the shared seed cancels everything else), an open floor exactly 0; extra time
-# at 8 over a 64-spp final render at 320x240 5-13% on `full` scenes (flat floors cheapest,
-# displaced ones dearest), 16-19% on `clevr` (its final render is cheap). The pass up to 0.9
-# (lit from the textured final render, an 8-spp textured no-shadow render) had RMSE ~0.1 and
-# up to 0.6 on an open floor, at 10-13%.
-# The Rust side filters the ratio over a 3x3 window within each instance and surface
-# (clevrtex_render::post::SHADOW_FILTER): RMSE 0.035 -> 0.030 at 8 samples; wider windows
-# blur the shadows' real detail more than they remove noise (docs/performance.md).
+# render with another seed, at 320x240 (docs/performance.md, "Shadow pass"): RMSE 0.0104
+# (0.0091-0.0114 over five scenes) at 16, 0.018 at 8, 0.033 at 4; an open floor exactly 0;
+# extra time at 16 over the 64-spp final render: 9% on `full` scenes with a flat floor, 26%
+# with a displaced one, 33-36% on `clevr` (a direct-light sample costs about the same
+# everywhere, and `clevr`'s final render is cheap). The anti-aliased pair before it had RMSE
+# 0.025 at 8 samples with a 3x3 filter; the pass before that (lit from the textured final
+# render, an 8-spp textured no-shadow render) ~0.1, and up to 0.6 on an open floor.
 SHADOW_SAMPLES_MAX = 64
+# Cycles' pixel filter width of the shadow renders: its smallest (Cycles clamps to 0.01 px),
+# i.e. every sample through the pixel's centre.
+SHADOW_FILTER_WIDTH = 0.01
 
 
 def default_shadow_samples(samples):
     """Samples of each shadow render for a final render of `samples`."""
-    return max(1, min(SHADOW_SAMPLES_MAX, (samples + 7) // 8))
+    return max(1, min(SHADOW_SAMPLES_MAX, (samples + 3) // 4))
 
 # Cycles seed: fixed, so two renders of one scene are identical (and visibility's single
 # sample is the final render's first sample).
@@ -516,14 +519,16 @@ class WhiteSurfaces:
 
 def _render_shadow(built, out_dir, samples):
     """The shadow pass's two renders (see SHADOW_SAMPLES_MAX): direct light on white
-    surfaces with and without object shadows, `samples` each, same seed. Returns (files,
+    surfaces with and without object shadows, `samples` each, same seed, every sample
+    through the pixel's centre. Returns (files,
     render seconds of both, write seconds)."""
     scene = bpy.context.scene
     passes.enable(bpy.context.view_layer, ["shadow"])
     c = scene.cycles
-    saved = (c.samples, c.max_bounces, c.use_adaptive_sampling)
+    saved = (c.samples, c.max_bounces, c.use_adaptive_sampling, c.filter_width)
     c.samples = max(1, samples)
     c.max_bounces = 0
+    c.filter_width = SHADOW_FILTER_WIDTH
     # Adaptive sampling would stop the two renders at different samples where they differ.
     c.use_adaptive_sampling = False
     files, render_s, write_s = {}, 0.0, 0.0
@@ -538,7 +543,7 @@ def _render_shadow(built, out_dir, samples):
                 _save(files[name], "EXR")
                 write_s += time.perf_counter() - t0
     finally:
-        c.samples, c.max_bounces, c.use_adaptive_sampling = saved
+        c.samples, c.max_bounces, c.use_adaptive_sampling, c.filter_width = saved
         for obj in built.objects:
             compat.set_cast_shadow(obj, True)
     return files, render_s, write_s

@@ -3,7 +3,9 @@
     blender -b --factory-startup --python-exit-code 1 \
         --python blender_scripts/dev/shadow_measure.py -- \
         --materials materials.json --out OUT [--size 160x120] [--threads 2] \
-        [--methods noshadow-8,paired-8,...] [--floor SCENE.json] SCENE.json [SCENE.json ...]
+        [--methods noshadow-8,paired-8,...] [--floor SCENE.json] \
+        [--filter-width 0.01] [--white-only-passes] [--second-ref] [--reuse-refs] \
+        [--pattern SOBOL] SCENE.json [SCENE.json ...]
 
 `materials.json` is `clevrtex materials json`; scene files come from `clevrtex sample`.
 `--floor SCENE.json` adds that scene with its objects removed: a lit open floor where the
@@ -19,6 +21,21 @@ colours are 1 and glossy light 0. Reference: textured methods are compared with 
 pair at `--ref-samples` (256) per render, white methods with the white pair; both use
 another seed (7919) than every candidate, so their noise is independent of the candidates'.
 `--no-textured-ref` skips the textured reference; `--ref-samples 0` skips both (timings).
+The shadow is undefined (0) where `un` is under max(1e-4, 1% of its 99th percentile), as in
+`post::shadow_undefined_below`.
+
+White methods (and the white references) take these options:
+  --filter-width W     Cycles' pixel filter width of their renders; 0.01 (what the bridge
+                       uses, builder.SHADOW_FILTER_WIDTH): every sample through
+                       the pixel's centre. Default: the scene's (anti-aliased).
+  --white-only-passes  their renders enable only the pass's `DiffDir`, as the bridge does
+                       (for timings); by default they also write mask, depth, normal, colours.
+  --second-ref         a second white reference with another seed (`ref2-white-paired-N_*`):
+                       the RMSE between the two is the reference's own noise.
+  --reuse-refs         white references already in OUT are read, not rendered again.
+  --pattern P          Cycles' sampling pattern of the candidates (not the references).
+Every render's EXR stays in OUT/<scene>/ (`white-paired-16_lit.exr`...), for
+`cargo run --release -p clevrtex-render --example shadow_filter_measure -- OUT METHOD...`.
 
 Methods (N = samples of each extra render):
   noshadow-N  the bridge up to 0.9: lit from the final render, un from a direct-light-only
@@ -28,11 +45,15 @@ Methods (N = samples of each extra render):
               they differ only where an object blocks a shadow ray.
   adaptiveT-N paired, with Cycles' adaptive sampling (noise threshold T, at most N spp) in
               both renders: where no object shadows, both stop at the same sample.
+              `adaptiveT_mK-N`: at least K samples (Cycles still takes 16 before its first
+              check).
+  fast-N      paired, but the backdrop casts no shadow in `lit` and `un` traces no shadow
+              ray at all (every light's shadows off).
   white-M     method M with every material's surface replaced by a white diffuse BSDF
               (displacement kept; builder.WhiteSurfaces): the shadow of the direct
               irradiance, no texture or glossy noise, cheaper shading. Compared with the
-              white reference. `white-paired-8` is what the bridge does at 64 samples
-              (builder.default_shadow_samples).
+              white reference. `white-paired-16` with `--filter-width 0.01` is what the
+              bridge does at 64 samples (builder.default_shadow_samples).
   nobd-M      method M with the backdrop casting no shadows (its relief then shadows it in
               neither render; shadow rays skip its dense displaced mesh).
   perlight-N  paired, one pair of renders per light (the others hidden), N spp each: no
@@ -68,6 +89,7 @@ import passes  # noqa: E402
 
 REF_SAMPLES = 256
 REF_SEED = 7919
+REF_SEED_2 = 104729
 DEFAULT_METHODS = "noshadow-8,noshadow-16,noshadow-64,paired-4,paired-8,paired-16,catcher-8"
 
 
@@ -82,6 +104,19 @@ def parse_args():
     p.add_argument("--ref-samples", type=int, default=REF_SAMPLES,
                    help="samples per render of the references; 0: no reference (timing only)")
     p.add_argument("--floor", default=None)
+    p.add_argument("--white-only-passes", action="store_true",
+                   help="white methods' renders enable only the shadow pass's DiffDir, as the "
+                        "bridge does (timings); the default adds mask/depth/normal/colours")
+    p.add_argument("--filter-width", type=float, default=None,
+                   help="Cycles' pixel filter width of the white methods' renders (and white "
+                        "references); 0.01: every sample through the pixel's centre")
+    p.add_argument("--pattern", default=None,
+                   help="Cycles' sampling pattern of the white candidates (not the references)")
+    p.add_argument("--reuse-refs", action="store_true",
+                   help="white references already in OUT (same settings) are read, not rendered")
+    p.add_argument("--second-ref", action="store_true",
+                   help="also a second white reference with another seed (REF_SEED_2), saved as "
+                        "ref2-white-paired-N_{lit,un}.exr: the reference's own noise")
     p.add_argument("--no-textured-ref", action="store_true",
                    help="skip the textured reference (only white methods compared)")
     p.add_argument("scenes", nargs="*")
@@ -116,8 +151,24 @@ def render_final(path):
     return t
 
 
+def set_light_shadows(enabled):
+    """Whether every light traces shadow rays (`cycles.cast_shadow` up to 3.x, `use_shadow`)."""
+    for o in bpy.context.scene.objects:
+        if o.type == "LIGHT":
+            if hasattr(o.data, "cycles") and hasattr(o.data.cycles, "cast_shadow"):
+                o.data.cycles.cast_shadow = enabled
+            else:
+                o.data.use_shadow = enabled
+
+
+WHITE_ONLY_PASSES = [False]
+FILTER_WIDTH = [None]
+REUSE_REFS = [0]
+PATTERN = [None]
+
+
 def render_direct(built, path, samples, cast, seed=None, catcher=False, only_light=None,
-                  adaptive=None):
+                  adaptive=None, light_shadows=True, min_samples=0):
     """Direct light only (max_bounces 0), `samples` spp, objects casting shadows or not;
     `adaptive`: Cycles' adaptive sampling with this noise threshold (`samples` the most)."""
     scene = bpy.context.scene
@@ -126,7 +177,13 @@ def render_direct(built, path, samples, cast, seed=None, catcher=False, only_lig
         for o in lights:
             o.hide_render = o.name != only_light
     vl = bpy.context.view_layer
-    enable_light_passes(vl)
+    if WHITE_ONLY_PASSES[0]:
+        passes.enable(vl, ["shadow"])
+    else:
+        enable_light_passes(vl)
+    if os.environ.get("SHADOW_MEASURE_SAMPLE_COUNT"):
+        vl.cycles.pass_debug_sample_count = adaptive is not None
+    set_light_shadows(light_shadows)
     c = scene.cycles
     saved = (c.samples, c.max_bounces, c.use_adaptive_sampling, c.seed,
              scene.render.film_transparent)
@@ -135,6 +192,7 @@ def render_direct(built, path, samples, cast, seed=None, catcher=False, only_lig
     c.use_adaptive_sampling = adaptive is not None
     if adaptive is not None:
         c.adaptive_threshold = adaptive
+        c.adaptive_min_samples = min_samples
     if seed is not None:
         c.seed = seed
     for obj in built.objects:
@@ -152,6 +210,7 @@ def render_direct(built, path, samples, cast, seed=None, catcher=False, only_lig
             compat.set_cast_shadow(obj, True)
         for o in lights:
             o.hide_render = False
+        set_light_shadows(True)
         if catcher:
             built.backdrop.is_shadow_catcher = False
             vl.cycles.use_pass_shadow_catcher = False
@@ -165,11 +224,15 @@ def lum(r, g, b):
 
 def direct_light(data, colours):
     """Per-pixel luminance of diffuse direct * colour + glossy direct * colour."""
-    ch = lambda d, layer, c: d["ViewLayer.%s.%s" % (layer, c)]  # noqa: E731
+    n = len(data["ViewLayer.DiffDir.R"])
+
+    def ch(d, layer, c, default):
+        # White methods rendered with --white-only-passes have DiffDir alone.
+        return d.get("ViewLayer.%s.%s" % (layer, c), [default] * n)
     out = []
     for c in "RGB":
-        dd, gd = ch(data, "DiffDir", c), ch(data, "GlossDir", c)
-        dc, gc = ch(colours, "DiffCol", c), ch(colours, "GlossCol", c)
+        dd, gd = ch(data, "DiffDir", c, 0.0), ch(data, "GlossDir", c, 0.0)
+        dc, gc = ch(colours, "DiffCol", c, 1.0), ch(colours, "GlossCol", c, 1.0)
         out.append([dd[i] * dc[i] + gd[i] * gc[i] for i in range(len(dd))])
     return [lum(out[0][i], out[1][i], out[2][i]) for i in range(len(out[0]))]
 
@@ -179,13 +242,22 @@ def shadow(lit_path, un_path):
     _, _, lit = exr_dump.read(lit_path)
     _, _, un = exr_dump.read(un_path)
     ll, uu = direct_light(lit, lit), direct_light(un, lit)
+    eps = undefined_below(uu)
     out = []
     for l, u in zip(ll, uu):
-        if not (math.isfinite(l) and math.isfinite(u)) or u < 1e-4:
+        if not (math.isfinite(l) and math.isfinite(u)) or u < eps:
             out.append(0.0)
         else:
             out.append(round(min(1.0, max(0.0, 1.0 - l / u)) * 255.0) / 255.0)
     return out
+
+
+def undefined_below(uu):
+    """post::shadow_undefined_below: max(1e-4, 1% of the 99th percentile of the lit pixels)."""
+    lit = sorted(u for u in uu if math.isfinite(u) and u >= 1e-4)
+    if not lit:
+        return 1e-4
+    return max(1e-4, 0.01 * lit[int(round((len(lit) - 1) * 0.99))])
 
 
 def catcher_shadow(path):
@@ -217,28 +289,45 @@ def shadow_sum(pairs):
         l, u = direct_light(lit, lit), direct_light(un, lit)
         ll = l if ll is None else [a + b for a, b in zip(ll, l)]
         uu = u if uu is None else [a + b for a, b in zip(uu, u)]
-    return [0.0 if u < 1e-4 else round(min(1.0, max(0.0, 1.0 - l / u)) * 255.0) / 255.0
+    eps = undefined_below(uu)
+    return [0.0 if u < eps else round(min(1.0, max(0.0, 1.0 - l / u)) * 255.0) / 255.0
             for l, u in zip(ll, uu)]
 
 
-def run_method(built, method, d, final_exr, seed=None):
+def run_method(built, method, d, final_exr, seed=None, tag=""):
     kind, n = method.rsplit("-", 1)
     n = int(n)
-    un = os.path.join(d, "%s_un.exr" % method)
     if kind.startswith("white-"):
-        with builder.WhiteSurfaces(built):
-            return run_method(built, method[len("white-"):], d, final_exr, seed)
+        c = bpy.context.scene.cycles
+        saved = c.filter_width
+        saved_pattern = c.sampling_pattern
+        if FILTER_WIDTH[0] is not None:
+            c.filter_width = FILTER_WIDTH[0]
+        if PATTERN[0] is not None and seed is None:
+            c.sampling_pattern = PATTERN[0]
+        try:
+            with builder.WhiteSurfaces(built):
+                return run_method(built, method[len("white-"):], d, final_exr, seed,
+                                  tag + "white-")
+        finally:
+            c.filter_width = saved
+            c.sampling_pattern = saved_pattern
+    method = tag + method
+    un = os.path.join(d, "%s_un.exr" % method)
     if kind.startswith("nobd-"):
         compat.set_cast_shadow(built.backdrop, False)
         try:
-            return run_method(built, method[len("nobd-"):], d, final_exr, seed)
+            return run_method(built, method[len("nobd-"):], d, final_exr, seed, tag + "nobd-")
         finally:
             compat.set_cast_shadow(built.backdrop, True)
     if kind.startswith("adaptive"):
-        thr = float(kind[len("adaptive"):])
+        # adaptiveT-N or adaptiveT_mK-N: threshold T, at most N, at least K (0: Cycles' auto).
+        spec = kind[len("adaptive"):]
+        thr, mins = (spec.split("_m") + ["0"])[:2]
+        thr, mins = float(thr), int(mins)
         lit = os.path.join(d, "%s_lit.exr" % method)
-        t1 = render_direct(built, lit, n, cast=True, seed=seed, adaptive=thr)
-        t2 = render_direct(built, un, n, cast=False, seed=seed, adaptive=thr)
+        t1 = render_direct(built, lit, n, cast=True, seed=seed, adaptive=thr, min_samples=mins)
+        t2 = render_direct(built, un, n, cast=False, seed=seed, adaptive=thr, min_samples=mins)
         return shadow(lit, un), add(t1, t2)
     if kind == "perlight":
         pairs, t = [], (0.0, 0.0)
@@ -254,9 +343,21 @@ def run_method(built, method, d, final_exr, seed=None):
         return shadow(final_exr, un), t
     if kind == "paired":
         lit = os.path.join(d, "%s_lit.exr" % method)
+        if REUSE_REFS[0] and n == REUSE_REFS[0] and os.path.exists(lit) and os.path.exists(un):
+            return shadow(lit, un), (0.0, 0.0)
         t1 = render_direct(built, lit, n, cast=True, seed=seed)
         t2 = render_direct(built, un, n, cast=False, seed=seed)
         return shadow(lit, un), (t1[0] + t2[0], t1[1] + t2[1])
+    if kind == "fast":
+        # The backdrop casts no shadow in `lit`; `un` traces no shadow ray at all.
+        lit = os.path.join(d, "%s_lit.exr" % method)
+        compat.set_cast_shadow(built.backdrop, False)
+        try:
+            t1 = render_direct(built, lit, n, cast=True, seed=seed)
+        finally:
+            compat.set_cast_shadow(built.backdrop, True)
+        t2 = render_direct(built, un, n, cast=False, seed=seed, light_shadows=False)
+        return shadow(lit, un), add(t1, t2)
     if kind == "catcher":
         t = render_direct(built, un, n, cast=True, catcher=True)
         return catcher_shadow(un), t
@@ -265,6 +366,11 @@ def run_method(built, method, d, final_exr, seed=None):
 
 def main():
     args = parse_args()
+    WHITE_ONLY_PASSES[0] = args.white_only_passes
+    FILTER_WIDTH[0] = args.filter_width
+    PATTERN[0] = args.pattern
+    if args.reuse_refs:
+        REUSE_REFS[0] = args.ref_samples
     os.makedirs(args.out, exist_ok=True)
     with open(args.materials, "r", encoding="utf-8") as f:
         catalogue = json.load(f)["materials"]
@@ -305,6 +411,12 @@ def main():
         if any(m.startswith("white-") for m in methods) and args.ref_samples > 0:
             white_ref, _ = run_method(built, "white-paired-%d" % args.ref_samples,
                                       d, final_exr, seed=REF_SEED)
+            if args.second_ref:
+                ref2, _ = run_method(built, "white-paired-%d" % args.ref_samples,
+                                     d, final_exr, seed=REF_SEED_2, tag="ref2-")
+                row["white_ref_vs_ref2"] = rmse(white_ref, ref2)
+                print("%-28s white reference vs second reference: rmse %.4f"
+                      % (name, row["white_ref_vs_ref2"]), flush=True)
         for m in methods:
             s, t = run_method(built, m, d, final_exr)
             row["methods"][m] = {

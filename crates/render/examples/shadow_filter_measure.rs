@@ -1,19 +1,23 @@
-//! RMSE of the shipped shadow filter (`clevrtex_render::post::filter_shadow`) against the
-//! 256-spp reference, on the EXRs that `blender_scripts/dev/shadow_measure.py` leaves in its
-//! `--out` folder (white methods are saved as `paired-N_{lit,un}.exr`; dev only; numbers in `docs/performance.md`, "Shadow pass"):
+//! RMSE of the shadow pass (`clevrtex_render::post::filter_shadow`, the shipped filter and
+//! variants) against the 256-spp reference, on the EXRs that
+//! `blender_scripts/dev/shadow_measure.py` leaves in its `--out` folder (white methods are
+//! saved as `white-paired-N_{lit,un}.exr`; dev only; numbers in `docs/performance.md`,
+//! "Shadow pass"):
 //!
 //! ```text
 //! cargo run --release -p clevrtex-render --example shadow_filter_measure -- \
-//!     OUT paired-8 [paired-16 ...]
+//!     OUT white-paired-16 [white-paired-8 ...]
 //! ```
 //!
 //! For every scene folder of OUT (the one named `open_floor` is reported as its maximum) and
 //! every method given, it prints the RMSE of the 8-bit pass (as published) for: no filter,
-//! the shipped filter, and variants (radius, tolerance, ratio of sums or mean of ratios),
-//! each against the unfiltered `paired-256` pair (the reference, another seed). The
-//! instance ids come from `final.exr` (its `IndexOB` pass). With `SPLIT=1` in the
-//! environment it also prints, on stderr, each variant's RMSE on the floor (id 0) and on the
-//! objects.
+//! the shipped filter, and variants (radius, tolerance, range, ratio of sums or mean of
+//! ratios), each against the unfiltered `white-paired-256` pair (the reference, another
+//! seed), with the pass's own rule for undefined pixels. Where the second reference
+//! (`ref2-white-paired-256`, `--second-ref`) is there, the first line is the two
+//! references' RMSE: the reference's own noise, part of every number. The instance ids come
+//! from `final.exr` (its `IndexOB` pass). With `SPLIT=1` in the environment it also prints,
+//! on stderr, each variant's RMSE on the floor (id 0) and on the objects.
 
 use std::path::Path;
 
@@ -50,17 +54,20 @@ fn main() {
             ..SHADOW_FILTER
         },
     )];
-    for radius in [1, 2, 3, 4, 5] {
-        for tolerance in [0.1, 0.25, 0.5, f32::INFINITY] {
-            for ratio_of_sums in [true, false] {
-                let f = ShadowFilter {
-                    radius,
-                    tolerance,
-                    ratio_of_sums,
-                };
-                let kind = if ratio_of_sums { "sums" } else { "ratios" };
-                let mark = if f == SHADOW_FILTER { " (shipped)" } else { "" };
-                variants.push((format!("r{radius} tol{tolerance} {kind}{mark}"), f));
+    variants.push(("shipped".into(), SHADOW_FILTER));
+    for radius in [1, 2, 3] {
+        for tolerance in [0.1, 0.25, f32::INFINITY] {
+            for range in [0.1, 0.2, 0.3, f32::INFINITY] {
+                for ratio_of_sums in [true, false] {
+                    let f = ShadowFilter {
+                        radius,
+                        tolerance,
+                        range,
+                        ratio_of_sums,
+                    };
+                    let kind = if ratio_of_sums { "sums" } else { "ratios" };
+                    variants.push((format!("r{radius} tol{tolerance} range{range} {kind}"), f));
+                }
             }
         }
     }
@@ -85,10 +92,27 @@ fn main() {
                 .collect();
             let w = fin.width;
             let (rl, ru) = (
-                lum(&read("paired-256_lit.exr")),
-                lum(&read("paired-256_un.exr")),
+                lum(&read("white-paired-256_lit.exr")),
+                lum(&read("white-paired-256_un.exr")),
             );
             let reference = quantised(&post::filter_shadow(&rl, &ru, &ids, w, variants[0].1));
+            if d.join("ref2-white-paired-256_un.exr").exists() {
+                let (l2, u2) = (
+                    lum(&read("ref2-white-paired-256_lit.exr")),
+                    lum(&read("ref2-white-paired-256_un.exr")),
+                );
+                let r2 = quantised(&post::filter_shadow(&l2, &u2, &ids, w, variants[0].1));
+                let se: f32 = r2
+                    .iter()
+                    .zip(&reference)
+                    .map(|(a, b)| (a - b).powi(2))
+                    .sum();
+                println!(
+                    "{}: reference vs second reference {:.4}",
+                    d.display(),
+                    (se / r2.len() as f32).sqrt()
+                );
+            }
             let (l, u) = (
                 lum(&read(&format!("{method}_lit.exr"))),
                 lum(&read(&format!("{method}_un.exr"))),
@@ -132,13 +156,22 @@ fn main() {
             }
         }
         println!(
-            "{:<28} {}   (open_floor: max)",
+            "{:<36} {}   (open_floor: max)",
             "filter",
             names.iter().map(|n| format!("{n:>22}")).collect::<String>()
         );
         for (k, (name, _)) in variants.iter().enumerate() {
             let row: String = table[k].iter().map(|v| format!("{v:>22.4}")).collect();
-            println!("{name:<28} {row}");
+            // Mean and worst over the scenes, open floor left out.
+            let scenes: Vec<f32> = table[k]
+                .iter()
+                .zip(&names)
+                .filter(|(_, n)| n.as_str() != "open_floor")
+                .map(|(v, _)| *v)
+                .collect();
+            let mean = scenes.iter().sum::<f32>() / scenes.len().max(1) as f32;
+            let worst = scenes.iter().fold(0.0f32, |a, &b| a.max(b));
+            println!("{name:<36} {row}   mean {mean:.4} worst {worst:.4}");
         }
     }
 }

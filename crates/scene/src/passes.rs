@@ -23,6 +23,11 @@ pub const NORMAL_BACKGROUND: [u16; 3] = [32768, 32768, 32768];
 pub const SHADOW_UNDEFINED: u8 = 0;
 /// Unshadowed direct-light luminance below which the shadow ratio counts as undefined.
 pub const SHADOW_EPS: f32 = 1e-4;
+/// ... and the fraction of the image's 99th-percentile unshadowed luminance below which it
+/// does too: a surface that gets under 1% of the typical direct light (grazing or turned
+/// away from every light) has no shadow worth the name, and its ratio of two tiny numbers
+/// is all noise (it was most of the 256-sample reference's own error; docs/performance.md).
+pub const SHADOW_REL_EPS: f32 = 0.01;
 
 /// A render pass. The same names key the bridge's pass table (`blender_scripts/passes.py`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -222,8 +227,10 @@ const SPECS: [PassSpec; 6] = [
         png: PngKind::Gray8,
         encoding: Encoding {
             undefined: Some(SHADOW_UNDEFINED),
-            // `SHADOW_EPS` written out (a test checks they agree).
-            undefined_when: Some("unshadowed direct light luminance < 0.0001"),
+            // `SHADOW_EPS` and `SHADOW_REL_EPS` written out (a test checks they agree).
+            undefined_when: Some(
+                "unshadowed direct light luminance < max(0.0001, 0.01 x its 99th percentile over the image)",
+            ),
             ..encoding(
                 8,
                 "gray",
@@ -290,7 +297,13 @@ mod tests {
     fn written_out_constants_agree() {
         assert_eq!(
             Pass::Shadow.spec().encoding.undefined_when,
-            Some(format!("unshadowed direct light luminance < {SHADOW_EPS}").as_str())
+            Some(
+                format!(
+                    "unshadowed direct light luminance < max({SHADOW_EPS}, {SHADOW_REL_EPS} x its \
+                     99th percentile over the image)"
+                )
+                .as_str()
+            )
         );
         assert_eq!(
             Pass::Normal.spec().exr_channels(),
