@@ -118,15 +118,21 @@ fn pass_table_rust_and_bridge_agree() {
          print('@@PASSES@@' + json.dumps([[n, list(p['exr'].items())] for n, p in passes.PASSES.items()]))",
         scripts = scripts.display().to_string()
     );
-    let out = std::process::Command::new(&blender)
-        .args([
+    // A Python with the `bpy` module (`CLEVRTEX_BLENDER=.venv-bpy/bin/python`) runs the
+    // bridge itself, so it reads the table there, without Blender's command line.
+    let args: Vec<&str> = match clevrtex_render::blender::flavour(&blender) {
+        clevrtex_render::blender::Flavour::PythonModule => vec!["-c", &expr],
+        clevrtex_render::blender::Flavour::Executable => vec![
             "-b",
             "--factory-startup",
             "--python-exit-code",
             "1",
             "--python-expr",
             &expr,
-        ])
+        ],
+    };
+    let out = std::process::Command::new(&blender)
+        .args(&args)
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
