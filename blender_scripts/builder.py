@@ -29,8 +29,9 @@ SCENE_VERSION = 1
 # goes through the pixel's centre (SHADOW_FILTER_WIDTH): the pass is the shadow of the one
 # surface point there, like the mask and depth, so there is no anti-aliasing noise (which
 # surface a sample hits) on silhouettes and shadow edges, and all the samples go to the
-# light. Samples of each: the request's `shadow_samples`, else a quarter of the scene's
-# samples (16 at the default 64), at most SHADOW_SAMPLES_MAX.
+# light. Samples of each: the request's `shadow_samples`, else the scene file's
+# `render.shadow_samples`, else a quarter of the scene's samples (16 at the default 64), at
+# most SHADOW_SAMPLES_MAX.
 # Measured with blender_scripts/dev/shadow_measure.py against the same pair at 256 spp per
 # render with another seed, at 320x240 (docs/performance.md, "Shadow pass"): RMSE 0.0104
 # (0.0091-0.0114 over five scenes) at 16, 0.018 at 8, 0.033 at 4; an open floor exactly 0;
@@ -471,7 +472,8 @@ def render_final(built, out_dir, shadow_samples=None):
         _save(files["passes"], "EXR")
     timings["write_s"] = time.perf_counter() - t0
     if "shadow" in wanted:
-        samples = shadow_samples or default_shadow_samples(scene.cycles.samples)
+        samples = (shadow_samples or built.spec["render"].get("shadow_samples")
+                   or default_shadow_samples(scene.cycles.samples))
         shadow_files, timings["shadow_render_s"], write_s = _render_shadow(
             built, out_dir, samples)
         files.update(shadow_files)

@@ -596,6 +596,16 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
             "the reference uses 320x240",
         ));
     }
+    if let Some(n) = r.shadow_samples {
+        if !(1..=MAX_SAMPLES).contains(&n) {
+            return Err(err(
+                "base_scene.render.shadow_samples",
+                Some(n.to_string()),
+                &format!("must be 1 to {MAX_SAMPLES}"),
+                "leave it out for a quarter of `samples` (16 at 64)",
+            ));
+        }
+    }
     if base.passes.is_empty() {
         return Err(err(
             "base_scene.passes",
@@ -758,6 +768,27 @@ mod tests {
         assert_eq!(c.base.render.width, 320);
         assert_eq!(c.base.placement.margin, 0.1);
         assert_eq!(c.base.placement.min_dist, 0.25);
+    }
+
+    #[test]
+    fn shadow_samples_come_from_the_config_and_zero_is_refused() {
+        let with = |v: &str| {
+            include_str!("../../../configs/full.json").replacen(
+                "{",
+                &format!(r#"{{"base_scene": {{"render": {{"shadow_samples": {v}}}}},"#),
+                1,
+            )
+        };
+        let c = Config::from_json_str(&with("32"), "my.json").unwrap();
+        assert_eq!(c.base.render.shadow_samples, Some(32));
+        assert_eq!(
+            Config::builtin("full").unwrap().base.render.shadow_samples,
+            None
+        );
+        let e = Config::from_json_str(&with("0"), "my.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("base_scene.render.shadow_samples"), "{e}");
     }
 
     #[test]
