@@ -69,15 +69,7 @@ pub fn run(args: Args) -> CmdResult {
         clevrtex_render::bridge::files().len(),
         clevrtex_render::bridge::BRIDGE_VERSION
     );
-    match Worker::start(&WorkerOptions {
-        blender: path.clone(),
-        script: bridge.worker_script(),
-        materials: bridge.materials_json(),
-        threads: 1,
-        startup_timeout: deadline,
-        interrupt: Arc::new(AtomicBool::new(false)),
-        device: Default::default(),
-    }) {
+    match start_worker(&path, &bridge, deadline) {
         Ok(worker) => {
             let ready = worker.ready().clone();
             println!(
@@ -122,6 +114,24 @@ pub fn run(args: Args) -> CmdResult {
             problems.len()
         )
     }
+}
+
+/// One single-threaded worker of `blender` running `bridge`'s script, on the default device:
+/// what `doctor` starts to ask a Blender what it has.
+fn start_worker(
+    blender: &std::path::Path,
+    bridge: &BridgeDir,
+    deadline: Duration,
+) -> Result<Worker, clevrtex_render::RenderError> {
+    Worker::start(&WorkerOptions {
+        blender: blender.to_path_buf(),
+        script: bridge.worker_script(),
+        materials: bridge.materials_json(),
+        threads: 1,
+        startup_timeout: deadline,
+        interrupt: Arc::new(AtomicBool::new(false)),
+        device: Default::default(),
+    })
 }
 
 fn yes_no(b: bool) -> &'static str {
@@ -175,17 +185,9 @@ fn list_blenders(checked: &std::path::Path, explicit: bool, deadline: Duration) 
                     let flavour = blender::flavour(path);
                     let version = blender::version_line_within(path, deadline)
                         .unwrap_or_else(|e| format!("no version ({})", first_line(&e.to_string())));
-                    let detail = match BridgeDir::create("{\"materials\": {}}").and_then(|bridge| {
-                        Worker::start(&WorkerOptions {
-                            blender: path.clone(),
-                            script: bridge.worker_script(),
-                            materials: bridge.materials_json(),
-                            threads: 1,
-                            startup_timeout: deadline,
-                            interrupt: Arc::new(AtomicBool::new(false)),
-                            device: Default::default(),
-                        })
-                    }) {
+                    let detail = match BridgeDir::create("{\"materials\": {}}")
+                        .and_then(|bridge| start_worker(path, &bridge, deadline))
+                    {
                         Ok(worker) => {
                             let ready = worker.ready().clone();
                             worker.quit();
