@@ -29,9 +29,9 @@ SCENE_VERSION = 1
 # goes through the pixel's centre (SHADOW_FILTER_WIDTH): the pass is the shadow of the one
 # surface point there, like the mask and depth, so there is no anti-aliasing noise (which
 # surface a sample hits) on silhouettes and shadow edges, and all the samples go to the
-# light. Samples of each: the request's `shadow_samples`, else the scene file's
-# `render.shadow_samples`, else a quarter of the scene's samples (16 at the default 64), at
-# most SHADOW_SAMPLES_MAX.
+# light (Cycles 4.0+'s light tree off: SHADOW_LIGHT_TREE). Samples of each: the request's
+# `shadow_samples`, else the scene file's `render.shadow_samples`, else a quarter of the
+# scene's samples (16 at the default 64), at most SHADOW_SAMPLES_MAX.
 # Measured with blender_scripts/dev/shadow_measure.py against the same pair at 256 spp per
 # render with another seed, at 320x240 (docs/performance.md, "Shadow pass"): RMSE 0.0104
 # (0.0091-0.0114 over five scenes) at 16, 0.018 at 8, 0.033 at 4; an open floor exactly 0;
@@ -44,6 +44,12 @@ SHADOW_SAMPLES_MAX = 64
 # Cycles' pixel filter width of the shadow renders: its smallest (Cycles clamps to 0.01 px),
 # i.e. every sample through the pixel's centre.
 SHADOW_FILTER_WIDTH = 0.01
+# Cycles 4.0+'s light tree in the shadow renders: off, whatever the scene asks for the final
+# render. Measured on bpy 4.5 (docs/performance.md, "Shadow pass"): with the tree, RMSE 0.034
+# at 16 samples on `clevr_000000` and `full_000000`; without, 0.0105 / 0.0085, as on 3.4.1
+# (which has no tree). The two renders still share their light samples either way (an open
+# floor is 0); the tree only spends them worse on this question.
+SHADOW_LIGHT_TREE = False
 
 
 def default_shadow_samples(samples):
@@ -533,6 +539,10 @@ def _render_shadow(built, out_dir, samples):
     c.filter_width = SHADOW_FILTER_WIDTH
     # Adaptive sampling would stop the two renders at different samples where they differ.
     c.use_adaptive_sampling = False
+    # Cycles 4.0+'s light tree off (SHADOW_LIGHT_TREE): with it the pass was 3x noisier.
+    light_tree = getattr(c, "use_light_tree", None)
+    if light_tree is not None:
+        c.use_light_tree = SHADOW_LIGHT_TREE
     files, render_s, write_s = {}, 0.0, 0.0
     try:
         with WhiteSurfaces(built):
@@ -546,6 +556,8 @@ def _render_shadow(built, out_dir, samples):
                 write_s += time.perf_counter() - t0
     finally:
         c.samples, c.max_bounces, c.use_adaptive_sampling, c.filter_width = saved
+        if light_tree is not None:
+            c.use_light_tree = light_tree
         for obj in built.objects:
             compat.set_cast_shadow(obj, True)
     return files, render_s, write_s

@@ -34,6 +34,9 @@ White methods (and the white references) take these options:
                        the RMSE between the two is the reference's own noise.
   --reuse-refs         white references already in OUT are read, not rendered again.
   --pattern P          Cycles' sampling pattern of the candidates (not the references).
+  --no-light-tree      Cycles 4.0+'s light tree off in every render (references too).
+  --white-light-tree   white renders keep the scene's light tree; by default they turn it
+                       off, as the bridge does (builder.SHADOW_LIGHT_TREE).
 Every render's EXR stays in OUT/<scene>/ (`white-paired-16_lit.exr`...), for
 `cargo run --release -p clevrtex-render --example shadow_filter_measure -- OUT METHOD...`.
 
@@ -112,6 +115,11 @@ def parse_args():
                         "references); 0.01: every sample through the pixel's centre")
     p.add_argument("--pattern", default=None,
                    help="Cycles' sampling pattern of the white candidates (not the references)")
+    p.add_argument("--no-light-tree", action="store_true",
+                   help="Cycles 4.0+'s light tree off for every render (scene `render.light_tree`)")
+    p.add_argument("--white-light-tree", action="store_true",
+                   help="white renders keep the scene's light tree (4.0+) instead of turning it "
+                        "off as the bridge does (builder.SHADOW_LIGHT_TREE)")
     p.add_argument("--reuse-refs", action="store_true",
                    help="white references already in OUT (same settings) are read, not rendered")
     p.add_argument("--second-ref", action="store_true",
@@ -165,6 +173,7 @@ WHITE_ONLY_PASSES = [False]
 FILTER_WIDTH = [None]
 REUSE_REFS = [0]
 PATTERN = [None]
+WHITE_LIGHT_TREE = [False]
 
 
 def render_direct(built, path, samples, cast, seed=None, catcher=False, only_light=None,
@@ -301,6 +310,9 @@ def run_method(built, method, d, final_exr, seed=None, tag=""):
         c = bpy.context.scene.cycles
         saved = c.filter_width
         saved_pattern = c.sampling_pattern
+        saved_tree = getattr(c, "use_light_tree", None)
+        if saved_tree is not None and not WHITE_LIGHT_TREE[0]:
+            c.use_light_tree = builder.SHADOW_LIGHT_TREE
         if FILTER_WIDTH[0] is not None:
             c.filter_width = FILTER_WIDTH[0]
         if PATTERN[0] is not None and seed is None:
@@ -312,6 +324,8 @@ def run_method(built, method, d, final_exr, seed=None, tag=""):
         finally:
             c.filter_width = saved
             c.sampling_pattern = saved_pattern
+            if saved_tree is not None:
+                c.use_light_tree = saved_tree
     method = tag + method
     un = os.path.join(d, "%s_un.exr" % method)
     if kind.startswith("nobd-"):
@@ -369,6 +383,7 @@ def main():
     WHITE_ONLY_PASSES[0] = args.white_only_passes
     FILTER_WIDTH[0] = args.filter_width
     PATTERN[0] = args.pattern
+    WHITE_LIGHT_TREE[0] = args.white_light_tree
     if args.reuse_refs:
         REUSE_REFS[0] = args.ref_samples
     os.makedirs(args.out, exist_ok=True)
@@ -387,6 +402,8 @@ def main():
         spec["render"]["width"], spec["render"]["height"] = w, h
         d = os.path.join(args.out, name)
         os.makedirs(d, exist_ok=True)
+        if args.no_light_tree:
+            spec["render"]["light_tree"] = False
         built = builder.build(spec, (name,), args.threads)
         builder.assign_materials(built, catalogue, materials.build_material, displacement=True)
         final_exr = os.path.join(d, "final.exr")
