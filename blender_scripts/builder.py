@@ -20,41 +20,49 @@ import shapes
 SCENE_FORMAT = "clevrtex-scene"
 SCENE_VERSION = 1
 
-# The shadow pass: two direct-light-only renders (no bounces) in which every surface is a
-# white diffuse BSDF (displacement kept, so the geometry is the final render's), one with
-# object shadows (`direct.exr`) and one with objects casting none (`noshadow.exr`), with the
-# same samples and Cycles seed: both trace the same rays and pick the same light samples, so
-# they differ only where an object blocks a shadow ray, and Rust computes
-# shadow = 1 - with / without (clevrtex_render::post::encode_shadow). Every sample of a pixel
+# The shadow pass: one direct-light-only render (no bounces) in which every surface is a
+# white diffuse BSDF (displacement kept, so the geometry is the final render's), the lights
+# are white (power scaled by their colour's luminance), and objects are transparent to shadow
+# rays in red only (OneRenderShadow): its direct light `DiffDir` is, per pixel, the light
+# without object shadows in red and with them in green, both from the same camera ray and
+# light samples, so they differ only where an object blocks a light sample, and Rust computes
+# shadow = 1 - green / red (clevrtex_render::post::encode_shadow). Every sample of a pixel
 # goes through the pixel's centre (SHADOW_FILTER_WIDTH): the pass is the shadow of the one
 # surface point there, like the mask and depth, so there is no anti-aliasing noise (which
 # surface a sample hits) on silhouettes and shadow edges, and all the samples go to the
-# light (Cycles 4.0+'s light tree off: SHADOW_LIGHT_TREE). Samples of each: the request's
-# `shadow_samples`, else the scene file's `render.shadow_samples`, else a quarter of the
-# scene's samples (16 at the default 64), at most SHADOW_SAMPLES_MAX.
-# Measured with blender_scripts/dev/shadow_measure.py against the same pair at 256 spp per
-# render with another seed, at 320x240 (docs/performance.md, "Shadow pass"): RMSE 0.0104
-# (0.0091-0.0114 over five scenes) at 16, 0.018 at 8, 0.033 at 4; an open floor exactly 0;
-# extra time at 16 over the 64-spp final render: 9% on `full` scenes with a flat floor, 26%
-# with a displaced one, 33-36% on `clevr` (a direct-light sample costs about the same
-# everywhere, and `clevr`'s final render is cheap). The anti-aliased pair before it had RMSE
-# 0.025 at 8 samples with a 3x3 filter; the pass before that (lit from the textured final
-# render, an 8-spp textured no-shadow render) ~0.1, and up to 0.6 on an open floor.
+# light (Cycles 4.0+'s light tree off: SHADOW_LIGHT_TREE). Samples: the request's
+# `shadow_samples`, else the scene file's `render.shadow_samples`, else three eighths of the
+# scene's samples (24 at the default 64), at most SHADOW_SAMPLES_MAX.
+# Measured with blender_scripts/dev/shadow_measure.py against the same render at 256 spp
+# with another seed, at 320x240 (docs/performance.md, "Shadow pass"): RMSE 0.0083
+# (0.0074-0.0091 over five scenes) at 24, 0.0104 at 16, 0.018 at 8; an open floor exactly 0;
+# extra time at 24 over the 64-spp final render: 6-7% on `full` scenes with a flat floor,
+# 20% with a displaced one, 22-29% on `clevr` (a direct-light sample costs about the same
+# everywhere, and `clevr`'s final render is cheap). Before this the pass took two renders
+# (with and without object shadows, same seed): the same noise per sample at ~1.6x the time;
+# before that, anti-aliased pairs (RMSE 0.025 at 8 samples with a 3x3 filter) and, up to
+# 0.9, the textured final render against an 8-spp no-shadow render (~0.1, up to 0.6 on an
+# open floor).
 SHADOW_SAMPLES_MAX = 64
-# Cycles' pixel filter width of the shadow renders: its smallest (Cycles clamps to 0.01 px),
+# Cycles' pixel filter width of the shadow render: its smallest (Cycles clamps to 0.01 px),
 # i.e. every sample through the pixel's centre.
 SHADOW_FILTER_WIDTH = 0.01
-# Cycles 4.0+'s light tree in the shadow renders: off, whatever the scene asks for the final
-# render. Measured on bpy 4.5 (docs/performance.md, "Shadow pass"): with the tree, RMSE 0.034
-# at 16 samples on `clevr_000000` and `full_000000`; without, 0.0105 / 0.0085, as on 3.4.1
-# (which has no tree). The two renders still share their light samples either way (an open
-# floor is 0); the tree only spends them worse on this question.
+# Cycles 4.0+'s light tree in the shadow render: off, whatever the scene asks for the final
+# render. Measured on bpy 4.5 with the two renders the pass took before (docs/performance.md, "Shadow
+# pass"): with the tree, RMSE 0.034 at 16 samples on `clevr_000000` and `full_000000`;
+# without, 0.0110 / 0.0099, as on 3.4.1 (which has no tree). The light with and without
+# object shadows shares its light samples either way (an open floor is 0); the tree only
+# spends them worse on this question.
 SHADOW_LIGHT_TREE = False
+# Transparent bounces of a shadow ray in the one shadow render (OneRenderShadow): objects are
+# transparent to it, and every object it crosses costs two or more; past the limit Cycles
+# counts the ray as blocked in every channel.
+SHADOW_TRANSPARENT_BOUNCES = 128
 
 
 def default_shadow_samples(samples):
-    """Samples of each shadow render for a final render of `samples`."""
-    return max(1, min(SHADOW_SAMPLES_MAX, (samples + 3) // 4))
+    """Samples of the shadow render for a final render of `samples`: three eighths."""
+    return max(1, min(SHADOW_SAMPLES_MAX, (3 * samples + 7) // 8))
 
 # Cycles seed: fixed, so two renders of one scene are identical (and visibility's single
 # sample is the final render's first sample).
@@ -525,39 +533,100 @@ class WhiteSurfaces:
         return False
 
 
+class OneRenderShadow:
+    """Within `with`: the shadow pass's light with and without object shadows come out of
+    ONE render, in two colour channels of its light. Every surface is white diffuse to
+    camera rays (displacement kept, as WhiteSurfaces); to shadow rays the objects
+    (pass_index > 0) are a transparent BSDF of colour (1, 0, 0), the backdrop stays opaque:
+    a shadow ray an object blocks carries its light in red only. Every light is made white,
+    its power scaled by the luminance of its colour, so each channel of the direct light is
+    the luminance the pass uses: red = without object shadows, green = with. Both channels
+    come from the same camera ray and light sample, so they differ exactly where an object
+    blocks a sample. The lights' multiple importance sampling is off: a BSDF-sampled ray
+    that reaches a light counts in both channels even where an object stands in the way of
+    the red one (seen as 0.1% of the pixels with one sample), so the light comes from light
+    samples alone (unbiased either way). Restored on exit."""
+
+    def __init__(self, built):
+        self.surfaces = WhiteSurfaces(built)
+        self.added = []
+        self.lights = []
+
+    def __enter__(self):
+        self.surfaces.__enter__()
+        for nt, sock, _old, diffuse in self.surfaces.swapped:
+            n = nt.nodes.new
+            transparent = n("ShaderNodeBsdfTransparent")
+            transparent.inputs["Color"].default_value = (1.0, 0.0, 0.0, 1.0)
+            path = n("ShaderNodeLightPath")
+            info = n("ShaderNodeObjectInfo")
+            is_object = n("ShaderNodeMath")
+            is_object.operation = "GREATER_THAN"
+            is_object.inputs[1].default_value = 0.5
+            fac = n("ShaderNodeMath")
+            fac.operation = "MULTIPLY"
+            mix = n("ShaderNodeMixShader")
+            nt.links.new(info.outputs["Object Index"], is_object.inputs[0])
+            nt.links.new(path.outputs["Is Shadow Ray"], fac.inputs[0])
+            nt.links.new(is_object.outputs["Value"], fac.inputs[1])
+            nt.links.new(fac.outputs["Value"], mix.inputs["Fac"])
+            nt.links.new(diffuse.outputs["BSDF"], mix.inputs[1])
+            nt.links.new(transparent.outputs["BSDF"], mix.inputs[2])
+            nt.links.new(mix.outputs["Shader"], sock)
+            self.added.append((nt, [transparent, path, info, is_object, fac, mix]))
+        for obj in bpy.context.scene.objects:
+            if obj.type == "LIGHT":
+                light = obj.data
+                c = tuple(light.color)
+                mis = compat.light_mis(light, False)
+                self.lights.append((light, c, light.energy, mis))
+                light.energy = light.energy * (0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2])
+                light.color = (1.0, 1.0, 1.0)
+        return self
+
+    def __exit__(self, *exc):
+        for light, c, energy, mis in self.lights:
+            light.color, light.energy = c, energy
+            compat.light_mis(light, mis)
+        self.lights = []
+        for nt, nodes in self.added:
+            for node in nodes:
+                nt.nodes.remove(node)
+        self.added = []
+        # WhiteSurfaces relinks the material's own surface (removing the diffuse).
+        return self.surfaces.__exit__(*exc)
+
+
 def _render_shadow(built, out_dir, samples):
-    """The shadow pass's two renders (see SHADOW_SAMPLES_MAX): direct light on white
-    surfaces with and without object shadows, `samples` each, same seed, every sample
-    through the pixel's centre. Returns (files,
-    render seconds of both, write seconds)."""
+    """The shadow pass's render (see the comment above SHADOW_SAMPLES_MAX): direct light on
+    white surfaces, `samples` samples, every one through the pixel's centre, objects
+    transparent to shadow rays in red (OneRenderShadow). Returns (files, render seconds,
+    write seconds)."""
     scene = bpy.context.scene
     passes.enable(bpy.context.view_layer, ["shadow"])
     c = scene.cycles
-    saved = (c.samples, c.max_bounces, c.use_adaptive_sampling, c.filter_width)
+    saved = (c.samples, c.max_bounces, c.use_adaptive_sampling, c.filter_width,
+             c.transparent_max_bounces)
     c.samples = max(1, samples)
     c.max_bounces = 0
     c.filter_width = SHADOW_FILTER_WIDTH
-    # Adaptive sampling would stop the two renders at different samples where they differ.
+    c.transparent_max_bounces = SHADOW_TRANSPARENT_BOUNCES
+    # Adaptive sampling would stop where the unshadowed light (red) has converged.
     c.use_adaptive_sampling = False
     # Cycles 4.0+'s light tree off (SHADOW_LIGHT_TREE): with it the pass was 3x noisier.
     light_tree = getattr(c, "use_light_tree", None)
     if light_tree is not None:
         c.use_light_tree = SHADOW_LIGHT_TREE
-    files, render_s, write_s = {}, 0.0, 0.0
     try:
-        with WhiteSurfaces(built):
-            for name, cast in (("direct", True), ("noshadow", False)):
-                for obj in built.objects:
-                    compat.set_cast_shadow(obj, cast)
-                render_s += _render()
-                t0 = time.perf_counter()
-                files[name] = os.path.join(out_dir, name + ".exr")
-                _save(files[name], "EXR")
-                write_s += time.perf_counter() - t0
+        with OneRenderShadow(built):
+            render_s = _render()
+        t0 = time.perf_counter()
+        path = os.path.join(out_dir, "shadow.exr")
+        _save(path, "EXR")
+        write_s = time.perf_counter() - t0
     finally:
-        c.samples, c.max_bounces, c.use_adaptive_sampling, c.filter_width = saved
+        (c.samples, c.max_bounces, c.use_adaptive_sampling, c.filter_width,
+         c.transparent_max_bounces) = saved
         if light_tree is not None:
             c.use_light_tree = light_tree
-        for obj in built.objects:
-            compat.set_cast_shadow(obj, True)
-    return files, render_s, write_s
+    return {"shadow": path}, render_s, write_s

@@ -244,6 +244,18 @@ def set_cast_shadow(obj, enabled):
         obj.cycles_visibility.shadow = enabled
 
 
+def light_mis(light, enabled=None):
+    """A light's multiple importance sampling (`light.cycles.use_multiple_importance_sampling`
+    up to 4.5 at least; `light.use_multiple_importance_sampling` where Cycles' settings moved
+    onto the light): returns the old value, sets `enabled` unless None."""
+    owner = light.cycles if hasattr(getattr(light, "cycles", None),
+                                    "use_multiple_importance_sampling") else light
+    old = owner.use_multiple_importance_sampling
+    if enabled is not None:
+        owner.use_multiple_importance_sampling = enabled
+    return old
+
+
 def cycles_devices():
     """Names of the Cycles device types compiled in (always includes CPU)."""
     devices = ["CPU"]

@@ -16,8 +16,8 @@ PASSES = {
     "depth": {"flags": ["use_pass_z"], "exr": {"Depth": "Z"}},
     "normal": {"flags": ["use_pass_normal"], "exr": {"Normal": "XYZ"}},
     "albedo": {"flags": ["use_pass_diffuse_color"], "exr": {"DiffCol": "RGB"}},
-    # From its own two renders (`direct.exr`, `noshadow.exr`; builder.SHADOW_SAMPLES_MAX),
-    # not the final render.
+    # From its own render (`shadow.exr`, builder.OneRenderShadow: red without object
+    # shadows, green with), not the final render.
     "shadow": {"flags": ["use_pass_diffuse_direct"], "exr": {"DiffDir": "RGB"},
                "render": "shadow"},
 }

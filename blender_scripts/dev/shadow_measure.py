@@ -30,6 +30,8 @@ White methods (and the white references) take these options:
                        the pixel's centre. Default: the scene's (anti-aliased).
   --white-only-passes  their renders enable only the pass's `DiffDir`, as the bridge does
                        (for timings); by default they also write mask, depth, normal, colours.
+  --single-ref         white references from one render each (`white-single-N`, see
+                       below) instead of the pair (`white-paired-N`).
   --second-ref         a second white reference with another seed (`ref2-white-paired-N_*`):
                        the RMSE between the two is the reference's own noise.
   --reuse-refs         white references already in OUT are read, not rendered again.
@@ -61,6 +63,9 @@ Methods (N = samples of each extra render):
               neither render; shadow rays skip its dense displaced mesh).
   perlight-N  paired, one pair of renders per light (the others hidden), N spp each: no
               light-selection noise.
+  single-N    (as `white-single-N`) one render instead of the pair: builder.OneRenderShadow
+              (objects transparent to shadow rays in red only, lights white): red is the
+              light without object shadows, green with; what the bridge does now.
   catcher-N   one direct-light-only render at N spp with the floor as Cycles' shadow catcher
               and a transparent film: shadow = 1 - lum(Shadow Catcher pass) (floor only).
 
@@ -122,6 +127,9 @@ def parse_args():
                         "off as the bridge does (builder.SHADOW_LIGHT_TREE)")
     p.add_argument("--reuse-refs", action="store_true",
                    help="white references already in OUT (same settings) are read, not rendered")
+    p.add_argument("--single-ref", action="store_true",
+                   help="white references from one render each (white-single-N, the bridge's "
+                        "method now) instead of the pair")
     p.add_argument("--second-ref", action="store_true",
                    help="also a second white reference with another seed (REF_SEED_2), saved as "
                         "ref2-white-paired-N_{lit,un}.exr: the reference's own noise")
@@ -269,6 +277,16 @@ def undefined_below(uu):
     return max(1e-4, 0.01 * lit[int(round((len(lit) - 1) * 0.99))])
 
 
+def single_shadow(path):
+    """The shadow from one OneRenderShadow render: 1 - green / red of `DiffDir`."""
+    _, _, d = exr_dump.read(path)
+    ll, uu = d["ViewLayer.DiffDir.G"], d["ViewLayer.DiffDir.R"]
+    eps = undefined_below(uu)
+    return [0.0 if not (math.isfinite(l) and math.isfinite(u)) or u < eps
+            else round(min(1.0, max(0.0, 1.0 - l / u)) * 255.0) / 255.0
+            for l, u in zip(ll, uu)]
+
+
 def catcher_shadow(path):
     _, _, d = exr_dump.read(path)
     ch = [d["ViewLayer.Shadow Catcher.%s" % c] for c in "RGB"]
@@ -318,7 +336,9 @@ def run_method(built, method, d, final_exr, seed=None, tag=""):
         if PATTERN[0] is not None and seed is None:
             c.sampling_pattern = PATTERN[0]
         try:
-            with builder.WhiteSurfaces(built):
+            ctx = (builder.OneRenderShadow(built) if method.startswith("white-single-")
+                   else builder.WhiteSurfaces(built))
+            with ctx:
                 return run_method(built, method[len("white-"):], d, final_exr, seed,
                                   tag + "white-")
         finally:
@@ -372,6 +392,19 @@ def run_method(built, method, d, final_exr, seed=None, tag=""):
             compat.set_cast_shadow(built.backdrop, True)
         t2 = render_direct(built, un, n, cast=False, seed=seed, light_shadows=False)
         return shadow(lit, un), add(t1, t2)
+    if kind == "single":
+        # builder.OneRenderShadow: red = without object shadows, green = with.
+        path = os.path.join(d, "%s.exr" % method)
+        if REUSE_REFS[0] and n == REUSE_REFS[0] and os.path.exists(path):
+            return single_shadow(path), (0.0, 0.0)
+        c = bpy.context.scene.cycles
+        saved_tb = c.transparent_max_bounces
+        c.transparent_max_bounces = builder.SHADOW_TRANSPARENT_BOUNCES
+        try:
+            t = render_direct(built, path, n, cast=True, seed=seed)
+        finally:
+            c.transparent_max_bounces = saved_tb
+        return single_shadow(path), t
     if kind == "catcher":
         t = render_direct(built, un, n, cast=True, catcher=True)
         return catcher_shadow(un), t
@@ -426,10 +459,11 @@ def main():
                                             / max(1e-9, sum(b for _, b in lit_px)))
         white_ref = None
         if any(m.startswith("white-") for m in methods) and args.ref_samples > 0:
-            white_ref, _ = run_method(built, "white-paired-%d" % args.ref_samples,
-                                      d, final_exr, seed=REF_SEED)
+            ref_method = "white-%s-%d" % ("single" if args.single_ref else "paired",
+                                          args.ref_samples)
+            white_ref, _ = run_method(built, ref_method, d, final_exr, seed=REF_SEED)
             if args.second_ref:
-                ref2, _ = run_method(built, "white-paired-%d" % args.ref_samples,
+                ref2, _ = run_method(built, ref_method,
                                      d, final_exr, seed=REF_SEED_2, tag="ref2-")
                 row["white_ref_vs_ref2"] = rmse(white_ref, ref2)
                 print("%-28s white reference vs second reference: rmse %.4f"

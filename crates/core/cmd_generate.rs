@@ -56,7 +56,7 @@ pub struct RunArgs {
     #[arg(long, default_value_t = 2, value_name = "N")]
     retries: u32,
     /// Also keep the float EXRs (`<stem>_passes.exr`, and with the shadow pass
-    /// `<stem>_direct.exr` and `<stem>_noshadow.exr`).
+    /// `<stem>_shadow.exr`).
     #[arg(long)]
     keep_exr: bool,
     /// Redo samples that are already complete (default: skip them, i.e. resume).
@@ -106,8 +106,8 @@ pub struct GenerateArgs {
     /// Cycles samples per pixel (default from the config).
     #[arg(long)]
     samples: Option<u32>,
-    /// Samples of each of the shadow pass's two renders (default: a quarter of the samples,
-    /// at most 64; RMSE ~0.018 at 8, ~0.010 at 16; see docs/performance.md, "Shadow pass").
+    /// Samples of the shadow pass's render (default: three eighths of the samples, at most
+    /// 64; RMSE ~0.018 at 8, ~0.010 at 16, ~0.008 at 24; docs/performance.md, "Shadow pass").
     #[arg(long, value_name = "N")]
     shadow_samples: Option<u32>,
     /// Quality preset: draft, standard, high or reference (samples, adaptive threshold,

@@ -1,21 +1,21 @@
 //! RMSE of the shadow pass (`clevrtex_render::post::filter_shadow`, the shipped filter and
 //! variants) against the 256-spp reference, on the EXRs that
 //! `blender_scripts/dev/shadow_measure.py` leaves in its `--out` folder (white methods are
-//! saved as `white-paired-N_{lit,un}.exr`; dev only; numbers in `docs/performance.md`,
-//! "Shadow pass"):
+//! saved as `white-single-N.exr`, one render, or `white-paired-N_{lit,un}.exr`, a pair; dev
+//! only; numbers in `docs/performance.md`, "Shadow pass"):
 //!
 //! ```text
 //! cargo run --release -p clevrtex-render --example shadow_filter_measure -- \
-//!     OUT white-paired-16 [white-paired-8 ...]
+//!     OUT white-single-24 [white-single-16 ...]
 //! ```
 //!
 //! For every scene folder of OUT (the one named `open_floor` is reported as its maximum) and
 //! every method given, it prints the RMSE of the 8-bit pass (as published) for: no filter,
 //! the shipped filter, and variants (radius, tolerance, range, ratio of sums or mean of
-//! ratios), each against the unfiltered `white-paired-256` pair (the reference, another
-//! seed), with the pass's own rule for undefined pixels. Where the second reference
-//! (`ref2-white-paired-256`, `--second-ref`) is there, the first line is the two
-//! references' RMSE: the reference's own noise, part of every number. The instance ids come
+//! ratios), each against the unfiltered `white-single-256` render (or `white-paired-256`
+//! pair: the reference, another seed), with the pass's own rule for undefined pixels. Where
+//! the second reference (`ref2-white-single-256`, `--second-ref`) is there, the first line
+//! is the two references' RMSE: the reference's own noise, part of every number. The instance ids come
 //! from `final.exr` (its `IndexOB` pass). With `SPLIT=1` in the environment it also prints,
 //! on stderr, each variant's RMSE on the floor (id 0) and on the objects.
 
@@ -33,6 +33,35 @@ fn lum(ch: &Channels) -> Vec<f32> {
     (0..r.len())
         .map(|i| 0.2126 * r[i] + 0.7152 * g[i] + 0.0722 * b[i])
         .collect()
+}
+
+/// The light with and without object shadows of method `name` in scene folder `d`: one
+/// render `name.exr` (green with, red without: `builder.OneRenderShadow`) or the pair
+/// `name_lit.exr` / `name_un.exr` (luminance of `DiffDir`).
+fn lit_un(d: &Path, name: &str) -> (Vec<f32>, Vec<f32>) {
+    let read = |n: &str| Channels::read(&d.join(n)).expect("EXR");
+    let single = d.join(format!("{name}.exr"));
+    if single.exists() {
+        let ch = read(&format!("{name}.exr"));
+        let get = |c: &str| {
+            ch.get(&format!("ViewLayer.DiffDir.{c}"))
+                .expect("DiffDir pass")
+                .to_vec()
+        };
+        return (get("G"), get("R"));
+    }
+    (
+        lum(&read(&format!("{name}_lit.exr"))),
+        lum(&read(&format!("{name}_un.exr"))),
+    )
+}
+
+/// The reference's method in `d`: one render per reference now, the pair before.
+fn reference_method(d: &Path, prefix: &str) -> Option<String> {
+    ["white-single-256", "white-paired-256"]
+        .iter()
+        .map(|m| format!("{prefix}{m}"))
+        .find(|m| d.join(format!("{m}.exr")).exists() || d.join(format!("{m}_un.exr")).exists())
 }
 
 fn quantised(s: &[Option<f32>]) -> Vec<f32> {
@@ -91,16 +120,10 @@ fn main() {
                 .map(|v| v.round() as u8)
                 .collect();
             let w = fin.width;
-            let (rl, ru) = (
-                lum(&read("white-paired-256_lit.exr")),
-                lum(&read("white-paired-256_un.exr")),
-            );
+            let (rl, ru) = lit_un(d, &reference_method(d, "").expect("a 256-spp reference"));
             let reference = quantised(&post::filter_shadow(&rl, &ru, &ids, w, variants[0].1));
-            if d.join("ref2-white-paired-256_un.exr").exists() {
-                let (l2, u2) = (
-                    lum(&read("ref2-white-paired-256_lit.exr")),
-                    lum(&read("ref2-white-paired-256_un.exr")),
-                );
+            if let Some(ref2) = reference_method(d, "ref2-") {
+                let (l2, u2) = lit_un(d, &ref2);
                 let r2 = quantised(&post::filter_shadow(&l2, &u2, &ids, w, variants[0].1));
                 let se: f32 = r2
                     .iter()
@@ -113,10 +136,7 @@ fn main() {
                     (se / r2.len() as f32).sqrt()
                 );
             }
-            let (l, u) = (
-                lum(&read(&format!("{method}_lit.exr"))),
-                lum(&read(&format!("{method}_un.exr"))),
-            );
+            let (l, u) = lit_un(d, method);
             let floor = d.file_name().is_some_and(|n| n == "open_floor");
             names.push(
                 Path::new(d)

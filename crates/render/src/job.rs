@@ -85,7 +85,7 @@ pub struct SampleStats {
     pub visibility_build_s: f64,
     /// See [`SampleStats::visibility_build_s`].
     pub visibility_render_s: f64,
-    /// Cycles render time of the final render (including the shadow pass's two renders).
+    /// Cycles render time of the final render (including the shadow pass's render).
     pub render_s: f64,
     /// Whole final request, as seen from Rust.
     pub final_request_s: f64,

@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use clevrtex_scene::layout::{exr_files, metadata_file, pass_file};
+use clevrtex_scene::layout::{exr_files, legacy_exr_files, metadata_file, pass_file};
 use clevrtex_scene::Pass;
 
 use crate::error::{RenderError, Result};
@@ -33,11 +33,12 @@ pub fn is_complete(dir: &Path, stem: &str, passes: &[Pass], keep_exr: bool) -> b
 }
 
 /// Remove the files of `stem` that a sample written with `passes` does not have: left by an
-/// earlier run with other passes (or `--keep-exr`), they would sit beside the new image
-/// without matching it.
+/// earlier run with other passes (or `--keep-exr`, also under the names of earlier versions),
+/// they would sit beside the new image without matching it.
 pub fn remove_other_outputs(dir: &Path, stem: &str, passes: &[Pass], keep_exr: bool) {
     let keep = expected_files(stem, passes, keep_exr);
-    let all = expected_files(stem, &Pass::ALL, true);
+    let mut all = expected_files(stem, &Pass::ALL, true);
+    all.extend(legacy_exr_files(stem));
     for f in all.iter().filter(|f| !keep.contains(f)) {
         let _ = std::fs::remove_file(dir.join(f));
     }
@@ -151,7 +152,9 @@ mod tests {
     fn other_outputs_of_the_stem_are_removed() {
         let dir = tempfile::tempdir().unwrap();
         let stem = "CLEVRTEX_camo_000000";
-        let all = expected_files(stem, &Pass::ALL, true);
+        let mut all = expected_files(stem, &Pass::ALL, true);
+        // The shadow pass's EXRs as `--keep-exr` named them before the one-render pass.
+        all.extend(legacy_exr_files(stem));
         for f in all
             .iter()
             .chain(["CLEVRTEX_camo_000001_depth_0001.png".to_string()].iter())

@@ -34,21 +34,9 @@ enum Pixels {
     Sixteen(Vec<u16>),
 }
 
-/// The shadow pass's two renders: with object shadows (`direct.exr`) and without
-/// (`noshadow.exr`).
-struct ShadowRenders {
-    direct: Channels,
-    noshadow: Channels,
-}
-
 /// Encode `pass` (any but the copied RGB) from the final render's channels `fin`, the
-/// shadow pass's renders (shadow only) and the decoded instance ids.
-fn encode(
-    pass: Pass,
-    fin: &Channels,
-    shadow: Option<&ShadowRenders>,
-    ids: &[u8],
-) -> Result<Pixels> {
+/// shadow pass's render (shadow only) and the decoded instance ids.
+fn encode(pass: Pass, fin: &Channels, shadow: Option<&Channels>, ids: &[u8]) -> Result<Pixels> {
     Ok(match pass {
         Pass::Rgb => unreachable!("the RGB pass is the bridge's PNG, copied"),
         Pass::Mask => Pixels::Eight(ids.to_vec()),
@@ -62,13 +50,14 @@ fn encode(
             Pixels::Eight(post::encode_albedo(c[0], c[1], c[2]))
         }
         Pass::Shadow => {
-            let s = shadow.expect("the shadow pass reads its own renders");
-            // Direct light on white diffuse surfaces: `DiffDir` is the light itself. Filtered
-            // within each instance of the final mask.
-            let (lit, un) = (layer(&s.direct, pass, 0)?, layer(&s.noshadow, pass, 0)?);
+            let s = shadow.expect("the shadow pass reads its own render");
+            // Direct light on white diffuse surfaces with white lights: `DiffDir` is the
+            // light's luminance, without object shadows in red, with them in green
+            // (`builder.OneRenderShadow`). Filtered within each instance of the final mask.
+            let c = layer(s, pass, 0)?;
             Pixels::Eight(post::encode_shadow(
-                [lit[0], lit[1], lit[2]],
-                [un[0], un[1], un[2]],
+                c[1],
+                c[0],
                 ids,
                 fin.width,
                 post::SHADOW_FILTER,
@@ -77,7 +66,7 @@ fn encode(
     })
 }
 
-/// Read one of the shadow pass's EXRs (`role` in the reply's files), checking its size.
+/// Read the shadow pass's EXR (`role` in the reply's files), checking its size.
 fn read_shadow_exr(
     reply: &RenderReply,
     role: &str,
@@ -124,11 +113,13 @@ pub(crate) fn write_passes(
     let n = scene.objects.len();
     let ids = post::instance_ids(ch.get(&index_channel())?, n, &exr_path)?;
     let objects = post::object_pixels(&ids, ch.width, n);
-    let shadow = match passes.iter().any(|p| p.spec().source == Source::ShadowExrs) {
-        true => Some(ShadowRenders {
-            direct: read_shadow_exr(reply, "direct", work, (ch.width, ch.height))?,
-            noshadow: read_shadow_exr(reply, "noshadow", work, (ch.width, ch.height))?,
-        }),
+    let shadow = match passes.iter().any(|p| p.spec().source == Source::ShadowExr) {
+        true => Some(read_shadow_exr(
+            reply,
+            "shadow",
+            work,
+            (ch.width, ch.height),
+        )?),
         false => None,
     };
     for &pass in passes {
@@ -161,9 +152,8 @@ pub(crate) fn write_passes(
     if keep_exr {
         let names = layout::exr_files(stem, passes.contains(&Pass::Shadow));
         staged.copy(&names[0], &exr_path)?;
-        if names.len() == 3 {
-            staged.copy(&names[1], &reply_file(reply, "direct", work)?)?;
-            staged.copy(&names[2], &reply_file(reply, "noshadow", work)?)?;
+        if names.len() == 2 {
+            staged.copy(&names[1], &reply_file(reply, "shadow", work)?)?;
         }
     }
     Ok(objects)

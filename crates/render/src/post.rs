@@ -186,28 +186,19 @@ pub struct ShadowFilter {
     pub ratio_of_sums: bool,
 }
 
-/// Luminance of pixel `i` of an RGB image.
-fn luminance(c: [&[f32]; 3], i: usize) -> f32 {
-    0.2126 * c[0][i] + 0.7152 * c[1][i] + 0.0722 * c[2][i]
-}
-
-/// Shadow amount `1 - L_shadowed / L_unshadowed` of direct light (luminance; the bridge
-/// renders it on white diffuse surfaces), filtered by `filter` within each instance of `ids`
-/// (row-major, `width` wide), clamped to [0, 1], as 8-bit (255 = fully shadowed). Where the
-/// unshadowed light is below [`shadow_undefined_below`] the ratio is undefined and the value
-/// is [`SHADOW_UNDEFINED`].
+/// Shadow amount `1 - L_shadowed / L_unshadowed` of direct light (luminances `lit` and
+/// `unshadowed`; the bridge renders both at once on white diffuse surfaces), filtered by
+/// `filter` within each instance of `ids` (row-major, `width` wide), clamped to [0, 1], as
+/// 8-bit (255 = fully shadowed). Where the unshadowed light is below
+/// [`shadow_undefined_below`] the ratio is undefined and the value is [`SHADOW_UNDEFINED`].
 pub fn encode_shadow(
-    lit: [&[f32]; 3],
-    unshadowed: [&[f32]; 3],
+    lit: &[f32],
+    unshadowed: &[f32],
     ids: &[u8],
     width: usize,
     filter: ShadowFilter,
 ) -> Vec<u8> {
-    let l: Vec<f32> = (0..lit[0].len()).map(|i| luminance(lit, i)).collect();
-    let u: Vec<f32> = (0..lit[0].len())
-        .map(|i| luminance(unshadowed, i))
-        .collect();
-    filter_shadow(&l, &u, ids, width, filter)
+    filter_shadow(lit, unshadowed, ids, width, filter)
         .into_iter()
         .map(|s| match s {
             None => SHADOW_UNDEFINED,
@@ -518,10 +509,10 @@ mod tests {
     fn shadow_is_never_nan() {
         let z = [0.0f32, 1.0, 0.5];
         let u = [0.0f32, 1.0, 1.0];
-        let s = encode_shadow([&z, &z, &z], [&u, &u, &u], &[0; 3], 3, WINDOW_3X3);
+        let s = encode_shadow(&z, &u, &[0; 3], 3, WINDOW_3X3);
         // Pixels 1 and 2 are lit alike (u = 1) on one surface: filtered together.
         assert_eq!(s, vec![SHADOW_UNDEFINED, 64, 64]);
-        let s = encode_shadow([&z, &z, &z], [&u, &u, &u], &[0; 3], 3, SHADOW_FILTER);
+        let s = encode_shadow(&z, &u, &[0; 3], 3, SHADOW_FILTER);
         assert_eq!(s, vec![SHADOW_UNDEFINED, 0, 128]);
     }
 
@@ -533,7 +524,7 @@ mod tests {
         u[201] = 0.02;
         let l: Vec<f32> = u.iter().map(|v| v / 2.0).collect();
         assert!((shadow_undefined_below(&u) - 0.01).abs() < 1e-7);
-        let s = encode_shadow([&l; 3], [&u; 3], &[0; 202], 202, SHADOW_FILTER);
+        let s = encode_shadow(&l, &u, &[0; 202], 202, SHADOW_FILTER);
         assert_eq!(s[200], SHADOW_UNDEFINED);
         assert_eq!(s[201], 128);
         assert_eq!(s[0], 128);
@@ -630,7 +621,7 @@ mod tests {
         }
         // A noisy, unshadowed surface (lit == un in every pixel) stays exactly 0.
         let (_, noisy, _) = noisy_ramp(w, h);
-        let s = encode_shadow([&noisy; 3], [&noisy; 3], &ids, w, WINDOW_3X3);
+        let s = encode_shadow(&noisy, &noisy, &ids, w, WINDOW_3X3);
         assert!(s.iter().all(|&v| v == 0 || v == SHADOW_UNDEFINED), "{s:?}");
     }
 

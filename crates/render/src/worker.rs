@@ -127,7 +127,7 @@ pub struct BridgeTimings {
 /// The reply to a `render` request.
 #[derive(Debug, Clone, Deserialize)]
 pub struct RenderReply {
-    /// Files written, by role (`visibility`, `rgb`, `passes`, `direct`, `noshadow`).
+    /// Files written, by role (`visibility`, `rgb`, `passes`, `shadow`).
     #[serde(default)]
     pub files: BTreeMap<String, PathBuf>,
     /// Where the time went.

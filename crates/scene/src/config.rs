@@ -602,7 +602,7 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
                 "base_scene.render.shadow_samples",
                 Some(n.to_string()),
                 &format!("must be 1 to {MAX_SAMPLES}"),
-                "leave it out for a quarter of `samples` (16 at 64)",
+                "leave it out for three eighths of `samples` (24 at 64)",
             ));
         }
     }

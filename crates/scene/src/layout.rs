@@ -49,14 +49,20 @@ pub fn metadata_file(stem: &str) -> String {
 }
 
 /// File names of the float EXRs kept with `--keep-exr`: the final render's passes, and the
-/// shadow pass's two renders (with and without object shadows) when it was made.
+/// shadow pass's render (direct light without object shadows in red, with them in green)
+/// when it was made.
 pub fn exr_files(stem: &str, shadow: bool) -> Vec<String> {
     let mut v = vec![format!("{stem}_passes.exr")];
     if shadow {
-        v.push(format!("{stem}_direct.exr"));
-        v.push(format!("{stem}_noshadow.exr"));
+        v.push(format!("{stem}_shadow.exr"));
     }
     v
+}
+
+/// File names that `--keep-exr` used for the shadow pass before it took one render (its two renders, with
+/// and without object shadows): removed when such a sample is written again.
+pub fn legacy_exr_files(stem: &str) -> [String; 2] {
+    [format!("{stem}_direct.exr"), format!("{stem}_noshadow.exr")]
 }
 
 /// A split of the published dataset.
@@ -143,10 +149,7 @@ mod tests {
         assert_eq!(pass_file("S", Pass::Albedo), "S_albedo_0001.png");
         assert_eq!(pass_file("S", Pass::Shadow), "S_shadow_0001.png");
         assert_eq!(metadata_file("S"), "S.json");
-        assert_eq!(
-            exr_files("S", true),
-            ["S_passes.exr", "S_direct.exr", "S_noshadow.exr"]
-        );
+        assert_eq!(exr_files("S", true), ["S_passes.exr", "S_shadow.exr"]);
     }
 
     #[test]

@@ -54,10 +54,10 @@ pub enum Source {
     RgbPng,
     /// Layers of the multilayer `passes.exr` of the final render.
     PassesExr,
-    /// The same layers of the shadow pass's own two renders, `direct.exr` and `noshadow.exr`:
-    /// direct light only, every surface a white diffuse BSDF, objects casting shadows and
-    /// not, same samples and seed (`blender_scripts/builder.py`, `SHADOW_SAMPLES_MAX`).
-    ShadowExrs,
+    /// The same layers of the shadow pass's own render, `shadow.exr`: direct light only,
+    /// every surface a white diffuse BSDF, lights white, the light without object shadows in
+    /// red and with them in green (`blender_scripts/builder.py`, `OneRenderShadow`).
+    ShadowExr,
 }
 
 /// The colour layout of a published PNG.
@@ -221,7 +221,7 @@ const SPECS: [PassSpec; 6] = [
     PassSpec {
         pass: Pass::Shadow,
         name: "shadow",
-        source: Source::ShadowExrs,
+        source: Source::ShadowExr,
         exr_layers: &[("DiffDir", "RGB")],
         file_suffix: "_shadow_0001",
         png: PngKind::Gray8,

@@ -110,9 +110,9 @@ pub struct RenderSettings {
     /// albedo passes, which Cycles does not denoise). Ignored where the build lacks OIDN.
     #[serde(default, skip_serializing_if = "is_false")]
     pub denoise: bool,
-    /// Samples of each of the shadow pass's two renders (absent: a quarter of `samples`, at
-    /// most 64). The pass's RMSE falls as 1/sqrt of it (0.018 at 8, 0.010 at 16) and its
-    /// cost grows with it (`docs/performance.md`, "Shadow pass").
+    /// Samples of the shadow pass's render (absent: three eighths of `samples`, at most 64).
+    /// The pass's RMSE falls with it (0.018 at 8, 0.010 at 16, 0.008 at 24) and its cost
+    /// grows with it (`docs/performance.md`, "Shadow pass").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shadow_samples: Option<u32>,
 }
