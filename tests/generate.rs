@@ -953,7 +953,9 @@ fn camera_model_depth_and_shadow_match_blender() {
 /// 8-sample no-shadow render against the final render, reached ~0.6 on such a floor), and
 /// with one cube the cube's shadow is there while most of the floor stays exactly 0 (the
 /// light with and without object shadows comes from the same samples of one render, so only
-/// blocked shadow rays differ).
+/// blocked shadow rays differ); a floor whose material an object shares stays as open (the
+/// objects' transparency to shadow rays goes by object, not by material; checked to fail
+/// when it went by material).
 #[test]
 fn shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube() {
     let Some(blender) =
@@ -974,10 +976,17 @@ fn shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube() {
     // The same cube with one shadow sample per render (`render.shadow_samples`).
     let mut one = with_index(fixture("full8", 64, 48, 32), 102, 1);
     one.render.shadow_samples = Some(1);
+    // An object that shares the backdrop's material (as in `camo`), far below the floor where
+    // it blocks no light: the shadow render makes objects transparent to shadow rays through
+    // their materials, and the backdrop must stay opaque (its relief shadows itself in both
+    // channels), so the floor is as open as without the object.
+    let mut shared = with_index(fixture("full8", 64, 48, 32), 103, 1);
+    shared.objects[0].material = shared.backdrop.material.clone();
+    shared.objects[0].location = [0.0, 0.0, -50.0];
     let stats = render_fixtures(
         blender,
         dir.path(),
-        vec![floor.clone(), cube.clone(), one.clone()],
+        vec![floor.clone(), cube.clone(), one.clone(), shared.clone()],
     );
     assert!(stats[0].render_s > 0.0 && stats[1].render_s > 0.0);
     let sub = dir.path().join("clevrtex_full/0");
@@ -990,6 +999,11 @@ fn shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube() {
         "open floor: shadow up to {max}/255"
     );
     assert!(sub.join(format!("{}_shadow.exr", floor.stem)).is_file());
+    let max = shadow(&shared.stem).data.iter().copied().max().unwrap();
+    assert!(
+        f64::from(max) / 255.0 <= 0.02,
+        "open floor sharing its material with an object: shadow up to {max}/255"
+    );
 
     let ids = decode_png(&sub.join(format!("{}_flat.png", cube.stem))).unwrap();
     let s = shadow(&cube.stem);
