@@ -48,11 +48,11 @@ SHADOW_SAMPLES_MAX = 64
 # i.e. every sample through the pixel's centre.
 SHADOW_FILTER_WIDTH = 0.01
 # Cycles 4.0+'s light tree in the shadow render: off, whatever the scene asks for the final
-# render. Measured on bpy 4.5 with the two renders the pass took before (docs/performance.md, "Shadow
-# pass"): with the tree, RMSE 0.034 at 16 samples on `clevr_000000` and `full_000000`;
-# without, 0.0110 / 0.0099, as on 3.4.1 (which has no tree). The light with and without
-# object shadows shares its light samples either way (an open floor is 0); the tree only
-# spends them worse on this question.
+# render. Measured on bpy 4.5 with the two renders the pass took before
+# (docs/performance.md, "Shadow pass"): with the tree, RMSE 0.034 at 16 samples on
+# `clevr_000000` and `full_000000`; without, 0.0110 / 0.0099, as on 3.4.1 (which has no
+# tree). The light with and without object shadows shares its light samples either way (an
+# open floor is 0); the tree only spends them worse on this question.
 SHADOW_LIGHT_TREE = False
 # Transparent bounces of a shadow ray in the one shadow render (OneRenderShadow): objects are
 # transparent to it, and every object it crosses costs two or more; past the limit Cycles
