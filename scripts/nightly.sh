@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-target/nightly}"
-export CLEVRTEX_REQUIRE_BLENDER=1
+export CLEVRTEX_REQUIRE_TOOLS=1
 cargo test --test integration --locked -- --ignored
 # PyPI's bpy 5.0 (in its own venv, so CI's 4.5 in .venv-bpy/ stays): the real-render suites
 # that run on every Blender found, with 5.0 as the second one. The cross-version test is

@@ -1,6 +1,6 @@
 //! One scene, two Blenders: Debian's 3.4.1 and PyPI's `bpy` 4.5 render the same scene files
 //! alike (`blender_scripts/compat.py` holds every version difference). Needs both; required
-//! under `CLEVRTEX_REQUIRE_BLENDER=1` plus `CLEVRTEX_REQUIRE_BPY=1` (what `.ci/run` sets).
+//! under `CLEVRTEX_REQUIRE_TOOLS=1` plus `CLEVRTEX_REQUIRE_BPY=1` (what `.ci/run` sets).
 //!
 //! What "alike" means, and the tolerances (measured, see `docs/scene-format.md`, "What is
 //! byte-identical"):

@@ -4,7 +4,7 @@
 //! run live in the test venv: per-image values on fixtures with ties, empty slots, one object,
 //! all background, one pixel, 300 segments and soft masks, and dataset means through the CLI.
 //! Agreement to 1e-6. Skipped visibly without the venv; required under
-//! `CLEVRTEX_REQUIRE_BLENDER=1` (CI).
+//! `CLEVRTEX_REQUIRE_TOOLS=1` (CI).
 
 use std::path::{Path, PathBuf};
 

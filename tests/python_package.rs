@@ -1,7 +1,7 @@
 //! The Python package `clevrtex` (`crates/python`): its pytest suite, run with the test venv's
 //! Python (where `scripts/setup.sh --test-venv` installs it with `pip install ./crates/python`)
 //! and this build's CLI, which it compares itself with. Skipped visibly without it; required
-//! under `CLEVRTEX_REQUIRE_BLENDER=1` (CI).
+//! under `CLEVRTEX_REQUIRE_TOOLS=1` (CI).
 
 use crate::util::{repo_root, test_python_or_skip, text};
 

@@ -897,11 +897,11 @@ fn splits_agree_with_the_public_loaders_rule_for_totals_1_to_41() {
         ])
         .output();
     let Ok(py) = py else {
-        if std::env::var("CLEVRTEX_REQUIRE_BLENDER").as_deref() == Ok("1") {
-            panic!("python3 is required (CLEVRTEX_REQUIRE_BLENDER=1) but could not be run");
-        }
-        eprintln!(
-            "SKIPPED splits_agree_with_the_public_loaders_rule_for_totals_1_to_41: no python3"
+        crate::util::skip(
+            "splits_agree_with_the_public_loaders_rule_for_totals_1_to_41",
+            crate::util::REQUIRE_TOOLS,
+            "python3 could not be run",
+            "install Python 3",
         );
         return;
     };

@@ -39,7 +39,7 @@ fn run_ok(cmd: &mut Command) -> Output {
 
 impl Cluster {
     /// Start munged, slurmctld and slurmd; `None` (a visible skip) when SLURM is not installed
-    /// or we are not root, unless `CLEVRTEX_REQUIRE_BLENDER=1` makes it required.
+    /// or we are not root, unless `CLEVRTEX_REQUIRE_TOOLS=1` makes it required.
     fn start() -> Option<Cluster> {
         let missing: Vec<&str> = ["munged", "mungekey", "slurmctld", "slurmd", "sbatch"]
             .into_iter()
@@ -55,10 +55,12 @@ impl Cluster {
             } else {
                 "not root (slurmd must be)".to_string()
             };
-            if std::env::var("CLEVRTEX_REQUIRE_BLENDER").as_deref() == Ok("1") {
-                panic!("the SLURM test is required (CLEVRTEX_REQUIRE_BLENDER=1): {why}; install `munge slurmctld slurmd slurm-client` (.ci/run does)");
-            }
-            eprintln!("SKIPPED slurm tests: {why} (install munge slurmctld slurmd slurm-client and run as root; CLEVRTEX_REQUIRE_BLENDER=1 makes this a failure)");
+            crate::util::skip(
+                "slurm",
+                crate::util::REQUIRE_TOOLS,
+                &format!("SLURM unusable: {why}"),
+                "install `munge slurmctld slurmd slurm-client` and run as root (.ci/run does)",
+            );
             return None;
         }
         let dir = tempfile::tempdir().unwrap();

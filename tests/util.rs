@@ -37,11 +37,50 @@ pub fn data(rel: &str) -> PathBuf {
     repo_root().join("tests/data").join(rel)
 }
 
+/// The variable that turns every skip of a missing external tool (Blender, the test Python
+/// and its libraries, Chromium, SLURM) into a failure; `.ci/run` sets it.
+/// `CLEVRTEX_REQUIRE_BLENDER=1`, its old name, is still honoured.
+pub const REQUIRE_TOOLS: &str = "CLEVRTEX_REQUIRE_TOOLS";
+
+/// The variable that makes the bpy half of the real-render tests required.
+pub const REQUIRE_BPY: &str = "CLEVRTEX_REQUIRE_BPY";
+
+/// Whether `var` (one of [`REQUIRE_TOOLS`], [`REQUIRE_BPY`]) is set to 1.
+pub fn required(var: &str) -> bool {
+    let set = |v: &str| std::env::var(v).as_deref() == Ok("1");
+    set(var) || (var == REQUIRE_TOOLS && set("CLEVRTEX_REQUIRE_BLENDER"))
+}
+
+/// Skip `test` because `missing` is absent (`fix` says how to get it), or fail when `var`
+/// makes it required.
+///
+/// A skip is printed on stderr and, when `CLEVRTEX_SKIP_LOG` names a file (the README's test
+/// command, `scripts/test.sh`, sets it), appended to it as one line, so that the test
+/// command's summary lists every skipped test: cargo's harness hides a passing test's stderr
+/// and has no "skipped" of its own.
+pub fn skip(test: &str, var: &str, missing: &str, fix: &str) {
+    if required(var) {
+        panic!("{test}: {missing}, but it is required ({var}=1); {fix}");
+    }
+    let line = format!("{test} ({missing}; {fix}; {var}=1 makes this a failure)");
+    eprintln!("SKIPPED {line}");
+    if let Some(log) = std::env::var_os("CLEVRTEX_SKIP_LOG") {
+        use std::io::Write;
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&log)
+            .unwrap_or_else(|e| panic!("CLEVRTEX_SKIP_LOG {}: {e}", Path::new(&log).display()));
+        // One write of one line: lines of parallel tests do not interleave.
+        f.write_all(format!("{line}\n").as_bytes()).unwrap();
+    }
+}
+
 /// The Blender binary to use for real-render tests, or `None` to skip the test.
 ///
 /// Looks at `CLEVRTEX_BLENDER`, then `blender` on `PATH`. When Blender is absent the test is
-/// skipped with a visible message on stderr, unless `CLEVRTEX_REQUIRE_BLENDER=1`, in which
-/// case it panics (CI sets it, so a missing Blender fails CI instead of skipping silently).
+/// skipped visibly ([`skip`]), unless [`REQUIRE_TOOLS`] makes it required (CI sets it, so a
+/// missing Blender fails CI instead of skipping).
 pub fn blender_or_skip(test: &str) -> Option<PathBuf> {
     let candidate = std::env::var_os("CLEVRTEX_BLENDER")
         .map(PathBuf::from)
@@ -49,10 +88,12 @@ pub fn blender_or_skip(test: &str) -> Option<PathBuf> {
     match candidate {
         Some(p) if p.exists() => Some(p),
         _ => {
-            if std::env::var("CLEVRTEX_REQUIRE_BLENDER").as_deref() == Ok("1") {
-                panic!("{test}: Blender is required (CLEVRTEX_REQUIRE_BLENDER=1) but was not found; install it with `apt-get install -y blender` or set CLEVRTEX_BLENDER");
-            }
-            eprintln!("SKIPPED {test}: Blender not found (install `blender` or set CLEVRTEX_BLENDER; set CLEVRTEX_REQUIRE_BLENDER=1 to make this a failure)");
+            skip(
+                test,
+                REQUIRE_TOOLS,
+                "Blender not found",
+                "install it with `apt-get install -y blender` or set CLEVRTEX_BLENDER",
+            );
             None
         }
     }
@@ -62,8 +103,8 @@ pub fn blender_or_skip(test: &str) -> Option<PathBuf> {
 /// tests), or `None` to skip the bpy half of a test.
 ///
 /// Looks at `CLEVRTEX_TEST_BPY`, then the project's `.venv-bpy/bin/python` (made by
-/// `./scripts/setup.sh --bpy 4.5`). When absent the bpy half is skipped with a visible message,
-/// unless `CLEVRTEX_REQUIRE_BPY=1` (set by `.ci/run`), in which case it panics.
+/// `./scripts/setup.sh --bpy 4.5`). When absent the bpy half is skipped visibly, unless
+/// [`REQUIRE_BPY`] (set by `.ci/run`) makes it required.
 pub fn bpy_or_skip(test: &str) -> Option<PathBuf> {
     let candidate = std::env::var_os("CLEVRTEX_TEST_BPY")
         .map(PathBuf::from)
@@ -71,10 +112,12 @@ pub fn bpy_or_skip(test: &str) -> Option<PathBuf> {
     if candidate.exists() {
         return Some(candidate);
     }
-    if std::env::var("CLEVRTEX_REQUIRE_BPY").as_deref() == Ok("1") {
-        panic!("{test}: a Python with `bpy` is required (CLEVRTEX_REQUIRE_BPY=1) but `{}` does not exist; run `./scripts/setup.sh --bpy 4.5` or set CLEVRTEX_TEST_BPY", candidate.display());
-    }
-    eprintln!("SKIPPED {test} on bpy: no `{}` (run `./scripts/setup.sh --bpy 4.5` or set CLEVRTEX_TEST_BPY; set CLEVRTEX_REQUIRE_BPY=1 to make this a failure)", candidate.display());
+    skip(
+        &format!("{test} on bpy"),
+        REQUIRE_BPY,
+        &format!("no `{}`", candidate.display()),
+        "run `./scripts/setup.sh --bpy 4.5` or set CLEVRTEX_TEST_BPY",
+    );
     None
 }
 
@@ -101,7 +144,7 @@ fn is_file(p: &Path) -> bool {
 /// A Python interpreter with the libraries the format round-trip tests read our files with
 /// (`webdataset`): `CLEVRTEX_TEST_PYTHON`, else the `.venv-test` that `.ci/run` (and
 /// `scripts/setup.sh --test-venv`) makes. `None` (a visible skip) when absent, unless
-/// `CLEVRTEX_REQUIRE_BLENDER=1` makes it required.
+/// [`REQUIRE_TOOLS`] makes it required.
 pub fn test_python_or_skip(test: &str, module: &str) -> Option<PathBuf> {
     let candidate = std::env::var_os("CLEVRTEX_TEST_PYTHON")
         .map(PathBuf::from)
@@ -113,16 +156,21 @@ pub fn test_python_or_skip(test: &str, module: &str) -> Option<PathBuf> {
     if ok {
         return Some(candidate);
     }
-    if std::env::var("CLEVRTEX_REQUIRE_BLENDER").as_deref() == Ok("1") {
-        panic!("{test}: a Python with `{module}` is required (CLEVRTEX_REQUIRE_BLENDER=1) but `{}` cannot import it; run `./scripts/setup.sh --test-venv` or set CLEVRTEX_TEST_PYTHON", candidate.display());
-    }
-    eprintln!("SKIPPED {test}: no Python with `{module}` (run `./scripts/setup.sh --test-venv` or set CLEVRTEX_TEST_PYTHON; set CLEVRTEX_REQUIRE_BLENDER=1 to make this a failure)");
+    skip(
+        test,
+        REQUIRE_TOOLS,
+        &format!(
+            "no Python with `{module}` (`{}` cannot import it)",
+            candidate.display()
+        ),
+        "run `./scripts/setup.sh --test-venv` or set CLEVRTEX_TEST_PYTHON",
+    );
     None
 }
 
 /// A headless Chromium for the report's browser test: `CLEVRTEX_CHROMIUM`, else `chromium`
 /// (Debian's package) or `chromium-browser` on `PATH`. `None` (a visible skip) when absent,
-/// unless `CLEVRTEX_REQUIRE_BLENDER=1` makes it required.
+/// unless [`REQUIRE_TOOLS`] makes it required.
 pub fn chromium_or_skip(test: &str) -> Option<PathBuf> {
     let candidate = std::env::var_os("CLEVRTEX_CHROMIUM")
         .map(PathBuf::from)
@@ -131,10 +179,12 @@ pub fn chromium_or_skip(test: &str) -> Option<PathBuf> {
     match candidate {
         Some(p) if p.exists() => Some(p),
         _ => {
-            if std::env::var("CLEVRTEX_REQUIRE_BLENDER").as_deref() == Ok("1") {
-                panic!("{test}: Chromium is required (CLEVRTEX_REQUIRE_BLENDER=1) but was not found; run `./scripts/setup.sh --browser` or set CLEVRTEX_CHROMIUM");
-            }
-            eprintln!("SKIPPED {test}: Chromium not found (run `./scripts/setup.sh --browser` or set CLEVRTEX_CHROMIUM; set CLEVRTEX_REQUIRE_BLENDER=1 to make this a failure)");
+            skip(
+                test,
+                REQUIRE_TOOLS,
+                "Chromium not found",
+                "run `./scripts/setup.sh --browser` or set CLEVRTEX_CHROMIUM",
+            );
             None
         }
     }
