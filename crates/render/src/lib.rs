@@ -40,6 +40,7 @@
 
 pub mod blender;
 pub mod bridge;
+pub mod dataset;
 pub mod device;
 mod error;
 pub mod exr_io;
