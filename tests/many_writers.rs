@@ -1,0 +1,165 @@
+//! Many writers into one output folder (issue 21): runs of other ranges each keep their own
+//! manifest and `verify` takes the union; a run's plan is written before its first image, so
+//! an interrupted or preempted run is incomplete, not whole; overlapping runs refuse to start
+//! while another holds the range's lock; `verify --remove-broken` and its rerun remake exactly
+//! the broken samples, in the folder that was verified.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::util::{blender_or_skip, clevrtex, fake_blender, text};
+
+/// `clevrtex generate` of clevr at 32x24 with rgb and mask into `out`, plus `extra`.
+fn generate(blender: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut c = clevrtex();
+    c.args(["generate", "--variant", "clevr", "--seed", "4"])
+        .args(["--width", "32", "--height", "24", "--samples", "1"])
+        .args(["--passes", "rgb,mask", "--workers", "1", "--blender"])
+        .arg(blender)
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("SLURM_ARRAY_TASK_COUNT")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .env_remove("CLEVRTEX_BLENDER");
+    c
+}
+
+fn run_ok(mut c: Command) {
+    let o = c.output().unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+}
+
+fn verify(args: &[&Path], extra: &[&str]) -> (Option<i32>, String) {
+    let o = clevrtex()
+        .arg("verify")
+        .args(extra)
+        .args(args)
+        .output()
+        .unwrap();
+    (o.status.code(), text(&o))
+}
+
+/// A `generate` with the fake Blender that hangs on its first request (it has written its plan
+/// once the plan's file exists).
+fn hanging(out: &Path, extra: &[&str]) -> Child {
+    generate(&fake_blender(), out, extra)
+        .env("FAKE_BLENDER_MODE", "hang")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// Wait until `path` exists (at most a minute).
+fn wait_for(path: &Path) {
+    let t = Instant::now();
+    while !path.exists() {
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "no `{}`",
+            path.display()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Send `sig` to `child`'s children (the fake Blender) and then to it, and reap it.
+fn signal(child: Child, sig: &str) -> Output {
+    let pid = child.id();
+    let kids =
+        std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children")).unwrap_or_default();
+    if sig == "KILL" {
+        for k in kids.split_whitespace() {
+            let _ = Command::new("kill").args(["-KILL", k]).status();
+        }
+    }
+    let st = Command::new("kill")
+        .arg(format!("-{sig}"))
+        .arg(pid.to_string())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    child.wait_with_output().unwrap()
+}
+
+fn lock(out: &Path, name: &str) -> PathBuf {
+    out.join("clevrtex_clevr").join(name)
+}
+
+#[test]
+fn a_grown_dataset_verifies_whole_and_repairs_in_the_folder_verified() {
+    let Some(blender) = blender_or_skip("a_grown_dataset_verifies_whole") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("first");
+    run_ok(generate(&blender, &out, &["-n", "2"]));
+    run_ok(generate(&blender, &out, &["--start", "2", "-n", "2"]));
+    let vdir = out.join("clevrtex_clevr");
+    assert!(vdir.join("MANIFEST-0-2-0of1.json").is_file());
+    assert!(vdir.join("MANIFEST-2-4-0of1.json").is_file());
+    let (code, t) = verify(&[&out], &[]);
+    assert_eq!(code, Some(0), "{t}");
+    assert!(t.contains("clevr: 4 of 4 expected samples whole"), "{t}");
+
+    // Moved elsewhere, one sample of the second run damaged: only it is removed, and the
+    // rerun names the folder verified.
+    let moved = dir.path().join("moved");
+    std::fs::rename(&out, &moved).unwrap();
+    let sub = moved.join("clevrtex_clevr/0");
+    let png = sub.join("CLEVRTEX_clevr_000003.png");
+    let bytes = std::fs::read(&png).unwrap();
+    std::fs::write(&png, &bytes[..bytes.len() / 2]).unwrap();
+    let (code, t) = verify(&[&moved], &["--remove-broken"]);
+    assert_eq!(code, Some(3), "{t}");
+    assert!(t.contains("broken samples (1):"), "{t}");
+    assert!(
+        t.contains(&format!("--out {}", moved.display())),
+        "the rerun writes where verify looked: {t}"
+    );
+    assert!(!t.contains(&format!("--out {}", out.display())), "{t}");
+    assert!(!sub.join("CLEVRTEX_clevr_000003.json").exists());
+    for i in 0..3 {
+        assert!(
+            sub.join(format!("CLEVRTEX_clevr_{i:06}.json")).is_file(),
+            "{i}"
+        );
+    }
+    run_ok(generate(&blender, &moved, &["--start", "2", "-n", "2"]));
+    let (code, t) = verify(&[&moved], &[]);
+    assert_eq!(code, Some(0), "{t}");
+}
+
+#[test]
+fn interrupted_and_preempted_runs_are_incomplete() {
+    let Some(blender) = blender_or_skip("interrupted_and_preempted_runs_are_incomplete") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    run_ok(generate(&blender, &out, &["-n", "2"]));
+    // A run of 0..6 in two shards (two SLURM tasks), both preempted before their first image.
+    let a = hanging(&out, &["-n", "6", "--shard", "0/2"]);
+    let b = hanging(&out, &["-n", "6", "--shard", "1/2"]);
+    wait_for(&lock(&out, "MANIFEST-0-6-0of2.json"));
+    wait_for(&lock(&out, "MANIFEST-0-6-1of2.json"));
+    for c in [a, b] {
+        let o = signal(c, "TERM");
+        assert_eq!(o.status.code(), Some(143), "{}", text(&o));
+    }
+    let (code, t) = verify(&[&out], &[]);
+    assert_eq!(code, Some(3), "{t}");
+    assert!(t.contains("missing (4): 2..=5"), "{t}");
+    assert!(
+        t.contains("MANIFEST-0-6-0of2.json`: the run of indices 0..6 (shard 0/2) did not finish"),
+        "{t}"
+    );
+    assert!(
+        t.contains("MANIFEST-0-6-1of2.json`: the run of indices 0..6 (shard 1/2) did not finish"),
+        "{t}"
+    );
+    assert!(t.contains("--shard 1/2"), "{t}");
+}
