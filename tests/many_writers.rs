@@ -42,8 +42,8 @@ fn verify(args: &[&Path], extra: &[&str]) -> (Option<i32>, String) {
     (o.status.code(), text(&o))
 }
 
-/// A `generate` with the fake Blender that hangs on its first request (it has written its plan
-/// once the plan's file exists).
+/// A `generate` with the fake Blender that hangs on its first request: it holds its lock and
+/// has written its plan once its lock file exists.
 fn hanging(out: &Path, extra: &[&str]) -> Child {
     generate(&fake_blender(), out, extra)
         .env("FAKE_BLENDER_MODE", "hang")
@@ -64,6 +64,25 @@ fn wait_for(path: &Path) {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
+}
+
+/// The output of `c`, killed (a failure) if it runs over `secs`.
+fn output_within(mut c: Command, secs: u64) -> Output {
+    let mut child = c
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t.elapsed() > Duration::from_secs(secs) {
+            child.kill().unwrap();
+            let o = child.wait_with_output().unwrap();
+            panic!("still running after {secs} s:\n{}", text(&o));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    child.wait_with_output().unwrap()
 }
 
 /// Send `sig` to `child`'s children (the fake Blender) and then to it, and reap it.
@@ -144,12 +163,13 @@ fn interrupted_and_preempted_runs_are_incomplete() {
     // A run of 0..6 in two shards (two SLURM tasks), both preempted before their first image.
     let a = hanging(&out, &["-n", "6", "--shard", "0/2"]);
     let b = hanging(&out, &["-n", "6", "--shard", "1/2"]);
-    wait_for(&lock(&out, "MANIFEST-0-6-0of2.json"));
-    wait_for(&lock(&out, "MANIFEST-0-6-1of2.json"));
+    wait_for(&lock(&out, ".clevrtex-run-0-6-0of2.lock"));
+    wait_for(&lock(&out, ".clevrtex-run-0-6-1of2.lock"));
     for c in [a, b] {
         let o = signal(c, "TERM");
         assert_eq!(o.status.code(), Some(143), "{}", text(&o));
     }
+    assert!(!lock(&out, ".clevrtex-run-0-6-0of2.lock").exists());
     let (code, t) = verify(&[&out], &[]);
     assert_eq!(code, Some(3), "{t}");
     assert!(t.contains("missing (4): 2..=5"), "{t}");
@@ -162,4 +182,43 @@ fn interrupted_and_preempted_runs_are_incomplete() {
         "{t}"
     );
     assert!(t.contains("--shard 1/2"), "{t}");
+}
+
+#[test]
+fn an_overlapping_run_refuses_while_the_range_is_held() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    let a = hanging(&out, &["-n", "4"]);
+    let held = lock(&out, ".clevrtex-run-0-4-0of1.lock");
+    wait_for(&held);
+    let o = output_within(
+        {
+            let mut c = generate(&fake_blender(), &out, &["--start", "2", "-n", "4"]);
+            c.env("FAKE_BLENDER_MODE", "hang");
+            c
+        },
+        60,
+    );
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(t.contains("overlap those of another run"), "{t}");
+    assert!(t.contains(&format!("pid {}", a.id())), "{t}");
+    assert!(t.contains(&held.display().to_string()), "{t}");
+    assert!(t.contains("hint: wait for that run to end"), "{t}");
+    // Its holder killed outright (no clean-up): the lock stays but is stale, and a new run
+    // of the range starts (here its images fail: the fake Blender crashes).
+    signal(a, "KILL");
+    assert!(held.exists());
+    let o = output_within(
+        {
+            let mut c = generate(&fake_blender(), &out, &["-n", "4", "--retries", "0"]);
+            c.env("FAKE_BLENDER_MODE", "crash");
+            c
+        },
+        120,
+    );
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(!t.contains("overlap"), "{t}");
+    assert!(!held.exists(), "the new run's lock went with it");
 }

@@ -517,10 +517,23 @@ pub(crate) fn run_jobs(
             failures.load(Ordering::Relaxed)
         ));
     };
-    // The plan first, so even a run that never ends is known to `verify`.
-    if let Some(plan) = &manifest {
-        plan.write_plan(&args.out)?;
-    }
+    // One writer per range: a run whose indices overlap a live run's refuses here, before
+    // anything is written; then the plan, so even a run that never ends is known to `verify`.
+    let _lock = match &manifest {
+        Some(plan) => {
+            let lock = clevrtex_render::run_lock::RunLock::acquire(
+                &plan.variant_dir(&args.out),
+                plan.start,
+                plan.end,
+                plan.shard,
+                std::env::args().collect(),
+            )
+            .map_err(|e| anyhow::anyhow!(e))?;
+            plan.write_plan(&args.out)?;
+            Some(lock)
+        }
+        None => None,
+    };
     let result = pool::run(&opts, jobs, &on_event);
     bar.finish_and_clear();
     match result {

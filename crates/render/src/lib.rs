@@ -52,6 +52,7 @@ pub mod output;
 mod passes;
 pub mod pool;
 pub mod post;
+pub mod run_lock;
 mod session;
 pub mod tmp;
 pub mod verify;
