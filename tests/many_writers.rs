@@ -85,14 +85,32 @@ fn output_within(mut c: Command, secs: u64) -> Output {
     child.wait_with_output().unwrap()
 }
 
-/// Send `sig` to `child`'s children (the fake Blender) and then to it, and reap it.
+/// The processes started by `pid` (by any of its threads), and theirs.
+fn descendants(pid: u32) -> Vec<u32> {
+    let mut out = Vec::new();
+    for task in std::fs::read_dir(format!("/proc/{pid}/task"))
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
+        let kids = std::fs::read_to_string(task.path().join("children")).unwrap_or_default();
+        for k in kids.split_whitespace().filter_map(|k| k.parse().ok()) {
+            out.extend(descendants(k));
+            out.push(k);
+        }
+    }
+    out
+}
+
+/// Send `sig` to `child` (for `KILL`, to the processes it started first: the fake Blender,
+/// which no clean-up would end) and reap it.
 fn signal(child: Child, sig: &str) -> Output {
     let pid = child.id();
-    let kids =
-        std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children")).unwrap_or_default();
     if sig == "KILL" {
-        for k in kids.split_whitespace() {
-            let _ = Command::new("kill").args(["-KILL", k]).status();
+        for k in descendants(pid) {
+            let _ = Command::new("kill")
+                .args(["-KILL", &k.to_string()])
+                .status();
         }
     }
     let st = Command::new("kill")
