@@ -114,6 +114,9 @@ pub struct VerifyOptions {
     pub variant: Option<String>,
 }
 
+/// A manifest read: its path, its contents and the folder its run's rerun writes into.
+type ReadManifest = (PathBuf, Manifest, PathBuf);
+
 /// Manifest entries by (variant folder, stem): file name -> the entries of every finished
 /// manifest that lists it (a later run with `--overwrite` may have changed the bytes).
 type Entries = BTreeMap<(PathBuf, String), BTreeMap<String, Vec<FileEntry>>>;
@@ -127,18 +130,15 @@ struct VariantDir {
     dir: PathBuf,
 }
 
+/// Variant folders by variant, and what was not followed by variant.
+type VariantDirs = (
+    BTreeMap<String, Vec<VariantDir>>,
+    BTreeMap<String, Vec<String>>,
+);
+
 /// Every `clevrtex_<variant>` folder under `roots` (a root may itself be one); entries named
 /// like one but not followed go to the second map.
-#[allow(clippy::type_complexity)]
-fn variant_dirs(
-    roots: &[PathBuf],
-) -> Result<
-    (
-        BTreeMap<String, Vec<VariantDir>>,
-        BTreeMap<String, Vec<String>>,
-    ),
-    String,
-> {
+fn variant_dirs(roots: &[PathBuf]) -> Result<VariantDirs, String> {
     let mut out: BTreeMap<String, Vec<VariantDir>> = BTreeMap::new();
     let mut skipped: BTreeMap<String, Vec<String>> = BTreeMap::new();
     for given in roots {
@@ -259,7 +259,7 @@ fn verify_variant(variant: &str, dirs: &[VariantDir]) -> VariantReport {
     // Samples by index, every place they are found.
     let mut found: BTreeMap<u64, Vec<(String, Found)>> = BTreeMap::new();
     // Manifests, with the folder their run's rerun writes into.
-    let mut manifests: Vec<(PathBuf, Manifest, PathBuf)> = Vec::new();
+    let mut manifests: Vec<ReadManifest> = Vec::new();
     for vd in dirs {
         let entries = match dataset::list(&vd.root, &vd.dir) {
             Ok(e) => e,
@@ -313,8 +313,7 @@ fn verify_variant(variant: &str, dirs: &[VariantDir]) -> VariantReport {
         }
         rep.expected_from = "no manifest: indices 0 to the largest found".into();
     } else {
-        let mut runs: BTreeMap<(u64, u64, u64), Vec<&(PathBuf, Manifest, PathBuf)>> =
-            BTreeMap::new();
+        let mut runs: BTreeMap<(u64, u64, u64), Vec<&ReadManifest>> = BTreeMap::new();
         for entry in &manifests {
             let m = &entry.1;
             runs.entry((m.start, m.end, m.shard[1]))
@@ -679,7 +678,9 @@ fn check_sample(
         }
     };
     // Every value that sizes or indexes something below, typed first.
-    let typed = (|| -> Result<(u32, u32, usize, u64, Vec<Option<u64>>), String> {
+    // (width, height, objects, visibility threshold, each object's `visible_pixels`)
+    type Typed = (u32, u32, usize, u64, Vec<Option<u64>>);
+    let typed = (|| -> Result<Typed, String> {
         let side = u64::from(MAX_IMAGE_SIDE);
         let w = meta_int(&meta, &meta_name, "render.width", 1, side)? as u32;
         let h = meta_int(&meta, &meta_name, "render.height", 1, side)? as u32;
