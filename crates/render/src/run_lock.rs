@@ -5,7 +5,7 @@
 //! `OUT/clevrtex_<variant>/.clevrtex-run-<start>-<end>-<k>of<n>.lock`, JSON: the holder's
 //! `host`, `pid` and `pid_start` (its start time, so a new process with the same pid is not
 //! taken for it), the range, the shard and the command. Locks are taken and checked under an
-//! exclusive `flock` of the variant folder itself, so two runs starting at once
+//! exclusive `flock` of `.clevrtex-runs.lock` in the same folder (kept), so two runs starting at once
 //! cannot both pass. A lock is stale, and ignored (then replaced), when its holder is gone:
 //! on this host, when no process with its pid and start time runs; on another host (a cluster
 //! node, a pod), when its file was not touched for [`STALE_AFTER`] (the holder touches it every
@@ -21,6 +21,8 @@ use serde::{Deserialize, Serialize};
 pub const HEARTBEAT: Duration = Duration::from_secs(20);
 /// A lock of another host not touched for this long is stale.
 pub const STALE_AFTER: Duration = Duration::from_secs(120);
+/// The file whose `flock` guards checking and taking locks (kept, like the ledger's).
+pub const GUARD: &str = ".clevrtex-runs.lock";
 /// Prefix of lock files.
 const PREFIX: &str = ".clevrtex-run-";
 /// The largest lock file read (a lock is a few hundred bytes).
@@ -114,9 +116,16 @@ impl RunLock {
             )
         };
         std::fs::create_dir_all(variant_dir).map_err(|e| io("create", variant_dir, e))?;
-        // The folder itself is the mutex (no file is left behind for it).
-        let guard = std::fs::File::open(variant_dir).map_err(|e| io("open", variant_dir, e))?;
-        guard.lock().map_err(|e| io("lock", variant_dir, e))?;
+        // A file opened for writing, as the failure ledger's: on NFS `flock` is emulated
+        // with POSIX locks, which need a writable descriptor (a folder's is read-only).
+        let guard_path = variant_dir.join(GUARD);
+        let guard = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&guard_path)
+            .map_err(|e| io("create", &guard_path, e))?;
+        guard.lock().map_err(|e| io("lock", &guard_path, e))?;
         let root = crate::dataset::root(variant_dir).map_err(|e| io("read", variant_dir, e))?;
         let entries = std::fs::read_dir(variant_dir).map_err(|e| io("read", variant_dir, e))?;
         let mine = file_name(start, end, shard[0], shard[1]);
