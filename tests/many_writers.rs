@@ -43,14 +43,40 @@ fn verify(args: &[&Path], extra: &[&str]) -> (Option<i32>, String) {
 }
 
 /// A `generate` with the fake Blender that hangs on its first request: it holds its lock and
-/// has written its plan once its lock file exists.
-fn hanging(out: &Path, extra: &[&str]) -> Child {
-    generate(&fake_blender(), out, extra)
-        .env("FAKE_BLENDER_MODE", "hang")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap()
+/// has written its plan once its lock file exists. Killed with its workers if the test ends
+/// before [`signal`] reaps it.
+fn hanging(out: &Path, extra: &[&str]) -> Hanging {
+    Hanging(Some(
+        generate(&fake_blender(), out, extra)
+            .env("FAKE_BLENDER_MODE", "hang")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ))
+}
+
+/// A child that is killed, with the processes it started, when dropped unreaped.
+struct Hanging(Option<Child>);
+
+impl Hanging {
+    fn id(&self) -> u32 {
+        self.0.as_ref().expect("not reaped").id()
+    }
+}
+
+impl Drop for Hanging {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.0.take() {
+            for k in descendants(c.id()) {
+                let _ = Command::new("kill")
+                    .args(["-KILL", &k.to_string()])
+                    .status();
+            }
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
 }
 
 /// Wait until `path` exists (at most a minute).
@@ -104,7 +130,8 @@ fn descendants(pid: u32) -> Vec<u32> {
 
 /// Send `sig` to `child` (for `KILL`, to the processes it started first: the fake Blender,
 /// which no clean-up would end) and reap it.
-fn signal(child: Child, sig: &str) -> Output {
+fn signal(mut child: Hanging, sig: &str) -> Output {
+    let child = child.0.take().expect("not reaped");
     let pid = child.id();
     if sig == "KILL" {
         for k in descendants(pid) {

@@ -327,3 +327,63 @@ fn verify_bounds_what_the_files_claim() {
         "{t}"
     );
 }
+
+#[test]
+fn remove_broken_removes_only_the_layouts_files_of_samples_a_run_remakes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    let outside = dir.path().join("precious.png");
+    std::fs::write(&outside, b"not the dataset's").unwrap();
+    // Sample 0: broken metadata, a link out of the dataset, a file of the user's beside it.
+    hand_sample(
+        &out,
+        "clevr",
+        0,
+        &serde_json::json!("garbage"),
+        &[("_notes.txt", b"mine")],
+    );
+    let sub = out.join("clevrtex_clevr/0");
+    std::os::unix::fs::symlink(&outside, sub.join("CLEVRTEX_clevr_000000.png")).unwrap();
+    // Sample 5: broken, but outside every manifest's range: no known command remakes it.
+    hand_sample(
+        &out,
+        "clevr",
+        5,
+        &serde_json::json!("garbage"),
+        &[(".png", b"x")],
+    );
+    let manifest = serde_json::json!({
+        "format": "clevrtex-manifest", "version": 1, "variant": "clevr", "seed": 0,
+        "config_hash": "0", "start": 0, "end": 2, "total": 2, "shard": [0, 1],
+        "passes": ["rgb"], "tool_version": "0", "blender_version": "",
+        "command": ["clevrtex", "generate", "-n", "2", "--out", "/where/it/was/made"],
+        "finished": true, "files": {}
+    });
+    std::fs::write(
+        out.join("clevrtex_clevr/MANIFEST-0-2-0of1.json"),
+        manifest.to_string(),
+    )
+    .unwrap();
+    let o = clevrtex()
+        .args(["verify", "--remove-broken"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(!sub.join("CLEVRTEX_clevr_000000.json").exists(), "{t}");
+    assert!(
+        std::fs::symlink_metadata(sub.join("CLEVRTEX_clevr_000000.png")).is_err(),
+        "the link is removed: {t}"
+    );
+    assert_eq!(std::fs::read(&outside).unwrap(), b"not the dataset's");
+    assert!(sub.join("CLEVRTEX_clevr_000000_notes.txt").is_file(), "{t}");
+    assert!(sub.join("CLEVRTEX_clevr_000005.json").is_file(), "{t}");
+    assert!(sub.join("CLEVRTEX_clevr_000005.png").is_file(), "{t}");
+    assert!(t.contains("kept broken sample(s) 5"), "{t}");
+    assert!(
+        t.contains(&format!("clevrtex generate -n 2 --out {}", out.display())),
+        "{t}"
+    );
+    assert!(!t.contains("/where/it/was/made"), "{t}");
+}
