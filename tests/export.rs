@@ -130,3 +130,173 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
         );
     }
 }
+
+/// A sample written by hand (no Blender): an 8-byte "PNG" (export does not decode) of
+/// `png_bytes` bytes and metadata `meta` (with `image_filename` set to the layout's name
+/// unless given).
+fn hand_sample(out: &std::path::Path, index: u64, meta: serde_json::Value, png_bytes: usize) {
+    let sub = out.join(format!("clevrtex_clevr/{}", index / 1000));
+    std::fs::create_dir_all(&sub).unwrap();
+    let stem = format!("CLEVRTEX_clevr_{index:06}");
+    let mut meta = meta;
+    if meta.get("image_filename").is_none() {
+        meta["image_filename"] = format!("{stem}.png").into();
+    }
+    if meta.get("split").is_none() {
+        meta["split"] = "train".into();
+    }
+    std::fs::write(sub.join(format!("{stem}.json")), meta.to_string()).unwrap();
+    if png_bytes > 0 {
+        std::fs::write(sub.join(format!("{stem}.png")), vec![7u8; png_bytes]).unwrap();
+    }
+}
+
+/// `clevrtex export DIR OUT extra...`, killed (a failure) after a minute.
+fn export(dir: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> (Option<i32>, String) {
+    let mut child = clevrtex()
+        .arg("export")
+        .args(extra)
+        .arg(dir)
+        .arg(out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t.elapsed().as_secs() > 60 {
+            child.kill().unwrap();
+            let o = child.wait_with_output().unwrap();
+            panic!("export still running after a minute:\n{}", text(&o));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let o = child.wait_with_output().unwrap();
+    (o.status.code(), text(&o))
+}
+
+/// Member names of a tar file.
+fn members(tar: &std::path::Path) -> Vec<String> {
+    let mut a = tar::Archive::new(std::fs::File::open(tar).unwrap());
+    a.entries()
+        .unwrap()
+        .map(|e| e.unwrap().path().unwrap().display().to_string())
+        .collect()
+}
+
+#[test]
+fn export_takes_file_names_from_the_layout_and_splits_from_the_fixed_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let secret = dir.path().join("secret.txt");
+    std::fs::write(&secret, b"not the dataset's").unwrap();
+    hand_sample(
+        &data,
+        0,
+        serde_json::json!({"image_filename": secret.display().to_string()}),
+        100,
+    );
+    let out = dir.path().join("wds");
+    let (code, t) = export(&data, &out, &[]);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000000.json` key `image_filename` is"),
+        "{t}"
+    );
+    assert!(
+        t.contains("not the layout's `CLEVRTEX_clevr_000000.png`"),
+        "{t}"
+    );
+
+    let data = dir.path().join("data2");
+    hand_sample(&data, 0, serde_json::json!({"split": "../../escaped"}), 100);
+    let out = dir.path().join("deep/er/wds");
+    let (code, t) = export(&data, &out, &[]);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(
+        t.contains("key `split` is `../../escaped`, not test, val or train"),
+        "{t}"
+    );
+    let escaped: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().contains("escaped"))
+        .collect();
+    assert!(escaped.is_empty(), "a shard was written outside OUT");
+}
+
+#[test]
+fn export_follows_no_link_out_of_the_dataset_and_reads_no_fifo() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let secret = dir.path().join("secret.png");
+    std::fs::write(&secret, b"not the dataset's").unwrap();
+    for i in 0..3 {
+        hand_sample(
+            &data,
+            i,
+            serde_json::json!({}),
+            if i == 2 { 100 } else { 0 },
+        );
+    }
+    let sub = data.join("clevrtex_clevr/0");
+    std::os::unix::fs::symlink(&secret, sub.join("CLEVRTEX_clevr_000000.png")).unwrap();
+    let st = std::process::Command::new("mkfifo")
+        .arg(sub.join("CLEVRTEX_clevr_000001.png"))
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let out = dir.path().join("wds");
+    let (code, t) = export(&data, &out, &[]);
+    assert_eq!(code, Some(3), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000000.png` is a symbolic link leading out of the dataset"),
+        "{t}"
+    );
+    assert!(
+        t.contains("CLEVRTEX_clevr_000001.png` is not a regular file"),
+        "{t}"
+    );
+    assert_eq!(
+        members(&out.join("clevr-train-000000.tar")),
+        ["CLEVRTEX_clevr_000002.png", "CLEVRTEX_clevr_000002.json"]
+    );
+}
+
+#[test]
+fn export_removes_the_shards_of_an_earlier_export_it_did_not_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    for i in 0..3 {
+        hand_sample(&data, i, serde_json::json!({}), 6000);
+    }
+    let out = dir.path().join("wds");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("notes.tar"), b"mine").unwrap();
+    std::fs::write(out.join("other-name-1.tar"), b"mine").unwrap();
+    let (code, t) = export(&data, &out, &["--shard-size", "10240"]);
+    assert_eq!(code, Some(0), "{t}");
+    assert!(out.join("clevr-train-000002.tar").is_file(), "{t}");
+    std::fs::remove_dir_all(data.join("clevrtex_clevr")).unwrap();
+    hand_sample(&data, 0, serde_json::json!({}), 6000);
+    let (code, t) = export(&data, &out, &["--shard-size", "10240"]);
+    assert_eq!(code, Some(0), "{t}");
+    let mut left: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(
+        left,
+        [
+            "clevr-train-000000.tar",
+            "index.json",
+            "notes.tar",
+            "other-name-1.tar"
+        ]
+    );
+    let index: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("index.json")).unwrap()).unwrap();
+    assert_eq!(index["shards"].as_array().unwrap().len(), 1, "{index}");
+}

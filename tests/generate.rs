@@ -627,7 +627,9 @@ fn generate_writes_every_pass_with_exact_masks_and_resumes() {
             assert_eq!((rgb.bits, rgb.width, rgb.height), (8, 80, 60));
         }
         // The run's manifest (sizes and hashes of these files, for `clevrtex verify`).
-        expected.push("clevrtex_camo/MANIFEST-0of1.json".to_string());
+        expected.push("clevrtex_camo/MANIFEST-0-2-0of1.json".to_string());
+        // The guard of the run locks (an empty file that stays).
+        expected.push("clevrtex_camo/.clevrtex-runs.lock".to_string());
         expected.sort();
         assert_eq!(files_under(dir.path()), expected);
 

@@ -77,7 +77,7 @@ fn report_of_a_generated_and_a_published_layout_dataset_and_both_compared() {
     generate(&blender, &data, &["clevr", "camo"], 5);
     // The run manifest records the seconds spent on each sample (the report plots them).
     let manifest: Value = serde_json::from_slice(
-        &std::fs::read(data.join("clevrtex_clevr/MANIFEST-0of1.json")).unwrap(),
+        &std::fs::read(data.join("clevrtex_clevr/MANIFEST-0-5-0of1.json")).unwrap(),
     )
     .unwrap();
     let secs = manifest["sample_seconds"].as_object().unwrap();
@@ -86,7 +86,7 @@ fn report_of_a_generated_and_a_published_layout_dataset_and_both_compared() {
     // A rerun that skips the finished samples keeps their times.
     generate(&blender, &data, &["clevr"], 5);
     let again: Value = serde_json::from_slice(
-        &std::fs::read(data.join("clevrtex_clevr/MANIFEST-0of1.json")).unwrap(),
+        &std::fs::read(data.join("clevrtex_clevr/MANIFEST-0-5-0of1.json")).unwrap(),
     )
     .unwrap();
     assert_eq!(again["sample_seconds"], manifest["sample_seconds"]);

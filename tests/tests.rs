@@ -11,6 +11,7 @@ mod export;
 mod extreme;
 mod generate;
 mod k8s;
+mod many_writers;
 mod materials;
 mod preview;
 mod python_package;

@@ -187,3 +187,203 @@ fn verify_finds_a_byte_change_against_the_manifest() {
         "{t}"
     );
 }
+
+/// A sample written by hand (no Blender): `files` by suffix, and its metadata.
+fn hand_sample(out: &Path, variant: &str, index: u64, meta: &Value, files: &[(&str, &[u8])]) {
+    let sub = out.join(format!("clevrtex_{variant}/{}", index / 1000));
+    std::fs::create_dir_all(&sub).unwrap();
+    let stem = format!("CLEVRTEX_{variant}_{index:06}");
+    std::fs::write(sub.join(format!("{stem}.json")), meta.to_string()).unwrap();
+    for (suffix, bytes) in files {
+        std::fs::write(sub.join(format!("{stem}{suffix}")), bytes).unwrap();
+    }
+}
+
+/// `clevrtex verify` with at most 2 GB of address space, killed (a failure) after `secs`.
+fn verify_bounded(dirs: &[&Path], secs: u64) -> (Option<i32>, String) {
+    let mut child = std::process::Command::new("sh")
+        .args(["-c", "ulimit -v 2000000; exec \"$0\" verify \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_clevrtex"))
+        .args(dirs)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t.elapsed().as_secs() > secs {
+            child.kill().unwrap();
+            let o = child.wait_with_output().unwrap();
+            panic!("verify still running after {secs} s:\n{}", text(&o));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let o = child.wait_with_output().unwrap();
+    (o.status.code(), text(&o))
+}
+
+#[test]
+fn verify_follows_no_link_out_of_the_dataset_and_reads_no_fifo() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    let meta = serde_json::json!({"image_index": 0, "num_objects": 0, "objects": []});
+    hand_sample(&out, "clevr", 0, &meta, &[]);
+    let sub = out.join("clevrtex_clevr/0");
+    std::os::unix::fs::symlink("/dev/zero", sub.join("CLEVRTEX_clevr_000000.png")).unwrap();
+    let st = std::process::Command::new("mkfifo")
+        .arg(sub.join("CLEVRTEX_clevr_000000_flat.png"))
+        .status()
+        .unwrap();
+    assert!(st.success());
+    // A variant folder that is a link to a folder outside.
+    let elsewhere = tempfile::tempdir().unwrap();
+    std::os::unix::fs::symlink(elsewhere.path(), out.join("clevrtex_camo")).unwrap();
+    let (code, t) = verify_bounded(&[&out], 60);
+    assert_eq!(code, Some(3), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000000.png` is a symbolic link leading out of the dataset"),
+        "{t}"
+    );
+    assert!(
+        t.contains("CLEVRTEX_clevr_000000_flat.png` is not a regular file"),
+        "{t}"
+    );
+    assert!(
+        t.contains("clevrtex_camo` is a symbolic link leading out of the dataset"),
+        "{t}"
+    );
+}
+
+#[test]
+fn verify_bounds_what_the_files_claim() {
+    let dir = tempfile::tempdir().unwrap();
+    // A file name with a huge index and no manifest: refused, not allocated.
+    let huge = dir.path().join("huge");
+    hand_sample(
+        &huge,
+        "clevr",
+        99_999_999_999_999,
+        &serde_json::json!({}),
+        &[],
+    );
+    let (code, t) = verify_bounded(&[&huge], 60);
+    assert_eq!(code, Some(3), "{t}");
+    assert!(
+        t.contains("is over the 100000000 indices a run may have"),
+        "{t}"
+    );
+    // A manifest whose range and shard count are near u64::MAX: refused, naming the key.
+    let big = dir.path().join("big");
+    std::fs::create_dir_all(big.join("clevrtex_clevr")).unwrap();
+    let manifest = serde_json::json!({
+        "format": "clevrtex-manifest", "version": 1, "variant": "clevr", "seed": 0,
+        "config_hash": "0", "start": 0, "end": u64::MAX - 1, "total": u64::MAX - 1,
+        "shard": [u64::MAX - 2, u64::MAX - 1], "passes": ["rgb"], "tool_version": "0",
+        "blender_version": "", "command": ["clevrtex"], "files": {}
+    });
+    std::fs::write(
+        big.join("clevrtex_clevr/MANIFEST-0of1.json"),
+        manifest.to_string(),
+    )
+    .unwrap();
+    let (code, t) = verify_bounded(&[&big], 60);
+    assert_eq!(code, Some(3), "{t}");
+    assert!(
+        t.contains(
+            "keys `start`..`end` (0..18446744073709551614) hold more than the 100000000 indices"
+        ),
+        "{t}"
+    );
+    // Metadata values of the wrong type or size: named with their file and key.
+    let typed = dir.path().join("typed");
+    let base = serde_json::json!({
+        "image_index": 0, "num_objects": 1, "objects": [{"visible_pixels": 3}],
+        "render": {"width": 32, "height": 24}, "passes": {"rgb": {}}
+    });
+    let mut objects = base.clone();
+    objects["image_index"] = 0.into();
+    objects["objects"] = "many".into();
+    hand_sample(&typed, "clevr", 0, &objects, &[]);
+    let mut width = base.clone();
+    width["image_index"] = 1.into();
+    width["render"]["width"] = (1u64 << 40).into();
+    hand_sample(&typed, "clevr", 1, &width, &[]);
+    let mut pixels = base.clone();
+    pixels["image_index"] = 2.into();
+    pixels["objects"][0]["visible_pixels"] = (-5).into();
+    hand_sample(&typed, "clevr", 2, &pixels, &[]);
+    let (code, t) = verify_bounded(&[&typed], 60);
+    assert_eq!(code, Some(3), "{t}");
+    assert!(
+        t.contains("metadata `CLEVRTEX_clevr_000000.json` key `objects` is \"many\", not a list"),
+        "{t}"
+    );
+    assert!(
+        t.contains("metadata `CLEVRTEX_clevr_000001.json` key `render.width` is 1099511627776, not a whole number from 1 to 8192"),
+        "{t}"
+    );
+    assert!(
+        t.contains("key `objects[0].visible_pixels` is -5, not a whole number from 0"),
+        "{t}"
+    );
+}
+
+#[test]
+fn remove_broken_removes_only_the_layouts_files_of_samples_a_run_remakes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    let outside = dir.path().join("precious.png");
+    std::fs::write(&outside, b"not the dataset's").unwrap();
+    // Sample 0: broken metadata, a link out of the dataset, a file of the user's beside it.
+    hand_sample(
+        &out,
+        "clevr",
+        0,
+        &serde_json::json!("garbage"),
+        &[("_notes.txt", b"mine")],
+    );
+    let sub = out.join("clevrtex_clevr/0");
+    std::os::unix::fs::symlink(&outside, sub.join("CLEVRTEX_clevr_000000.png")).unwrap();
+    // Sample 5: broken, but outside every manifest's range: no known command remakes it.
+    hand_sample(
+        &out,
+        "clevr",
+        5,
+        &serde_json::json!("garbage"),
+        &[(".png", b"x")],
+    );
+    let manifest = serde_json::json!({
+        "format": "clevrtex-manifest", "version": 1, "variant": "clevr", "seed": 0,
+        "config_hash": "0", "start": 0, "end": 2, "total": 2, "shard": [0, 1],
+        "passes": ["rgb"], "tool_version": "0", "blender_version": "",
+        "command": ["clevrtex", "generate", "-n", "2", "--out", "/where/it/was/made"],
+        "finished": true, "files": {}
+    });
+    std::fs::write(
+        out.join("clevrtex_clevr/MANIFEST-0-2-0of1.json"),
+        manifest.to_string(),
+    )
+    .unwrap();
+    let o = clevrtex()
+        .args(["verify", "--remove-broken"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(!sub.join("CLEVRTEX_clevr_000000.json").exists(), "{t}");
+    assert!(
+        std::fs::symlink_metadata(sub.join("CLEVRTEX_clevr_000000.png")).is_err(),
+        "the link is removed: {t}"
+    );
+    assert_eq!(std::fs::read(&outside).unwrap(), b"not the dataset's");
+    assert!(sub.join("CLEVRTEX_clevr_000000_notes.txt").is_file(), "{t}");
+    assert!(sub.join("CLEVRTEX_clevr_000005.json").is_file(), "{t}");
+    assert!(sub.join("CLEVRTEX_clevr_000005.png").is_file(), "{t}");
+    assert!(t.contains("kept broken sample(s) 5"), "{t}");
+    assert!(
+        t.contains(&format!("clevrtex generate -n 2 --out {}", out.display())),
+        "{t}"
+    );
+    assert!(!t.contains("/where/it/was/made"), "{t}");
+}

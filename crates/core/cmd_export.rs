@@ -6,7 +6,11 @@
 //! shard a sample is the files `<stem>.png`, `<stem>.flat.png`, `<stem>.depth.png`,
 //! `<stem>.normal.png`, `<stem>.albedo.png`, `<stem>.shadow.png` (the passes it has) and
 //! `<stem>.json`, so WebDataset's key is the stem. Splits come from each sample's metadata
-//! (`split`, the public loader's rule). Tar headers carry no time, owner or mode of the
+//! (`split`, the public loader's rule; only `test`, `val` or `train`). The files are those of
+//! the layout (`clevrtex_scene::layout`): a metadata `*_filename` only says whether a pass was
+//! written and must name the layout's file. Links leading out of the dataset are not followed
+//! and non-regular files not read (their samples are left out, exit 3). Shards of an earlier
+//! export into OUT that this one did not write are removed (only names of the form above). Tar headers carry no time, owner or mode of the
 //! machine: the same dataset gives the same bytes. Each shard is written under a temporary
 //! name and renamed when complete; `OUT/index.json` lists the shards and their sample counts.
 
@@ -15,6 +19,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
+use clevrtex_render::dataset::{self, Kind};
+use clevrtex_scene::layout::Split;
 use clevrtex_scene::{layout, Pass};
 use serde_json::{json, Value};
 
@@ -61,62 +67,111 @@ fn extension(pass: Pass) -> String {
 struct Sample {
     index: u64,
     stem: String,
-    split: String,
+    split: Split,
     files: Vec<(String, PathBuf)>,
     bytes: u64,
 }
 
-/// The samples of one variant folder, in index order.
-fn samples(vdir: &Path) -> anyhow::Result<Vec<Sample>> {
+/// The samples of one variant folder (under the dataset's canonical `root`), in index order,
+/// and what was not followed or not read (samples with such files are left out).
+/// File names come from the layout and the pass table, never from the metadata: a
+/// `*_filename` key only says whether the pass was written, and must name the layout's file.
+fn samples(root: &Path, vdir: &Path, skipped: &mut Vec<String>) -> anyhow::Result<Vec<Sample>> {
     let mut found = BTreeMap::new();
-    let mut subdirs: Vec<PathBuf> = std::fs::read_dir(vdir)
-        .with_context(|| format!("cannot read `{}`", vdir.display()))?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.is_dir())
-        .collect();
-    subdirs.sort();
-    for d in subdirs {
-        for e in std::fs::read_dir(&d)
-            .with_context(|| format!("cannot read `{}`", d.display()))?
-            .flatten()
+    let entries =
+        dataset::list(root, vdir).with_context(|| format!("cannot read `{}`", vdir.display()))?;
+    for (_, d, kind) in entries {
+        match kind {
+            Kind::Dir => {}
+            Kind::Skipped(why) => {
+                skipped.push(format!("`{}` {why}", d.display()));
+                continue;
+            }
+            Kind::File => continue,
+        }
+        for (name, p, kind) in
+            dataset::list(root, &d).with_context(|| format!("cannot read `{}`", d.display()))?
         {
-            let name = e.file_name().to_string_lossy().into_owned();
             if let Some((stem, _, index)) = layout::parse_stem(&name, ".json") {
+                if let Kind::Skipped(why) = kind {
+                    skipped.push(format!("`{}` {why}", p.display()));
+                    continue;
+                }
                 found.insert(index, (stem.to_string(), d.clone()));
             }
         }
     }
     let mut out = Vec::new();
-    for (index, (stem, dir)) in found {
+    'samples: for (index, (stem, dir)) in found {
         let meta_path = dir.join(layout::metadata_file(&stem));
-        let meta: Value = serde_json::from_slice(
-            &std::fs::read(&meta_path)
-                .with_context(|| format!("cannot read `{}`", meta_path.display()))?,
-        )
-        .with_context(|| {
+        let bytes = match dataset::read(root, &meta_path, dataset::MAX_FILE_BYTES) {
+            Ok(b) => b,
+            Err(why) => {
+                skipped.push(format!("`{}` {why}", meta_path.display()));
+                continue;
+            }
+        };
+        let meta: Value = serde_json::from_slice(&bytes).with_context(|| {
             format!(
                 "`{}` is not valid metadata\nhint: check the dataset with `clevrtex verify`",
                 meta_path.display()
             )
         })?;
+        let bad = |key: &str, what: String| {
+            anyhow::anyhow!(
+                "metadata `{}` key `{key}` {what}\nhint: check the dataset with `clevrtex verify`; export takes file names from the layout, not from the metadata",
+                meta_path.display()
+            )
+        };
         let mut files = Vec::new();
         for pass in Pass::ALL {
             let key = match pass {
                 Pass::Rgb => "image_filename".to_string(),
                 p => format!("{}_filename", p.name()),
             };
-            if let Some(name) = meta[&key].as_str() {
-                files.push((extension(pass), dir.join(name)));
+            let want = layout::pass_file(&stem, pass);
+            match &meta[&key] {
+                Value::Null => {}
+                Value::String(name) if *name == want => {
+                    files.push((extension(pass), dir.join(want)))
+                }
+                other => {
+                    return Err(bad(
+                        &key,
+                        format!("is {other}, not the layout's `{want}` (or null)"),
+                    ))
+                }
             }
         }
+        let split = match &meta["split"] {
+            Value::Null => Split::Train,
+            Value::String(s) => match [Split::Test, Split::Val, Split::Train]
+                .into_iter()
+                .find(|x| x.name() == s)
+            {
+                Some(x) => x,
+                None => return Err(bad("split", format!("is `{s}`, not test, val or train"))),
+            },
+            other => return Err(bad("split", format!("is {other}, not test, val or train"))),
+        };
         files.push(("json".into(), meta_path));
         let mut bytes = 0;
         for (_, p) in &files {
+            match dataset::classify(root, p) {
+                Kind::File => {}
+                Kind::Skipped(why) => {
+                    skipped.push(format!("`{}` {why}", p.display()));
+                    continue 'samples;
+                }
+                Kind::Dir => {
+                    skipped.push(format!("`{}` is a folder", p.display()));
+                    continue 'samples;
+                }
+            }
             bytes += std::fs::metadata(p)
                 .with_context(|| {
                     format!(
-                        "`{}` (named by the metadata of `{stem}`) is missing\nhint: check the dataset with `clevrtex verify`",
+                        "`{}` (a pass the metadata of `{stem}` lists) is missing\nhint: check the dataset with `clevrtex verify`",
                         p.display()
                     )
                 })?
@@ -125,13 +180,30 @@ fn samples(vdir: &Path) -> anyhow::Result<Vec<Sample>> {
         }
         out.push(Sample {
             index,
-            split: meta["split"].as_str().unwrap_or("train").to_string(),
+            split,
             stem,
             files,
             bytes,
         });
     }
     Ok(out)
+}
+
+/// Whether `name` is one of export's shard names, `<variant>-<split>-<6 digits>.tar`.
+fn is_shard_name(name: &str) -> bool {
+    let Some(rest) = name.strip_suffix(".tar") else {
+        return false;
+    };
+    let Some((head, digits)) = rest.rsplit_once('-') else {
+        return false;
+    };
+    let Some((variant, split)) = head.rsplit_once('-') else {
+        return false;
+    };
+    !variant.is_empty()
+        && ["test", "val", "train"].contains(&split)
+        && digits.len() == 6
+        && digits.bytes().all(|b| b.is_ascii_digit())
 }
 
 /// A tar shard being written under a temporary name.
@@ -162,10 +234,14 @@ impl ShardWriter {
         })
     }
 
-    fn add(&mut self, s: &Sample) -> anyhow::Result<()> {
+    fn add(&mut self, root: &Path, s: &Sample) -> anyhow::Result<()> {
         for (ext, path) in &s.files {
-            let data =
-                std::fs::read(path).with_context(|| format!("cannot read `{}`", path.display()))?;
+            let data = dataset::read(root, path, dataset::MAX_FILE_BYTES).map_err(|why| {
+                anyhow::anyhow!(
+                    "`{}` {why}\nhint: check the dataset with `clevrtex verify`",
+                    path.display()
+                )
+            })?;
             let mut h = tar::Header::new_ustar();
             h.set_size(data.len() as u64);
             h.set_mode(0o644);
@@ -238,17 +314,25 @@ pub fn run(args: Args) -> CmdResult {
             args.dir.display()
         );
     }
-    let mut variants: Vec<(String, PathBuf)> = std::fs::read_dir(&args.dir)
+    let root = dataset::root(&args.dir)
+        .with_context(|| format!("cannot read `{}`", args.dir.display()))?;
+    let mut skipped = Vec::new();
+    let mut variants: Vec<(String, PathBuf)> = Vec::new();
+    for (name, path, kind) in dataset::list(&root, &args.dir)
         .with_context(|| format!("cannot read `{}`", args.dir.display()))?
-        .flatten()
-        .filter_map(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            let v = name.strip_prefix("clevrtex_")?.to_string();
-            e.path().is_dir().then_some((v, e.path()))
-        })
-        .filter(|(v, _)| args.variant.as_ref().is_none_or(|want| want == v))
-        .collect();
-    variants.sort();
+    {
+        let Some(v) = name.strip_prefix("clevrtex_") else {
+            continue;
+        };
+        if args.variant.as_ref().is_some_and(|want| want != v) {
+            continue;
+        }
+        match kind {
+            Kind::Dir => variants.push((v.to_string(), path)),
+            Kind::Skipped(why) => skipped.push(format!("`{}` {why}", path.display())),
+            Kind::File => {}
+        }
+    }
     if variants.is_empty() {
         bail!(
             "no `clevrtex_<variant>` folder{} in `{}`\nhint: pass the `--out` folder of `clevrtex generate`",
@@ -264,11 +348,12 @@ pub fn run(args: Args) -> CmdResult {
     let mut index = Vec::new();
     let mut total_bytes = 0u64;
     let mut total_samples = 0u64;
+    let mut written = std::collections::BTreeSet::new();
     for (variant, vdir) in &variants {
-        let all = samples(vdir)?;
-        let mut by_split: BTreeMap<String, Vec<&Sample>> = BTreeMap::new();
+        let all = samples(&root, vdir, &mut skipped)?;
+        let mut by_split: BTreeMap<&str, Vec<&Sample>> = BTreeMap::new();
         for s in &all {
-            by_split.entry(s.split.clone()).or_default().push(s);
+            by_split.entry(s.split.name()).or_default().push(s);
         }
         for (split, list) in by_split {
             let mut shard: Option<ShardWriter> = None;
@@ -286,11 +371,13 @@ pub fn run(args: Args) -> CmdResult {
                     index.push(json!({"variant": variant, "split": split, "shard": done}));
                 }
                 if shard.is_none() {
-                    let path = args.out.join(format!("{variant}-{split}-{n:06}.tar"));
+                    let name = format!("{variant}-{split}-{n:06}.tar");
+                    written.insert(name.clone());
+                    let path = args.out.join(name);
                     n += 1;
                     shard = Some(ShardWriter::create(path)?);
                 }
-                shard.as_mut().unwrap().add(s)?;
+                shard.as_mut().unwrap().add(&root, s)?;
                 total_samples += 1;
             }
             if let Some(w) = shard {
@@ -299,6 +386,33 @@ pub fn run(args: Args) -> CmdResult {
                 index.push(json!({"variant": variant, "split": split, "shard": done}));
             }
         }
+    }
+    // Shards of an earlier export into OUT that this one did not write (fewer samples, another
+    // variant): removed, so `index.json` and the shards on disk agree. Only export's own shard
+    // names are touched.
+    let mut stale = Vec::new();
+    for e in std::fs::read_dir(&args.out)
+        .with_context(|| format!("cannot read `{}`", args.out.display()))?
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let file = e.file_type().is_ok_and(|t| t.is_file() || t.is_symlink());
+        if file && is_shard_name(&name) && !written.contains(&name) {
+            std::fs::remove_file(e.path()).with_context(|| {
+                format!(
+                    "cannot remove the stale shard `{}` of an earlier export\nhint: remove it by hand, or export into an empty folder",
+                    e.path().display()
+                )
+            })?;
+            stale.push(name);
+        }
+    }
+    if !stale.is_empty() {
+        eprintln!(
+            "removed {} shard(s) of an earlier export that this one did not write: {}",
+            stale.len(),
+            stale.join(", ")
+        );
     }
     let doc = json!({
         "format": "webdataset",
@@ -324,5 +438,16 @@ pub fn run(args: Args) -> CmdResult {
         total_bytes as f64 / 1e6 / secs.max(1e-9),
         index_path.display()
     );
+    if !skipped.is_empty() {
+        eprintln!(
+            "warning: {} file(s) or folder(s) not followed or not read; their samples are not exported:",
+            skipped.len()
+        );
+        for s in &skipped {
+            eprintln!("  {s}");
+        }
+        eprintln!("hint: check the dataset with `clevrtex verify`");
+        return Ok(exit::PARTIAL);
+    }
     Ok(exit::OK)
 }

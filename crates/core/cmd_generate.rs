@@ -11,6 +11,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
+use clevrtex_render::manifest::Manifest;
 use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, RunReport};
 use clevrtex_render::RenderError;
 use clevrtex_scene::{layout, Config, Pass, SampleRequest};
@@ -245,16 +246,77 @@ pub(crate) struct ManifestPlan {
 }
 
 impl ManifestPlan {
+    fn variant_dir(&self, out: &Path) -> PathBuf {
+        layout::variant_dir(out, &self.variant)
+    }
+
+    /// The manifest of this run's range and shard as an earlier run left it, if readable.
+    fn earlier(&self, out: &Path) -> Option<Manifest> {
+        let name = clevrtex_render::manifest::file_name(
+            self.start,
+            self.end,
+            self.shard[0],
+            self.shard[1],
+        );
+        Manifest::read(&self.variant_dir(out).join(name)).ok()
+    }
+
+    /// The manifest with these settings, `files` and `sample_seconds`.
+    fn manifest(
+        &self,
+        finished: bool,
+        blender_version: String,
+        files: BTreeMap<String, clevrtex_render::manifest::FileEntry>,
+        sample_seconds: BTreeMap<String, f64>,
+    ) -> Manifest {
+        Manifest {
+            format: clevrtex_render::manifest::MANIFEST_FORMAT.into(),
+            version: clevrtex_render::manifest::MANIFEST_VERSION,
+            variant: self.variant.clone(),
+            seed: self.seed,
+            config_hash: self.config_hash.clone(),
+            start: self.start,
+            end: self.end,
+            total: self.total,
+            shard: self.shard,
+            passes: self.passes.iter().map(|p| p.name().to_string()).collect(),
+            tool_version: env!("CARGO_PKG_VERSION").into(),
+            blender_version,
+            command: std::env::args().collect(),
+            finished,
+            files,
+            sample_seconds,
+        }
+    }
+
+    /// Write the run's plan before the first image: its manifest with `finished: false` and
+    /// no files, so `verify` knows what the run is to make even if it never ends. The seconds
+    /// of samples an earlier run of this range made are kept.
+    fn write_plan(&self, out: &Path) -> anyhow::Result<PathBuf> {
+        let seconds = self
+            .earlier(out)
+            .map(|m| m.sample_seconds)
+            .unwrap_or_default();
+        let m = self.manifest(false, String::new(), BTreeMap::new(), seconds);
+        let vdir = self.variant_dir(out);
+        std::fs::create_dir_all(&vdir).with_context(|| {
+            format!(
+                "cannot create `{}`\nhint: pass a writable folder with `--out`",
+                vdir.display()
+            )
+        })?;
+        Ok(m.write(&vdir)?)
+    }
+
     /// Write the manifest of the run's complete samples (hashing their files).
     /// `seconds`: time per sample made by this run, by index; those of complete samples an
     /// earlier run made are kept from its manifest.
     fn write(&self, out: &Path, seconds: &BTreeMap<u64, f64>) -> anyhow::Result<PathBuf> {
-        let vdir = layout::variant_dir(out, &self.variant);
-        let earlier = clevrtex_render::manifest::Manifest::read(&vdir.join(
-            clevrtex_render::manifest::file_name(self.shard[0], self.shard[1]),
-        ))
-        .map(|m| m.sample_seconds)
-        .unwrap_or_default();
+        let vdir = self.variant_dir(out);
+        let earlier = self
+            .earlier(out)
+            .map(|m| m.sample_seconds)
+            .unwrap_or_default();
         let mut sample_seconds = BTreeMap::new();
         let shard = crate::shard::Shard {
             k: self.shard[0],
@@ -281,23 +343,8 @@ impl ManifestPlan {
             let sub = (index / 1000).to_string();
             files.extend(names.into_iter().map(|n| format!("{sub}/{n}")));
         }
-        let manifest = clevrtex_render::manifest::Manifest {
-            format: clevrtex_render::manifest::MANIFEST_FORMAT.into(),
-            version: clevrtex_render::manifest::MANIFEST_VERSION,
-            variant: self.variant.clone(),
-            seed: self.seed,
-            config_hash: self.config_hash.clone(),
-            start: self.start,
-            end: self.end,
-            total: self.total,
-            shard: self.shard,
-            passes: self.passes.iter().map(|p| p.name().to_string()).collect(),
-            tool_version: env!("CARGO_PKG_VERSION").into(),
-            blender_version,
-            command: std::env::args().collect(),
-            files: clevrtex_render::manifest::hash_files(&vdir, &files)?,
-            sample_seconds,
-        };
+        let files = clevrtex_render::manifest::hash_files(&vdir, &files)?;
+        let manifest = self.manifest(true, blender_version, files, sample_seconds);
         Ok(manifest.write(&vdir)?)
     }
 }
@@ -469,6 +516,23 @@ pub(crate) fn run_jobs(
             rejects.load(Ordering::Relaxed),
             failures.load(Ordering::Relaxed)
         ));
+    };
+    // One writer per range: a run whose indices overlap a live run's refuses here, before
+    // anything is written; then the plan, so even a run that never ends is known to `verify`.
+    let _lock = match &manifest {
+        Some(plan) => {
+            let lock = clevrtex_render::run_lock::RunLock::acquire(
+                &plan.variant_dir(&args.out),
+                plan.start,
+                plan.end,
+                plan.shard,
+                std::env::args().collect(),
+            )
+            .map_err(|e| anyhow::anyhow!(e))?;
+            plan.write_plan(&args.out)?;
+            Some(lock)
+        }
+        None => None,
     };
     let result = pool::run(&opts, jobs, &on_event);
     bar.finish_and_clear();

@@ -18,8 +18,9 @@ pub struct Args {
     /// Check only this variant.
     #[arg(long)]
     variant: Option<String>,
-    /// Delete the files of broken samples and stray temporary files, so that rerunning the
-    /// run's `generate` command remakes them (duplicates are only reported).
+    /// Delete the files of broken samples that a run of the manifests covers (only the names
+    /// of the layout, inside the dataset) and the temporary files of dead writers, so that
+    /// rerunning that run's `generate` command remakes them (duplicates are only reported).
     #[arg(long)]
     remove_broken: bool,
     /// Write the full report as JSON to FILE.
@@ -54,13 +55,13 @@ fn ranges(v: &[u64]) -> String {
     s
 }
 
-fn print_report(r: &VariantReport, dirs: &[PathBuf]) {
+fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
     println!(
         "{}: {} of {} expected samples whole ({})",
         r.variant, r.ok, r.expected, r.expected_from
     );
-    if !r.missing.is_empty() {
-        println!("  missing ({}): {}", r.missing.len(), ranges(&r.missing));
+    if r.missing_count > 0 {
+        println!("  missing ({}): {}", r.missing_count, ranges(&r.missing));
     }
     if !r.duplicates.is_empty() {
         println!("  duplicated indices ({}):", r.duplicates.len());
@@ -100,6 +101,15 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf]) {
             println!("    {}", t.display());
         }
     }
+    if !r.skipped.is_empty() {
+        println!("  not followed or not read ({}):", r.skipped.len());
+        for s in r.skipped.iter().take(20) {
+            println!("    {s}");
+        }
+        if r.skipped.len() > 20 {
+            println!("    ... {} more (see --json)", r.skipped.len() - 20);
+        }
+    }
     for p in &r.manifest_problems {
         println!("  manifest: {p}");
     }
@@ -127,11 +137,15 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf]) {
                 .collect::<Vec<_>>()
                 .join("\n    "),
         };
-        println!(
-            "  to repair: clevrtex verify {} --variant {} --remove-broken, then rerun:\n    {rerun}",
-            dirs.join(" "),
-            r.variant
-        );
+        if remove {
+            println!("  to repair, rerun:\n    {rerun}");
+        } else {
+            println!(
+                "  to repair: clevrtex verify {} --variant {} --remove-broken, then rerun:\n    {rerun}",
+                dirs.join(" "),
+                r.variant
+            );
+        }
     }
 }
 
@@ -183,7 +197,7 @@ pub fn run(args: Args) -> CmdResult {
     }
     let samples: u64 = reports.iter().map(|r| r.ok + r.broken.len() as u64).sum();
     for r in &reports {
-        print_report(r, &args.dirs);
+        print_report(r, &args.dirs, args.remove_broken);
     }
     let secs = started.elapsed().as_secs_f64();
     eprintln!(
@@ -200,7 +214,15 @@ pub fn run(args: Args) -> CmdResult {
     if args.remove_broken {
         let mut removed = 0;
         for r in &reports {
-            removed += verify::remove_broken(r).context("cannot remove a broken sample's file")?;
+            let done = verify::remove_broken(r).context("cannot remove a broken sample's file")?;
+            removed += done.files;
+            if !done.kept.is_empty() {
+                println!(
+                    "{}: kept broken sample(s) {}: no run of the manifests covers them, so no known command remakes them\nhint: remove them by hand if they are not wanted, or remake them with `clevrtex generate --start I -n N --out DIR`",
+                    r.variant,
+                    ranges(&done.kept)
+                );
+            }
         }
         println!("removed {removed} file(s) of broken samples and temporary files");
     }

@@ -40,6 +40,7 @@
 
 pub mod blender;
 pub mod bridge;
+pub mod dataset;
 pub mod device;
 mod error;
 pub mod exr_io;
@@ -51,6 +52,7 @@ pub mod output;
 mod passes;
 pub mod pool;
 pub mod post;
+pub mod run_lock;
 mod session;
 pub mod tmp;
 pub mod verify;

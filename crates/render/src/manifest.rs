@@ -2,9 +2,12 @@
 //! and xxh3 hash of every file, so `clevrtex verify` can check the bytes later (after a copy,
 //! on another machine, for the union of shards).
 //!
-//! `OUT/clevrtex_<variant>/MANIFEST-<k>of<n>.json`, one per shard (`0of1` unsharded), written
-//! atomically at the end of a run that was not interrupted. Paths are relative to the variant
-//! folder, e.g. `0/CLEVRTEX_full_000000.png`.
+//! `OUT/clevrtex_<variant>/MANIFEST-<start>-<end>-<k>of<n>.json`: one per range and shard
+//! (`0of1` unsharded), so runs of other ranges into one folder (a dataset grown with `--start`)
+//! and shards never overwrite each other's; `verify` takes their union. Written atomically
+//! twice: before the first image as the run's plan (`finished: false`, no files), and at the
+//! end of a run that was not interrupted with every file (`finished: true`). Paths are relative
+//! to the variant folder, e.g. `0/CLEVRTEX_full_000000.png`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -18,6 +21,10 @@ use crate::error::{RenderError, Result};
 pub const MANIFEST_FORMAT: &str = "clevrtex-manifest";
 /// Current value of [`Manifest::version`].
 pub const MANIFEST_VERSION: u32 = 1;
+/// The most indices one manifest's range (`end - start`), or the union of a dataset's runs,
+/// may hold: 100 million, a hundred times the largest dataset anyone renders. A file with
+/// more is refused before anything is sized by it.
+pub const MAX_RUN_INDICES: u64 = 100_000_000;
 
 /// One file of the manifest.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -57,6 +64,11 @@ pub struct Manifest {
     pub blender_version: String,
     /// The command line that made the run (rerunning it resumes and repairs).
     pub command: Vec<String>,
+    /// Whether the run got to its end (`false`: only its plan, written before the first
+    /// image; the run was interrupted or is still going). Absent in older manifests, which
+    /// were only written at the end.
+    #[serde(default = "finished_default")]
+    pub finished: bool,
     /// Every file of the run's complete samples, by path relative to the variant folder.
     pub files: BTreeMap<String, FileEntry>,
     /// Seconds one worker spent on each complete sample, by stem: its visibility passes,
@@ -72,9 +84,18 @@ pub fn hash_hex(bytes: &[u8]) -> String {
     format!("{:016x}", clevrtex_materials::content_hash(&[bytes]))
 }
 
-/// The manifest's file name for shard `k` of `n`.
-pub fn file_name(k: u64, n: u64) -> String {
-    format!("MANIFEST-{k}of{n}.json")
+fn finished_default() -> bool {
+    true
+}
+
+/// The manifest's file name for shard `k` of `n` of the indices `start..end`.
+pub fn file_name(start: u64, end: u64, k: u64, n: u64) -> String {
+    format!("MANIFEST-{start}-{end}-{k}of{n}.json")
+}
+
+/// Whether `name` is a manifest's file name (this version's or an older `MANIFEST-<k>of<n>.json`).
+pub fn is_manifest_name(name: &str) -> bool {
+    name.starts_with("MANIFEST-") && name.ends_with(".json")
 }
 
 /// Size and hash of each of `files` (paths relative to `root`), in parallel.
@@ -103,10 +124,20 @@ pub fn hash_files(root: &Path, files: &[String]) -> Result<BTreeMap<String, File
 }
 
 impl Manifest {
-    /// Write to `variant_dir/MANIFEST-<k>of<n>.json` through a temporary file and a rename.
+    /// This manifest's file name ([`file_name`]).
+    pub fn name(&self) -> String {
+        file_name(self.start, self.end, self.shard[0], self.shard[1])
+    }
+
+    /// Write to `variant_dir/`[`Manifest::name`] through a temporary file and a rename.
     pub fn write(&self, variant_dir: &Path) -> Result<PathBuf> {
-        let path = variant_dir.join(file_name(self.shard[0], self.shard[1]));
-        let tmp = path.with_extension(format!("json{}", crate::output::TMP_SUFFIX));
+        let path = variant_dir.join(self.name());
+        let tmp = variant_dir.join(format!(
+            "{}.{}{}",
+            self.name(),
+            crate::tmp::owner_tag(),
+            crate::output::TMP_SUFFIX
+        ));
         let text = serde_json::to_string_pretty(self).expect("manifest serialises") + "\n";
         crate::post::write_file(&tmp, text.as_bytes())?;
         std::fs::rename(&tmp, &path).map_err(|e| {
@@ -116,17 +147,51 @@ impl Manifest {
         Ok(path)
     }
 
-    /// Read a manifest file.
+    /// Read a manifest file: a regular file (a link only within its folder), at most
+    /// [`crate::dataset::MAX_FILE_BYTES`], whose values pass [`Manifest::check`].
     pub fn read(path: &Path) -> std::result::Result<Manifest, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
-        let m: Manifest = serde_json::from_str(&text).map_err(|e| e.to_string())?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let root = crate::dataset::root(dir).map_err(|e| e.to_string())?;
+        let bytes = crate::dataset::read(&root, path, crate::dataset::MAX_FILE_BYTES)?;
+        let m: Manifest = serde_json::from_slice(&bytes).map_err(|e| e.to_string())?;
         if m.format != MANIFEST_FORMAT || m.version != MANIFEST_VERSION {
             return Err(format!(
                 "not a version {MANIFEST_VERSION} clevrtex manifest (format `{}`, version {})",
                 m.format, m.version
             ));
         }
+        m.check()?;
         Ok(m)
+    }
+
+    /// The values that size or steer a reader, checked: `start <= end`, `end - start` at most
+    /// [`MAX_RUN_INDICES`], `shard` `[k, n]` with `0 <= k < n`; the error names the key.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if self.start > self.end {
+            return Err(format!(
+                "key `start` ({}) is after `end` ({})",
+                self.start, self.end
+            ));
+        }
+        if self.end - self.start > MAX_RUN_INDICES {
+            return Err(format!(
+                "keys `start`..`end` ({}..{}) hold more than the {MAX_RUN_INDICES} indices a run may have",
+                self.start, self.end
+            ));
+        }
+        let [k, n] = self.shard;
+        if n == 0 || k >= n {
+            return Err(format!(
+                "key `shard` is [{k}, {n}], not [k, n] with 0 <= k < n"
+            ));
+        }
+        Ok(())
+    }
+
+    /// Whether `index` is one this manifest's run was asked to make.
+    pub fn covers(&self, index: u64) -> bool {
+        let [k, n] = self.shard;
+        (self.start..self.end).contains(&index) && index % n.max(1) == k
     }
 
     /// The indices this manifest's run was asked to make.

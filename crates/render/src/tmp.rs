@@ -82,8 +82,19 @@ pub fn remove_stale() -> usize {
     removed
 }
 
+/// Whether process `pid` of this machine, started at `start` (clock ticks since boot, as in
+/// [`owner_tag`]; 0: unknown), is still running.
+pub fn process_alive(pid: u32, start: u64) -> bool {
+    start_time(pid).is_some_and(|s| start == 0 || s == start)
+}
+
+/// Start time of this process (clock ticks since boot; 0 where unknown).
+pub fn own_start_time() -> u64 {
+    start_time(std::process::id()).unwrap_or(0)
+}
+
 /// This machine's name (`/proc/sys/kernel/hostname`), for owner tags.
-fn hostname() -> String {
+pub fn hostname() -> String {
     std::fs::read_to_string("/proc/sys/kernel/hostname")
         .or_else(|_| std::fs::read_to_string("/etc/hostname"))
         .map(|h| h.trim().to_string())

@@ -1,12 +1,14 @@
-//! `clevrtex verify`: is a dataset (one output folder, or the union of several shards' folders)
-//! complete and intact?
+//! `clevrtex verify`: is a dataset (one output folder, or the union of several shards' or runs'
+//! folders) complete and intact?
 //!
-//! Per variant: every index of the run present exactly once (the run's indices come from the
-//! manifests, else from `0..=max` of what is there), every sample's metadata readable and
-//! naming files that exist, every requested pass a PNG of the right size and layout, mask ids
-//! exactly `0..=N` with every object above the visibility threshold (recounted, and equal to
-//! the metadata), no temporary files, every file's bytes equal to its manifest entry, and the
-//! failure ledger summarised.
+//! Per variant: every index of the runs present exactly once (the union of the manifests'
+//! ranges, every run's plan included, else `0..=max` of what is there), every run finished,
+//! every sample's metadata typed and naming the layout's files, every requested pass a PNG of
+//! the right size and layout, mask ids exactly `0..=N` with every object above the visibility
+//! threshold (recounted, and equal to the metadata), no temporary files, every file's bytes
+//! equal to a manifest entry, and the failure ledger summarised. Files are read through
+//! [`crate::dataset`] (no link out of the dataset, only regular files, capped), and every count
+//! taken from a file is bounded before it sizes anything ([`MAX_RUN_INDICES`]).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -18,12 +20,15 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::Value;
 
-use crate::manifest::{self, FileEntry, Manifest};
+use crate::dataset::{self, Kind};
+use crate::manifest::{self, FileEntry, Manifest, MAX_RUN_INDICES};
 use crate::output::TMP_SUFFIX;
 
 /// One sample found on disk: its files by name, and the folder they are in.
 #[derive(Debug, Clone)]
 struct Found {
+    /// The dataset root it was found under (canonical), which no link may leave.
+    root: PathBuf,
     /// Variant folder the sample is under (`.../clevrtex_<variant>`).
     variant_dir: PathBuf,
     /// The sample's folder.
@@ -43,21 +48,29 @@ pub struct Broken {
     pub dir: PathBuf,
     /// What is wrong, one line each.
     pub problems: Vec<String>,
+    /// Whether a run of the manifests covers the index, so rerunning its command remakes the
+    /// sample: only such samples are removed by `--remove-broken`.
+    pub rerun_remakes: bool,
 }
+
+/// The most missing indices listed one by one (all are counted in `missing_count`).
+pub const MAX_LISTED: usize = 1_000_000;
 
 /// What `verify` found for one variant.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct VariantReport {
     /// Variant name.
     pub variant: String,
-    /// Indices the run was to make (from the manifests, else `0..=max found`).
+    /// Indices the run was to make (the union of the manifests' ranges, else `0..=max found`).
     pub expected: u64,
     /// Where the expected indices came from.
     pub expected_from: String,
     /// Complete, intact samples.
     pub ok: u64,
-    /// Expected indices with no sample.
+    /// Expected indices with no sample (the first [`MAX_LISTED`]).
     pub missing: Vec<u64>,
+    /// How many expected indices have no sample.
+    pub missing_count: u64,
     /// Indices found more than once, with every folder they are in.
     pub duplicates: BTreeMap<u64, Vec<PathBuf>>,
     /// Samples found but broken.
@@ -66,24 +79,30 @@ pub struct VariantReport {
     pub unexpected: Vec<u64>,
     /// Temporary files left by killed runs.
     pub temp_files: Vec<PathBuf>,
+    /// Entries not followed or not read: links leading out of the dataset, FIFOs, devices,
+    /// files over the size cap (one line each, naming the path).
+    pub skipped: Vec<String>,
     /// Manifests read.
     pub manifests: Vec<PathBuf>,
-    /// Problems with the manifests themselves (unreadable, shards that disagree or lack one).
+    /// Problems with the manifests themselves (unreadable, runs that did not finish, shards
+    /// that disagree or lack one).
     pub manifest_problems: Vec<String>,
     /// Entries of the failure ledgers: index -> error.
     pub ledger: BTreeMap<u64, String>,
-    /// Commands that made the run (from the manifests), to rerun after repair.
+    /// Commands to rerun after repair: those of the runs (from the manifests) whose indices
+    /// are missing or broken or that did not finish, with `--out` set to the folder verified.
     pub commands: Vec<Vec<String>>,
 }
 
 impl VariantReport {
     /// Whether the variant is whole: every expected index once, intact, no temporary files,
-    /// no manifest problems.
+    /// nothing skipped, no manifest problems (every planned run finished).
     pub fn is_whole(&self) -> bool {
-        self.missing.is_empty()
+        self.missing_count == 0
             && self.duplicates.is_empty()
             && self.broken.is_empty()
             && self.temp_files.is_empty()
+            && self.skipped.is_empty()
             && self.manifest_problems.is_empty()
     }
 }
@@ -95,33 +114,70 @@ pub struct VerifyOptions {
     pub variant: Option<String>,
 }
 
-/// Manifest entries by (variant folder, stem): file name -> entry.
-type Entries = BTreeMap<(PathBuf, String), BTreeMap<String, FileEntry>>;
+/// A manifest read: its path, its contents and the folder its run's rerun writes into.
+type ReadManifest = (PathBuf, Manifest, PathBuf);
 
-/// Every `clevrtex_<variant>` folder under `roots` (a root may itself be one).
-fn variant_dirs(roots: &[PathBuf]) -> BTreeMap<String, Vec<PathBuf>> {
-    let mut out: BTreeMap<String, Vec<PathBuf>> = BTreeMap::new();
-    for root in roots {
+/// Manifest entries by (variant folder, stem): file name -> the entries of every finished
+/// manifest that lists it (a later run with `--overwrite` may have changed the bytes).
+type Entries = BTreeMap<(PathBuf, String), BTreeMap<String, Vec<FileEntry>>>;
+
+/// A variant folder to check: the root it was found under (as given, and canonical) and
+/// the folder itself.
+#[derive(Debug, Clone)]
+struct VariantDir {
+    given_root: PathBuf,
+    root: PathBuf,
+    dir: PathBuf,
+}
+
+/// Variant folders by variant, and what was not followed by variant.
+type VariantDirs = (
+    BTreeMap<String, Vec<VariantDir>>,
+    BTreeMap<String, Vec<String>>,
+);
+
+/// Every `clevrtex_<variant>` folder under `roots` (a root may itself be one); entries named
+/// like one but not followed go to the second map.
+fn variant_dirs(roots: &[PathBuf]) -> Result<VariantDirs, String> {
+    let mut out: BTreeMap<String, Vec<VariantDir>> = BTreeMap::new();
+    let mut skipped: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for given in roots {
+        let root = dataset::root(given)
+            .map_err(|e| format!("`{}` cannot be read: {e}", given.display()))?;
         let name = root
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
         if let Some(v) = name.strip_prefix("clevrtex_") {
-            out.entry(v.to_string()).or_default().push(root.clone());
+            out.entry(v.to_string()).or_default().push(VariantDir {
+                given_root: given.parent().unwrap_or(Path::new(".")).to_path_buf(),
+                root: root.clone(),
+                dir: given.clone(),
+            });
             continue;
         }
-        if let Ok(entries) = std::fs::read_dir(root) {
-            let mut dirs: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
-            dirs.sort();
-            for d in dirs.into_iter().filter(|d| d.is_dir()) {
-                let name = d.file_name().unwrap().to_string_lossy().into_owned();
-                if let Some(v) = name.strip_prefix("clevrtex_") {
-                    out.entry(v.to_string()).or_default().push(d);
-                }
+        let Ok(entries) = dataset::list(&root, given) else {
+            continue;
+        };
+        for (name, d, kind) in entries {
+            let Some(v) = name.strip_prefix("clevrtex_") else {
+                continue;
+            };
+            match kind {
+                Kind::Dir => out.entry(v.to_string()).or_default().push(VariantDir {
+                    given_root: given.clone(),
+                    root: root.clone(),
+                    dir: d,
+                }),
+                Kind::Skipped(why) => skipped
+                    .entry(v.to_string())
+                    .or_default()
+                    .push(format!("`{}` {why}", d.display())),
+                Kind::File => {}
             }
         }
     }
-    out
+    Ok((out, skipped))
 }
 
 /// Verify the dataset under `roots`. Errors only for unreadable roots.
@@ -131,174 +187,334 @@ pub fn verify(roots: &[PathBuf], opts: &VerifyOptions) -> Result<Vec<VariantRepo
             return Err(format!("`{}` is not a folder", r.display()));
         }
     }
+    let (dirs, mut skipped) = variant_dirs(roots)?;
+    let mut names: BTreeSet<String> = dirs.keys().cloned().collect();
+    names.extend(skipped.keys().cloned());
     let mut reports = Vec::new();
-    for (variant, dirs) in variant_dirs(roots) {
+    for variant in names {
         if opts.variant.as_ref().is_some_and(|v| *v != variant) {
             continue;
         }
-        reports.push(verify_variant(&variant, &dirs));
+        let mut rep = verify_variant(&variant, dirs.get(&variant).map_or(&[], Vec::as_slice));
+        rep.skipped
+            .splice(0..0, skipped.remove(&variant).unwrap_or_default());
+        reports.push(rep);
     }
     Ok(reports)
 }
 
-fn verify_variant(variant: &str, dirs: &[PathBuf]) -> VariantReport {
+/// Merge ranges into sorted, disjoint ones.
+fn merge(mut ranges: Vec<(u64, u64)>) -> Vec<(u64, u64)> {
+    ranges.retain(|(a, b)| a < b);
+    ranges.sort();
+    let mut out: Vec<(u64, u64)> = Vec::new();
+    for (a, b) in ranges {
+        match out.last_mut() {
+            Some(last) if a <= last.1 => last.1 = last.1.max(b),
+            _ => out.push((a, b)),
+        }
+    }
+    out
+}
+
+/// Whether `i` is in one of the sorted, disjoint `ranges`.
+fn in_ranges(ranges: &[(u64, u64)], i: u64) -> bool {
+    let k = ranges.partition_point(|&(_, b)| b <= i);
+    ranges.get(k).is_some_and(|&(a, b)| a <= i && i < b)
+}
+
+/// `command` with the value of its `--out` replaced by `out` (the folder that was verified,
+/// wherever the run wrote it first).
+fn with_out(command: &[String], out: &Path) -> Vec<String> {
+    let out = out.display().to_string();
+    let mut v = Vec::with_capacity(command.len());
+    let mut it = command.iter();
+    let mut replaced = false;
+    while let Some(a) = it.next() {
+        if a == "--out" {
+            v.push(a.clone());
+            if it.next().is_some() {
+                v.push(out.clone());
+                replaced = true;
+            }
+        } else if a.starts_with("--out=") {
+            v.push(format!("--out={out}"));
+            replaced = true;
+        } else {
+            v.push(a.clone());
+        }
+    }
+    if !replaced {
+        v.push("--out".into());
+        v.push(out);
+    }
+    v
+}
+
+fn verify_variant(variant: &str, dirs: &[VariantDir]) -> VariantReport {
     let mut rep = VariantReport {
         variant: variant.to_string(),
         ..VariantReport::default()
     };
     // Samples by index, every place they are found.
     let mut found: BTreeMap<u64, Vec<(String, Found)>> = BTreeMap::new();
-    let mut manifests = Vec::new();
-    for vdir in dirs {
-        let Ok(entries) = std::fs::read_dir(vdir) else {
-            continue;
+    // Manifests, with the folder their run's rerun writes into.
+    let mut manifests: Vec<ReadManifest> = Vec::new();
+    for vd in dirs {
+        let entries = match dataset::list(&vd.root, &vd.dir) {
+            Ok(e) => e,
+            Err(e) => {
+                rep.skipped
+                    .push(format!("`{}` cannot be read: {e}", vd.dir.display()));
+                continue;
+            }
         };
-        let mut entries: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
-        entries.sort();
-        for p in entries {
-            let name = p.file_name().unwrap().to_string_lossy().into_owned();
-            if p.is_dir() {
-                scan_sample_dir(vdir, &p, &mut found, &mut rep.temp_files);
-            } else if name.starts_with("MANIFEST-") && name.ends_with(".json") {
-                match Manifest::read(&p) {
-                    Ok(m) => manifests.push((p.clone(), m)),
-                    Err(e) => rep
-                        .manifest_problems
-                        .push(format!("`{}` cannot be read: {e}", p.display())),
-                }
-                rep.manifests.push(p);
-            } else if name == "failures.jsonl" {
-                read_ledger(&p, &mut rep.ledger);
-            } else if name.ends_with(TMP_SUFFIX) {
+        for (name, p, kind) in entries {
+            if name.ends_with(TMP_SUFFIX) {
                 rep.temp_files.push(p);
+                continue;
+            }
+            match kind {
+                Kind::Skipped(why) => rep.skipped.push(format!("`{}` {why}", p.display())),
+                Kind::Dir => scan_sample_dir(vd, &p, &mut found, &mut rep),
+                Kind::File if manifest::is_manifest_name(&name) => {
+                    match Manifest::read(&p) {
+                        Ok(m) => manifests.push((p.clone(), m, vd.given_root.clone())),
+                        Err(e) => rep
+                            .manifest_problems
+                            .push(format!("`{}` cannot be read: {e}", p.display())),
+                    }
+                    rep.manifests.push(p);
+                }
+                Kind::File if name == "failures.jsonl" => {
+                    read_ledger(&vd.root, &p, &mut rep.ledger, &mut rep.skipped)
+                }
+                Kind::File => {}
             }
         }
     }
 
-    // The expected indices, and the manifest entry of each file.
-    let mut expected: BTreeSet<u64> = BTreeSet::new();
-    // Manifest entries by (variant folder, stem): file name -> entry.
+    // The expected indices (the union of the runs' ranges), and the manifest entry of each
+    // file. A run is the manifests of one range and shard count; its shards together make
+    // `start..end`, and a shard without a manifest still belongs to the run.
     let mut entries: Entries = BTreeMap::new();
+    let mut ranges = Vec::new();
+    // Finished shards by run (start, end, n).
+    let mut finished: BTreeMap<(u64, u64, u64), BTreeSet<u64>> = BTreeMap::new();
     if manifests.is_empty() {
-        if let Some((&max, _)) = found.last_key_value() {
-            expected.extend(0..=max);
+        if let Some((&max, places)) = found.last_key_value() {
+            if max >= MAX_RUN_INDICES {
+                rep.manifest_problems.push(format!(
+                    "no manifest, and the largest index found, {max} (`{}`), is over the {MAX_RUN_INDICES} indices a run may have: which indices the run made is unknown\nhint: remove files that are not the dataset's, or verify the folder of a run that wrote its manifest",
+                    places[0].1.dir.join(&places[0].0).display()
+                ));
+            }
+            ranges.push((0, max.saturating_add(1)));
         }
         rep.expected_from = "no manifest: indices 0 to the largest found".into();
     } else {
-        let first = &manifests[0].1;
-        let (start, end, n) = (first.start, first.end, first.shard[1]);
-        let mut shards = BTreeSet::new();
-        for (path, m) in &manifests {
-            if (m.start, m.end, m.shard[1], m.seed, &m.config_hash)
-                != (start, end, n, first.seed, &first.config_hash)
-            {
-                rep.manifest_problems.push(format!(
-                    "`{}` is from another run (indices {}..{}, {} shards, seed {}) than `{}` ({start}..{end}, {n} shards, seed {})",
-                    path.display(), m.start, m.end, m.shard[1], m.seed, manifests[0].0.display(), first.seed
-                ));
-            }
-            shards.insert(m.shard[0]);
-            expected.extend(m.indices());
-            let vdir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-            for (rel, e) in &m.files {
-                let name = rel.rsplit('/').next().unwrap_or(rel);
-                if let Some((stem, _)) = stem_of(name) {
-                    entries
-                        .entry((vdir.clone(), stem.to_string()))
-                        .or_default()
-                        .insert(name.to_string(), e.clone());
+        let mut runs: BTreeMap<(u64, u64, u64), Vec<&ReadManifest>> = BTreeMap::new();
+        for entry in &manifests {
+            let m = &entry.1;
+            runs.entry((m.start, m.end, m.shard[1]))
+                .or_default()
+                .push(entry);
+        }
+        for ((start, end, n), list) in &runs {
+            let first = &list[0].1;
+            let mut shards = BTreeSet::new();
+            for (path, m, _) in list {
+                if (m.seed, &m.config_hash) != (first.seed, &first.config_hash) {
+                    rep.manifest_problems.push(format!(
+                        "`{}` (seed {}) and `{}` (seed {}) are shards of indices {start}..{end} made with other seeds or configs",
+                        path.display(), m.seed, list[0].0.display(), first.seed
+                    ));
+                }
+                shards.insert(m.shard[0]);
+                if !m.finished {
+                    rep.manifest_problems.push(format!(
+                        "`{}`: the run of indices {start}..{end} (shard {}/{n}) did not finish: it was interrupted, preempted or is still running (its plan was written, its end was not)",
+                        path.display(),
+                        m.shard[0]
+                    ));
+                    continue;
+                }
+                finished
+                    .entry((*start, *end, *n))
+                    .or_default()
+                    .insert(m.shard[0]);
+                let vdir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+                for (rel, e) in &m.files {
+                    let name = rel.rsplit('/').next().unwrap_or(rel);
+                    if let Some((stem, _)) = stem_of(name) {
+                        entries
+                            .entry((vdir.clone(), stem.to_string()))
+                            .or_default()
+                            .entry(name.to_string())
+                            .or_default()
+                            .push(e.clone());
+                    }
                 }
             }
-            if !rep.commands.contains(&m.command) {
-                rep.commands.push(m.command.clone());
+            let absent: Vec<String> = (0..(*n).min(1000))
+                .filter(|k| !shards.contains(k))
+                .map(|k| format!("{k}/{n}"))
+                .collect();
+            if !absent.is_empty() {
+                rep.manifest_problems.push(format!(
+                    "no manifest for shard(s) {} of the run of indices {start}..{end}: they did not start (or their folders were not given)",
+                    absent.join(", ")
+                ));
             }
+            ranges.push((*start, *end));
         }
-        let absent: Vec<String> = (0..n)
-            .filter(|k| !shards.contains(k))
-            .map(|k| format!("{k}/{n}"))
-            .collect();
-        if !absent.is_empty() {
-            rep.manifest_problems.push(format!(
-                "no manifest for shard(s) {} of the run: they did not finish (or their folders were not given)",
-                absent.join(", ")
-            ));
-            // Their indices are still part of the run.
-            expected.extend(start..end);
-        }
-        rep.expected_from = format!(
-            "{} manifest(s): indices {start}..{end} in {n} shard(s), seed {}",
-            manifests.len(),
-            first.seed
-        );
+        let n_runs = runs.len();
+        rep.expected_from = if n_runs == 1 {
+            let ((start, end, n), list) = runs.iter().next().expect("one run");
+            format!(
+                "{} manifest(s): indices {start}..{end} in {n} shard(s), seed {}",
+                manifests.len(),
+                list[0].1.seed
+            )
+        } else {
+            let parts: Vec<String> = runs
+                .keys()
+                .map(|(s, e, n)| format!("{s}..{e} in {n} shard(s)"))
+                .collect();
+            format!(
+                "{} manifest(s) of {n_runs} runs: indices {}",
+                manifests.len(),
+                parts.join(", ")
+            )
+        };
     }
-    rep.expected = expected.len() as u64;
-    rep.missing = expected
-        .iter()
-        .filter(|i| !found.contains_key(i))
-        .copied()
-        .collect();
+    let ranges = merge(ranges);
+    rep.expected = ranges.iter().map(|(a, b)| b - a).sum();
+    if !manifests.is_empty() && rep.expected > MAX_RUN_INDICES {
+        rep.manifest_problems.push(format!(
+            "the manifests' runs hold {} indices, over the {MAX_RUN_INDICES} a dataset may have",
+            rep.expected
+        ));
+    }
+    // Missing: the gaps between the samples found, per range, counted without listing every
+    // index (a range may be large).
+    for &(a, b) in &ranges {
+        let mut next = a;
+        let keys = found.range(a..b).map(|(i, _)| *i).chain(std::iter::once(b));
+        for i in keys {
+            if i > next {
+                rep.missing_count += i - next;
+                let room = MAX_LISTED.saturating_sub(rep.missing.len()) as u64;
+                rep.missing.extend(next..next + (i - next).min(room));
+            }
+            next = i.saturating_add(1);
+        }
+    }
     rep.unexpected = found
         .keys()
-        .filter(|i| !expected.contains(i))
+        .filter(|&&i| !in_ranges(&ranges, i))
         .copied()
         .collect();
+    let covered_by_finished = |i: u64| {
+        finished
+            .iter()
+            .any(|((s, e, n), ks)| (*s..*e).contains(&i) && ks.contains(&(i % n)))
+    };
     let mut singles = Vec::new();
     for (index, places) in &found {
         if places.len() > 1 {
             rep.duplicates
                 .insert(*index, places.iter().map(|(_, f)| f.dir.clone()).collect());
         } else {
-            singles.push((*index, places[0].clone()));
+            singles.push((*index, places[0].clone(), covered_by_finished(*index)));
         }
     }
     let checked: Vec<Result<(), Broken>> = singles
         .par_iter()
-        .map(|(index, (stem, f))| check_sample(*index, stem, f, &entries))
+        .map(|(index, (stem, f), listed)| check_sample(*index, stem, f, &entries, *listed))
         .collect();
     for c in checked {
         match c {
             Ok(()) => rep.ok += 1,
-            Err(b) => rep.broken.push(b),
+            Err(mut b) => {
+                b.rerun_remakes = manifests.iter().any(|(_, m, _)| m.covers(b.index));
+                rep.broken.push(b)
+            }
         }
     }
+    // The commands to rerun: those of runs with something to remake, `--out` the folder
+    // verified (not where the run first wrote).
+    // By range, not shard: the command of a shard whose sibling left no manifest is the
+    // nearest one to adapt (`--shard`).
+    let needs = |m: &Manifest| {
+        let within = |i: u64| (m.start..m.end).contains(&i);
+        !m.finished
+            || rep.missing.iter().any(|&i| within(i))
+            || rep.broken.iter().any(|b| within(b.index))
+            || (rep.missing_count as usize > rep.missing.len())
+    };
+    let mut commands: Vec<Vec<String>> = Vec::new();
+    for (_, m, out) in &manifests {
+        if !needs(m) {
+            continue;
+        }
+        let c = with_out(&m.command, out);
+        if !commands.contains(&c) {
+            commands.push(c);
+        }
+    }
+    rep.commands = commands;
     rep
 }
 
 /// Collect the samples and temporary files of one `<index / 1000>` folder.
 fn scan_sample_dir(
-    vdir: &Path,
+    vd: &VariantDir,
     dir: &Path,
     found: &mut BTreeMap<u64, Vec<(String, Found)>>,
-    temps: &mut Vec<PathBuf>,
+    rep: &mut VariantReport,
 ) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
+    let entries = match dataset::list(&vd.root, dir) {
+        Ok(e) => e,
+        Err(e) => {
+            rep.skipped
+                .push(format!("`{}` cannot be read: {e}", dir.display()));
+            return;
+        }
     };
     let mut by_stem: BTreeMap<String, (u64, BTreeSet<String>)> = BTreeMap::new();
-    let mut names: Vec<String> = entries
-        .flatten()
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    for name in names {
+    for (name, p, kind) in entries {
         if name.ends_with(TMP_SUFFIX) || (name.starts_with('.') && name.contains(".tmp")) {
-            temps.push(dir.join(&name));
+            rep.temp_files.push(p);
             continue;
         }
-        let stem = stem_of(&name);
-        if let Some((stem, index)) = stem {
-            by_stem
-                .entry(stem.to_string())
-                .or_insert((index, BTreeSet::new()))
-                .1
-                .insert(name.clone());
+        let Some((stem, index)) = stem_of(&name) else {
+            continue;
+        };
+        match kind {
+            Kind::File => {}
+            Kind::Skipped(why) => {
+                rep.skipped.push(format!("`{}` {why}", p.display()));
+                continue;
+            }
+            Kind::Dir => {
+                rep.skipped
+                    .push(format!("`{}` is a folder named like a file", p.display()));
+                continue;
+            }
         }
+        by_stem
+            .entry(stem.to_string())
+            .or_insert((index, BTreeSet::new()))
+            .1
+            .insert(name.clone());
     }
     for (stem, (index, files)) in by_stem {
         found.entry(index).or_default().push((
             stem,
             Found {
-                variant_dir: vdir.to_path_buf(),
+                root: vd.root.clone(),
+                variant_dir: vd.dir.clone(),
                 dir: dir.to_path_buf(),
                 files,
             },
@@ -321,19 +537,32 @@ fn stem_of(name: &str) -> Option<(&str, u64)> {
         .map(|(stem, _, index)| (stem, index))
 }
 
-fn read_ledger(path: &Path, out: &mut BTreeMap<u64, String>) {
-    if let Ok(text) = std::fs::read_to_string(path) {
-        for line in text.lines() {
-            if let Ok(v) = serde_json::from_str::<Value>(line) {
-                if let Some(i) = v["index"].as_u64() {
-                    let err = v["error"]
-                        .as_str()
-                        .unwrap_or("")
-                        .lines()
-                        .next()
-                        .unwrap_or("");
-                    out.insert(i, err.to_string());
-                }
+/// The largest failure ledger read (one line per failed image).
+const MAX_LEDGER_BYTES: u64 = 256 << 20;
+
+fn read_ledger(
+    root: &Path,
+    path: &Path,
+    out: &mut BTreeMap<u64, String>,
+    skipped: &mut Vec<String>,
+) {
+    let bytes = match dataset::read(root, path, MAX_LEDGER_BYTES) {
+        Ok(b) => b,
+        Err(why) => {
+            skipped.push(format!("`{}` {why}", path.display()));
+            return;
+        }
+    };
+    for line in String::from_utf8_lossy(&bytes).lines() {
+        if let Ok(v) = serde_json::from_str::<Value>(line) {
+            if let Some(i) = v["index"].as_u64() {
+                let err = v["error"]
+                    .as_str()
+                    .unwrap_or("")
+                    .lines()
+                    .next()
+                    .unwrap_or("");
+                out.insert(i, err.chars().take(500).collect());
             }
         }
     }
@@ -350,8 +579,38 @@ fn png_layout(kind: PngKind) -> (u8, usize, bool) {
     }
 }
 
-/// Check one sample; `Err` lists every problem found.
-fn check_sample(index: u64, stem: &str, f: &Found, entries: &Entries) -> Result<(), Broken> {
+/// Width and height from a PNG's header, when `bytes` starts like a PNG.
+fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
+    if bytes.len() < 24 || &bytes[..8] != b"\x89PNG\r\n\x1a\n" || &bytes[12..16] != b"IHDR" {
+        return None;
+    }
+    let w = u32::from_be_bytes(bytes[16..20].try_into().ok()?);
+    let h = u32::from_be_bytes(bytes[20..24].try_into().ok()?);
+    Some((w, h))
+}
+
+/// A whole number from the metadata at `key` (dotted), within `lo..=hi`; `Err` names the key
+/// and what was found.
+fn meta_int(meta: &Value, file: &str, key: &str, lo: u64, hi: u64) -> Result<u64, String> {
+    let v = key.split('.').fold(meta, |v, k| &v[k]);
+    match v.as_u64() {
+        Some(n) if (lo..=hi).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "metadata `{file}` key `{key}` is {v}, not a whole number from {lo} to {hi}"
+        )),
+    }
+}
+
+/// Check one sample; `Err` lists every problem found. `listed`: a finished manifest covers
+/// the index, so every file must be in one.
+fn check_sample(
+    index: u64,
+    stem: &str,
+    f: &Found,
+    entries: &Entries,
+    listed_run: bool,
+) -> Result<(), Broken> {
+    use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
     let mut problems = Vec::new();
     let variant_from_stem = layout::parse_stem(&format!("{stem}.json"), ".json")
         .map(|(_, v, _)| v.to_string())
@@ -372,26 +631,30 @@ fn check_sample(index: u64, stem: &str, f: &Found, entries: &Entries) -> Result<
     let listed = entries.get(&(f.variant_dir.clone(), stem.to_string()));
     let mut bytes_of: BTreeMap<String, Vec<u8>> = BTreeMap::new();
     for name in &f.files {
-        match std::fs::read(f.dir.join(name)) {
+        match dataset::read(&f.root, &f.dir.join(name), dataset::MAX_FILE_BYTES) {
             Ok(b) => {
                 match listed.and_then(|l| l.get(name)) {
-                    Some(e) if e.size != b.len() as u64 || e.xxh3 != manifest::hash_hex(&b) => {
+                    Some(es)
+                        if !es
+                            .iter()
+                            .any(|e| e.size == b.len() as u64 && e.xxh3 == manifest::hash_hex(&b)) =>
+                    {
                         problems.push(format!(
                             "`{name}` differs from the manifest ({} bytes, xxh3 {}; manifest: {} bytes, xxh3 {})",
                             b.len(),
                             manifest::hash_hex(&b),
-                            e.size,
-                            e.xxh3
+                            es[0].size,
+                            es[0].xxh3
                         ))
                     }
-                    None if !entries.is_empty() => {
+                    None if listed_run => {
                         problems.push(format!("`{name}` is not in any manifest"))
                     }
                     _ => {}
                 }
                 bytes_of.insert(name.clone(), b);
             }
-            Err(e) => problems.push(format!("`{name}` cannot be read: {e}")),
+            Err(why) => problems.push(format!("`{name}` {why}")),
         }
     }
     for name in listed.into_iter().flat_map(|l| l.keys()) {
@@ -404,22 +667,75 @@ fn check_sample(index: u64, stem: &str, f: &Found, entries: &Entries) -> Result<
         return Err(broken(index, stem, f, problems));
     };
     let meta: Value = match serde_json::from_slice(meta_bytes) {
-        Ok(v) => v,
+        Ok(v @ Value::Object(_)) => v,
+        Ok(_) => {
+            problems.push(format!("metadata `{meta_name}` is not a JSON object"));
+            return Err(broken(index, stem, f, problems));
+        }
         Err(e) => {
             problems.push(format!("metadata `{meta_name}` does not parse: {e}"));
             return Err(broken(index, stem, f, problems));
         }
     };
-    let (w, h) = (
-        meta["render"]["width"].as_u64().unwrap_or(0) as u32,
-        meta["render"]["height"].as_u64().unwrap_or(0) as u32,
-    );
-    let n = meta["num_objects"].as_u64().unwrap_or(0) as usize;
-    let threshold = meta["visibility_threshold_px"].as_u64().unwrap_or(0);
+    // Every value that sizes or indexes something below, typed first.
+    // (width, height, objects, visibility threshold, each object's `visible_pixels`)
+    type Typed = (u32, u32, usize, u64, Vec<Option<u64>>);
+    let typed = (|| -> Result<Typed, String> {
+        let side = u64::from(MAX_IMAGE_SIDE);
+        let w = meta_int(&meta, &meta_name, "render.width", 1, side)? as u32;
+        let h = meta_int(&meta, &meta_name, "render.height", 1, side)? as u32;
+        let n = meta_int(&meta, &meta_name, "num_objects", 0, 255)? as usize;
+        let threshold = match meta.get("visibility_threshold_px") {
+            None => 0,
+            Some(_) => meta_int(
+                &meta,
+                &meta_name,
+                "visibility_threshold_px",
+                0,
+                u64::from(w) * u64::from(h),
+            )?,
+        };
+        let Some(objects) = meta["objects"].as_array() else {
+            return Err(format!(
+                "metadata `{meta_name}` key `objects` is {}, not a list",
+                short(&meta["objects"])
+            ));
+        };
+        if objects.len() != n {
+            return Err(format!(
+                "metadata `{meta_name}` key `objects` has {} entries but `num_objects` is {n}",
+                objects.len()
+            ));
+        }
+        let mut pixels = Vec::with_capacity(n);
+        for (i, o) in objects.iter().enumerate() {
+            pixels.push(match o.get("visible_pixels") {
+                None => None,
+                Some(v) => match v.as_u64() {
+                    Some(p) if p <= u64::from(w) * u64::from(h) => Some(p),
+                    _ => {
+                        return Err(format!(
+                            "metadata `{meta_name}` key `objects[{i}].visible_pixels` is {}, not a whole number from 0 to the image's {} pixels",
+                            short(v),
+                            u64::from(w) * u64::from(h)
+                        ))
+                    }
+                },
+            });
+        }
+        Ok((w, h, n, threshold, pixels))
+    })();
+    let (w, h, n, threshold, visible) = match typed {
+        Ok(t) => t,
+        Err(e) => {
+            problems.push(e);
+            return Err(broken(index, stem, f, problems));
+        }
+    };
     if meta["image_index"].as_u64() != Some(index) {
         problems.push(format!(
             "metadata `image_index` is {} (the file name says {index})",
-            meta["image_index"]
+            short(&meta["image_index"])
         ));
     }
     let passes: Vec<Pass> = meta["passes"]
@@ -438,13 +754,20 @@ fn check_sample(index: u64, stem: &str, f: &Found, entries: &Entries) -> Result<
         if meta[&key].as_str() != Some(name.as_str()) {
             problems.push(format!(
                 "metadata `{key}` is {} (expected \"{name}\")",
-                meta[&key]
+                short(&meta[&key])
             ));
         }
         let Some(bytes) = bytes_of.get(&name) else {
             problems.push(format!("`{name}` is missing"));
             continue;
         };
+        // The header's size before decoding: a PNG claiming a huge size is never allocated.
+        if let Some((pw, ph)) = png_size(bytes) {
+            if (pw, ph) != (w, h) {
+                problems.push(format!("`{name}` is {pw}x{ph} (the metadata says {w}x{h})"));
+                continue;
+            }
+        }
         let png = match crate::post::decode_png_bytes(bytes, &f.dir.join(&name)) {
             Ok(p) => p,
             Err(crate::RenderError::BadOutput { problem, .. }) => {
@@ -487,8 +810,8 @@ fn check_sample(index: u64, stem: &str, f: &Found, entries: &Entries) -> Result<
                     "mask has id {bad} but the metadata has {n} objects"
                 ));
             }
-            for i in 1..=n.min(255) {
-                let listed = meta["objects"][i - 1]["visible_pixels"].as_u64();
+            for i in 1..=n {
+                let listed = visible[i - 1];
                 if counts[i] <= threshold {
                     problems.push(format!(
                         "object {i} has {} visible pixels, at or under the threshold {threshold}",
@@ -511,43 +834,112 @@ fn check_sample(index: u64, stem: &str, f: &Found, entries: &Entries) -> Result<
     }
 }
 
+/// A metadata value for a message: its JSON, cut at 80 characters.
+fn short(v: &Value) -> String {
+    let t = v.to_string();
+    if t.chars().count() > 80 {
+        format!("{}...", t.chars().take(80).collect::<String>())
+    } else {
+        t
+    }
+}
+
 fn broken(index: u64, stem: &str, f: &Found, problems: Vec<String>) -> Broken {
     Broken {
         index,
         stem: stem.to_string(),
         dir: f.dir.clone(),
         problems,
+        rerun_remakes: false,
     }
 }
 
-/// Remove every file of each broken sample (metadata first, so an interrupted removal still
-/// leaves the sample incomplete) and the temporary files, so that rerunning the run's
-/// `generate` command remakes exactly them. Returns the number of files removed.
-pub fn remove_broken(report: &VariantReport) -> std::io::Result<usize> {
-    let mut removed = 0;
+/// What [`remove_broken`] did.
+#[derive(Debug, Clone, Default)]
+pub struct Removal {
+    /// Files removed.
+    pub files: usize,
+    /// Broken samples kept because no run of the manifests covers them (no known command
+    /// remakes them).
+    pub kept: Vec<u64>,
+}
+
+/// Remove the files of each broken sample that a rerun of a manifest's run remakes
+/// ([`Broken::rerun_remakes`]; metadata first, so an interrupted removal still leaves the
+/// sample incomplete), and the temporary files of dead writers. Only names of the layout
+/// (every pass, the metadata, the EXRs) are removed, in the sample's folder found inside the
+/// dataset, and a link is removed as a link (its target is never touched). Duplicates are only
+/// reported.
+pub fn remove_broken(report: &VariantReport) -> std::io::Result<Removal> {
+    let mut out = Removal::default();
     for b in &report.broken {
-        let meta = b.dir.join(layout::metadata_file(&b.stem));
-        if meta.exists() {
-            std::fs::remove_file(&meta)?;
-            removed += 1;
+        if !b.rerun_remakes {
+            out.kept.push(b.index);
+            continue;
         }
-        if let Ok(entries) = std::fs::read_dir(&b.dir) {
-            for e in entries.flatten() {
-                let name = e.file_name().to_string_lossy().into_owned();
-                let of_stem = name
-                    .strip_prefix(b.stem.as_str())
-                    .is_some_and(|rest| rest.starts_with('_') || rest.starts_with('.'));
-                if of_stem {
-                    std::fs::remove_file(e.path())?;
-                    removed += 1;
+        let mut names = vec![layout::metadata_file(&b.stem)];
+        names.extend(crate::output::expected_files(&b.stem, &Pass::ALL, true));
+        names.extend(layout::legacy_exr_files(&b.stem));
+        names.dedup();
+        for name in names {
+            let p = b.dir.join(&name);
+            match std::fs::symlink_metadata(&p) {
+                Ok(m) if !m.is_dir() => {
+                    std::fs::remove_file(&p)?;
+                    out.files += 1;
                 }
+                _ => {}
             }
         }
     }
     for t in &report.temp_files {
-        if std::fs::remove_file(t).is_ok() {
-            removed += 1;
+        let name = t
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        // A live writer's temporary (another shard writing now) is not stray.
+        let live = name
+            .strip_suffix(TMP_SUFFIX)
+            .is_some_and(|stem| !crate::tmp::tagged_name_is_stale(stem));
+        if live {
+            continue;
+        }
+        if std::fs::symlink_metadata(t).is_ok_and(|m| !m.is_dir())
+            && std::fs::remove_file(t).is_ok()
+        {
+            out.files += 1;
         }
     }
-    Ok(removed)
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_merge_and_hold() {
+        let r = merge(vec![(4, 8), (0, 4), (10, 12), (11, 11)]);
+        assert_eq!(r, [(0, 8), (10, 12)]);
+        assert!(in_ranges(&r, 0) && in_ranges(&r, 7) && in_ranges(&r, 11));
+        assert!(!in_ranges(&r, 8) && !in_ranges(&r, 12) && !in_ranges(&r, u64::MAX));
+    }
+
+    #[test]
+    fn the_rerun_writes_where_verify_looked() {
+        let c: Vec<String> = ["clevrtex", "generate", "--out", "/old", "-n", "4"]
+            .map(String::from)
+            .to_vec();
+        assert_eq!(
+            with_out(&c, Path::new("/new")),
+            ["clevrtex", "generate", "--out", "/new", "-n", "4"]
+        );
+        let c: Vec<String> = ["clevrtex", "generate", "--out=/old"]
+            .map(String::from)
+            .to_vec();
+        assert_eq!(
+            with_out(&c, Path::new("/new")),
+            ["clevrtex", "generate", "--out=/new"]
+        );
+    }
 }

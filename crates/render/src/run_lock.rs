@@ -1,0 +1,303 @@
+//! One writer per range: a `generate` run holds a lock on the indices it makes, so a second
+//! run whose indices overlap (the same command started twice, or `--start`/`-n` ranges that
+//! meet) refuses to start instead of writing the same samples at the same time.
+//!
+//! `OUT/clevrtex_<variant>/.clevrtex-run-<start>-<end>-<k>of<n>.lock`, JSON: the holder's
+//! `host`, `pid` and `pid_start` (its start time, so a new process with the same pid is not
+//! taken for it), the range, the shard and the command. Locks are taken and checked under an
+//! exclusive `flock` of `.clevrtex-runs.lock` in the same folder (kept), so two runs starting at once
+//! cannot both pass. A lock is stale, and ignored (then replaced), when its holder is gone:
+//! on this host, when no process with its pid and start time runs; on another host (a cluster
+//! node, a pod), when its file was not touched for [`STALE_AFTER`] (the holder touches it every
+//! [`HEARTBEAT`]). The lock is removed when the run ends (also on Ctrl-C or an error).
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::{Duration, SystemTime};
+
+use serde::{Deserialize, Serialize};
+
+/// How often a holder touches its lock file.
+pub const HEARTBEAT: Duration = Duration::from_secs(20);
+/// A lock of another host not touched for this long is stale.
+pub const STALE_AFTER: Duration = Duration::from_secs(120);
+/// The file whose `flock` guards checking and taking locks (kept, like the ledger's).
+pub const GUARD: &str = ".clevrtex-runs.lock";
+/// Prefix of lock files.
+const PREFIX: &str = ".clevrtex-run-";
+/// The largest lock file read (a lock is a few hundred bytes).
+const MAX_LOCK_BYTES: u64 = 64 * 1024;
+
+/// What a lock file holds.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Holder {
+    /// Host name of the holder ([`crate::tmp::hostname`]).
+    pub host: String,
+    /// Its process id.
+    pub pid: u32,
+    /// Its start time (clock ticks since boot; 0: unknown).
+    pub pid_start: u64,
+    /// First index of its range.
+    pub start: u64,
+    /// One past its last index.
+    pub end: u64,
+    /// Its shard `[k, n]`.
+    pub shard: [u64; 2],
+    /// Its command line.
+    pub command: Vec<String>,
+}
+
+/// A held lock; dropping it removes the lock file.
+#[derive(Debug)]
+pub struct RunLock {
+    path: PathBuf,
+    stop: Option<mpsc::Sender<()>>,
+    beat: Option<std::thread::JoinHandle<()>>,
+}
+
+/// File name of the lock of a range and shard.
+pub fn file_name(start: u64, end: u64, k: u64, n: u64) -> String {
+    format!("{PREFIX}{start}-{end}-{k}of{n}.lock")
+}
+
+/// Whether some index of `start..end` is in both shards `[k1, n1]` and `[k2, n2]` of the
+/// two ranges.
+pub fn overlaps(a: (u64, u64, [u64; 2]), b: (u64, u64, [u64; 2])) -> bool {
+    let (lo, hi) = (a.0.max(b.0), a.1.min(b.1));
+    if lo >= hi {
+        return false;
+    }
+    let ([k1, n1], [k2, n2]) = (a.2, b.2);
+    let (n1, n2) = (n1.max(1), n2.max(1));
+    // The first index of `lo..hi` in shard 1, then every n1-th: their residues mod n2 repeat
+    // after n2 steps, so n2 steps decide (bounded; past the bound, assume an overlap).
+    let first = lo + (k1 % n1 + n1 - lo % n1) % n1;
+    let mut i = first;
+    for _ in 0..n2.min(1_000_000) {
+        if i >= hi {
+            return false;
+        }
+        if i % n2 == k2 % n2 {
+            return true;
+        }
+        i = match i.checked_add(n1) {
+            Some(v) => v,
+            None => return false,
+        };
+    }
+    n2 > 1_000_000
+}
+
+/// Whether the holder of a lock file (its `holder`, the file's modification time) is gone.
+fn is_stale(holder: &Holder, modified: Option<SystemTime>) -> bool {
+    if holder.host == crate::tmp::hostname() {
+        return !crate::tmp::process_alive(holder.pid, holder.pid_start);
+    }
+    modified
+        .and_then(|m| SystemTime::now().duration_since(m).ok())
+        .is_some_and(|age| age > STALE_AFTER)
+}
+
+impl RunLock {
+    /// Take the lock of shard `[k, n]` of `start..end` in `variant_dir` (created if missing).
+    /// `Err` (a message with a `hint:` line) when a live run holds an overlapping range, naming
+    /// its lock file and holder.
+    pub fn acquire(
+        variant_dir: &Path,
+        start: u64,
+        end: u64,
+        shard: [u64; 2],
+        command: Vec<String>,
+    ) -> Result<RunLock, String> {
+        let io = |what: &str, p: &Path, e: std::io::Error| {
+            format!(
+                "cannot {what} `{}`: {e}\nhint: pass a writable folder with `--out`",
+                p.display()
+            )
+        };
+        std::fs::create_dir_all(variant_dir).map_err(|e| io("create", variant_dir, e))?;
+        // A file opened for writing, as the failure ledger's: on NFS `flock` is emulated
+        // with POSIX locks, which need a writable descriptor (a folder's is read-only).
+        let guard_path = variant_dir.join(GUARD);
+        let guard = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&guard_path)
+            .map_err(|e| io("create", &guard_path, e))?;
+        guard.lock().map_err(|e| io("lock", &guard_path, e))?;
+        let root = crate::dataset::root(variant_dir).map_err(|e| io("read", variant_dir, e))?;
+        let entries = std::fs::read_dir(variant_dir).map_err(|e| io("read", variant_dir, e))?;
+        let mine = file_name(start, end, shard[0], shard[1]);
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if !(name.starts_with(PREFIX) && name.ends_with(".lock")) {
+                continue;
+            }
+            let path = e.path();
+            let holder = crate::dataset::read(&root, &path, MAX_LOCK_BYTES)
+                .and_then(|b| serde_json::from_slice::<Holder>(&b).map_err(|e| e.to_string()));
+            let holder = match holder {
+                Ok(h) => h,
+                Err(why) => {
+                    return Err(format!(
+                        "the run lock `{}` cannot be read ({why}), so this run cannot tell whether another run is writing here\nhint: if no `clevrtex generate` is writing into `{}`, delete `{}` and run again",
+                        path.display(),
+                        variant_dir.display(),
+                        path.display()
+                    ))
+                }
+            };
+            let modified = std::fs::symlink_metadata(&path)
+                .and_then(|m| m.modified())
+                .ok();
+            if is_stale(&holder, modified) {
+                continue;
+            }
+            if overlaps(
+                (start, end, shard),
+                (holder.start, holder.end, holder.shard),
+            ) {
+                return Err(format!(
+                    "indices {start}..{end} (shard {}/{}) overlap those of another run writing into `{}`: pid {} on host `{}` holds indices {}..{} (shard {}/{}) in the lock `{}` (its command: {})\nhint: wait for that run to end, or give this run another `--out` or a range that does not overlap; if that run is gone (its machine stopped), delete `{}` and run again",
+                    shard[0],
+                    shard[1],
+                    variant_dir.display(),
+                    holder.pid,
+                    holder.host,
+                    holder.start,
+                    holder.end,
+                    holder.shard[0],
+                    holder.shard[1],
+                    path.display(),
+                    holder.command.join(" "),
+                    path.display()
+                ));
+            }
+        }
+        let holder = Holder {
+            host: crate::tmp::hostname(),
+            pid: std::process::id(),
+            pid_start: crate::tmp::own_start_time(),
+            start,
+            end,
+            shard,
+            command,
+        };
+        let path = variant_dir.join(&mine);
+        let tmp = variant_dir.join(format!(
+            "{mine}.{}{}",
+            crate::tmp::owner_tag(),
+            crate::output::TMP_SUFFIX
+        ));
+        let text = serde_json::to_string_pretty(&holder).expect("lock serialises") + "\n";
+        std::fs::write(&tmp, text)
+            .and_then(|()| std::fs::rename(&tmp, &path))
+            .map_err(|e| {
+                let _ = std::fs::remove_file(&tmp);
+                io("write", &path, e)
+            })?;
+        drop(guard);
+        let (tx, rx) = mpsc::channel::<()>();
+        let beat_path = path.clone();
+        let beat = std::thread::spawn(move || {
+            while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(HEARTBEAT) {
+                if let Ok(f) = std::fs::OpenOptions::new().append(true).open(&beat_path) {
+                    let _ = f.set_modified(SystemTime::now());
+                }
+            }
+        });
+        Ok(RunLock {
+            path,
+            stop: Some(tx),
+            beat: Some(beat),
+        })
+    }
+
+    /// The lock file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for RunLock {
+    fn drop(&mut self) {
+        drop(self.stop.take());
+        if let Some(b) = self.beat.take() {
+            let _ = b.join();
+        }
+        // Remove the file only while it is still ours (never another run's lock).
+        let ours = std::fs::read(&self.path)
+            .ok()
+            .and_then(|b| serde_json::from_slice::<Holder>(&b).ok())
+            .is_some_and(|h| h.pid == std::process::id() && h.host == crate::tmp::hostname());
+        if ours {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overlapping_ranges_and_shards() {
+        assert!(overlaps((0, 8, [0, 1]), (4, 12, [0, 1])));
+        assert!(!overlaps((0, 8, [0, 1]), (8, 12, [0, 1])));
+        assert!(!overlaps((0, 8, [0, 2]), (0, 8, [1, 2])));
+        assert!(overlaps((0, 8, [0, 2]), (0, 8, [0, 4])));
+        assert!(!overlaps((0, 8, [1, 2]), (0, 8, [0, 4])));
+        assert!(overlaps((3, 4, [0, 3]), (0, 8, [0, 1])));
+        assert!(!overlaps((4, 5, [0, 3]), (0, 8, [0, 1])));
+        assert!(overlaps((0, u64::MAX, [5, 7]), (0, u64::MAX, [1, 3])));
+    }
+
+    #[test]
+    fn a_live_overlapping_lock_refuses_and_a_dead_ones_is_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec!["a".into()]).unwrap();
+        let err = RunLock::acquire(dir.path(), 4, 12, [0, 1], vec!["b".into()]).unwrap_err();
+        assert!(
+            err.contains(&format!("pid {}", std::process::id())),
+            "{err}"
+        );
+        assert!(err.contains(".clevrtex-run-0-8-0of1.lock"), "{err}");
+        let b = RunLock::acquire(dir.path(), 8, 12, [0, 1], vec!["c".into()]).unwrap();
+        drop(a);
+        assert!(!dir.path().join(file_name(0, 8, 0, 1)).exists());
+        drop(b);
+        // A holder that has exited on this host: stale.
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let pid = child.id();
+        child.wait().unwrap();
+        let dead = Holder {
+            host: crate::tmp::hostname(),
+            pid,
+            pid_start: 1,
+            start: 0,
+            end: 8,
+            shard: [0, 1],
+            command: vec![],
+        };
+        std::fs::write(
+            dir.path().join(file_name(0, 8, 0, 1)),
+            serde_json::to_string(&dead).unwrap(),
+        )
+        .unwrap();
+        let c = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec![]).unwrap();
+        drop(c);
+        // Another host's lock, recently touched: live.
+        let other = Holder {
+            host: "elsewhere".into(),
+            ..dead
+        };
+        std::fs::write(
+            dir.path().join(file_name(0, 8, 0, 1)),
+            serde_json::to_string(&other).unwrap(),
+        )
+        .unwrap();
+        let err = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec![]).unwrap_err();
+        assert!(err.contains("host `elsewhere`"), "{err}");
+    }
+}
