@@ -18,4 +18,5 @@ mod python_package;
 mod report;
 mod sample;
 mod slurm;
+mod trust_paths;
 mod verify;

@@ -145,10 +145,7 @@ fn samples(root: &Path, vdir: &Path, skipped: &mut Vec<String>) -> anyhow::Resul
         }
         let split = match &meta["split"] {
             Value::Null => Split::Train,
-            Value::String(s) => match [Split::Test, Split::Val, Split::Train]
-                .into_iter()
-                .find(|x| x.name() == s)
-            {
+            Value::String(s) => match Split::parse(s) {
                 Some(x) => x,
                 None => return Err(bad("split", format!("is `{s}`, not test, val or train"))),
             },
@@ -201,7 +198,7 @@ fn is_shard_name(name: &str) -> bool {
         return false;
     };
     !variant.is_empty()
-        && ["test", "val", "train"].contains(&split)
+        && Split::parse(split).is_some()
         && digits.len() == 6
         && digits.bytes().all(|b| b.is_ascii_digit())
 }

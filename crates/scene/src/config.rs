@@ -455,16 +455,11 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
     let catalogue: Catalogue = serde_json::from_str(clevrtex_materials::CATALOGUE_JSON)
         .expect("built-in material catalogue is valid JSON");
 
-    if file.name.is_empty()
-        || !file
-            .name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-    {
+    if let Some(problem) = crate::layout::variant_name_problem(&file.name) {
         return Err(err(
             "name",
             Some(file.name),
-            "must be non-empty ASCII letters, digits, `_` or `-` (it is used in file names)",
+            &problem,
             "rename the variant, e.g. `my_variant`",
         ));
     }

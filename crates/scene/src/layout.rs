@@ -28,6 +28,30 @@ pub fn parse_stem<'a>(name: &'a str, suffix: &str) -> Option<(&'a str, &'a str, 
     Some((stem, variant, digits.parse().ok()?))
 }
 
+/// Longest variant name: it becomes part of folder and file names.
+pub const MAX_VARIANT_NAME: usize = 64;
+
+/// Why `name` cannot be a variant's name, or `None` when it can. A variant's name becomes part
+/// of folder and file names (`clevrtex_<variant>`, `CLEVRTEX_<variant>_<index>`), so it must be
+/// 1 to [`MAX_VARIANT_NAME`] ASCII letters, digits, `_` or `-`: one path component that is
+/// never `.`, `..` or absolute, whatever file it was read from.
+pub fn variant_name_problem(name: &str) -> Option<String> {
+    if name.is_empty() || name.len() > MAX_VARIANT_NAME {
+        return Some(format!(
+            "must be 1 to {MAX_VARIANT_NAME} characters (it is used in file names)"
+        ));
+    }
+    if !name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
+        return Some(
+            "must be ASCII letters, digits, `_` or `-` (it is used in file names)".to_string(),
+        );
+    }
+    None
+}
+
 /// Folder of one variant: `OUT/clevrtex_<variant>`.
 pub fn variant_dir(out: &Path, variant: &str) -> PathBuf {
     out.join(format!("clevrtex_{variant}"))
@@ -77,6 +101,14 @@ pub enum Split {
 }
 
 impl Split {
+    /// Every split, in the order of the published files.
+    pub const ALL: [Split; 3] = [Split::Test, Split::Val, Split::Train];
+
+    /// The split named `name` (`test`, `val` or `train`); `None` for any other text.
+    pub fn parse(name: &str) -> Option<Split> {
+        Split::ALL.into_iter().find(|s| s.name() == name)
+    }
+
     /// `test`, `val` or `train`.
     pub fn name(self) -> &'static str {
         match self {
@@ -150,6 +182,27 @@ mod tests {
         assert_eq!(pass_file("S", Pass::Shadow), "S_shadow_0001.png");
         assert_eq!(metadata_file("S"), "S.json");
         assert_eq!(exr_files("S", true), ["S_passes.exr", "S_shadow.exr"]);
+    }
+
+    #[test]
+    fn variant_names_are_one_plain_path_component() {
+        for ok in ["camo", "my_variant-2", "A"] {
+            assert_eq!(variant_name_problem(ok), None, "{ok}");
+        }
+        let long = "x".repeat(MAX_VARIANT_NAME + 1);
+        for bad in [
+            "",
+            ".",
+            "..",
+            "a/b",
+            "/etc",
+            "a b",
+            "caf\u{e9}",
+            "a\0b",
+            long.as_str(),
+        ] {
+            assert!(variant_name_problem(bad).is_some(), "{bad:?}");
+        }
     }
 
     #[test]

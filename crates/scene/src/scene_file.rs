@@ -245,7 +245,8 @@ pub const MAX_OBJECT_DISTANCE_M: f64 = 1000.0;
 
 impl SceneFile {
     /// Check what the bridge cannot check cheaply, before a scene is sent to Blender: the
-    /// format and version, image size and samples within bounds, every real number finite and
+    /// format and version, `variant`, `stem` and `split` (the names that become paths: one
+    /// plain component each, the stem the layout's own), image size and samples within bounds, every real number finite and
     /// of sane magnitude, at most [`MAX_OBJECTS`] objects, each with a positive scale and near
     /// the origin. The error names the key (`objects[2].location[0]`), its value and the rule.
     pub fn validate(&self) -> Result<(), String> {
@@ -253,6 +254,24 @@ impl SceneFile {
             return Err(format!(
                 "not a version {SCENE_VERSION} clevrtex scene file (format `{}`, version {})",
                 self.format, self.version
+            ));
+        }
+        // Names that become paths: one plain component each, checked here so that no value of
+        // a scene file ever names a folder outside the output (docs/security.md).
+        if let Some(problem) = crate::layout::variant_name_problem(&self.variant) {
+            return Err(format!("`variant` = {:?}: {problem}", self.variant));
+        }
+        let stem = crate::layout::stem(&self.variant, self.index);
+        if self.stem != stem {
+            return Err(format!(
+                "`stem` = {:?}: must be `{stem}` (`CLEVRTEX_<variant>_<index:06>`; it names the sample's files)",
+                self.stem
+            ));
+        }
+        if crate::layout::Split::parse(&self.split).is_none() {
+            return Err(format!(
+                "`split` = {:?}: must be `train`, `val` or `test`",
+                self.split
             ));
         }
         let r = &self.render;
