@@ -18,6 +18,7 @@ import json
 import os
 import sys
 import time
+import threading
 import traceback
 
 BRIDGE_VERSION = 1
@@ -200,11 +201,40 @@ class Worker:
             self.replier.send(reply)
 
 
+def _proc_stat(pid):
+    """(parent pid, start time) of process `pid` from /proc, or None if it is gone."""
+    try:
+        with open("/proc/%d/stat" % pid) as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return int(fields[1]), int(fields[19])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _ancestor_start(pid):
+    """The start time of `pid` if it is our parent or an ancestor (a wrapper script may sit
+    between clevrtex and Blender), else None."""
+    p = os.getppid()
+    for _ in range(32):
+        if p <= 1:
+            return None
+        stat = _proc_stat(p)
+        if stat is None:
+            return None
+        if p == pid:
+            return stat[1]
+        p = stat[0]
+    return None
+
+
 def _die_with_parent():
     """Never outlive the clevrtex process that started us, even when it is killed with SIGKILL
     (no chance for it to stop us): on Linux, ask the kernel for SIGKILL when our parent dies,
-    then check that the parent named by CLEVRTEX_PARENT_PID is still it (it may have died
-    before the request). Elsewhere, or without the variable, nothing happens."""
+    then check that the process named by CLEVRTEX_PARENT_PID is still our parent, or an
+    ancestor when a wrapper script started us (it may have died before the request). Behind
+    a wrapper, the kernel's signal follows the wrapper, not clevrtex, so a watchdog thread
+    also exits when clevrtex is gone (and a closed stdin ends the request loop). Elsewhere, or
+    without the variable, nothing happens."""
     parent = os.environ.get("CLEVRTEX_PARENT_PID")
     if not parent or not sys.platform.startswith("linux"):
         return
@@ -213,8 +243,21 @@ def _die_with_parent():
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, 9, 0, 0, 0)
     except Exception:
         return
-    if os.getppid() != int(parent):
+    parent = int(parent)
+    if os.getppid() == parent:
+        return
+    start = _ancestor_start(parent)
+    if start is None:
         os._exit(1)
+
+    def watch():
+        while True:
+            time.sleep(1.0)
+            stat = _proc_stat(parent)
+            if stat is None or stat[1] != start:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="clevrtex-parent-watch", daemon=True).start()
 
 
 def main():

@@ -20,3 +20,4 @@ mod sample;
 mod slurm;
 mod trust_paths;
 mod verify;
+mod workers;

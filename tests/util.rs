@@ -190,6 +190,41 @@ pub fn chromium_or_skip(test: &str) -> Option<PathBuf> {
     }
 }
 
+/// `clevrtex args` with at most 2 GB of address space (a file or a program that makes it
+/// allocate more aborts it), with `envs` set, killed (a test failure) after `secs`; its exit
+/// code (`None`: killed by a signal, e.g. SIGABRT on an allocation failure) and
+/// [`text`].
+pub fn run_limited(
+    args: &[&std::ffi::OsStr],
+    envs: &[(&str, &std::ffi::OsStr)],
+    secs: u64,
+) -> (Option<i32>, String) {
+    let mut cmd = Command::new("sh");
+    cmd.args(["-c", "ulimit -v 2000000; exec \"$0\" \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_clevrtex"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    for (k, v) in envs {
+        cmd.env(k, v);
+    }
+    let mut child = cmd.spawn().unwrap();
+    let t = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t.elapsed().as_secs() > secs {
+            child.kill().unwrap();
+            let o = child.wait_with_output().unwrap();
+            panic!(
+                "clevrtex {args:?} still running after {secs} s:\n{}",
+                text(&o)
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let o = child.wait_with_output().unwrap();
+    (o.status.code(), text(&o))
+}
+
 /// The fake Blender of `tests/fake_blender/` (its modes are listed at its top).
 pub fn fake_blender() -> PathBuf {
     repo_root().join("tests/fake_blender/blender")

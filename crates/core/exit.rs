@@ -46,7 +46,10 @@ pub fn report(result: CmdResult) -> u8 {
         Ok(code) => code,
         Err(err) => {
             eprintln!("error: {err:#}");
-            if err.downcast_ref::<Interrupted>().is_some() {
+            // A command that stopped because of a signal, whatever error the stop surfaced
+            // as (a worker's start cut short, a render's `interrupted`), exits with the
+            // signal's code, not 1.
+            if err.downcast_ref::<Interrupted>().is_some() || crate::interrupt::received() {
                 crate::interrupt::exit_code()
             } else {
                 ERROR

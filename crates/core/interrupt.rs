@@ -28,6 +28,10 @@ pub enum OnInterrupt {
     /// Only set the flag: the command checks it between short steps, so stopping is quick
     /// and a second interrupt does nothing more.
     FlagOnly,
+    /// Exit at once with 130 or 143: what a signal does before a command has said what it
+    /// means to it (the handler is installed first thing, by [`install_early`]), and in
+    /// commands that write nothing that a stop could leave half-done.
+    Exit,
 }
 
 struct Handler {
@@ -64,16 +68,32 @@ fn install() {
     }
 }
 
-/// The process's interrupt flag, installing the Ctrl-C handler on the first call; `on` is
-/// what an interrupt does from now on.
-pub fn flag(on: OnInterrupt) -> Arc<AtomicBool> {
-    let handler = HANDLER.get_or_init(|| {
+/// Install the handler before anything else runs, so that a signal in the first moments
+/// of a run exits with 130 / 143 (as [`OnInterrupt::Exit`]) instead of the default action's
+/// death or, once a command is under way, a plain error.
+pub fn install_early() {
+    handler(OnInterrupt::Exit);
+}
+
+/// Whether SIGINT or SIGTERM has been received.
+pub fn received() -> bool {
+    LAST_SIGNAL.load(Ordering::SeqCst) != 0
+}
+
+fn handler(first: OnInterrupt) -> &'static Handler {
+    HANDLER.get_or_init(|| {
         install();
         Handler {
             flag: Arc::new(AtomicBool::new(false)),
-            on_interrupt: Mutex::new(on),
+            on_interrupt: Mutex::new(first),
         }
-    });
+    })
+}
+
+/// The process's interrupt flag, installing the Ctrl-C handler on the first call; `on` is
+/// what an interrupt does from now on.
+pub fn flag(on: OnInterrupt) -> Arc<AtomicBool> {
+    let handler = handler(on);
     *handler
         .on_interrupt
         .lock()
@@ -92,6 +112,16 @@ fn on_signal() {
         .unwrap_or_else(|poisoned| poisoned.into_inner());
     match on {
         OnInterrupt::FlagOnly => handler.flag.store(true, Ordering::SeqCst),
+        OnInterrupt::Exit => {
+            handler.flag.store(true, Ordering::SeqCst);
+            let what = if LAST_SIGNAL.load(Ordering::SeqCst) == SIGTERM {
+                "terminated (SIGTERM)"
+            } else {
+                "interrupted"
+            };
+            eprintln!("\n{what}: nothing was under way; exiting");
+            std::process::exit(i32::from(exit_code()));
+        }
         OnInterrupt::Stop { message } => {
             if handler.flag.swap(true, Ordering::SeqCst) {
                 std::process::exit(i32::from(exit_code()));

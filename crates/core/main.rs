@@ -58,6 +58,8 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // First, so that a signal at any moment of a run gets its exit code (130 / 143).
+    interrupt::install_early();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(err) => {

@@ -147,6 +147,8 @@ pub fn locate(explicit: Option<&Path>) -> Result<PathBuf> {
         }
         return if path.is_file() {
             Ok(path)
+        } else if path.is_dir() {
+            Err(RenderError::BlenderIsFolder { path })
         } else {
             Err(RenderError::BlenderNotFound { tried: Some(path) })
         };
@@ -222,25 +224,36 @@ pub fn version_line_within(blender: &Path, timeout: Duration) -> Result<String> 
         .to_string())
 }
 
-/// Run `program args` with no stdin, returning its stdout (stderr dropped) once it exits, or
-/// [`RenderError::VersionTimeout`] after `timeout` (it is killed).
+/// Most of a `--version` probe's stdout that is kept (Blender prints a few hundred bytes);
+/// the rest is read and dropped, so a program that prints without end costs no memory.
+const MAX_PROBE_OUTPUT: u64 = 64 * 1024;
+
+/// Run `program args` with no stdin, returning the first [`MAX_PROBE_OUTPUT`] bytes of its
+/// stdout (stderr dropped) once it exits, or [`RenderError::VersionTimeout`] after `timeout`
+/// (it is killed, with its process group: a wrapper script's children too).
 fn run_capturing(program: &Path, args: &[&str], timeout: Duration) -> Result<String> {
     let blender = program;
-    let mut child = Command::new(blender)
-        .args(args)
+    let mut cmd = Command::new(blender);
+    cmd.args(args)
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .map_err(|source| RenderError::Spawn {
-            program: blender.to_path_buf(),
-            cause: source,
-        })?;
-    let mut stdout = child.stdout.take().expect("piped");
+        .stderr(std::process::Stdio::null());
+    crate::group::own_group(&mut cmd);
+    let mut child = cmd.spawn().map_err(|source| RenderError::Spawn {
+        program: blender.to_path_buf(),
+        cause: source,
+    })?;
+    let stdout = child.stdout.take().expect("piped");
     let reader = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = std::io::Read::read_to_string(&mut stdout, &mut s);
-        s
+        let mut kept = Vec::new();
+        let mut stdout = stdout;
+        let _ = std::io::Read::read_to_end(
+            &mut std::io::Read::take(&mut stdout, MAX_PROBE_OUTPUT),
+            &mut kept,
+        );
+        // Drain the rest without keeping it, so the program is not blocked on a full pipe.
+        let _ = std::io::copy(&mut stdout, &mut std::io::sink());
+        String::from_utf8_lossy(&kept).into_owned()
     });
     let deadline = Instant::now() + timeout;
     loop {
@@ -248,8 +261,7 @@ fn run_capturing(program: &Path, args: &[&str], timeout: Duration) -> Result<Str
             Ok(Some(_)) => break,
             Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
             _ => {
-                let _ = child.kill();
-                let _ = child.wait();
+                crate::group::kill_group(&mut child);
                 return Err(RenderError::VersionTimeout {
                     program: blender.to_path_buf(),
                     waited: timeout,
@@ -257,6 +269,8 @@ fn run_capturing(program: &Path, args: &[&str], timeout: Duration) -> Result<Str
             }
         }
     }
+    // A wrapper may have exited leaving a child that holds the pipe open: stop the group.
+    crate::group::kill_group(&mut child);
     Ok(reader.join().unwrap_or_default())
 }
 

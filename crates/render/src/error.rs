@@ -5,6 +5,19 @@ use std::path::PathBuf;
 use std::process::ExitStatus;
 use std::time::Duration;
 
+/// Smallest image (in pixels) at which every object of a default layout can cover a pixel:
+/// below it, layouts are rejected because of the image's size, not of the configuration.
+const MIN_VISIBLE_IMAGE_PX: u64 = 32 * 24;
+
+fn rejects_hint(width: u32, height: u32) -> String {
+    if u64::from(width) * u64::from(height) < MIN_VISIBLE_IMAGE_PX {
+        format!("the image ({width}x{height}) is too small for every object to cover a pixel; use a larger `--width`/`--height` (at least 32x24)")
+    } else {
+        "the configuration places objects where they cannot be seen; use fewer or larger objects"
+            .to_string()
+    }
+}
+
 /// The last lines a Blender process printed, kept for error reports.
 #[derive(Debug, Clone, Default)]
 pub struct Tails {
@@ -38,6 +51,12 @@ pub enum RenderError {
     BlenderNotFound {
         /// The explicit path that did not exist, if one was given.
         tried: Option<PathBuf>,
+    },
+    /// The Blender given is a folder, not a program.
+    #[error("`{}` is a folder, not a Blender executable\nhint: pass the program itself, e.g. `--blender {}` (or a Python with `bpy`, e.g. `.venv-bpy/bin/python`)", .path.display(), .path.join("blender").display())]
+    BlenderIsFolder {
+        /// The folder given.
+        path: PathBuf,
     },
     /// The Blender process could not be started.
     #[error("could not start `{}`: {cause}\nhint: check that the file is an executable Blender (`{} --version`), or pass another with `--blender PATH`", .program.display(), .program.display())]
@@ -163,7 +182,7 @@ pub enum RenderError {
         message: String,
     },
     /// Every attempt produced a layout with a (nearly) hidden object.
-    #[error("scene {index}: {attempts} layouts in a row had an object with at most {threshold} visible pixels\nhint: the configuration places objects where they cannot be seen; use fewer or larger objects")]
+    #[error("scene {index}: {attempts} layouts in a row had an object with at most {threshold} visible pixels at {width}x{height}\nhint: {}", rejects_hint(*.width, *.height))]
     TooManyRejects {
         /// Image index.
         index: u64,
@@ -171,6 +190,10 @@ pub enum RenderError {
         attempts: u32,
         /// The pixel threshold.
         threshold: u64,
+        /// Image width in pixels.
+        width: u32,
+        /// Image height in pixels.
+        height: u32,
     },
 }
 

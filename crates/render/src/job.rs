@@ -116,6 +116,7 @@ impl Slot<'_, '_> {
             1
         };
         let mut threshold = 0;
+        let mut size = (0, 0);
         for attempt in 0..attempts {
             if self.shared.stopping() {
                 return Err(RenderError::Interrupted);
@@ -135,6 +136,7 @@ impl Slot<'_, '_> {
             bridge_passes.sort();
             scene.passes = bridge_passes;
             threshold = post::visibility_threshold(scene.render.width, scene.render.height);
+            size = (scene.render.width, scene.render.height);
             let work = self.scratch.path().join(format!("{}-{attempt}", job.stem));
             let _ = std::fs::remove_dir_all(&work);
             std::fs::create_dir_all(&work).map_err(|e| RenderError::write(&work, e))?;
@@ -229,6 +231,8 @@ impl Slot<'_, '_> {
             index: job.index,
             attempts,
             threshold,
+            width: size.0,
+            height: size.1,
         })
     }
 

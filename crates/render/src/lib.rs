@@ -44,6 +44,7 @@ pub mod dataset;
 pub mod device;
 mod error;
 pub mod exr_io;
+mod group;
 mod job;
 mod ledger;
 pub mod manifest;

@@ -21,6 +21,13 @@ use crate::error::{RenderError, Result, Tails};
 
 /// Lines of stdout and of stderr kept for error reports.
 const TAIL_LINES: usize = 25;
+/// Longest line of Blender's output that is kept (protocol replies are a few KB).
+const MAX_LINE: usize = 1 << 20;
+/// Longest line kept in the error tails.
+const MAX_TAIL_LINE: usize = 4096;
+/// Reply lines waiting to be read: a worker that floods the reply stream blocks on its pipe
+/// instead of filling our memory.
+const MAX_PENDING_REPLIES: usize = 64;
 /// How often a wait re-checks the child's status and the interrupt flag.
 const POLL: Duration = Duration::from_millis(50);
 /// After stdout closes, how long to wait for the exit status before killing.
@@ -276,10 +283,9 @@ impl Worker {
         // The bridge asks the kernel to kill it when we die, even by SIGKILL, and checks that
         // we are still its parent (see worker.py).
         cmd.env("CLEVRTEX_PARENT_PID", std::process::id().to_string());
-        // Own process group: a Ctrl-C in the terminal reaches only us, and we stop the
-        // workers ourselves, so no half-written output is left behind.
-        #[cfg(unix)]
-        std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
+        // Own process group: a Ctrl-C in the terminal reaches only us, and a kill reaches a
+        // wrapper script's Blender too (`group`).
+        crate::group::own_group(&mut cmd);
         let mut child = cmd.spawn().map_err(|source| {
             if source.kind() == std::io::ErrorKind::NotFound {
                 RenderError::BlenderNotFound {
@@ -299,7 +305,7 @@ impl Worker {
             let activity = Arc::clone(&activity);
             move || activity.store(epoch.elapsed().as_millis() as u64, Ordering::Relaxed)
         };
-        let (tx, events) = mpsc::channel();
+        let (tx, events) = mpsc::sync_channel(MAX_PENDING_REPLIES);
         let stdout = child.stdout.take().expect("piped");
         let stderr = child.stderr.take().expect("piped");
         {
@@ -669,14 +675,12 @@ impl Worker {
         }
     }
 
-    /// Kill and reap the process (idempotent).
+    /// Kill the process and its whole process group (a wrapper's Blender, anything Blender
+    /// started), and reap it (idempotent).
     fn kill(&mut self) {
         self.dead = true;
         self.stdin = None;
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-        }
-        let _ = self.child.wait();
+        crate::group::kill_group(&mut self.child);
     }
 }
 
@@ -690,21 +694,61 @@ fn push_tail(tail: &mut VecDeque<String>, line: &str) {
     if tail.len() == TAIL_LINES {
         tail.pop_front();
     }
-    tail.push_back(line.to_string());
+    let mut end = line.len().min(MAX_TAIL_LINE);
+    while !line.is_char_boundary(end) {
+        end -= 1;
+    }
+    if end < line.len() {
+        tail.push_back(format!(
+            "{} [... {} more bytes]",
+            &line[..end],
+            line.len() - end
+        ));
+    } else {
+        tail.push_back(line.to_string());
+    }
 }
 
 /// Call `f` on each line (lossy UTF-8, without the line ending) until EOF or a read error.
+///
+/// Blender's output is not trusted: a line longer than [`MAX_LINE`] bytes is cut there (the
+/// rest of it is read and dropped, never buffered), so output without a newline costs at
+/// most that much memory; a cut reply is then not valid JSON and ends as a protocol error.
 fn read_lines(stream: impl Read, mut f: impl FnMut(&str)) {
     let mut reader = BufReader::new(stream);
     let mut buf = Vec::new();
     loop {
         buf.clear();
-        match reader.read_until(b'\n', &mut buf) {
-            Ok(0) | Err(_) => return,
-            Ok(_) => {
-                let text = String::from_utf8_lossy(&buf);
-                f(text.trim_end_matches(['\n', '\r']));
+        let mut cut = false;
+        let ended = loop {
+            let chunk = match reader.fill_buf() {
+                Ok([]) | Err(_) => break false,
+                Ok(chunk) => chunk,
+            };
+            let (take, newline) = match chunk.iter().position(|&b| b == b'\n') {
+                Some(i) => (i + 1, true),
+                None => (chunk.len(), false),
+            };
+            let room = MAX_LINE.saturating_sub(buf.len());
+            cut |= take > room;
+            buf.extend_from_slice(&chunk[..take.min(room)]);
+            reader.consume(take);
+            if newline {
+                break true;
             }
+        };
+        if buf.is_empty() && !ended {
+            return;
+        }
+        let text = String::from_utf8_lossy(&buf);
+        let line = text.trim_end_matches(['\n', '\r']);
+        if cut {
+            f(&format!("{line} [line cut at {MAX_LINE} bytes]"));
+        } else {
+            f(line);
+        }
+        if !ended {
+            return;
         }
     }
 }

@@ -1,0 +1,28 @@
+//! Blender processes run in their own process group, and are killed as a group: a Blender
+//! behind a wrapper script (`module load blender; blender "$@"`, no `exec`) is a grandchild of
+//! ours, and killing only the direct child would leave it rendering.
+
+use std::process::{Child, Command};
+
+/// Start `cmd` as the leader of a new process group (whose id is then its pid). Also keeps a
+/// Ctrl-C in the terminal from reaching Blender: we stop the workers ourselves, so no
+/// half-written output is left behind.
+pub fn own_group(cmd: &mut Command) {
+    std::os::unix::process::CommandExt::process_group(cmd, 0);
+}
+
+/// SIGKILL the process group that `child` leads (see [`own_group`]), then reap `child`.
+///
+/// The group is signalled before `child` is reaped, so its id cannot have been reused; a
+/// group whose leader already exited (a wrapper that left its Blender running) is still
+/// signalled, since a group's id is not reused while any member lives.
+pub fn kill_group(child: &mut Child) {
+    if let Some(pgid) = i32::try_from(child.id())
+        .ok()
+        .and_then(rustix::process::Pid::from_raw)
+    {
+        let _ = rustix::process::kill_process_group(pgid, rustix::process::Signal::KILL);
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+}
