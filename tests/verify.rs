@@ -201,25 +201,9 @@ fn hand_sample(out: &Path, variant: &str, index: u64, meta: &Value, files: &[(&s
 
 /// `clevrtex verify` with at most 2 GB of address space, killed (a failure) after `secs`.
 fn verify_bounded(dirs: &[&Path], secs: u64) -> (Option<i32>, String) {
-    let mut child = std::process::Command::new("sh")
-        .args(["-c", "ulimit -v 2000000; exec \"$0\" verify \"$@\""])
-        .arg(env!("CARGO_BIN_EXE_clevrtex"))
-        .args(dirs)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let t = std::time::Instant::now();
-    while child.try_wait().unwrap().is_none() {
-        if t.elapsed().as_secs() > secs {
-            child.kill().unwrap();
-            let o = child.wait_with_output().unwrap();
-            panic!("verify still running after {secs} s:\n{}", text(&o));
-        }
-        std::thread::sleep(std::time::Duration::from_millis(100));
-    }
-    let o = child.wait_with_output().unwrap();
-    (o.status.code(), text(&o))
+    let mut args = vec![std::ffi::OsStr::new("verify")];
+    args.extend(dirs.iter().map(|d| d.as_os_str()));
+    crate::util::run_limited(&args, &[], secs)
 }
 
 #[test]
