@@ -841,3 +841,91 @@ fn eval_nan_huge_and_out_of_range_reconstructions_are_reported() {
         text(&out)
     );
 }
+
+/// A 30000x30000 `_mask.png` of zeros (about 1 MB deflated) against the dataset's 40x30: its
+/// size is refused from the PNG header, before anything is decoded. Before, `--native-size`
+/// decoded it first (0.9 GB of pixels, 3.6 GB of ids: 4.4 GB seen), here an abort under a
+/// 2 GB address-space limit.
+#[test]
+fn eval_native_size_refuses_a_huge_png_from_its_header() {
+    let dir = tempfile::tempdir().unwrap();
+    // The ground truth's own masks as native-size predictions, one of them replaced.
+    let preds = dir.path().join("preds");
+    std::fs::create_dir_all(&preds).unwrap();
+    for e in std::fs::read_dir(gt().join("clevrtex_vbg/0")).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap().to_string();
+        if let Some(stem) = name.strip_suffix("_flat.png") {
+            std::fs::copy(&p, preds.join(format!("{stem}_mask.png"))).unwrap();
+        }
+    }
+    let target = preds.join("CLEVRTEX_vbg_000000_mask.png");
+    let made = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(
+            "import struct, sys, zlib\n\
+             w = h = 30000\n\
+             def chunk(t, d):\n\
+             \x20   return struct.pack('>I', len(d)) + t + d + struct.pack('>I', zlib.crc32(t + d) & 0xffffffff)\n\
+             z = zlib.compressobj(9)\n\
+             row = bytes(w + 1)\n\
+             data = b''.join(z.compress(row) for _ in range(h)) + z.flush()\n\
+             png = b'\\x89PNG\\r\\n\\x1a\\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', w, h, 8, 0, 0, 0, 0)) + chunk(b'IDAT', data) + chunk(b'IEND', b'')\n\
+             open(sys.argv[1], 'wb').write(png)\n",
+        )
+        .arg(&target)
+        .status();
+    if !made.is_ok_and(|s| s.success()) {
+        crate::util::skip(
+            "eval_native_size_refuses_a_huge_png_from_its_header",
+            crate::util::REQUIRE_TOOLS,
+            "python3 could not write the test PNG",
+            "install Python 3",
+        );
+        return;
+    }
+    assert!(std::fs::metadata(&target).unwrap().len() < 2 << 20);
+    let (p, g) = (preds.clone(), gt());
+    let mut args = vec![std::ffi::OsStr::new("eval"), p.as_os_str(), g.as_os_str()];
+    args.extend(
+        ["--native-size", "--split", "all", "--bootstrap", "0"]
+            .iter()
+            .map(std::ffi::OsStr::new),
+    );
+    let (code, t) = crate::util::run_limited(&args, &[], 120);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(
+        t.contains("30000"),
+        "the message gives the declared size: {t}"
+    );
+}
+
+/// An `.npz` with 3,001 arrays and neither `labels` nor `masks`: the error lists ten names and
+/// how many more, not all 3,001 (it did).
+#[test]
+fn eval_npz_without_labels_lists_a_few_of_its_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let preds = npz_preds(dir.path());
+    let spoilt = preds.join("clevrtex_vbg/0/CLEVRTEX_vbg_000000.npz");
+    let _ = std::fs::remove_file(&spoilt);
+    let spoilt = preds.join("CLEVRTEX_vbg_000000.npz");
+    let names: Vec<String> = (0..3001).map(|i| format!("junk{i}")).collect();
+    let members: Vec<(&str, Vec<u8>, usize)> = names
+        .iter()
+        .map(|n| (n.as_str(), npy_header("<f4", &[1]), 4))
+        .collect();
+    write_npz(&spoilt, &members);
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&gt()),
+        "--split",
+        "all",
+        "--bootstrap",
+        "0",
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(err.contains("and 2991 more"), "{err}");
+    assert!(!err.contains("junk2999"), "{err}");
+}

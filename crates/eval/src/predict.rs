@@ -247,6 +247,24 @@ fn recon_from_array(
     }
 }
 
+/// Names for a message: the first [`LISTED_NAMES`], then how many more (a hostile `.npz` may
+/// hold thousands of arrays).
+fn list_names(names: &[String]) -> String {
+    let mut text = names
+        .iter()
+        .take(LISTED_NAMES)
+        .map(|n| format!("`{n}`"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    if names.len() > LISTED_NAMES {
+        text.push_str(&format!(", ... and {} more", names.len() - LISTED_NAMES));
+    }
+    text
+}
+
+/// How many array names an error lists.
+const LISTED_NAMES: usize = 10;
+
 /// Load the prediction for one sample, expecting `hw = (width, height)`. Returns the
 /// prediction and the bytes of every file read (for hashing).
 pub fn load(
@@ -266,6 +284,17 @@ pub fn load(
     let name = seg.file_name().and_then(|s| s.to_str()).unwrap_or("");
     let mut recon = None;
     let (labels, slots) = if name.ends_with(".png") {
+        // The size from the header first: a small file may declare a huge image.
+        let (pw, ph) = read::png_size(&bytes).map_err(|r| {
+            corrupt(
+                seg,
+                r,
+                "a `_mask.png` must be an 8- or 16-bit greyscale or palette PNG of segment ids",
+            )
+        })?;
+        if (pw, ph) != (w, h) {
+            return Err(mismatch(seg, &[ph, pw], &[h, w]));
+        }
         let img = read::png_labels(&bytes).map_err(|r| {
             corrupt(
                 seg,
@@ -322,11 +351,7 @@ pub fn load(
                     seg,
                     format!(
                         "no `labels` or `masks` array (it holds: {})",
-                        names
-                            .iter()
-                            .map(|n| format!("`{n}`"))
-                            .collect::<Vec<_>>()
-                            .join(", ")
+                        list_names(&names)
                     ),
                     "save the segmentation as `labels` (H, W) or `masks` (K, H, W)",
                 ));
@@ -344,6 +369,11 @@ pub fn load(
             });
         }
         let rb = read_file(rp)?;
+        let (pw, ph) = read::png_size(&rb)
+            .map_err(|r| corrupt(rp, r, "a `_recon.png` must be an RGB(A) PNG"))?;
+        if (pw, ph) != (w, h) {
+            return Err(mismatch(rp, &[ph, pw, 3], &[h, w, 3]));
+        }
         let img = read::png_rgb(&rb)
             .map_err(|r| corrupt(rp, r, "a `_recon.png` must be an RGB(A) PNG"))?;
         if (img.width, img.height) != (w, h) {

@@ -76,6 +76,14 @@ fn png_frame(
     Ok((buf, info))
 }
 
+/// Width and height a PNG declares in its header, read without decoding anything: check
+/// them against what is expected before [`png_labels`] or [`png_rgb`] allocate for them.
+pub fn png_size(bytes: &[u8]) -> Result<(usize, usize), String> {
+    let reader = png_reader(bytes)?;
+    let info = reader.info();
+    Ok((info.width as usize, info.height as usize))
+}
+
 /// Read a PNG of segment ids: 1-16 bit greyscale, or palette (the raw index, never the
 /// palette colour).
 pub fn png_labels(bytes: &[u8]) -> Result<LabelImage, String> {
