@@ -306,3 +306,28 @@ def test_the_gil_is_released_while_scoring():
     assert took[0] > 0.25, f"scoring took {took[0]:.3f} s: too short to show anything"
     assert max(gaps) < took[0] / 2, f"this thread stalled {max(gaps):.3f} s of {took[0]:.3f} s"
     assert ticks > 1000
+
+
+def test_wrong_shapes_and_short_metadata_raise_before_any_state_changes():
+    """Issue 21: a wrong-shaped `pred_masks` (batch 4 against 2, H and W swapped) used to be
+    reshaped silently into other images' pixels, and a short metadata list raised IndexError
+    after the first image was counted. Now ValueError names the shapes, and nothing is counted."""
+    rng = np.random.default_rng(3)
+    img_p, masks, img_t, truth, meta = batch(rng, b=2, h=16, w=8)
+    ev = clevrtex.Evaluator()
+    ev.update(img_p, masks, img_t, truth, meta)
+    before = {name: (rm.v, rm.n) for name, rm in ev.stats.items()}
+    tags_before = repr(ev.tags)
+    cases = [
+        (np.concatenate([masks, masks]), truth, meta, r"`pred_masks` is \(4, 5, 1, 16, 8\)"),
+        (masks.transpose(0, 1, 2, 4, 3).copy(), truth, meta, r"`pred_masks` is \(2, 5, 1, 8, 16\)"),
+        (masks, truth.transpose(0, 1, 3, 2).copy(), meta, r"`true_masks` is \(2, 1, 8, 16\)"),
+        (masks, truth, meta[:1], r"`true_metadata` has 1 entries but the batch has 2 images"),
+        (masks, truth, [meta[0], {"objects": "cube"}], r"`true_metadata\[1\]\['objects'\]` is a str"),
+        (masks, truth, [meta[0], None], r"`true_metadata\[1\]` is a NoneType"),
+    ]
+    for pm, tm, md, message in cases:
+        with pytest.raises(ValueError, match=message):
+            ev.update(img_p, pm, img_t, tm, md)
+        assert {name: (rm.v, rm.n) for name, rm in ev.stats.items()} == before, message
+        assert repr(ev.tags) == tags_before, message

@@ -173,8 +173,27 @@ class Evaluator:
         if ti.shape != pi.shape:
             raise ValueError(f"`true_image` is {ti.shape} but `pred_image` is {pi.shape}")
         b, _, h, w = pi.shape
-        if not 4 <= pm.ndim <= 5:
-            raise ValueError(f"masks should be in (B, K, 1, H, W) shape, `pred_masks` is {pm.shape}")
+        # Every shape and the metadata checked before anything is scored or counted: a wrong
+        # shape is never reshaped into another image's pixels, and an error changes nothing.
+        if not 4 <= pm.ndim <= 5 or pm.shape[0] != b or pm.shape[-2:] != (h, w) or (pm.ndim == 5 and pm.shape[2] != 1):
+            raise ValueError(
+                f"`pred_masks` is {pm.shape}, expected (B, K, 1, H, W) or (B, K, H, W) with (B, H, W) = ({b}, {h}, {w}) from `pred_image` {pi.shape}"
+            )
+        if not 4 <= tm.ndim <= 5 or tm.shape[0] != b or tm.shape[-2:] != (h, w) or (tm.ndim == 5 and tm.shape[2] != 1):
+            raise ValueError(
+                f"`true_masks` is {tm.shape}, expected (B, 1, H, W) ids or (B, K, H, W) / (B, K, 1, H, W) one-hot with (B, H, W) = ({b}, {h}, {w}) from `pred_image` {pi.shape}"
+            )
+        if true_metadata is not None:
+            if len(true_metadata) != b:
+                raise ValueError(f"`true_metadata` has {len(true_metadata)} entries but the batch has {b} images")
+            for i, meta in enumerate(true_metadata):
+                if not isinstance(meta, dict):
+                    raise ValueError(f"`true_metadata[{i}]` is a {type(meta).__name__}, not a dict")
+                if not isinstance(meta.get("objects", []), (list, tuple)):
+                    raise ValueError(f"`true_metadata[{i}]['objects']` is a {type(meta['objects']).__name__}, not a list")
+                for j, obj in enumerate(meta.get("objects", [])):
+                    if not isinstance(obj, dict):
+                        raise ValueError(f"`true_metadata[{i}]['objects'][{j}]` is a {type(obj).__name__}, not a dict")
         pm = pm.reshape(b, -1, h * w)
         k_pred = pm.shape[1] + (0 if self.masks_have_background else 1)
         if tm.ndim == 4 and tm.shape[1] == 1:
