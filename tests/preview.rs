@@ -65,3 +65,121 @@ fn preview_draws_one_row_per_sample_and_one_column_per_pass() {
     assert!(text(&o).contains("no sample with index 7"), "{}", text(&o));
     assert!(!dir.path().join("none.png").exists());
 }
+
+/// A sample whose RGB image and mask differ in size is reported and left empty; the sheet is
+/// still written (exit 3). Before, drawing its outlines panicked (exit 101).
+#[test]
+fn preview_reports_a_sample_whose_rgb_and_mask_differ_in_size_and_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    crate::util::hand_png_sample(&data, "clevr", 0, (16, 12), (16, 12));
+    crate::util::hand_png_sample(&data, "clevr", 1, (16, 12), (8, 6));
+    let sheet = dir.path().join("sheet.png");
+    let o = clevrtex()
+        .args(["preview", "--cell", "32", "--out"])
+        .arg(&sheet)
+        .arg(&data)
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000001") && t.contains("is 16x12 but its mask"),
+        "{t}"
+    );
+    assert!(
+        !t.contains("CLEVRTEX_clevr_000000:"),
+        "the good sample is not reported: {t}"
+    );
+    assert!(sheet.is_file(), "{t}");
+}
+
+/// A link out of the dataset is not followed and a FIFO is not opened (it hung the command);
+/// both are reported, the sheet is written.
+#[test]
+fn preview_follows_no_link_out_of_the_dataset_and_opens_no_fifo() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    for i in 0..3 {
+        crate::util::hand_png_sample(&data, "clevr", i, (16, 12), (16, 12));
+    }
+    let sub = data.join("clevrtex_clevr/0");
+    let outside = dir.path().join("secret.png");
+    image::RgbImage::from_pixel(16, 12, image::Rgb([255, 0, 0]))
+        .save(&outside)
+        .unwrap();
+    std::fs::remove_file(sub.join("CLEVRTEX_clevr_000001.png")).unwrap();
+    std::os::unix::fs::symlink(&outside, sub.join("CLEVRTEX_clevr_000001.png")).unwrap();
+    std::fs::remove_file(sub.join("CLEVRTEX_clevr_000002_flat.png")).unwrap();
+    let st = std::process::Command::new("mkfifo")
+        .arg(sub.join("CLEVRTEX_clevr_000002_flat.png"))
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let sheet = dir.path().join("sheet.png");
+    let o = crate::util::run_within(
+        &[
+            "preview".as_ref(),
+            "--cell".as_ref(),
+            "32".as_ref(),
+            "--out".as_ref(),
+            sheet.as_os_str(),
+            data.as_os_str(),
+        ],
+        60,
+    );
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000001.png` is a symbolic link leading out of the dataset"),
+        "{t}"
+    );
+    assert!(
+        t.contains("CLEVRTEX_clevr_000002_flat.png` is not a regular file"),
+        "{t}"
+    );
+    // Nothing of the outside file on the sheet: no pure red pixel.
+    let img = image::open(&sheet).unwrap().to_rgb8();
+    assert!(
+        !img.pixels().any(|p| p.0 == [255, 0, 0]),
+        "the linked file was drawn"
+    );
+}
+
+/// `--out` inside the dataset is refused before anything is written (it could overwrite a
+/// sample's file).
+#[test]
+fn preview_and_report_refuse_an_output_inside_the_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    crate::util::hand_png_sample(&data, "clevr", 0, (16, 12), (16, 12));
+    let victim = data.join("clevrtex_clevr/0/CLEVRTEX_clevr_000000.png");
+    let before = std::fs::read(&victim).unwrap();
+    for (cmd, out) in [
+        ("preview", victim.clone()),
+        (
+            "report",
+            data.join("clevrtex_clevr/0/CLEVRTEX_clevr_000000.html"),
+        ),
+        ("report", victim.clone()),
+    ] {
+        let o = clevrtex()
+            .arg(cmd)
+            .arg("--out")
+            .arg(&out)
+            .arg(&data)
+            .output()
+            .unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{cmd}: {t}");
+        assert!(t.contains("is inside the dataset"), "{cmd}: {t}");
+        assert_eq!(
+            std::fs::read(&victim).unwrap(),
+            before,
+            "{cmd} overwrote a sample's file"
+        );
+        if out != victim {
+            assert!(!out.exists(), "{cmd} wrote into the dataset");
+        }
+    }
+}

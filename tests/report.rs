@@ -331,3 +331,58 @@ fn report_loads_in_headless_chromium_without_broken_images_or_console_messages()
     let dark = img.iter().filter(|&&p| p < 128).count() as f64 / n;
     assert!(dark > 0.01, "almost nothing drawn: {dark}");
 }
+
+/// Samples the report cannot use (RGB and mask of different sizes, metadata that is not
+/// valid, a link out of the dataset, a FIFO) are named and left out; the page is written
+/// (exit 3). Before, the size mismatch panicked (exit 101), one bad metadata file failed the
+/// whole report and a FIFO hung it.
+#[test]
+fn report_leaves_out_samples_it_cannot_use_and_names_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    for i in 0..5 {
+        let mask = if i == 1 { (8, 6) } else { (16, 12) };
+        crate::util::hand_png_sample(&data, "clevr", i, (16, 12), mask);
+    }
+    let sub = data.join("clevrtex_clevr/0");
+    std::fs::write(sub.join("CLEVRTEX_clevr_000002.json"), b"{\"objects\": 7}").unwrap();
+    let outside = dir.path().join("elsewhere.json");
+    std::fs::copy(sub.join("CLEVRTEX_clevr_000000.json"), &outside).unwrap();
+    std::fs::remove_file(sub.join("CLEVRTEX_clevr_000003.json")).unwrap();
+    std::os::unix::fs::symlink(&outside, sub.join("CLEVRTEX_clevr_000003.json")).unwrap();
+    std::fs::remove_file(sub.join("CLEVRTEX_clevr_000004.json")).unwrap();
+    let st = std::process::Command::new("mkfifo")
+        .arg(sub.join("CLEVRTEX_clevr_000004.json"))
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let page = dir.path().join("report.html");
+    let o = crate::util::run_within(
+        &[
+            "report".as_ref(),
+            "--out".as_ref(),
+            page.as_os_str(),
+            data.as_os_str(),
+        ],
+        120,
+    );
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000001") && t.contains("is 16x12 but its mask"),
+        "{t}"
+    );
+    assert!(
+        t.contains("CLEVRTEX_clevr_000002.json` is not valid metadata"),
+        "{t}"
+    );
+    assert!(
+        t.contains("CLEVRTEX_clevr_000003.json` is a symbolic link leading out"),
+        "{t}"
+    );
+    assert!(
+        t.contains("CLEVRTEX_clevr_000004.json` is not a regular file"),
+        "{t}"
+    );
+    assert!(page.is_file(), "{t}");
+}

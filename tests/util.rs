@@ -335,3 +335,47 @@ pub fn published_copy(ours: &Path, variant: &str, dst: &Path) {
         }
     }
 }
+
+/// A hand-made sample of `variant` in the published layout under `out`: metadata with no
+/// objects, an RGB PNG of `rgb` size and a grey mask PNG of `mask` size (0 everywhere), for
+/// tests of what readers do with files no renderer would write.
+pub fn hand_png_sample(out: &Path, variant: &str, index: u64, rgb: (u32, u32), mask: (u32, u32)) {
+    let sub = out.join(format!("clevrtex_{variant}/{}", index / 1000));
+    std::fs::create_dir_all(&sub).unwrap();
+    let stem = format!("CLEVRTEX_{variant}_{index:06}");
+    let meta = serde_json::json!({
+        "image_index": index, "variant": variant, "split": "test", "num_objects": 0,
+        "objects": [], "ground_material": "plain",
+    });
+    std::fs::write(sub.join(format!("{stem}.json")), meta.to_string()).unwrap();
+    image::RgbImage::from_pixel(rgb.0, rgb.1, image::Rgb([90, 120, 150]))
+        .save(sub.join(format!("{stem}.png")))
+        .unwrap();
+    image::GrayImage::new(mask.0, mask.1)
+        .save(sub.join(format!("{stem}_flat.png")))
+        .unwrap();
+}
+
+/// Run `clevrtex args`, killed (a test failure) after `secs`: for inputs that could hang a
+/// command (a FIFO in a dataset).
+pub fn run_within(args: &[&std::ffi::OsStr], secs: u64) -> Output {
+    let mut child = clevrtex()
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t.elapsed().as_secs() > secs {
+            child.kill().unwrap();
+            let o = child.wait_with_output().unwrap();
+            panic!(
+                "clevrtex {args:?} still running after {secs} s:\n{}",
+                text(&o)
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    child.wait_with_output().unwrap()
+}

@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
+use clevrtex_render::dataset::{self, Kind};
 use clevrtex_render::post::decode_png;
 use clevrtex_scene::{layout, Pass};
 use image::{Rgb, RgbImage};
@@ -63,6 +64,9 @@ pub struct Sheet {
     pub columns: Vec<&'static str>,
     /// Whether a font was found for the labels.
     pub labelled: bool,
+    /// Cells left empty, one line each (`<stem>: <file>: <why>`): a sample whose files cannot
+    /// be read, or whose RGB image and mask differ in size, is reported and the sheet goes on.
+    pub problems: Vec<String>,
 }
 
 /// Columns of the sheet, in order.
@@ -118,6 +122,8 @@ struct Sample {
     stem: String,
     dir: PathBuf,
     meta: Value,
+    /// The dataset's root, canonical: links leading out of it are not followed.
+    root: PathBuf,
 }
 
 /// The colour of instance id `i`: the mask PNG's own palette (0 = background, black).
@@ -141,8 +147,19 @@ fn colour_map(t: f64) -> Rgb<u8> {
     Rgb([c(0), c(1), c(2)])
 }
 
-/// Find the samples to show, in index order.
+/// Largest metadata file read (a sample's JSON is a few KB).
+const MAX_METADATA_BYTES: u64 = 64 << 20;
+
+/// Find the samples to show, in index order. Folders are walked with the dataset reader
+/// (`clevrtex_render::dataset`): a link out of the dataset, a FIFO or a device is never
+/// followed or opened.
 fn find_samples(args: &Args) -> anyhow::Result<Vec<Sample>> {
+    let root = dataset::root(&args.dir).with_context(|| {
+        format!(
+            "cannot read `{}`\nhint: pass the `--out` folder of `clevrtex generate`",
+            args.dir.display()
+        )
+    })?;
     let mut vdirs = Vec::new();
     let name = args
         .dir
@@ -150,35 +167,34 @@ fn find_samples(args: &Args) -> anyhow::Result<Vec<Sample>> {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     if name.starts_with("clevrtex_") {
-        vdirs.push(args.dir.clone());
+        vdirs.push(root.clone());
     } else {
-        let rd = std::fs::read_dir(&args.dir).with_context(|| {
-            format!(
-                "cannot read `{}`\nhint: pass the `--out` folder of `clevrtex generate`",
-                args.dir.display()
-            )
-        })?;
-        let mut v: Vec<PathBuf> = rd.flatten().map(|e| e.path()).collect();
-        v.sort();
-        vdirs.extend(v.into_iter().filter(|p| {
-            p.is_dir()
-                && p.file_name()
-                    .is_some_and(|n| n.to_string_lossy().starts_with("clevrtex_"))
-        }));
+        let entries = dataset::list(&root, &root)
+            .with_context(|| format!("cannot read `{}`", args.dir.display()))?;
+        vdirs.extend(
+            entries
+                .into_iter()
+                .filter(|(n, _, k)| *k == Kind::Dir && n.starts_with("clevrtex_"))
+                .map(|(_, p, _)| p),
+        );
     }
     let mut found: Vec<(String, u64, String, PathBuf)> = Vec::new();
     for vdir in vdirs {
-        let mut subs: Vec<PathBuf> = std::fs::read_dir(&vdir)
-            .with_context(|| format!("cannot read `{}`", vdir.display()))?
-            .flatten()
-            .map(|e| e.path())
-            .filter(|p| p.is_dir())
-            .collect();
-        subs.sort();
-        for sub in subs {
-            for e in std::fs::read_dir(&sub)?.flatten() {
-                let n = e.file_name().to_string_lossy().into_owned();
+        let subs = dataset::list(&root, &vdir)
+            .with_context(|| format!("cannot read `{}`", vdir.display()))?;
+        for (_, sub, kind) in subs {
+            if kind != Kind::Dir {
+                continue;
+            }
+            let Ok(files) = dataset::list(&root, &sub) else {
+                continue;
+            };
+            for (n, _, kind) in files {
                 if let Some((stem, variant, index)) = layout::parse_stem(&n, ".json") {
+                    if let Kind::Skipped(why) = &kind {
+                        eprintln!("skipped `{}`: {why}", sub.join(&n).display());
+                        continue;
+                    }
                     if args.variant.as_ref().is_none_or(|v| v == variant) {
                         found.push((variant.to_string(), index, stem.to_string(), sub.clone()));
                     }
@@ -213,12 +229,16 @@ fn find_samples(args: &Args) -> anyhow::Result<Vec<Sample>> {
         .into_iter()
         .map(|(_, _, stem, dir)| {
             let path = dir.join(layout::metadata_file(&stem));
-            let meta: Value = serde_json::from_slice(
-                &std::fs::read(&path)
-                    .with_context(|| format!("cannot read `{}`", path.display()))?,
-            )
-            .with_context(|| format!("`{}` is not valid metadata", path.display()))?;
-            Ok(Sample { stem, dir, meta })
+            let bytes = dataset::read(&root, &path, MAX_METADATA_BYTES)
+                .map_err(|why| anyhow::anyhow!("`{}` {why}", path.display()))?;
+            let meta: Value = serde_json::from_slice(&bytes)
+                .with_context(|| format!("`{}` is not valid metadata", path.display()))?;
+            Ok(Sample {
+                stem,
+                dir,
+                meta,
+                root: root.clone(),
+            })
         })
         .collect()
 }
@@ -226,7 +246,19 @@ fn find_samples(args: &Args) -> anyhow::Result<Vec<Sample>> {
 /// The file of `pass` of a sample, if it exists.
 fn pass_path(s: &Sample, pass: Pass) -> Option<PathBuf> {
     let p = s.dir.join(layout::pass_file(&s.stem, pass));
-    p.is_file().then_some(p)
+    (dataset::classify(&s.root, &p) == Kind::File).then_some(p)
+}
+
+/// Why the file of `pass` of a sample is not read, when it exists but is a link out of the
+/// dataset, a FIFO or a device.
+fn pass_skipped(s: &Sample, pass: Pass) -> Option<String> {
+    let p = s.dir.join(layout::pass_file(&s.stem, pass));
+    match dataset::classify(&s.root, &p) {
+        Kind::Skipped(why) if std::fs::symlink_metadata(&p).is_ok() => {
+            Some(format!("`{}` {why}", p.display()))
+        }
+        _ => None,
+    }
 }
 
 /// Scale `img` to `w` wide (nearest neighbour: masks stay exact).
@@ -240,6 +272,9 @@ type Cell = (RgbImage, Option<(f64, f64)>);
 
 /// The cell of column `col` of a sample; `None` when the sample lacks the pass.
 fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
+    if let Some(why) = pass_skipped(s, col.pass()) {
+        anyhow::bail!("{why}");
+    }
     let Some(path) = pass_path(s, col.pass()) else {
         return Ok(None);
     };
@@ -257,7 +292,19 @@ fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
                 RgbImage::from_fn(w, h, |x, y| id_colour(id(x, y)))
             } else {
                 match pass_path(s, Pass::Rgb) {
-                    Some(rgb) => to_rgb(&rgb)?,
+                    Some(rgb) => {
+                        let img = to_rgb(&rgb)?;
+                        if img.dimensions() != (w, h) {
+                            anyhow::bail!(
+                                "`{}` is {}x{} but its mask `{}` is {w}x{h}: the outlines cannot be drawn",
+                                rgb.display(),
+                                img.width(),
+                                img.height(),
+                                path.display()
+                            );
+                        }
+                        img
+                    }
                     None => RgbImage::new(w, h),
                 }
             };
@@ -323,6 +370,7 @@ pub fn draw(args: &Args) -> anyhow::Result<Sheet> {
     let mut sheet = RgbImage::from_pixel(width, height, Rgb([24, 24, 24]));
     // Texts to draw, after the images: (x, y, text, size).
     let mut texts: Vec<(i32, i32, String, u32)> = Vec::new();
+    let mut problems = Vec::new();
     for (c, col) in cols.iter().enumerate() {
         texts.push((
             (c as u32 * (cw + bar_w) + bar_w) as i32,
@@ -360,8 +408,13 @@ pub fn draw(args: &Args) -> anyhow::Result<Sheet> {
         ));
         for (c, col) in cols.iter().enumerate() {
             let x0 = c as u32 * (cw + bar_w) + bar_w;
-            let Some((img, depth_range)) = cell(s, *col)? else {
-                continue;
+            let (img, depth_range) = match cell(s, *col) {
+                Ok(Some(c)) => c,
+                Ok(None) => continue,
+                Err(e) => {
+                    problems.push(format!("{}: {e:#}", s.stem));
+                    continue;
+                }
             };
             let (nw, nh) = (img.width(), img.height());
             let img = scaled(&img, cw);
@@ -424,16 +477,19 @@ pub fn draw(args: &Args) -> anyhow::Result<Sheet> {
         samples: samples.len(),
         columns: cols.iter().map(|c| c.title()).collect(),
         labelled: drew_text,
+        problems,
     })
 }
 
 /// Run `clevrtex preview`.
 pub fn run(args: Args) -> CmdResult {
+    crate::cmd_report::refuse_output_inside(&args.out, &[&args.dir])?;
     let Sheet {
         image: sheet,
         samples,
         columns,
         labelled: drew_text,
+        problems,
     } = draw(&args)?;
     let tmp = args.out.with_extension("png.clevrtex-tmp");
     sheet
@@ -452,6 +508,16 @@ pub fn run(args: Args) -> CmdResult {
         eprintln!(
             "warning: no TrueType font found (install fonts-dejavu-core): the sheet has no labels"
         );
+    }
+    if !problems.is_empty() {
+        for p in &problems {
+            eprintln!("skipped a cell of {p}");
+        }
+        eprintln!(
+            "{} cell(s) left empty\nhint: `clevrtex verify` checks every file of the dataset",
+            problems.len()
+        );
+        return Ok(exit::PARTIAL);
     }
     Ok(exit::OK)
 }

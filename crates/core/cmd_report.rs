@@ -59,6 +59,8 @@ const COUNT_RANGE: std::ops::RangeInclusive<usize> = 3..=10;
 struct Summary {
     label: String,
     data: Dataset,
+    /// Samples left out of the measurements, one line each (`<stem>: <why>`).
+    problems: Vec<String>,
     measures: Vec<(String, texture::ImageMeasures)>,
     measured: BTreeMap<String, (usize, usize)>,
     /// Light offsets from their rig positions (m), when the scenes could be recomputed.
@@ -109,11 +111,23 @@ fn summarise(dir: &Path, args: &Args) -> anyhow::Result<Summary> {
     let measures = picked
         .par_iter()
         .map(|s| {
-            let m = texture::measure(s)?;
+            let m = texture::measure(s);
             bar.inc(1);
-            Ok((s.variant.clone(), m))
+            (s, m)
         })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .collect::<Vec<_>>();
+    // A sample that cannot be read or measured is reported and left out; the report goes on.
+    let mut problems = data.problems.clone();
+    let measures = measures
+        .into_iter()
+        .filter_map(|(s, m)| match m {
+            Ok(m) => Some((s.variant.clone(), m)),
+            Err(e) => {
+                problems.push(format!("{}: {e:#}", s.stem));
+                None
+            }
+        })
+        .collect::<Vec<_>>();
     bar.finish_and_clear();
     // Lights are not in the metadata: recompute the scene from the seed with the built-in
     // config, and trust it only when its objects are the metadata's.
@@ -174,6 +188,7 @@ fn summarise(dir: &Path, args: &Args) -> anyhow::Result<Summary> {
         light_offsets: lights.into_iter().flatten().flatten().collect(),
         lights_matched: (matched, tried),
         data,
+        problems,
         measures,
         measured,
     })
@@ -410,7 +425,9 @@ table{border-collapse:collapse;font-size:.85em;margin:.4em 0}td,th{border:1px so
 td:first-child,th:first-child{text-align:left}.cap{font-size:.85em;color:#555}.na{color:#a60}\
 .test{font-size:.9em}code{background:#f4f4f4;padding:0 3px}pre{white-space:pre-wrap;font-size:.8em;background:#f8f8f8;padding:4px}";
 
-fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
+/// The page, and the problems met while drawing it (cells of the preview left empty).
+fn build(sums: &[Summary], args: &Args) -> anyhow::Result<(String, Vec<String>)> {
+    let mut problems = Vec::new();
     let labels: Vec<String> = sums
         .iter()
         .enumerate()
@@ -888,6 +905,7 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
                 args.preview,
                 128,
             ))?;
+            problems.extend(sheet.problems.iter().map(|p| format!("preview: {p}")));
             let mut png = Vec::new();
             sheet
                 .image
@@ -959,7 +977,7 @@ fn build(sums: &[Summary], args: &Args) -> anyhow::Result<String> {
         );
     }
     page.html += "</body></html>\n";
-    Ok(page.html)
+    Ok((page.html, problems))
 }
 
 /// Run `clevrtex report`.
@@ -969,12 +987,15 @@ pub fn run(args: Args) -> CmdResult {
             "`--max-texture-samples 0` measures nothing\nhint: pass at least 1 (default 200)"
         );
     }
+    let mut dirs = vec![args.dir.as_path()];
+    dirs.extend(args.compare.as_deref());
+    refuse_output_inside(&args.out, &dirs)?;
     let started = std::time::Instant::now();
     let mut sums = vec![summarise(&args.dir, &args)?];
     if let Some(other) = &args.compare {
         sums.push(summarise(other, &args)?);
     }
-    let html = build(&sums, &args)?;
+    let (html, drawing_problems) = build(&sums, &args)?;
     let tmp = args.out.with_extension("html.clevrtex-tmp");
     std::fs::write(&tmp, html.as_bytes()).with_context(|| {
         format!(
@@ -994,7 +1015,51 @@ pub fn run(args: Args) -> CmdResult {
         html.len() / 1024,
         started.elapsed().as_secs_f64()
     );
+    let problems: Vec<&String> = sums
+        .iter()
+        .flat_map(|s| &s.problems)
+        .chain(&drawing_problems)
+        .collect();
+    if !problems.is_empty() {
+        for p in &problems {
+            eprintln!("left out {p}");
+        }
+        eprintln!(
+            "{} sample(s) or cell(s) left out of the report\nhint: `clevrtex verify` checks every file of the dataset",
+            problems.len()
+        );
+        return Ok(exit::PARTIAL);
+    }
     Ok(exit::OK)
+}
+
+/// Refuse an `--out` file inside one of the datasets `dirs`: writing there could overwrite a
+/// dataset file (`--out data/clevrtex_full/0/CLEVRTEX_full_000000.png`).
+pub fn refuse_output_inside(out: &Path, dirs: &[&Path]) -> anyhow::Result<()> {
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    // The folder the file would go to, with links resolved (it must exist to be written).
+    let Ok(parent) = parent.canonicalize() else {
+        return Ok(());
+    };
+    for dir in dirs {
+        let Ok(root) = dir.canonicalize() else {
+            continue;
+        };
+        if parent.starts_with(&root) {
+            anyhow::bail!(
+                "`--out {}` is inside the dataset `{}`: writing there could overwrite its files\nhint: write the output outside the dataset folder, e.g. `--out {}`",
+                out.display(),
+                dir.display(),
+                out.file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "report.html".into())
+            );
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

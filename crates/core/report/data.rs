@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
+use clevrtex_render::dataset::{self, Kind};
 use clevrtex_render::manifest::Manifest;
 use clevrtex_scene::layout;
 use indicatif::ProgressBar;
@@ -68,6 +69,9 @@ pub struct Dataset {
     pub failures: Vec<Failure>,
     /// Manifests that could not be read: (path, why).
     pub bad_manifests: Vec<(PathBuf, String)>,
+    /// Samples left out, one line each (`<file>: <why>`): metadata that cannot be read or is
+    /// not valid, a link out of the dataset, a FIFO.
+    pub problems: Vec<String>,
 }
 
 impl Dataset {
@@ -79,6 +83,11 @@ impl Dataset {
             .collect()
     }
 }
+
+/// Largest metadata file read (a sample's JSON is a few KB).
+const MAX_METADATA_BYTES: u64 = 64 << 20;
+/// Largest failure ledger read.
+const MAX_LEDGER_BYTES: u64 = 256 << 20;
 
 /// The `clevrtex_<variant>` folders of `dir` (or `dir` itself).
 fn variant_dirs(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
@@ -93,16 +102,13 @@ fn variant_dirs(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     if name.starts_with("clevrtex_") {
         return Ok(vec![dir.to_path_buf()]);
     }
-    let rd = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read `{}`\n{hint}", dir.display()))?;
-    let mut v: Vec<PathBuf> = rd
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| {
-            p.is_dir()
-                && p.file_name()
-                    .is_some_and(|n| n.to_string_lossy().starts_with("clevrtex_"))
-        })
+    let root =
+        dataset::root(dir).with_context(|| format!("cannot read `{}`\n{hint}", dir.display()))?;
+    let mut v: Vec<PathBuf> = dataset::list(&root, &root)
+        .with_context(|| format!("cannot read `{}`\n{hint}", dir.display()))?
+        .into_iter()
+        .filter(|(n, _, k)| *k == Kind::Dir && n.starts_with("clevrtex_"))
+        .map(|(_, p, _)| p)
         .collect();
     v.sort();
     if v.is_empty() {
@@ -120,15 +126,18 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
     let mut manifests = Vec::new();
     let mut bad_manifests = Vec::new();
     let mut failures = Vec::new();
+    let mut problems = Vec::new();
+    let root = dataset::root(dir).with_context(|| format!("cannot read `{}`", dir.display()))?;
     for vdir in variant_dirs(dir)? {
         let mut subs = Vec::new();
-        for e in std::fs::read_dir(&vdir)
+        for (n, p, kind) in dataset::list(&root, &vdir)
             .with_context(|| format!("cannot read `{}`", vdir.display()))?
-            .flatten()
         {
-            let p = e.path();
-            let n = e.file_name().to_string_lossy().into_owned();
-            if p.is_dir() {
+            if let Kind::Skipped(why) = &kind {
+                problems.push(format!("`{}` {why}", p.display()));
+                continue;
+            }
+            if kind == Kind::Dir {
                 subs.push(p);
             } else if n.starts_with("MANIFEST-") && n.ends_with(".json") {
                 match Manifest::read(&p) {
@@ -136,8 +145,8 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
                     Err(e) => bad_manifests.push((p, e)),
                 }
             } else if n == "failures.jsonl" {
-                let text = std::fs::read_to_string(&p).unwrap_or_default();
-                for line in text.lines() {
+                let bytes = dataset::read(&root, &p, MAX_LEDGER_BYTES).unwrap_or_default();
+                for line in String::from_utf8_lossy(&bytes).lines() {
                     let Ok(v) = serde_json::from_str::<Value>(line) else {
                         continue;
                     };
@@ -149,14 +158,15 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
                 }
             }
         }
-        subs.sort();
         for sub in subs {
-            for e in std::fs::read_dir(&sub)
+            for (n, p, kind) in dataset::list(&root, &sub)
                 .with_context(|| format!("cannot read `{}`", sub.display()))?
-                .flatten()
             {
-                let n = e.file_name().to_string_lossy().into_owned();
                 if let Some((stem, variant, index)) = layout::parse_stem(&n, ".json") {
+                    if let Kind::Skipped(why) = &kind {
+                        problems.push(format!("`{}` {why}", p.display()));
+                        continue;
+                    }
                     found.push((variant.to_string(), index, stem.to_string(), sub.clone()));
                 }
             }
@@ -170,29 +180,45 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
         );
     }
     bar.set_length(found.len() as u64);
-    let samples = found
+    let read = found
         .into_par_iter()
         .map(|(variant, index, stem, dir)| {
             let path = dir.join(layout::metadata_file(&stem));
-            let bytes =
-                std::fs::read(&path).with_context(|| format!("cannot read `{}`", path.display()))?;
-            let meta: Value = serde_json::from_slice(&bytes).with_context(|| {
-                format!(
-                    "`{}` is not valid metadata\nhint: `clevrtex verify` finds broken samples and `--remove-broken` deletes them for a rerun",
-                    path.display()
-                )
-            })?;
+            let sample = dataset::read(&root, &path, MAX_METADATA_BYTES)
+                .map_err(|why| anyhow::anyhow!("{why}"))
+                .and_then(|bytes| {
+                    serde_json::from_slice::<Value>(&bytes)
+                        .map_err(|e| anyhow::anyhow!("is not valid metadata: {e}"))
+                })
+                .and_then(|meta| {
+                    parse(variant, index, stem, dir, &meta)
+                        .map_err(|e| anyhow::anyhow!("is not valid metadata: {e:#}"))
+                });
             bar.inc(1);
-            parse(variant, index, stem, dir, &meta)
-                .with_context(|| format!("`{}` is not valid metadata", path.display()))
+            sample.map_err(|e| format!("`{}` {e}", path.display()))
         })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .collect::<Vec<_>>();
+    let mut samples = Vec::new();
+    for r in read {
+        match r {
+            Ok(s) => samples.push(s),
+            Err(p) => problems.push(p),
+        }
+    }
+    if samples.is_empty() {
+        bail!(
+            "no readable sample under `{}`: {}\nhint: `clevrtex verify` finds broken samples and `--remove-broken` deletes them for a rerun",
+            dir.display(),
+            problems.first().map(String::as_str).unwrap_or("")
+        );
+    }
     Ok(Dataset {
         root: dir.to_path_buf(),
         samples,
         manifests,
         failures,
         bad_manifests,
+        problems,
     })
 }
 
@@ -211,7 +237,7 @@ fn parse(
         m["render"]["width"].as_u64(),
         m["render"]["height"].as_u64(),
     ) {
-        (Some(w), Some(h)) => Some((w as u32, h as u32)),
+        (Some(w @ 1..=8192), Some(h @ 1..=8192)) => Some((w as u32, h as u32)),
         _ => None,
     };
     let objects = objs

@@ -67,9 +67,18 @@ pub fn measure(s: &Sample) -> anyhow::Result<ImageMeasures> {
             .map_err(|e| anyhow::anyhow!("`{}`: {e}", rgb.display()))?
             .to_rgb8();
         let m = decode_png(&mask).map_err(|e| anyhow::anyhow!("`{}`: {e}", mask.display()))?;
-        if (m.width, m.height) == img.dimensions() {
-            out.contrasts = contrasts(&img, &m.data, s.objects.len());
+        if (m.width, m.height) != img.dimensions() {
+            anyhow::bail!(
+                "`{}` is {}x{} but its mask `{}` is {}x{}",
+                rgb.display(),
+                img.width(),
+                img.height(),
+                mask.display(),
+                m.width,
+                m.height
+            );
         }
+        out.contrasts = contrasts(&img, &m.data, s.objects.len());
     }
     let depth = path(Pass::Depth);
     if let (Some((scale, background)), true) = (s.depth_encoding, depth.is_file()) {
