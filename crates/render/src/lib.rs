@@ -40,7 +40,8 @@
 
 pub mod blender;
 pub mod bridge;
-pub mod dataset;
+/// The reader of untrusted dataset folders, in the pure `scene` crate so that `eval` shares it.
+pub use clevrtex_scene::dataset;
 pub mod device;
 mod error;
 pub mod exr_io;

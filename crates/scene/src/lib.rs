@@ -21,6 +21,7 @@
 
 pub mod camera;
 pub mod config;
+pub mod dataset;
 pub mod json;
 pub mod layout;
 pub mod metadata;

@@ -1,5 +1,6 @@
-//! Reading a dataset folder someone else wrote (`verify`, `export`): its files are data, not
-//! instructions. One place decides what is followed and what is read:
+//! Reading a dataset folder someone else wrote (`verify`, `export`, `preview`, `report`,
+//! `eval`): its files are data, not instructions. One place decides what is followed and what
+//! is read:
 //!
 //! - a symbolic link is followed only when its target (resolved) lies inside the dataset's
 //!   root; one that leads out of it is reported and never opened;
