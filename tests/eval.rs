@@ -929,3 +929,59 @@ fn eval_npz_without_labels_lists_a_few_of_its_names() {
     assert!(err.contains("and 2991 more"), "{err}");
     assert!(!err.contains("junk2999"), "{err}");
 }
+
+/// A prediction that is a link out of the predictions folder is not followed (even to a
+/// valid prediction), and a FIFO is never opened: both count as missing, named, and eval
+/// exits 1 without hanging. Before, the link was followed and scored.
+#[test]
+fn eval_follows_no_link_out_of_its_folders_and_opens_no_fifo() {
+    let dir = tempfile::tempdir().unwrap();
+    let preds = dir.path().join("preds");
+    copy_dir(&data("eval/preds/png"), &preds);
+    let mut masks: Vec<std::path::PathBuf> = std::fs::read_dir(&preds)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.to_string_lossy().ends_with("_mask.png"))
+        .collect();
+    masks.sort();
+    // The first prediction moves out of the folder and is linked back.
+    let outside = dir.path().join("outside.png");
+    std::fs::rename(&masks[0], &outside).unwrap();
+    std::os::unix::fs::symlink(&outside, &masks[0]).unwrap();
+    let g = gt();
+    let mut args = vec![
+        std::ffi::OsStr::new("eval"),
+        preds.as_os_str(),
+        g.as_os_str(),
+    ];
+    args.extend(
+        ["--split", "all", "--bootstrap", "0"]
+            .iter()
+            .map(std::ffi::OsStr::new),
+    );
+    let o = crate::util::run_within(&args, 60);
+    let t = text(&o);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "the linked prediction is not scored: {t}"
+    );
+    let stem = masks[0]
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .replace("_mask.png", "");
+    assert!(t.contains(&stem), "the missing prediction is named: {t}");
+    // A FIFO in its place: missing too, and no hang.
+    std::fs::remove_file(&masks[0]).unwrap();
+    let st = std::process::Command::new("mkfifo")
+        .arg(&masks[0])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let o = crate::util::run_within(&args, 60);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(t.contains(&stem), "{t}");
+}

@@ -74,38 +74,57 @@ impl Split {
     }
 }
 
-/// Every regular file under `dir`, recursively (symlinks followed, depth-limited).
+/// Every regular file under `dir`, recursively and depth-limited, walked with the reader of
+/// untrusted folders (`clevrtex_scene::dataset`): links are followed only inside `dir`, and
+/// FIFOs, sockets and devices are left out.
 pub fn walk(dir: &Path) -> Result<Vec<PathBuf>, EvalError> {
+    let root = clevrtex_scene::dataset::root(dir).map_err(|cause| EvalError::Io {
+        path: dir.to_path_buf(),
+        cause,
+    })?;
     let mut out = Vec::new();
     let mut seen = std::collections::HashSet::new();
-    walk_into(dir, 0, &mut out, &mut seen)?;
+    walk_into(&root, dir, 0, &mut out, &mut seen)?;
     out.sort();
     Ok(out)
 }
 
 fn walk_into(
+    root: &Path,
     dir: &Path,
     depth: usize,
     out: &mut Vec<PathBuf>,
     seen: &mut std::collections::HashSet<PathBuf>,
 ) -> Result<(), EvalError> {
+    use clevrtex_scene::dataset::{list, Kind};
     // Symlinked directories are followed once each, so a link cycle cannot blow up the walk.
     if !seen.insert(std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf())) {
         return Ok(());
     }
-    let io = |cause| EvalError::Io {
+    let entries = list(root, dir).map_err(|cause| EvalError::Io {
         path: dir.to_path_buf(),
         cause,
-    };
-    for entry in std::fs::read_dir(dir).map_err(io)? {
-        let path = entry.map_err(io)?.path();
-        match std::fs::metadata(&path) {
-            Ok(m) if m.is_dir() && depth < 32 => walk_into(&path, depth + 1, out, seen)?,
-            Ok(m) if m.is_file() => out.push(path),
+    })?;
+    for (_, path, kind) in entries {
+        match kind {
+            Kind::Dir if depth < 32 => walk_into(root, &path, depth + 1, out, seen)?,
+            Kind::File => out.push(path),
             _ => {}
         }
     }
     Ok(())
+}
+
+/// Largest input file read (a prediction `.npz` of 1024 soft masks at 1024x1024 fits).
+pub const MAX_FILE_BYTES: u64 = clevrtex_scene::dataset::MAX_FILE_BYTES;
+
+/// The bytes of an input file found by [`walk`]: a regular file (never a FIFO, which would
+/// block), at most [`MAX_FILE_BYTES`].
+pub fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
+    clevrtex_scene::dataset::read_regular(path, MAX_FILE_BYTES).map_err(|why| EvalError::Io {
+        path: path.to_path_buf(),
+        cause: std::io::Error::other(why),
+    })
 }
 
 fn file_name(p: &Path) -> &str {

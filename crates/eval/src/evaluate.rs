@@ -291,12 +291,7 @@ impl Report {
     }
 }
 
-fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
-    std::fs::read(path).map_err(|cause| EvalError::Io {
-        path: path.to_path_buf(),
-        cause,
-    })
-}
+use crate::dataset::read_file;
 
 const GT_HINT: &str = "the ground truth is damaged: regenerate or re-download this sample";
 

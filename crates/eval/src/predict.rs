@@ -40,12 +40,7 @@ impl ReconImage {
 /// Bytes of the files read, for the provenance hash.
 pub type ReadBytes = Vec<Vec<u8>>;
 
-fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
-    std::fs::read(path).map_err(|cause| EvalError::Io {
-        path: path.to_path_buf(),
-        cause,
-    })
-}
+use crate::dataset::read_file;
 
 fn shape_str(dims: &[usize]) -> String {
     format!(

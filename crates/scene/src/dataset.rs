@@ -89,6 +89,13 @@ pub fn read(root: &Path, path: &Path, cap: u64) -> Result<Vec<u8>, String> {
     if let Kind::Skipped(why) = classify(root, path) {
         return Err(why);
     }
+    read_regular(path, cap)
+}
+
+/// The bytes of `path` if it is a regular file (checked on the open file: a FIFO or device is
+/// never read, and never blocks), at most `cap` bytes; `Err` says why not, in one line. For a
+/// path already found by walking a root with [`classify`].
+pub fn read_regular(path: &Path, cap: u64) -> Result<Vec<u8>, String> {
     use std::os::unix::fs::OpenOptionsExt;
     // Non-blocking: a FIFO swapped in after `classify` must not hang the command.
     let f = std::fs::OpenOptions::new()
