@@ -497,8 +497,10 @@ fn load_sample<'py>(
     side: Option<usize>,
 ) -> PyResult<(Bound<'py, PyBytes>, Bound<'py, PyBytes>, usize, usize)> {
     let (rgb, labels, h, w) = py.allow_threads(|| -> PyResult<_> {
+        // The dataset's reader: a regular file only (a FIFO never blocks), capped.
         let read_file = |p: &str| {
-            std::fs::read(p).map_err(|e| PyOSError::new_err(format!("cannot read `{p}`: {e}")))
+            clevrtex_eval::dataset::read_file(Path::new(p))
+                .map_err(|e| PyOSError::new_err(e.to_string()))
         };
         let img = read::png_rgb(&read_file(image)?)
             .map_err(|r| value_error(format!("cannot decode `{image}`: {r}")))?;
