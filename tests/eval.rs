@@ -465,7 +465,7 @@ fn eval_outd_is_test_only() {
     assert_eq!(r["counts"]["images"], 10);
     assert_eq!(r["provenance"]["variant"], "outd");
     let out = run(&["eval", s(&p), s(&dir.path().join("gt")), "--split", "val"]);
-    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
     assert!(
         stderr(&out).contains("`outd` is a test-only dataset"),
         "{}",
@@ -703,7 +703,7 @@ fn eval_bootstrap_above_the_cap_is_refused_at_once() {
         "--bootstrap",
         "1000000000",
     ]);
-    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
     assert!(
         stderr(&out).contains("`--bootstrap 1000000000` is more than the 100000"),
         "{}",

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use clevrtex_eval::{evaluate, output, Metric, Options, Protocol, Split};
 
-use crate::exit::{CmdResult, OK, USAGE};
+use crate::exit::{CmdResult, OK};
 
 /// Arguments of `clevrtex eval`.
 #[derive(Debug, clap::Args)]
@@ -161,11 +161,9 @@ pub fn run(args: Args) -> CmdResult {
     };
     let report = match evaluate(&args.preds, &args.gt, &opts) {
         Ok(r) => r,
-        // A flag that does not fit the dataset (e.g. `--split val` on `outd`) is a usage error.
-        Err(e @ clevrtex_eval::EvalError::Usage { .. }) => {
-            eprintln!("error: {e}");
-            return Ok(USAGE);
-        }
+        // A flag that does not fit the dataset (e.g. `--split val` on `outd`) or its limit
+        // (`--bootstrap`) is an error (1) with a hint, as in every command: 2 is only for a
+        // command line the parser rejects (README, "Exit codes").
         Err(e) => return Err(e.into()),
     };
     if let Some(path) = &args.json {
