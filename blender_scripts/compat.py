@@ -352,3 +352,11 @@ def teapot_mesh():
     with open(TEAPOT_MESH, "r", encoding="utf-8") as f:
         doc = json.load(f)
     return [tuple(v) for v in doc["verts"]], [tuple(f) for f in doc["faces"]]
+
+
+def set_aov_name(node, name):
+    """Name the AOV an AOV Output node writes: `aov_name` since 4.0, `name` in 3.x."""
+    if hasattr(node, "aov_name"):
+        node.aov_name = name
+    else:
+        node.name = name
