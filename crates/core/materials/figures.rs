@@ -78,9 +78,9 @@ pub fn albedo_spread(albedo: &[u8], ids: &[u32], w: usize, h: usize) -> BTreeMap
     for i in (0..w * h).filter(|&i| keep[i]) {
         let e = acc.entry(ids[i]).or_insert((0.0, [0.0; 3], [0.0; 3]));
         e.0 += 1.0;
-        for k in 0..3 {
-            e.1[k] += lab[i][k];
-            e.2[k] += lab[i][k] * lab[i][k];
+        for (k, v) in lab[i].iter().enumerate() {
+            e.1[k] += v;
+            e.2[k] += v * v;
         }
     }
     acc.into_iter()
@@ -400,9 +400,12 @@ pub fn measure_sample(
     })
 }
 
-/// The samples (variant, stem, folder) under a dataset folder: the `--out` of `generate`
-/// or one `clevrtex_<variant>` folder.
-pub fn find_samples(dir: &Path) -> anyhow::Result<(PathBuf, Vec<(String, String, PathBuf)>)> {
+/// One sample found: (variant, stem, folder).
+pub type Found = (String, String, PathBuf);
+
+/// The dataset's canonical root and its samples: the `--out` of `generate` or one
+/// `clevrtex_<variant>` folder.
+pub fn find_samples(dir: &Path) -> anyhow::Result<(PathBuf, Vec<Found>)> {
     let hint =
         "hint: pass the `--out` folder of `clevrtex generate` or one `clevrtex_<variant>` folder";
     if !dir.is_dir() {
