@@ -360,3 +360,14 @@ def set_aov_name(node, name):
         node.aov_name = name
     else:
         node.name = name
+
+
+def remove_aov(view_layer, index):
+    """Remove the view layer's AOV number `index`: `aovs.remove` where it exists (4.x);
+    3.x has only the operator, which removes the active AOV of the context's view layer."""
+    aovs = view_layer.aovs
+    if hasattr(aovs, "remove"):
+        aovs.remove(aovs[index])
+        return
+    view_layer.active_aov_index = index
+    bpy.ops.scene.view_layer_remove_aov()

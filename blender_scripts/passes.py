@@ -59,9 +59,11 @@ def enable(view_layer, pass_names):
     aovs = {}
     for name in pass_names:
         aovs.update(PASSES[name].get("aovs", {}))
-    for aov in list(view_layer.aovs):
-        if aov.name not in aovs:
-            view_layer.aovs.remove(aov)
+    import compat  # here, not at the top: this module is also read outside Blender
+
+    for i in reversed(range(len(view_layer.aovs))):
+        if view_layer.aovs[i].name not in aovs:
+            compat.remove_aov(view_layer, i)
     have = set(a.name for a in view_layer.aovs)
     for name, kind in sorted(aovs.items()):
         if name not in have:
