@@ -375,7 +375,10 @@ def _set_adaptive(obj, enabled, simple):
 
 def assign_materials(built, catalogue, build_material, displacement):
     """Build (or rebuild for another context) every material the scene uses, and assign it."""
-    context = {"displacement": bool(displacement)}
+    # The albedo pass's AOV output only when that pass is requested (the same in the
+    # visibility and the final context, so it never causes a rebuild of its own).
+    context = {"displacement": bool(displacement),
+               "albedo": "albedo" in built.spec.get("passes", [])}
     if built.material_context == context:
         return 0.0
     t0 = time.perf_counter()

@@ -352,3 +352,22 @@ def teapot_mesh():
     with open(TEAPOT_MESH, "r", encoding="utf-8") as f:
         doc = json.load(f)
     return [tuple(v) for v in doc["verts"]], [tuple(f) for f in doc["faces"]]
+
+
+def set_aov_name(node, name):
+    """Name the AOV an AOV Output node writes: `aov_name` since 4.0, `name` in 3.x."""
+    if hasattr(node, "aov_name"):
+        node.aov_name = name
+    else:
+        node.name = name
+
+
+def remove_aov(view_layer, index):
+    """Remove the view layer's AOV number `index`: `aovs.remove` where it exists (4.x);
+    3.x has only the operator, which removes the active AOV of the context's view layer."""
+    aovs = view_layer.aovs
+    if hasattr(aovs, "remove"):
+        aovs.remove(aovs[index])
+        return
+    view_layer.active_aov_index = index
+    bpy.ops.scene.view_layer_remove_aov()

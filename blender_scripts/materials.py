@@ -6,8 +6,10 @@
 - recipe: the material's entry of materials.json, resolved by clevrtex-materials (every
   default filled, colours linear); see docs/materials.md;
 - instance: the scene file's MaterialInstance as a dict (random, color, displacement, scale);
-- context: {"displacement": bool} -- False for the cheap visibility pass, where no
-  displacement may be set up.
+- context: {"displacement": bool, "albedo": bool} -- displacement False for the cheap
+  visibility pass, where no displacement may be set up; albedo True when the albedo pass is
+  requested: the material then writes its base colour (metals: their colour) to the colour
+  AOV `BaseCol` (passes.PASSES), and otherwise has no such node.
 
 Coordinates: Object coordinates times the object's own scale (read by an Attribute node, so
 one material serves objects of any size), i.e. world units in the object's frame. A large
@@ -31,6 +33,8 @@ from material_nodes import Graph
 # around the x axis keep their curvature, large enough to decorrelate every noise.
 RANDOM_OFFSET = (73.1, 0.61, 0.37)
 CELL_OFFSET = (31.7, 0.43, 0.29)
+# The colour AOV of the albedo pass (passes.PASSES["albedo"]).
+ALBEDO_AOV = "BaseCol"
 
 
 def build_material(name, recipe, instance, context):
@@ -48,10 +52,11 @@ def build_material(name, recipe, instance, context):
         and bool(context.get("displacement", True))
         and (instance.get("displacement") or 0.0) > 0.0
     )
+    albedo = bool(context.get("albedo", False))
     if kind == "blend":
-        _build_blend(nt, out, recipe, instance, displace)
+        _build_blend(nt, out, recipe, instance, displace, albedo)
     else:
-        displace = _build_layers(nt, out, recipe, instance, displace)
+        displace = _build_layers(nt, out, recipe, instance, displace, albedo)
     compat.set_displacement_method(mat, "BOTH" if displace else "BUMP")
     return mat
 
@@ -77,7 +82,7 @@ def _set_bsdf(g, bsdf, name, value):
         g.set(socket, value)
 
 
-def _build_layers(nt, out, recipe, instance, displace):
+def _build_layers(nt, out, recipe, instance, displace, albedo=False):
     g = Graph(nt)
     p, normal = _coords(g, recipe, instance)
     ctx = {"normal": normal, "cell": None, "inside": None, "_normal_xyz": None}
@@ -103,6 +108,10 @@ def _build_layers(nt, out, recipe, instance, displace):
     surf = recipe.get("surface") or {}
     bsdf = g.node("ShaderNodeBsdfPrincipled")
     _set_bsdf(g, bsdf, "Base Color", color)
+    if albedo:
+        aov = g.node("ShaderNodeOutputAOV")
+        compat.set_aov_name(aov, ALBEDO_AOV)
+        g.set(aov.inputs["Color"], color)
     _set_bsdf(g, bsdf, "Roughness", rough)
     _set_bsdf(g, bsdf, "Metallic", metal)
     _set_bsdf(g, bsdf, "Specular", surf.get("specular", 0.5))
@@ -261,7 +270,7 @@ def _group_outputs(ng):
     return [s for s in ng.interface.items_tree if getattr(s, "in_out", "") == "OUTPUT"]
 
 
-def _build_blend(nt, out, recipe, instance, displace):
+def _build_blend(nt, out, recipe, instance, displace, albedo=False):
     ng = _load_group(recipe["path"], recipe.get("group"))
     node = nt.nodes.new("ShaderNodeGroup")
     node.node_tree = ng
@@ -283,6 +292,13 @@ def _build_blend(nt, out, recipe, instance, displace):
                 sock.default_value = v if not isinstance(v, tuple) else v[0]
     shader = node.outputs.get("Shader") or node.outputs.get("BSDF")
     nt.links.new(shader, out.inputs["Surface"])
+    # A user group's base colour is its `Color` (or `Base Color`) output, if it has one;
+    # without one the albedo pass is 0 on it (docs/output-format.md).
+    base = node.outputs.get("Color") or node.outputs.get("Base Color")
+    if albedo and base is not None:
+        aov = nt.nodes.new("ShaderNodeOutputAOV")
+        compat.set_aov_name(aov, ALBEDO_AOV)
+        nt.links.new(base, aov.inputs["Color"])
     disp = node.outputs.get("Displacement")
     if displace and disp is not None:
         nt.links.new(disp, out.inputs["Displacement"])

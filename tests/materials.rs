@@ -511,3 +511,82 @@ fn a_fake_blend_and_a_zero_size_are_refused() {
     assert!(t.contains("0 is not in 16..=4096"), "{t}");
     assert!(!sheet.exists());
 }
+
+/// The albedo pass is the material's base colour: `metal` objects of a `clevr` scene show
+/// their CLEVR colour (Cycles' diffuse colour, the pass before issue 23, was near black on
+/// them: 5-8 of 255), and `materials measure` reads the dataset (a rendered one, end to end).
+/// Two scenes in one worker: the albedo AOV is removed for the second scene's visibility
+/// render and added again for its final render (3.4 has no `aovs.remove`).
+#[test]
+fn albedo_pass_is_the_base_colour_metals_included() {
+    let Some(blender) = blender_or_skip("albedo_pass_is_the_base_colour_metals_included") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = run(&[
+        "generate",
+        "--variant",
+        "clevr",
+        "-n",
+        "2",
+        "--seed",
+        "2",
+        "--width",
+        "160",
+        "--height",
+        "120",
+        "--samples",
+        "4",
+        "--passes",
+        "rgb,mask,albedo",
+        "--workers",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+        "--blender",
+        blender.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let sub = out.join("clevrtex_clevr/0");
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(sub.join("CLEVRTEX_clevr_000000.json")).unwrap())
+            .unwrap();
+    let mask =
+        clevrtex_render::post::decode_png(&sub.join("CLEVRTEX_clevr_000000_flat.png")).unwrap();
+    let albedo =
+        clevrtex_render::post::decode_png(&sub.join("CLEVRTEX_clevr_000000_albedo_0001.png"))
+            .unwrap();
+    let mut metals = 0;
+    for (i, obj) in meta["objects"].as_array().unwrap().iter().enumerate() {
+        if obj["material"] != "metal" {
+            continue;
+        }
+        let (mut sum, mut n) = ([0.0f64; 3], 0.0);
+        for (p, &id) in mask.data.iter().enumerate() {
+            if usize::from(id) == i + 1 {
+                (0..3).for_each(|k| sum[k] += f64::from(albedo.data[3 * p + k]));
+                n += 1.0;
+            }
+        }
+        if n < 20.0 {
+            continue;
+        }
+        let brightest = sum.iter().map(|s| s / n).fold(0.0, f64::max);
+        assert!(
+            brightest > 60.0,
+            "metal object {} ({}) albedo {brightest}",
+            i + 1,
+            obj["color"]
+        );
+        metals += 1;
+    }
+    assert!(metals > 0, "the scene has no visible metal object: {meta}");
+    let m = run(&["materials", "measure", out.to_str().unwrap()]);
+    assert!(m.status.success(), "{}", text(&m));
+    let stdout = String::from_utf8_lossy(&m.stdout);
+    assert!(
+        stdout.contains("clevr ") && stdout.contains("metal"),
+        "{stdout}"
+    );
+}

@@ -3,7 +3,8 @@
 //! Features: a 4x4x4 colour histogram, gradient energy at three scales (1, 2 and 4 pixel
 //! boxes) and the share of gradient energy along four orientations. The distance between
 //! two materials is half the L1 distance of the histograms (0..1) plus the mean relative
-//! difference of the texture features (0..1).
+//! difference of the texture features (0..1). Also the sRGB to CIELAB conversion ([`lab`])
+//! shared by the report and the dataset figures.
 
 use std::path::Path;
 
@@ -105,9 +106,42 @@ pub fn distance(a: &Features, b: &Features) -> f64 {
     hist + tex
 }
 
+fn srgb_to_linear(c: u8) -> f64 {
+    let c = f64::from(c) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// CIELAB (D65) of an sRGB pixel.
+pub fn lab(p: [u8; 3]) -> [f64; 3] {
+    let [r, g, b] = p.map(srgb_to_linear);
+    let x = (0.4124 * r + 0.3576 * g + 0.1805 * b) / 0.95047;
+    let y = 0.2126 * r + 0.7152 * g + 0.0722 * b;
+    let z = (0.0193 * r + 0.1192 * g + 0.9505 * b) / 1.08883;
+    let f = |t: f64| {
+        if t > 216.0 / 24389.0 {
+            t.cbrt()
+        } else {
+            (24389.0 / 27.0 * t + 16.0) / 116.0
+        }
+    };
+    let (fx, fy, fz) = (f(x), f(y), f(z));
+    [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lab_of_white_and_black() {
+        let w = lab([255, 255, 255]);
+        assert!((w[0] - 100.0).abs() < 0.01 && w[1].abs() < 0.05 && w[2].abs() < 0.05);
+        assert!(lab([0, 0, 0])[0].abs() < 1e-9);
+    }
 
     #[test]
     fn a_region_has_the_features_of_the_same_pixels_cut_out() {

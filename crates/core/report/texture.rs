@@ -10,7 +10,7 @@ use clevrtex_render::post::decode_png;
 use clevrtex_scene::{layout, Pass};
 use image::RgbImage;
 
-use crate::cmd_materials::stats::{distance, region_features};
+use crate::cmd_materials::stats::{distance, lab, region_features};
 
 use super::data::Sample;
 
@@ -29,32 +29,6 @@ pub struct ImageMeasures {
     pub contrasts: Vec<Contrast>,
     /// Nearest and farthest valid depth, metres (with a depth pass and its encoding).
     pub depth_range: Option<(f64, f64)>,
-}
-
-fn srgb_to_linear(c: u8) -> f64 {
-    let c = f64::from(c) / 255.0;
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// CIELAB (D65) of an sRGB pixel.
-pub fn lab(p: [u8; 3]) -> [f64; 3] {
-    let [r, g, b] = p.map(srgb_to_linear);
-    let x = (0.4124 * r + 0.3576 * g + 0.1805 * b) / 0.95047;
-    let y = 0.2126 * r + 0.7152 * g + 0.0722 * b;
-    let z = (0.0193 * r + 0.1192 * g + 0.9505 * b) / 1.08883;
-    let f = |t: f64| {
-        if t > 216.0 / 24389.0 {
-            t.cbrt()
-        } else {
-            (24389.0 / 27.0 * t + 16.0) / 116.0
-        }
-    };
-    let (fx, fy, fz) = (f(x), f(y), f(z));
-    [116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)]
 }
 
 /// Measure one sample; passes it lacks give nothing.
@@ -194,13 +168,6 @@ pub fn contrasts(img: &RgbImage, ids: &[u16], n: usize) -> Vec<Contrast> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn lab_of_white_and_black() {
-        let w = lab([255, 255, 255]);
-        assert!((w[0] - 100.0).abs() < 0.01 && w[1].abs() < 0.05 && w[2].abs() < 0.05);
-        assert!(lab([0, 0, 0])[0].abs() < 1e-9);
-    }
 
     #[test]
     fn a_red_square_on_grey_stands_out_and_a_grey_one_does_not() {

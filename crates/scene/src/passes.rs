@@ -41,7 +41,7 @@ pub enum Pass {
     Depth,
     /// Surface normals.
     Normal,
-    /// Diffuse colour.
+    /// The material's base colour (metals: their colour).
     Albedo,
     /// Computed shadow amount.
     Shadow,
@@ -209,13 +209,13 @@ const SPECS: [PassSpec; 6] = [
         pass: Pass::Albedo,
         name: "albedo",
         source: Source::PassesExr,
-        exr_layers: &[("DiffCol", "RGB")],
+        exr_layers: &[("BaseCol", "RGB")],
         file_suffix: "_albedo_0001",
         png: PngKind::Rgb8,
         encoding: encoding(
             8,
             "RGB",
-            "diffuse colour pass, linear values encoded with the sRGB transfer curve",
+            "the material's base colour (metals: their colour; a colour AOV), linear values encoded with the sRGB transfer curve",
         ),
     },
     PassSpec {

@@ -256,7 +256,10 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
                     random: unit(&mut rng),
                     color_name,
                     color,
-                    scale: None,
+                    // One material on everything (`camo`): the backdrop's texture scale too,
+                    // so objects and backdrop show the texture at one world scale (texture
+                    // coordinates are world units on both; `blender_scripts/materials.py`).
+                    scale: scene_material.as_ref().and(config.background.scale),
                 },
             }
         })
@@ -399,5 +402,24 @@ mod tests {
             matches!(e, SampleError::Infeasible { count: 100, .. }),
             "{e}"
         );
+    }
+
+    #[test]
+    fn camo_objects_take_the_backdrops_texture_scale_and_full_objects_none() {
+        // `camo` has one material on everything: objects and backdrop must show its texture
+        // at one world scale, so the objects' copy carries the backdrop's `scale` (2).
+        let c = Config::builtin("camo").unwrap();
+        assert_eq!(c.background.scale, Some(2.0));
+        for i in 0..5 {
+            let s = sample(&c, &req(i)).unwrap();
+            assert_eq!(s.backdrop.material.scale, Some(2.0));
+            for o in &s.objects {
+                assert_eq!(o.material.name, s.backdrop.material.name);
+                assert_eq!(o.material.scale, s.backdrop.material.scale, "index {i}");
+            }
+        }
+        // Variants with their own object materials keep the recipe's scale on objects.
+        let s = sample(&Config::builtin("full").unwrap(), &req(3)).unwrap();
+        assert!(s.objects.iter().all(|o| o.material.scale.is_none()));
     }
 }
