@@ -159,13 +159,10 @@ pub fn run(args: Args) -> CmdResult {
         bootstrap: args.bootstrap,
         seed: args.seed,
     };
-    let report = match evaluate(&args.preds, &args.gt, &opts) {
-        Ok(r) => r,
-        // A flag that does not fit the dataset (e.g. `--split val` on `outd`) or its limit
-        // (`--bootstrap`) is an error (1) with a hint, as in every command: 2 is only for a
-        // command line the parser rejects (README, "Exit codes").
-        Err(e) => return Err(e.into()),
-    };
+    // A flag that does not fit the dataset (e.g. `--split val` on `outd`) or its limit
+    // (`--bootstrap`) is an error (1) with a hint, as in every command: 2 is only for a
+    // command line the parser rejects (README, "Exit codes").
+    let report = evaluate(&args.preds, &args.gt, &opts)?;
     if let Some(path) = &args.json {
         let json = output::to_json(&report, env!("CARGO_PKG_VERSION"));
         write_atomic(path, &format!("{json:#}\n"))?;
