@@ -127,8 +127,10 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
     let mut bad_manifests = Vec::new();
     let mut failures = Vec::new();
     let mut problems = Vec::new();
+    // The folders first: they say when the dataset does not exist.
+    let vdirs = variant_dirs(dir)?;
     let root = dataset::root(dir).with_context(|| format!("cannot read `{}`", dir.display()))?;
-    for vdir in variant_dirs(dir)? {
+    for vdir in vdirs {
         let mut subs = Vec::new();
         for (n, p, kind) in dataset::list(&root, &vdir)
             .with_context(|| format!("cannot read `{}`", vdir.display()))?
