@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use clevrtex_render::dataset::{self, Kind};
-use clevrtex_render::post::decode_png;
+use clevrtex_render::post::{decode_png_bytes, DecodedPng};
 use clevrtex_scene::{layout, Pass};
 use image::{Rgb, RgbImage};
 use plotters::prelude::*;
@@ -261,6 +261,29 @@ fn pass_skipped(s: &Sample, pass: Pass) -> Option<String> {
     }
 }
 
+/// Most pixels a pass PNG of a sample may declare (8192x8192, the largest render size).
+pub(crate) const MAX_PASS_PIXELS: u64 = 8192 * 8192;
+
+/// Read and decode a sample's mask or depth PNG under `root` as untrusted data: through the
+/// dataset reader (no link out of `root`, no FIFO, capped read), and its size checked from the
+/// PNG header before the decoder allocates for it.
+pub(crate) fn read_pass_png(root: &Path, path: &Path) -> anyhow::Result<DecodedPng> {
+    let bytes = dataset::read(root, path, dataset::MAX_FILE_BYTES)
+        .map_err(|why| anyhow::anyhow!("`{}` {why}", path.display()))?;
+    if bytes.len() >= 24 && &bytes[12..16] == b"IHDR" {
+        let be =
+            |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+        let (w, h) = (be(16), be(20));
+        if u64::from(w) * u64::from(h) > MAX_PASS_PIXELS {
+            anyhow::bail!(
+                "`{}` declares {w}x{h} pixels, more than a sample's pass may have ({MAX_PASS_PIXELS}): the file is damaged or not clevrtex's; regenerate or re-download the sample",
+                path.display()
+            );
+        }
+    }
+    Ok(decode_png_bytes(&bytes, path)?)
+}
+
 /// Scale `img` to `w` wide (nearest neighbour: masks stay exact).
 fn scaled(img: &RgbImage, w: u32) -> RgbImage {
     let h = (u64::from(img.height()) * u64::from(w) / u64::from(img.width().max(1))).max(1) as u32;
@@ -285,7 +308,7 @@ fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
     Ok(Some(match col {
         Column::Rgb | Column::Normal | Column::Albedo | Column::Shadow => (to_rgb(&path)?, None),
         Column::Mask | Column::Outlines => {
-            let m = decode_png(&path).map_err(|e| bad(&e))?;
+            let m = read_pass_png(&s.root, &path)?;
             let (w, h) = (m.width, m.height);
             let id = |x: u32, y: u32| m.data[(y * w + x) as usize];
             let mut img = if col == Column::Mask {
@@ -322,7 +345,7 @@ fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
             (img, None)
         }
         Column::Depth => {
-            let d = decode_png(&path).map_err(|e| bad(&e))?;
+            let d = read_pass_png(&s.root, &path)?;
             let enc = &s.meta["passes"]["depth"];
             let scale = enc["scale"].as_f64().unwrap_or(1.0);
             let background = enc["background"].as_u64().unwrap_or(65535) as u16;

@@ -403,6 +403,15 @@ pub fn decode_png_bytes(bytes: &[u8], path: &Path) -> Result<DecodedPng> {
     let mut reader = dec
         .read_info()
         .map_err(|e| bad(format!("not a PNG: {e}")))?;
+    // The size from the header, bounded before anything is allocated for it: a PNG read
+    // back from a dataset is not trusted, and a few hundred bytes can declare 200000x200000.
+    let (w, h) = (reader.info().width, reader.info().height);
+    let max = clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
+    if w > max || h > max {
+        return Err(bad(format!(
+            "declares {w}x{h} pixels, more than the {max}x{max} any clevrtex image has"
+        )));
+    }
     let size = reader
         .output_buffer_size()
         .ok_or_else(|| bad("image too large".into()))?;
