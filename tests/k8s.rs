@@ -166,3 +166,62 @@ fn job_completion_index_shards_make_the_same_union_as_one_run() {
     assert_eq!(v.status.code(), Some(0), "{}", text(&v));
     assert!(text(&v).contains("3 manifest(s)"), "{}", text(&v));
 }
+
+/// The Job as JSON, parsed by PyYAML; `None` when the test Python lacks it (skipped).
+fn job_json(name: &str) -> Option<Value> {
+    let python = test_python_or_skip(name, "yaml")?;
+    let yaml = repo_root().join("deploy/k8s/indexed-job.yaml");
+    let o = std::process::Command::new(&python)
+        .args([
+            "-c",
+            "import json, sys, yaml; print(json.dumps(list(yaml.safe_load_all(open(sys.argv[1])))))",
+        ])
+        .arg(&yaml)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let docs: Vec<Value> = serde_json::from_slice(&o.stdout).unwrap();
+    docs.into_iter().find(|d| d["kind"] == "Job")
+}
+
+#[test]
+fn indexed_job_has_a_tmp_emptydir_and_preemption_does_not_use_up_retries() {
+    let Some(job) = job_json("indexed_job_tmp_and_pod_failure_policy") else {
+        return;
+    };
+    let pod = &job["spec"]["template"]["spec"];
+    // /tmp is an emptyDir volume mounted in the container.
+    let tmp_volume = pod["volumes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|v| v["emptyDir"].is_object())
+        .unwrap_or_else(|| panic!("no emptyDir volume: {pod}"));
+    let mounts = pod["containers"][0]["volumeMounts"].as_array().unwrap();
+    assert!(
+        mounts
+            .iter()
+            .any(|m| m["mountPath"] == "/tmp" && m["name"] == tmp_volume["name"]),
+        "/tmp is not the emptyDir: {mounts:?}"
+    );
+    // Preemption (SIGTERM -> exit 143, or the DisruptionTarget condition) is ignored, so it
+    // does not count against backoffLimitPerIndex.
+    let rules = job["spec"]["podFailurePolicy"]["rules"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no podFailurePolicy rules: {}", job["spec"]));
+    assert!(
+        rules.iter().any(|r| r["action"] == "Ignore"
+            && r["onExitCodes"]["operator"] == "In"
+            && r["onExitCodes"]["values"]
+                .as_array()
+                .is_some_and(|v| v.iter().any(|c| c == 143))),
+        "no Ignore rule for exit code 143: {rules:?}"
+    );
+    assert!(
+        rules.iter().any(|r| r["action"] == "Ignore"
+            && r["onPodConditions"]
+                .as_array()
+                .is_some_and(|c| c.iter().any(|c| c["type"] == "DisruptionTarget"))),
+        "no Ignore rule for DisruptionTarget: {rules:?}"
+    );
+}

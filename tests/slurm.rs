@@ -179,10 +179,15 @@ impl Cluster {
 
     /// Submit the template as an array of `tasks`; returns the job id.
     fn submit(&self, tasks: u32, env: &[(&str, String)], logs: &Path) -> String {
+        self.submit_array(&format!("0-{}", tasks - 1), env, logs)
+    }
+
+    /// Submit the template with `--array=<spec>`; returns the job id.
+    fn submit_array(&self, spec: &str, env: &[(&str, String)], logs: &Path) -> String {
         let mut c = self.cmd("sbatch");
         c.args([
             "--parsable",
-            &format!("--array=0-{}", tasks - 1),
+            &format!("--array={spec}"),
             "--cpus-per-task=1",
             "--mem=400M",
         ])
@@ -280,6 +285,7 @@ fn slurm_array_union_equals_one_run_and_a_killed_task_resumes_after_requeue() {
             ("VARIANT", "clevr".to_string()),
             ("COUNT", "12".to_string()),
             ("SEED", "4".to_string()),
+            ("SHARDS", "4".to_string()),
             ("EXTRA_ARGS", extra.clone()),
             // Our own temporary folder: the bridge folders (and any Blender left behind) of
             // these tasks are told apart from other tests' by it.
@@ -375,4 +381,58 @@ fn slurm_array_union_equals_one_run_and_a_killed_task_resumes_after_requeue() {
     assert_eq!(v.status.code(), Some(0), "{}\n{}", text(&v), cluster.logs());
     let left = processes_under(&tmp);
     assert!(left.is_empty(), "orphan processes: {left:?}");
+
+    // 3. Task 2 resubmitted alone (`--array=2`) after its outputs are deleted: it renders
+    // exactly shard 2 of 4 (indices 2, 6, 10), not every image as shard 0 of 1.
+    let sub = out2.join("clevrtex_clevr/0");
+    for e in std::fs::read_dir(&sub).unwrap().flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let index: Option<u64> = name
+            .strip_prefix("CLEVRTEX_clevr_")
+            .and_then(|r| r.get(..6))
+            .and_then(|d| d.parse().ok());
+        if index.is_some_and(|i| i % 4 == 2) {
+            std::fs::remove_file(e.path()).unwrap();
+        }
+    }
+    for e in std::fs::read_dir(out2.join("clevrtex_clevr"))
+        .unwrap()
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.starts_with("MANIFEST") && name.contains("2of4") {
+            std::fs::remove_file(e.path()).unwrap();
+        }
+    }
+    let before: std::collections::BTreeSet<String> = std::fs::read_dir(&sub)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    let logs3 = work.path().join("logs3");
+    std::fs::create_dir_all(&logs3).unwrap();
+    let id = cluster.submit_array("2", &env(&out2), &logs3);
+    cluster.wait(&id, Duration::from_secs(600));
+    let after: std::collections::BTreeSet<String> = std::fs::read_dir(&sub)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    let made: Vec<String> = after
+        .difference(&before)
+        .filter(|n| n.ends_with(".json"))
+        .cloned()
+        .collect();
+    assert_eq!(
+        made,
+        [
+            "CLEVRTEX_clevr_000002.json",
+            "CLEVRTEX_clevr_000006.json",
+            "CLEVRTEX_clevr_000010.json"
+        ],
+        "{}",
+        std::fs::read_to_string(logs3.join("task-2.log")).unwrap_or_default()
+    );
+    let v = clevrtex().arg("verify").arg(&out2).output().unwrap();
+    assert_eq!(v.status.code(), Some(0), "{}", text(&v));
 }
