@@ -44,7 +44,8 @@ fn indexed_job_yaml_names_the_dockerfiles_image_and_a_valid_command() {
         .map(|e| {
             (
                 e["name"].as_str().unwrap().to_string(),
-                e["value"].as_str().unwrap().to_string(),
+                // Entries from the downward API (`valueFrom`) have no literal value.
+                e["value"].as_str().unwrap_or_default().to_string(),
             )
         })
         .collect();
@@ -224,4 +225,43 @@ fn indexed_job_has_a_tmp_emptydir_and_preemption_does_not_use_up_retries() {
                 .is_some_and(|c| c.iter().any(|c| c["type"] == "DisruptionTarget"))),
         "no Ignore rule for DisruptionTarget: {rules:?}"
     );
+}
+
+/// The pods' host in clevrtex's owner tags and range locks is the job and the completion
+/// index (`CLEVRTEX_HOST`), not the pod name: a pod restarted for the same index (a new pod
+/// name) then finds a killed pod's temporaries and lock in the shared folder stale, instead of
+/// taking them for another live host's. Before, the pod name was the host.
+#[test]
+fn indexed_job_names_the_host_by_job_and_index_not_by_pod() {
+    let Some(job) = job_json("indexed_job_names_the_host_by_job_and_index") else {
+        return;
+    };
+    let env = job["spec"]["template"]["spec"]["containers"][0]["env"]
+        .as_array()
+        .unwrap()
+        .clone();
+    let by_name = |n: &str| -> Option<&Value> { env.iter().find(|e| e["name"] == n) };
+    let host = by_name("CLEVRTEX_HOST").unwrap_or_else(|| panic!("no CLEVRTEX_HOST: {env:?}"));
+    let value = host["value"].as_str().unwrap_or_default();
+    // Both parts come from the pod's own metadata, defined before the value that uses them.
+    let pos = |n: &str| env.iter().position(|e| e["name"] == n).unwrap();
+    for (var, field) in [
+        (
+            "CLEVRTEX_JOB_NAME",
+            "metadata.labels['batch.kubernetes.io/job-name']",
+        ),
+        (
+            "CLEVRTEX_JOB_INDEX",
+            "metadata.annotations['batch.kubernetes.io/job-completion-index']",
+        ),
+    ] {
+        assert!(value.contains(&format!("$({var})")), "{value}");
+        let e = by_name(var).unwrap_or_else(|| panic!("no {var}: {env:?}"));
+        assert_eq!(e["valueFrom"]["fieldRef"]["fieldPath"], field, "{var}");
+        assert!(pos(var) < pos("CLEVRTEX_HOST"), "{var} must come first");
+    }
+    // And clevrtex reads that variable.
+    let src =
+        std::fs::read_to_string(crate::util::repo_root().join("crates/render/src/tmp.rs")).unwrap();
+    assert!(src.contains("pub const HOST_ENV: &str = \"CLEVRTEX_HOST\""));
 }

@@ -93,13 +93,37 @@ pub fn own_start_time() -> u64 {
     start_time(std::process::id()).unwrap_or(0)
 }
 
-/// This machine's name (`/proc/sys/kernel/hostname`), for owner tags.
+/// The variable that names this process's host in owner tags and range locks instead of the
+/// machine's name. The Kubernetes recipe sets it to `<job>-<completion index>`, so that a pod
+/// restarted for the same index (a new pod name, hence a new host name) knows a killed pod's
+/// temporaries and lock in the shared output folder as its own host's, and finds them stale
+/// when their pid and start time are not running.
+pub const HOST_ENV: &str = "CLEVRTEX_HOST";
+
+/// The host name of owner tags and range locks: `$CLEVRTEX_HOST` when set, else this
+/// machine's name (`/proc/sys/kernel/hostname`).
 pub fn hostname() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+    static HOST: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    HOST.get_or_init(|| {
+        host_name(
+            std::env::var(HOST_ENV).ok(),
+            std::fs::read_to_string("/proc/sys/kernel/hostname")
+                .or_else(|_| std::fs::read_to_string("/etc/hostname"))
+                .ok(),
+        )
+    })
+    .clone()
+}
+
+/// [`hostname`] from the variable's value and the machine's name: the first non-empty one,
+/// as one tag-safe word (ASCII letters, digits and `-`; anything else becomes `_`, so a value
+/// never adds a `.` to a tag or a `/` to a path).
+fn host_name(var: Option<String>, machine: Option<String>) -> String {
+    [var, machine]
+        .into_iter()
+        .flatten()
         .map(|h| h.trim().to_string())
-        .ok()
-        .filter(|h| !h.is_empty())
+        .find(|h| !h.is_empty())
         .unwrap_or_else(|| "localhost".into())
         .replace(|c: char| !(c.is_ascii_alphanumeric() || c == '-'), "_")
 }
@@ -136,6 +160,19 @@ pub fn tagged_name_is_stale(stem: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_host_variable_names_the_host_as_one_tag_safe_word() {
+        let m = Some("node-7\n".to_string());
+        assert_eq!(host_name(None, m.clone()), "node-7");
+        assert_eq!(
+            host_name(Some("gen-full-3".into()), m.clone()),
+            "gen-full-3"
+        );
+        assert_eq!(host_name(Some("  ".into()), m.clone()), "node-7");
+        assert_eq!(host_name(Some("../a.b/c".into()), m), "___a_b_c");
+        assert_eq!(host_name(None, None), "localhost");
+    }
 
     #[test]
     fn our_own_folder_is_alive_and_a_dead_owners_is_stale() {
