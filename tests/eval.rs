@@ -985,3 +985,53 @@ fn eval_follows_no_link_out_of_its_folders_and_opens_no_fifo() {
     assert_eq!(o.status.code(), Some(1), "{t}");
     assert!(t.contains(&stem), "{t}");
 }
+
+/// A ground-truth sample's mask (or metadata) beside its image is read only if the walk of
+/// the ground-truth folder found it: a mask that is a link out of the folder is refused by
+/// name (it was followed and scored), a metadata FIFO is called what it is (it was "missing").
+#[test]
+fn eval_refuses_a_ground_truth_mask_linked_out_of_its_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gt");
+    copy_dir(&gt(), &g);
+    let sub = g.join("clevrtex_vbg/0");
+    let mask = sub.join("CLEVRTEX_vbg_000003_flat.png");
+    let outside = dir.path().join("outside_flat.png");
+    std::fs::rename(&mask, &outside).unwrap();
+    std::os::unix::fs::symlink(&outside, &mask).unwrap();
+    let preds = data("eval/preds/png");
+    let args: Vec<&std::ffi::OsStr> = vec![
+        "eval".as_ref(),
+        preds.as_os_str(),
+        g.as_os_str(),
+        "--split".as_ref(),
+        "all".as_ref(),
+        "--bootstrap".as_ref(),
+        "0".as_ref(),
+    ];
+    let o = crate::util::run_within(&args, 60);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_vbg_000003_flat.png` is a symbolic link leading out"),
+        "{t}"
+    );
+    assert!(t.contains("hint: "), "{t}");
+    // A FIFO in the metadata's place: named as not a regular file, and no hang.
+    std::fs::remove_file(&mask).unwrap();
+    std::fs::rename(&outside, &mask).unwrap();
+    let meta = sub.join("CLEVRTEX_vbg_000003.json");
+    std::fs::remove_file(&meta).unwrap();
+    let st = std::process::Command::new("mkfifo")
+        .arg(&meta)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let o = crate::util::run_within(&args, 60);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_vbg_000003.json` is not a regular file"),
+        "{t}"
+    );
+}

@@ -199,18 +199,37 @@ pub fn discover_gt(
             });
         }
     }
+    // A sample's mask and metadata must be among the files the walk found: a link out of
+    // the folder, a FIFO or a device beside the image is refused, not read.
+    let walked: std::collections::HashSet<&Path> = files.iter().map(PathBuf::as_path).collect();
+    let root = clevrtex_scene::dataset::root(dir).map_err(|cause| EvalError::Io {
+        path: dir.to_path_buf(),
+        cause,
+    })?;
     let mut samples = Vec::with_capacity(found.len());
     for (index, stem, image) in found {
         let parent = image.parent().unwrap_or(Path::new("."));
         let mask = parent.join(format!("{stem}_flat.png"));
         let meta = parent.join(format!("{stem}.json"));
         for p in [&mask, &meta] {
-            if !p.is_file() {
-                return Err(EvalError::GtIncomplete {
-                    stem,
-                    path: p.clone(),
-                });
+            if walked.contains(p.as_path()) {
+                continue;
             }
+            if std::fs::symlink_metadata(p).is_ok() {
+                if let clevrtex_scene::dataset::Kind::Skipped(why) =
+                    clevrtex_scene::dataset::classify(&root, p)
+                {
+                    return Err(EvalError::GtNotRead {
+                        stem,
+                        path: p.clone(),
+                        why,
+                    });
+                }
+            }
+            return Err(EvalError::GtIncomplete {
+                stem,
+                path: p.clone(),
+            });
         }
         samples.push(GtSample {
             index,
