@@ -842,6 +842,28 @@ fn eval_nan_huge_and_out_of_range_reconstructions_are_reported() {
     );
 }
 
+/// Write a valid greyscale PNG of `side` x `side` zeros (under 1 MB for 30000): a small file
+/// that decodes to gigabytes. False when python3 cannot write it.
+fn write_zero_png(path: &Path, side: u32) -> bool {
+    std::process::Command::new("python3")
+        .arg("-c")
+        .arg(
+            "import struct, sys, zlib\n\
+             w = h = int(sys.argv[2])\n\
+             def chunk(t, d):\n\
+             \x20   return struct.pack('>I', len(d)) + t + d + struct.pack('>I', zlib.crc32(t + d) & 0xffffffff)\n\
+             z = zlib.compressobj(9)\n\
+             row = bytes(w + 1)\n\
+             data = b''.join(z.compress(row) for _ in range(h)) + z.flush()\n\
+             png = b'\\x89PNG\\r\\n\\x1a\\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', w, h, 8, 0, 0, 0, 0)) + chunk(b'IDAT', data) + chunk(b'IEND', b'')\n\
+             open(sys.argv[1], 'wb').write(png)\n",
+        )
+        .arg(path)
+        .arg(side.to_string())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
 /// A 30000x30000 `_mask.png` of zeros (about 1 MB deflated) against the dataset's 40x30: its
 /// size is refused from the PNG header, before anything is decoded. Before, `--native-size`
 /// decoded it first (0.9 GB of pixels, 3.6 GB of ids: 4.4 GB seen), here an abort under a
@@ -860,22 +882,8 @@ fn eval_native_size_refuses_a_huge_png_from_its_header() {
         }
     }
     let target = preds.join("CLEVRTEX_vbg_000000_mask.png");
-    let made = std::process::Command::new("python3")
-        .arg("-c")
-        .arg(
-            "import struct, sys, zlib\n\
-             w = h = 30000\n\
-             def chunk(t, d):\n\
-             \x20   return struct.pack('>I', len(d)) + t + d + struct.pack('>I', zlib.crc32(t + d) & 0xffffffff)\n\
-             z = zlib.compressobj(9)\n\
-             row = bytes(w + 1)\n\
-             data = b''.join(z.compress(row) for _ in range(h)) + z.flush()\n\
-             png = b'\\x89PNG\\r\\n\\x1a\\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', w, h, 8, 0, 0, 0, 0)) + chunk(b'IDAT', data) + chunk(b'IEND', b'')\n\
-             open(sys.argv[1], 'wb').write(png)\n",
-        )
-        .arg(&target)
-        .status();
-    if !made.is_ok_and(|s| s.success()) {
+    let made = write_zero_png(&target, 30000);
+    if !made {
         crate::util::skip(
             "eval_native_size_refuses_a_huge_png_from_its_header",
             crate::util::REQUIRE_TOOLS,
@@ -1034,4 +1042,45 @@ fn eval_refuses_a_ground_truth_mask_linked_out_of_its_folder() {
         t.contains("CLEVRTEX_vbg_000003.json` is not a regular file"),
         "{t}"
     );
+}
+
+/// A ground-truth mask whose header declares 30000x30000 pixels (a valid PNG of zeros under
+/// 1 MB) is refused from its header before it is decoded, with or without `--native-size`:
+/// decoding it cost 0.9 GB of pixels and 3.6 GB of labels (an abort under a memory limit).
+#[test]
+fn eval_checks_a_ground_truth_png_size_from_its_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gt");
+    copy_dir(&gt(), &g);
+    let target = g.join("clevrtex_vbg/0/CLEVRTEX_vbg_000000_flat.png");
+    if !write_zero_png(&target, 30000) {
+        crate::util::skip(
+            "eval_checks_a_ground_truth_png_size_from_its_header",
+            crate::util::REQUIRE_TOOLS,
+            "python3 could not write the test PNG",
+            "install Python 3",
+        );
+        return;
+    }
+    assert!(std::fs::metadata(&target).unwrap().len() < 2 << 20);
+    let preds = data("eval/preds/png");
+    for extra in [&[][..], &["--native-size"][..]] {
+        let mut args = vec![
+            std::ffi::OsStr::new("eval"),
+            preds.as_os_str(),
+            g.as_os_str(),
+        ];
+        args.extend(
+            ["--split", "all", "--bootstrap", "0"]
+                .iter()
+                .chain(extra)
+                .map(std::ffi::OsStr::new),
+        );
+        let (code, t) = crate::util::run_limited(&args, &[], 120);
+        assert_eq!(code, Some(1), "{extra:?}: {t}");
+        assert!(
+            t.contains("CLEVRTEX_vbg_000000_flat.png") && t.contains("declares 30000x30000"),
+            "{extra:?}: {t}"
+        );
+    }
 }

@@ -488,6 +488,22 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
 }
 
+/// The size a ground-truth PNG declares in its header, checked before it is decoded: each side
+/// at most the 8192 pixels any ClevrTex image has (a 1 MB mask declaring 30000x30000 decoded
+/// to 4.5 GB of labels).
+fn gt_png_size(bytes: &[u8], path: &Path) -> Result<(usize, usize), EvalError> {
+    let (w, h) = read::png_size(bytes).map_err(|r| corrupt(path, r, GT_HINT))?;
+    let max = clevrtex_scene::scene_file::MAX_IMAGE_SIDE as usize;
+    if w > max || h > max {
+        return Err(corrupt(
+            path,
+            format!("declares {w}x{h} pixels, more than the {max}x{max} of any ClevrTex image"),
+            GT_HINT,
+        ));
+    }
+    Ok((w, h))
+}
+
 fn score_sample(
     s: &crate::dataset::GtSample,
     files: &PredFiles,
@@ -496,6 +512,7 @@ fn score_sample(
 ) -> Result<ImageResult, EvalError> {
     let mask_bytes = read_file(&s.mask)?;
     let meta_bytes = read_file(&s.meta)?;
+    gt_png_size(&mask_bytes, &s.mask)?;
     let gt_mask = read::png_labels(&mask_bytes).map_err(|r| corrupt(&s.mask, r, GT_HINT))?;
     if let Some(&bad) = gt_mask.labels.iter().find(|&&l| l as usize >= MAX_SLOTS) {
         return Err(corrupt(
@@ -546,6 +563,7 @@ fn score_sample(
         Some(_) => {
             let img_bytes = read_file(&s.image)?;
             gt_hasher_input.push(xxh3_64(&img_bytes));
+            gt_png_size(&img_bytes, &s.image)?;
             let img = read::png_rgb(&img_bytes).map_err(|r| corrupt(&s.image, r, GT_HINT))?;
             if (img.width, img.height) != (gw, gh) {
                 return Err(corrupt(
