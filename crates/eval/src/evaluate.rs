@@ -492,16 +492,7 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 /// at most the 8192 pixels any ClevrTex image has (a 1 MB mask declaring 30000x30000 decoded
 /// to 4.5 GB of labels).
 fn gt_png_size(bytes: &[u8], path: &Path) -> Result<(usize, usize), EvalError> {
-    let (w, h) = read::png_size(bytes).map_err(|r| corrupt(path, r, GT_HINT))?;
-    let max = clevrtex_scene::scene_file::MAX_IMAGE_SIDE as usize;
-    if w > max || h > max {
-        return Err(corrupt(
-            path,
-            format!("declares {w}x{h} pixels, more than the {max}x{max} of any ClevrTex image"),
-            GT_HINT,
-        ));
-    }
-    Ok((w, h))
+    read::png_size_of_dataset_image(bytes).map_err(|r| corrupt(path, r, GT_HINT))
 }
 
 fn score_sample(
