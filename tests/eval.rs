@@ -1047,6 +1047,7 @@ fn eval_refuses_a_ground_truth_mask_linked_out_of_its_folder() {
 /// A ground-truth mask whose header declares 30000x30000 pixels (a valid PNG of zeros under
 /// 1 MB) is refused from its header before it is decoded, with or without `--native-size`:
 /// decoding it cost 0.9 GB of pixels and 3.6 GB of labels (an abort under a memory limit).
+/// Ground-truth metadata is read up to 64 MiB (it was read up to 1 GiB and parsed).
 #[test]
 fn eval_checks_a_ground_truth_png_size_from_its_header() {
     let dir = tempfile::tempdir().unwrap();
@@ -1064,12 +1065,18 @@ fn eval_checks_a_ground_truth_png_size_from_its_header() {
     }
     assert!(std::fs::metadata(&target).unwrap().len() < 2 << 20);
     let preds = data("eval/preds/png");
-    for extra in [&[][..], &["--native-size"][..]] {
-        let mut args = vec![
-            std::ffi::OsStr::new("eval"),
-            preds.as_os_str(),
-            g.as_os_str(),
-        ];
+    // Native-size predictions: the ground truth's own masks, so that only the huge mask fails.
+    let native = dir.path().join("native");
+    std::fs::create_dir_all(&native).unwrap();
+    for e in std::fs::read_dir(gt().join("clevrtex_vbg/0")).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap().to_string();
+        if let Some(stem) = name.strip_suffix("_flat.png") {
+            std::fs::copy(&p, native.join(format!("{stem}_mask.png"))).unwrap();
+        }
+    }
+    for (p, extra) in [(&preds, &[][..]), (&native, &["--native-size"][..])] {
+        let mut args = vec![std::ffi::OsStr::new("eval"), p.as_os_str(), g.as_os_str()];
         args.extend(
             ["--split", "all", "--bootstrap", "0"]
                 .iter()
@@ -1083,4 +1090,35 @@ fn eval_checks_a_ground_truth_png_size_from_its_header() {
             "{extra:?}: {t}"
         );
     }
+    // Metadata over 64 MiB (sparse: no disk) is refused by its size, not read and parsed.
+    std::fs::copy(
+        gt().join("clevrtex_vbg/0/CLEVRTEX_vbg_000000_flat.png"),
+        &target,
+    )
+    .unwrap();
+    let meta = g.join("clevrtex_vbg/0/CLEVRTEX_vbg_000001.json");
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&meta)
+        .unwrap()
+        .set_len((64 << 20) + 1)
+        .unwrap();
+    let o = crate::util::run_within(
+        &[
+            "eval".as_ref(),
+            preds.as_os_str(),
+            g.as_os_str(),
+            "--split".as_ref(),
+            "all".as_ref(),
+            "--bootstrap".as_ref(),
+            "0".as_ref(),
+        ],
+        60,
+    );
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_vbg_000001.json") && t.contains("over the 67108864 bytes"),
+        "{t}"
+    );
 }

@@ -127,6 +127,19 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
     })
 }
 
+/// Largest ground-truth metadata file read (a sample's JSON is a few KB; the CLI's other
+/// readers of a dataset's metadata stop at the same size).
+pub const MAX_METADATA_BYTES: u64 = 64 << 20;
+
+/// The bytes of a ground-truth metadata file found by [`discover_gt`], like [`read_file`] but
+/// at most [`MAX_METADATA_BYTES`].
+pub fn read_metadata(path: &Path) -> Result<Vec<u8>, EvalError> {
+    clevrtex_scene::dataset::read_regular(path, MAX_METADATA_BYTES).map_err(|why| EvalError::Io {
+        path: path.to_path_buf(),
+        cause: std::io::Error::other(why),
+    })
+}
+
 fn file_name(p: &Path) -> &str {
     p.file_name().and_then(|n| n.to_str()).unwrap_or("")
 }

@@ -502,7 +502,7 @@ fn score_sample(
     opts: &Options,
 ) -> Result<ImageResult, EvalError> {
     let mask_bytes = read_file(&s.mask)?;
-    let meta_bytes = read_file(&s.meta)?;
+    let meta_bytes = crate::dataset::read_metadata(&s.meta)?;
     gt_png_size(&mask_bytes, &s.mask)?;
     let gt_mask = read::png_labels(&mask_bytes).map_err(|r| corrupt(&s.mask, r, GT_HINT))?;
     if let Some(&bad) = gt_mask.labels.iter().find(|&&l| l as usize >= MAX_SLOTS) {
