@@ -842,6 +842,28 @@ fn eval_nan_huge_and_out_of_range_reconstructions_are_reported() {
     );
 }
 
+/// Write a valid greyscale PNG of `side` x `side` zeros (under 1 MB for 30000): a small file
+/// that decodes to gigabytes. False when python3 cannot write it.
+fn write_zero_png(path: &Path, side: u32) -> bool {
+    std::process::Command::new("python3")
+        .arg("-c")
+        .arg(
+            "import struct, sys, zlib\n\
+             w = h = int(sys.argv[2])\n\
+             def chunk(t, d):\n\
+             \x20   return struct.pack('>I', len(d)) + t + d + struct.pack('>I', zlib.crc32(t + d) & 0xffffffff)\n\
+             z = zlib.compressobj(9)\n\
+             row = bytes(w + 1)\n\
+             data = b''.join(z.compress(row) for _ in range(h)) + z.flush()\n\
+             png = b'\\x89PNG\\r\\n\\x1a\\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', w, h, 8, 0, 0, 0, 0)) + chunk(b'IDAT', data) + chunk(b'IEND', b'')\n\
+             open(sys.argv[1], 'wb').write(png)\n",
+        )
+        .arg(path)
+        .arg(side.to_string())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
 /// A 30000x30000 `_mask.png` of zeros (about 1 MB deflated) against the dataset's 40x30: its
 /// size is refused from the PNG header, before anything is decoded. Before, `--native-size`
 /// decoded it first (0.9 GB of pixels, 3.6 GB of ids: 4.4 GB seen), here an abort under a
@@ -860,22 +882,8 @@ fn eval_native_size_refuses_a_huge_png_from_its_header() {
         }
     }
     let target = preds.join("CLEVRTEX_vbg_000000_mask.png");
-    let made = std::process::Command::new("python3")
-        .arg("-c")
-        .arg(
-            "import struct, sys, zlib\n\
-             w = h = 30000\n\
-             def chunk(t, d):\n\
-             \x20   return struct.pack('>I', len(d)) + t + d + struct.pack('>I', zlib.crc32(t + d) & 0xffffffff)\n\
-             z = zlib.compressobj(9)\n\
-             row = bytes(w + 1)\n\
-             data = b''.join(z.compress(row) for _ in range(h)) + z.flush()\n\
-             png = b'\\x89PNG\\r\\n\\x1a\\n' + chunk(b'IHDR', struct.pack('>IIBBBBB', w, h, 8, 0, 0, 0, 0)) + chunk(b'IDAT', data) + chunk(b'IEND', b'')\n\
-             open(sys.argv[1], 'wb').write(png)\n",
-        )
-        .arg(&target)
-        .status();
-    if !made.is_ok_and(|s| s.success()) {
+    let made = write_zero_png(&target, 30000);
+    if !made {
         crate::util::skip(
             "eval_native_size_refuses_a_huge_png_from_its_header",
             crate::util::REQUIRE_TOOLS,
@@ -984,4 +992,133 @@ fn eval_follows_no_link_out_of_its_folders_and_opens_no_fifo() {
     let t = text(&o);
     assert_eq!(o.status.code(), Some(1), "{t}");
     assert!(t.contains(&stem), "{t}");
+}
+
+/// A ground-truth sample's mask (or metadata) beside its image is read only if the walk of
+/// the ground-truth folder found it: a mask that is a link out of the folder is refused by
+/// name (it was followed and scored), a metadata FIFO is called what it is (it was "missing").
+#[test]
+fn eval_refuses_a_ground_truth_mask_linked_out_of_its_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gt");
+    copy_dir(&gt(), &g);
+    let sub = g.join("clevrtex_vbg/0");
+    let mask = sub.join("CLEVRTEX_vbg_000003_flat.png");
+    let outside = dir.path().join("outside_flat.png");
+    std::fs::rename(&mask, &outside).unwrap();
+    std::os::unix::fs::symlink(&outside, &mask).unwrap();
+    let preds = data("eval/preds/png");
+    let args: Vec<&std::ffi::OsStr> = vec![
+        "eval".as_ref(),
+        preds.as_os_str(),
+        g.as_os_str(),
+        "--split".as_ref(),
+        "all".as_ref(),
+        "--bootstrap".as_ref(),
+        "0".as_ref(),
+    ];
+    let o = crate::util::run_within(&args, 60);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_vbg_000003_flat.png` is a symbolic link leading out"),
+        "{t}"
+    );
+    assert!(t.contains("hint: "), "{t}");
+    // A FIFO in the metadata's place: named as not a regular file, and no hang.
+    std::fs::remove_file(&mask).unwrap();
+    std::fs::rename(&outside, &mask).unwrap();
+    let meta = sub.join("CLEVRTEX_vbg_000003.json");
+    std::fs::remove_file(&meta).unwrap();
+    let st = std::process::Command::new("mkfifo")
+        .arg(&meta)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let o = crate::util::run_within(&args, 60);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_vbg_000003.json` is not a regular file"),
+        "{t}"
+    );
+}
+
+/// A ground-truth mask whose header declares 30000x30000 pixels (a valid PNG of zeros under
+/// 1 MB) is refused from its header before it is decoded, with or without `--native-size`:
+/// decoding it cost 0.9 GB of pixels and 3.6 GB of labels (an abort under a memory limit).
+/// Ground-truth metadata is read up to 64 MiB (it was read up to 1 GiB and parsed).
+#[test]
+fn eval_checks_a_ground_truth_png_size_from_its_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gt");
+    copy_dir(&gt(), &g);
+    let target = g.join("clevrtex_vbg/0/CLEVRTEX_vbg_000000_flat.png");
+    if !write_zero_png(&target, 30000) {
+        crate::util::skip(
+            "eval_checks_a_ground_truth_png_size_from_its_header",
+            crate::util::REQUIRE_TOOLS,
+            "python3 could not write the test PNG",
+            "install Python 3",
+        );
+        return;
+    }
+    assert!(std::fs::metadata(&target).unwrap().len() < 2 << 20);
+    let preds = data("eval/preds/png");
+    // Native-size predictions: the ground truth's own masks, so that only the huge mask fails.
+    let native = dir.path().join("native");
+    std::fs::create_dir_all(&native).unwrap();
+    for e in std::fs::read_dir(gt().join("clevrtex_vbg/0")).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap().to_string();
+        if let Some(stem) = name.strip_suffix("_flat.png") {
+            std::fs::copy(&p, native.join(format!("{stem}_mask.png"))).unwrap();
+        }
+    }
+    for (p, extra) in [(&preds, &[][..]), (&native, &["--native-size"][..])] {
+        let mut args = vec![std::ffi::OsStr::new("eval"), p.as_os_str(), g.as_os_str()];
+        args.extend(
+            ["--split", "all", "--bootstrap", "0"]
+                .iter()
+                .chain(extra)
+                .map(std::ffi::OsStr::new),
+        );
+        let (code, t) = crate::util::run_limited(&args, &[], 120);
+        assert_eq!(code, Some(1), "{extra:?}: {t}");
+        assert!(
+            t.contains("CLEVRTEX_vbg_000000_flat.png") && t.contains("declares 30000x30000"),
+            "{extra:?}: {t}"
+        );
+    }
+    // Metadata over 64 MiB (sparse: no disk) is refused by its size, not read and parsed.
+    std::fs::copy(
+        gt().join("clevrtex_vbg/0/CLEVRTEX_vbg_000000_flat.png"),
+        &target,
+    )
+    .unwrap();
+    let meta = g.join("clevrtex_vbg/0/CLEVRTEX_vbg_000001.json");
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&meta)
+        .unwrap()
+        .set_len((64 << 20) + 1)
+        .unwrap();
+    let o = crate::util::run_within(
+        &[
+            "eval".as_ref(),
+            preds.as_os_str(),
+            g.as_os_str(),
+            "--split".as_ref(),
+            "all".as_ref(),
+            "--bootstrap".as_ref(),
+            "0".as_ref(),
+        ],
+        60,
+    );
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_vbg_000001.json") && t.contains("over the 67108864 bytes"),
+        "{t}"
+    );
 }

@@ -94,6 +94,37 @@ fn preview_reports_a_sample_whose_rgb_and_mask_differ_in_size_and_goes_on() {
     assert!(sheet.is_file(), "{t}");
 }
 
+/// A sample of another shape (RGB and mask 1x8192, a few hundred bytes each) is shrunk into
+/// its cell, and a first sample of that shape does not make every row 8192 cells tall: it was
+/// scaled to the cell's width (1024x8388608) and the sheet sized by it, gigabytes for a tiny
+/// file (an abort under a memory limit).
+#[test]
+fn preview_shrinks_a_tall_thin_sample_into_its_cell() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    crate::util::hand_png_sample(&data, "clevr", 0, (16, 12), (16, 12));
+    crate::util::hand_png_sample(&data, "clevr", 1, (1, 8192), (1, 8192));
+    for (indices, rows) in [("0,1", 768), ("1,0", 2048)] {
+        let sheet = dir.path().join(format!("sheet-{indices}.png"));
+        let args: Vec<&std::ffi::OsStr> = vec![
+            "preview".as_ref(),
+            "--cell".as_ref(),
+            "1024".as_ref(),
+            "--indices".as_ref(),
+            indices.as_ref(),
+            "--out".as_ref(),
+            sheet.as_os_str(),
+            data.as_os_str(),
+        ];
+        let (code, t) = crate::util::run_limited(&args, &[], 120);
+        assert_eq!(code, Some(0), "--indices {indices}: {t}");
+        // 3 columns (rgb, mask, outlines) of 1024 px; rows 768 px (4:3) or, with the tall
+        // sample first, at most twice the cell's width.
+        let (w, h) = image::image_dimensions(&sheet).unwrap();
+        assert_eq!((w, h), (3 * 1034 + 10, 20 + 2 * (18 + rows + 6)), "{t}");
+    }
+}
+
 /// A link out of the dataset is not followed and a FIFO is not opened (it hung the command);
 /// both are reported, the sheet is written.
 #[test]

@@ -386,3 +386,40 @@ fn report_leaves_out_samples_it_cannot_use_and_names_them() {
     );
     assert!(page.is_file(), "{t}");
 }
+
+/// The report measures a sample's pixels through the dataset reader too: an RGB image that is
+/// a link out of the dataset is not read and the sample is named and left out of the
+/// measurements (exit 3). Before, only the preview sheet left it out; the contrast
+/// measurement read the file the link led to.
+#[test]
+fn report_measures_no_pass_file_behind_a_link_out_of_the_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    for i in 0..3 {
+        crate::util::hand_png_sample(&data, "clevr", i, (16, 12), (16, 12));
+    }
+    let rgb = data.join("clevrtex_clevr/0/CLEVRTEX_clevr_000002.png");
+    let outside = dir.path().join("secret.png");
+    std::fs::rename(&rgb, &outside).unwrap();
+    std::os::unix::fs::symlink(&outside, &rgb).unwrap();
+    let page = dir.path().join("report.html");
+    let o = crate::util::run_within(
+        &[
+            "report".as_ref(),
+            "--preview".as_ref(),
+            "0".as_ref(),
+            "--out".as_ref(),
+            page.as_os_str(),
+            data.as_os_str(),
+        ],
+        120,
+    );
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(t.contains("3 image(s) read, 2 measured"), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000002.png` is a symbolic link leading out"),
+        "{t}"
+    );
+    assert!(page.is_file(), "{t}");
+}

@@ -264,30 +264,76 @@ fn pass_skipped(s: &Sample, pass: Pass) -> Option<String> {
 /// Most pixels a pass PNG of a sample may declare (8192x8192, the largest render size).
 pub(crate) const MAX_PASS_PIXELS: u64 = 8192 * 8192;
 
+/// The size a PNG declares in its header (`None` when `bytes` do not start like a PNG).
+fn png_header_size(bytes: &[u8]) -> Option<(u32, u32)> {
+    if bytes.len() < 24 || &bytes[12..16] != b"IHDR" {
+        return None;
+    }
+    let be = |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+    Some((be(16), be(20)))
+}
+
+/// Refuse a pass PNG whose header declares more pixels, or a longer side, than a sample's
+/// pass may have, before anything is decoded.
+fn check_png_size(bytes: &[u8], path: &Path) -> anyhow::Result<()> {
+    let Some((w, h)) = png_header_size(bytes) else {
+        return Ok(());
+    };
+    let side = clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
+    if u64::from(w) * u64::from(h) > MAX_PASS_PIXELS || w > side || h > side {
+        anyhow::bail!(
+            "`{}` declares {w}x{h} pixels, more than a sample's pass may have ({side}x{side}): the file is damaged or not clevrtex's; regenerate or re-download the sample",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
 /// Read and decode a sample's mask or depth PNG under `root` as untrusted data: through the
 /// dataset reader (no link out of `root`, no FIFO, capped read), and its size checked from the
 /// PNG header before the decoder allocates for it.
 pub(crate) fn read_pass_png(root: &Path, path: &Path) -> anyhow::Result<DecodedPng> {
     let bytes = dataset::read(root, path, dataset::MAX_FILE_BYTES)
         .map_err(|why| anyhow::anyhow!("`{}` {why}", path.display()))?;
-    if bytes.len() >= 24 && &bytes[12..16] == b"IHDR" {
-        let be =
-            |i: usize| u32::from_be_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
-        let (w, h) = (be(16), be(20));
-        if u64::from(w) * u64::from(h) > MAX_PASS_PIXELS {
-            anyhow::bail!(
-                "`{}` declares {w}x{h} pixels, more than a sample's pass may have ({MAX_PASS_PIXELS}): the file is damaged or not clevrtex's; regenerate or re-download the sample",
-                path.display()
-            );
-        }
-    }
+    check_png_size(&bytes, path)?;
     Ok(decode_png_bytes(&bytes, path)?)
 }
 
-/// Scale `img` to `w` wide (nearest neighbour: masks stay exact).
-fn scaled(img: &RgbImage, w: u32) -> RgbImage {
-    let h = (u64::from(img.height()) * u64::from(w) / u64::from(img.width().max(1))).max(1) as u32;
-    image::imageops::resize(img, w, h, image::imageops::FilterType::Nearest)
+/// Read and decode a sample's colour image (RGB, normal, albedo, shadow) under `root` like
+/// [`read_pass_png`]: through the dataset reader, its size checked from its header first.
+pub(crate) fn read_colour_png(root: &Path, path: &Path) -> anyhow::Result<RgbImage> {
+    let bytes = dataset::read(root, path, dataset::MAX_FILE_BYTES)
+        .map_err(|why| anyhow::anyhow!("`{}` {why}", path.display()))?;
+    check_png_size(&bytes, path)?;
+    Ok(image::load_from_memory(&bytes)
+        .map_err(|e| anyhow::anyhow!("`{}`: {e}", path.display()))?
+        .to_rgb8())
+}
+
+/// A cell is at most this many times as tall as it is wide: a sample of another shape (a
+/// 1x8192 image, a few hundred bytes) is shrunk into the cell instead of scaled to the
+/// cell's width (which took gigabytes).
+const MAX_CELL_ASPECT: u32 = 2;
+
+/// Scale `img` to `w` wide, or to `max_h` high if that is less (nearest neighbour: masks stay
+/// exact), keeping its aspect.
+fn scaled(img: &RgbImage, w: u32, max_h: u32) -> RgbImage {
+    let (iw, ih) = (
+        u64::from(img.width().max(1)),
+        u64::from(img.height().max(1)),
+    );
+    let (w, max_h) = (u64::from(w), u64::from(max_h));
+    let (w, h) = if ih * w / iw <= max_h {
+        (w, (ih * w / iw).max(1))
+    } else {
+        ((iw * max_h / ih).max(1), max_h)
+    };
+    image::imageops::resize(
+        img,
+        w as u32,
+        h as u32,
+        image::imageops::FilterType::Nearest,
+    )
 }
 
 /// One cell at its native size, and for depth the range drawn in metres (for the scale).
@@ -301,10 +347,7 @@ fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
     let Some(path) = pass_path(s, col.pass()) else {
         return Ok(None);
     };
-    let bad = |e: &dyn std::fmt::Display| anyhow::anyhow!("`{}`: {e}", path.display());
-    let to_rgb = |p: &Path| -> anyhow::Result<RgbImage> {
-        Ok(image::open(p).map_err(|e| bad(&e))?.to_rgb8())
-    };
+    let to_rgb = |p: &Path| read_colour_png(&s.root, p);
     Ok(Some(match col {
         Column::Rgb | Column::Normal | Column::Albedo | Column::Shadow => (to_rgb(&path)?, None),
         Column::Mask | Column::Outlines => {
@@ -379,14 +422,15 @@ pub fn draw(args: &Args) -> anyhow::Result<Sheet> {
         .filter(|c| samples.iter().any(|s| pass_path(s, c.pass()).is_some()))
         .collect();
     let cw = args.cell;
+    // The row height from the first sample whose image's header can be read (a damaged one
+    // is reported with its cells below, and does not stop the sheet).
     let first = samples
         .iter()
-        .find_map(|s| pass_path(s, Pass::Rgb).or_else(|| pass_path(s, Pass::Mask)))
-        .map(|p| image::image_dimensions(&p))
-        .transpose()
-        .context("cannot read an image of the dataset")?
+        .filter_map(|s| pass_path(s, Pass::Rgb).or_else(|| pass_path(s, Pass::Mask)))
+        .find_map(|p| image::image_dimensions(&p).ok())
         .unwrap_or((4, 3));
-    let ch = (u64::from(first.1) * u64::from(cw) / u64::from(first.0.max(1))).max(1) as u32;
+    let ch = (u64::from(first.1) * u64::from(cw) / u64::from(first.0.max(1)))
+        .clamp(1, u64::from(MAX_CELL_ASPECT * cw)) as u32;
     let (label_h, head_h, bar_w) = (18u32, 20u32, 10u32);
     let width = cols.len() as u32 * (cw + bar_w) + bar_w;
     let height = head_h + samples.len() as u32 * (label_h + ch + 6);
@@ -440,14 +484,14 @@ pub fn draw(args: &Args) -> anyhow::Result<Sheet> {
                 }
             };
             let (nw, nh) = (img.width(), img.height());
-            let img = scaled(&img, cw);
+            let img = scaled(&img, cw, ch);
             image::imageops::replace(&mut sheet, &img, i64::from(x0), i64::from(y0 + label_h));
             if *col == Column::Mask {
                 if let Some(objs) = s.meta["objects"].as_array() {
                     for (i, o) in objs.iter().enumerate() {
                         let p = &o["pixel_coords"];
                         if let (Some(px), Some(py)) = (p[0].as_f64(), p[1].as_f64()) {
-                            let x = x0 as f64 + px * f64::from(cw) / f64::from(nw.max(1));
+                            let x = x0 as f64 + px * f64::from(img.width()) / f64::from(nw.max(1));
                             let y = f64::from(y0 + label_h)
                                 + py * f64::from(img.height()) / f64::from(nh.max(1));
                             texts.push((x as i32 - 4, y as i32 - 6, (i + 1).to_string(), 12));

@@ -95,6 +95,8 @@ fn summarise(dir: &Path, args: &Args) -> anyhow::Result<Summary> {
     let bar = progress(0, "metadata files");
     let data = data::read(dir, &bar)?;
     bar.finish_and_clear();
+    let root = clevrtex_render::dataset::root(dir)
+        .with_context(|| format!("cannot read `{}`", dir.display()))?;
     // Pixels of a capped, evenly spread sample per variant.
     let mut by_variant: BTreeMap<&str, Vec<&data::Sample>> = BTreeMap::new();
     for s in &data.samples {
@@ -111,7 +113,7 @@ fn summarise(dir: &Path, args: &Args) -> anyhow::Result<Summary> {
     let measures = picked
         .par_iter()
         .map(|s| {
-            let m = texture::measure(s);
+            let m = texture::measure(s, &root);
             bar.inc(1);
             (s, m)
         })

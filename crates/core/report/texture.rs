@@ -6,11 +6,14 @@
 //! The ring is the background (mask id 0) within `max(2, W / 40)` pixels (8 at 320 px wide)
 //! of the object, found with a separable square dilation of the object's mask.
 
-use clevrtex_render::post::decode_png;
+use std::path::{Path, PathBuf};
+
+use clevrtex_render::dataset::{self, Kind};
 use clevrtex_scene::{layout, Pass};
 use image::RgbImage;
 
 use crate::cmd_materials::stats::{distance, lab, region_features};
+use crate::cmd_preview::{read_colour_png, read_pass_png};
 
 use super::data::Sample;
 
@@ -31,16 +34,25 @@ pub struct ImageMeasures {
     pub depth_range: Option<(f64, f64)>,
 }
 
-/// Measure one sample; passes it lacks give nothing.
-pub fn measure(s: &Sample) -> anyhow::Result<ImageMeasures> {
+/// Measure one sample; passes it lacks give nothing. Its files are read under `root` (the
+/// dataset's root, canonical) with the dataset reader: a pass file that is a link out of the
+/// dataset, a FIFO or a device is not read and makes the sample a problem, like one that is
+/// damaged.
+pub fn measure(s: &Sample, root: &Path) -> anyhow::Result<ImageMeasures> {
     let mut out = ImageMeasures::default();
-    let path = |p: Pass| s.dir.join(layout::pass_file(&s.stem, p));
-    let (rgb, mask) = (path(Pass::Rgb), path(Pass::Mask));
-    if rgb.is_file() && mask.is_file() {
-        let img = image::open(&rgb)
-            .map_err(|e| anyhow::anyhow!("`{}`: {e}", rgb.display()))?
-            .to_rgb8();
-        let m = decode_png(&mask).map_err(|e| anyhow::anyhow!("`{}`: {e}", mask.display()))?;
+    let file = |p: Pass| -> anyhow::Result<Option<PathBuf>> {
+        let path = s.dir.join(layout::pass_file(&s.stem, p));
+        match dataset::classify(root, &path) {
+            Kind::File => Ok(Some(path)),
+            Kind::Skipped(why) if std::fs::symlink_metadata(&path).is_ok() => {
+                anyhow::bail!("`{}` {why}", path.display())
+            }
+            _ => Ok(None),
+        }
+    };
+    if let (Some(rgb), Some(mask)) = (file(Pass::Rgb)?, file(Pass::Mask)?) {
+        let img = read_colour_png(root, &rgb)?;
+        let m = read_pass_png(root, &mask)?;
         if (m.width, m.height) != img.dimensions() {
             anyhow::bail!(
                 "`{}` is {}x{} but its mask `{}` is {}x{}",
@@ -54,9 +66,8 @@ pub fn measure(s: &Sample) -> anyhow::Result<ImageMeasures> {
         }
         out.contrasts = contrasts(&img, &m.data, s.objects.len());
     }
-    let depth = path(Pass::Depth);
-    if let (Some((scale, background)), true) = (s.depth_encoding, depth.is_file()) {
-        let d = decode_png(&depth).map_err(|e| anyhow::anyhow!("`{}`: {e}", depth.display()))?;
+    if let (Some((scale, background)), Some(depth)) = (s.depth_encoding, file(Pass::Depth)?) {
+        let d = read_pass_png(root, &depth)?;
         let (lo, hi) = d
             .data
             .iter()

@@ -127,6 +127,19 @@ pub fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
     })
 }
 
+/// Largest ground-truth metadata file read (a sample's JSON is a few KB; the CLI's other
+/// readers of a dataset's metadata stop at the same size).
+pub const MAX_METADATA_BYTES: u64 = 64 << 20;
+
+/// The bytes of a ground-truth metadata file found by [`discover_gt`], like [`read_file`] but
+/// at most [`MAX_METADATA_BYTES`].
+pub fn read_metadata(path: &Path) -> Result<Vec<u8>, EvalError> {
+    clevrtex_scene::dataset::read_regular(path, MAX_METADATA_BYTES).map_err(|why| EvalError::Io {
+        path: path.to_path_buf(),
+        cause: std::io::Error::other(why),
+    })
+}
+
 fn file_name(p: &Path) -> &str {
     p.file_name().and_then(|n| n.to_str()).unwrap_or("")
 }
@@ -199,18 +212,37 @@ pub fn discover_gt(
             });
         }
     }
+    // A sample's mask and metadata must be among the files the walk found: a link out of
+    // the folder, a FIFO or a device beside the image is refused, not read.
+    let walked: std::collections::HashSet<&Path> = files.iter().map(PathBuf::as_path).collect();
+    let root = clevrtex_scene::dataset::root(dir).map_err(|cause| EvalError::Io {
+        path: dir.to_path_buf(),
+        cause,
+    })?;
     let mut samples = Vec::with_capacity(found.len());
     for (index, stem, image) in found {
         let parent = image.parent().unwrap_or(Path::new("."));
         let mask = parent.join(format!("{stem}_flat.png"));
         let meta = parent.join(format!("{stem}.json"));
         for p in [&mask, &meta] {
-            if !p.is_file() {
-                return Err(EvalError::GtIncomplete {
-                    stem,
-                    path: p.clone(),
-                });
+            if walked.contains(p.as_path()) {
+                continue;
             }
+            if std::fs::symlink_metadata(p).is_ok() {
+                if let clevrtex_scene::dataset::Kind::Skipped(why) =
+                    clevrtex_scene::dataset::classify(&root, p)
+                {
+                    return Err(EvalError::GtNotRead {
+                        stem,
+                        path: p.clone(),
+                        why,
+                    });
+                }
+            }
+            return Err(EvalError::GtIncomplete {
+                stem,
+                path: p.clone(),
+            });
         }
         samples.push(GtSample {
             index,

@@ -101,6 +101,17 @@ pub enum EvalError {
         /// The missing file.
         path: PathBuf,
     },
+    /// A ground-truth sample's file is not read: a link out of the ground-truth folder, a
+    /// FIFO, a socket or a device.
+    #[error("ground-truth sample `{stem}`: `{}` {why}\nhint: every file of the ground truth must be a regular file inside its folder (a link only to a file inside it); copy the file in instead of linking it", path.display())]
+    GtNotRead {
+        /// The sample's stem.
+        stem: String,
+        /// The file.
+        path: PathBuf,
+        /// Why it is not read, one line.
+        why: String,
+    },
     /// The chosen split holds no sample.
     #[error("the `{split}` split of `{}` is empty: it has {total} samples in all\nhint: a split is a share of the samples (test the first int(0.1 N), val up to int(0.2 N), train the rest); use `--split all` for small datasets", gt.display())]
     EmptySplit {

@@ -488,6 +488,13 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
 }
 
+/// The size a ground-truth PNG declares in its header, checked before it is decoded: each side
+/// at most the 8192 pixels any ClevrTex image has (a 1 MB mask declaring 30000x30000 decoded
+/// to 4.5 GB of labels).
+fn gt_png_size(bytes: &[u8], path: &Path) -> Result<(usize, usize), EvalError> {
+    read::png_size_of_dataset_image(bytes).map_err(|r| corrupt(path, r, GT_HINT))
+}
+
 fn score_sample(
     s: &crate::dataset::GtSample,
     files: &PredFiles,
@@ -495,7 +502,8 @@ fn score_sample(
     opts: &Options,
 ) -> Result<ImageResult, EvalError> {
     let mask_bytes = read_file(&s.mask)?;
-    let meta_bytes = read_file(&s.meta)?;
+    let meta_bytes = crate::dataset::read_metadata(&s.meta)?;
+    gt_png_size(&mask_bytes, &s.mask)?;
     let gt_mask = read::png_labels(&mask_bytes).map_err(|r| corrupt(&s.mask, r, GT_HINT))?;
     if let Some(&bad) = gt_mask.labels.iter().find(|&&l| l as usize >= MAX_SLOTS) {
         return Err(corrupt(
@@ -546,6 +554,7 @@ fn score_sample(
         Some(_) => {
             let img_bytes = read_file(&s.image)?;
             gt_hasher_input.push(xxh3_64(&img_bytes));
+            gt_png_size(&img_bytes, &s.image)?;
             let img = read::png_rgb(&img_bytes).map_err(|r| corrupt(&s.image, r, GT_HINT))?;
             if (img.width, img.height) != (gw, gh) {
                 return Err(corrupt(

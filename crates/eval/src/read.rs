@@ -84,6 +84,19 @@ pub fn png_size(bytes: &[u8]) -> Result<(usize, usize), String> {
     Ok((info.width as usize, info.height as usize))
 }
 
+/// [`png_size`], refused when a side is over the 8192 pixels any ClevrTex image has: for a
+/// dataset's own PNGs (ground truth), whose size nothing else bounds before decoding.
+pub fn png_size_of_dataset_image(bytes: &[u8]) -> Result<(usize, usize), String> {
+    let (w, h) = png_size(bytes)?;
+    let max = clevrtex_scene::scene_file::MAX_IMAGE_SIDE as usize;
+    if w > max || h > max {
+        return Err(format!(
+            "declares {w}x{h} pixels, more than the {max}x{max} of any ClevrTex image"
+        ));
+    }
+    Ok((w, h))
+}
+
 /// Read a PNG of segment ids: 1-16 bit greyscale, or palette (the raw index, never the
 /// palette colour).
 pub fn png_labels(bytes: &[u8]) -> Result<LabelImage, String> {

@@ -502,9 +502,17 @@ fn load_sample<'py>(
             clevrtex_eval::dataset::read_file(Path::new(p))
                 .map_err(|e| PyOSError::new_err(e.to_string()))
         };
-        let img = read::png_rgb(&read_file(image)?)
+        // Each PNG's size checked from its header before it is decoded (a 1 MB mask can
+        // declare 30000x30000: 4.5 GB decoded).
+        let decode = |p: &str| -> PyResult<Vec<u8>> {
+            let bytes = read_file(p)?;
+            read::png_size_of_dataset_image(&bytes)
+                .map_err(|r| value_error(format!("cannot decode `{p}`: {r}")))?;
+            Ok(bytes)
+        };
+        let img = read::png_rgb(&decode(image)?)
             .map_err(|r| value_error(format!("cannot decode `{image}`: {r}")))?;
-        let msk = read::png_labels(&read_file(mask)?)
+        let msk = read::png_labels(&decode(mask)?)
             .map_err(|r| value_error(format!("cannot decode `{mask}`: {r}")))?;
         let (w, h) = (img.width, img.height);
         if (msk.width, msk.height) != (w, h) {

@@ -331,3 +331,66 @@ def test_wrong_shapes_and_short_metadata_raise_before_any_state_changes():
             ev.update(img_p, pm, img_t, tm, md)
         assert {name: (rm.v, rm.n) for name, rm in ev.stats.items()} == before, message
         assert repr(ev.tags) == tags_before, message
+
+
+def _zero_png(path, side):
+    """A valid greyscale PNG of `side` x `side` zeros: under 1 MB for 30000, gigabytes decoded."""
+    import struct
+    import zlib
+
+    def chunk(t, d):
+        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xFFFFFFFF)
+
+    z = zlib.compressobj(9)
+    row = bytes(side + 1)
+    data = b"".join(z.compress(row) for _ in range(side)) + z.flush()
+    with open(path, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", side, side, 8, 0, 0, 0, 0)) + chunk(b"IDAT", data) + chunk(b"IEND", b""))
+
+
+def test_dataset_reads_untrusted_samples_within_bounds(tmp_path):
+    """Issue 21: `Dataset` decoded a mask whose header declares 30000x30000 (a 1 MB file: 4.5 GB
+    decoded, an abort under a 2 GB limit) and read metadata of any size with `open`. Now a PNG's
+    size is checked from its header first, metadata is read up to 64 MiB from a regular file,
+    and a mask linked out of the dataset is refused when the dataset is opened."""
+    import shutil
+    import textwrap
+
+    gt = tmp_path / "gt"
+    shutil.copytree(GT, gt)
+    sub = gt / "clevrtex_vbg" / "0"
+    _zero_png(sub / "CLEVRTEX_vbg_000000_flat.png", 30000)
+    code = textwrap.dedent(
+        f"""
+        import resource
+        resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))
+        import clevrtex
+        ds = clevrtex.Dataset({str(gt)!r}, "vbg", split="all")
+        try:
+            ds[0]
+        except ValueError as e:
+            print("ValueError:", e)
+        """
+    )
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "declares 30000x30000" in out.stdout and "CLEVRTEX_vbg_000000_flat.png" in out.stdout, out.stdout + out.stderr
+    shutil.copy(os.path.join(GT, "clevrtex_vbg", "0", "CLEVRTEX_vbg_000000_flat.png"), sub)
+
+    # Metadata over 64 MiB (sparse: no disk) is refused, not read.
+    meta = sub / "CLEVRTEX_vbg_000001.json"
+    with open(meta, "r+b") as f:
+        f.truncate((64 << 20) + 1)
+    ds = clevrtex.Dataset(str(gt), "vbg", split="all")
+    with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000001.json` is 67108865 bytes, over the 67108864"):
+        ds[1]
+    assert ds[0][0] == 0  # the others are read
+
+    # A mask linked out of the dataset: refused by name when the dataset is opened.
+    outside = tmp_path / "outside_flat.png"
+    mask = sub / "CLEVRTEX_vbg_000002_flat.png"
+    os.rename(mask, outside)
+    os.symlink(outside, mask)
+    with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000002_flat.png` is a symbolic link leading out"):
+        clevrtex.Dataset(str(gt), "vbg", split="all")

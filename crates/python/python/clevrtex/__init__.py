@@ -11,6 +11,8 @@ definitions and how the protocols differ: docs/eval.md.
 """
 
 import json
+import os
+import stat
 from collections import defaultdict
 from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
@@ -290,6 +292,36 @@ def evaluate(
     return result
 
 
+#: Largest metadata file `Dataset` reads (a sample's JSON is a few KB), as the CLI's readers.
+MAX_METADATA_BYTES = 64 << 20
+
+
+def _read_metadata(path: str) -> bytes:
+    """A sample's metadata as the dataset reader reads files: a regular file only (a FIFO
+    swapped in never blocks: it is opened non-blocking and checked before a byte is read),
+    at most `MAX_METADATA_BYTES`."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise ValueError(f"`{path}` is not a regular file (a FIFO, socket or device); not read")
+        if st.st_size > MAX_METADATA_BYTES:
+            raise ValueError(f"`{path}` is {st.st_size} bytes, over the {MAX_METADATA_BYTES} bytes read of a sample's metadata")
+        chunks, left = [], MAX_METADATA_BYTES + 1
+        while left > 0:
+            chunk = os.read(fd, min(left, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            left -= len(chunk)
+        data = b"".join(chunks)
+        if len(data) > MAX_METADATA_BYTES:
+            raise ValueError(f"`{path}` grew over the {MAX_METADATA_BYTES} bytes read of a sample's metadata")
+        return data
+    finally:
+        os.close(fd)
+
+
 class Dataset:
     """A ClevrTex dataset in the published layout (made by `clevrtex generate` or downloaded),
     read like the public `CLEVRTEX` loader: `ds[i]` is `(index, image, mask)` or, with
@@ -343,5 +375,12 @@ class Dataset:
         msk = msk.astype(np.uint8) if (msk.size == 0 or msk.max() < 256) else msk.astype(np.int64)
         if not self.return_metadata:
             return index, img, msk
-        with open(meta) as f:
-            return index, img, msk, self._format_metadata(json.load(f))
+        try:
+            data = json.loads(_read_metadata(meta))
+        except UnicodeDecodeError as e:
+            raise ValueError(f"`{meta}` is not valid metadata: {e}") from None
+        except json.JSONDecodeError as e:
+            raise ValueError(f"`{meta}` is not valid metadata: {e}") from None
+        if not isinstance(data, dict):
+            raise ValueError(f"`{meta}` is not valid metadata: a {type(data).__name__}, not an object")
+        return index, img, msk, self._format_metadata(data)
