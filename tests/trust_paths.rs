@@ -100,3 +100,145 @@ fn render_refuses_scene_names_that_are_paths_and_deletes_nothing() {
         std::fs::write(&scene, original).unwrap();
     }
 }
+
+/// The files a Blender reply names are read only where the request put them (Blender's output
+/// is not trusted): a reply naming a file elsewhere fails the image with a message saying so,
+/// the file is neither read nor copied into the dataset. Before the check, `render` opened any
+/// path the reply named (and `--keep-exr` copied it into the sample).
+#[test]
+fn render_reads_no_file_a_blender_reply_names_outside_its_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = one_scene(dir.path());
+    let secret = dir.path().join("secret.exr");
+    std::fs::write(&secret, b"not yours").unwrap();
+    let out_dir = dir.path().join("out");
+    let out = clevrtex()
+        .env("FAKE_BLENDER_MODE", "outside")
+        .env("FAKE_BLENDER_OUTSIDE", &secret)
+        .env_remove("CLEVRTEX_BLENDER")
+        .args(["render", "--workers", "1", "--retries", "0", "--keep-exr"])
+        .arg("--blender")
+        .arg(fake_blender())
+        .arg("--out")
+        .arg(&out_dir)
+        .arg(&scene)
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    let ledger = std::fs::read_to_string(out_dir.join("clevrtex_clevr/failures.jsonl")).unwrap();
+    assert!(
+        ledger.contains("is not in the worker's folder") && ledger.contains("was not read"),
+        "{ledger}"
+    );
+    assert_eq!(std::fs::read(&secret).unwrap(), b"not yours");
+    let mut stack = vec![out_dir];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(d).unwrap().flatten() {
+            if e.path().is_dir() {
+                stack.push(e.path());
+            } else {
+                assert_ne!(std::fs::read(e.path()).unwrap(), b"not yours", "{e:?}");
+            }
+        }
+    }
+}
+
+/// `materials sheet` moves each rendered cell into its cache: a reply naming any other file
+/// than the cell asked for is a protocol error, and nothing is moved. Before the check, the
+/// named file (here a user's file outside every folder of the run) was moved into the cache.
+#[test]
+fn materials_move_no_file_a_blender_reply_names_outside_its_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let victim = dir.path().join("thesis.png");
+    std::fs::write(&victim, b"mine").unwrap();
+    let out = clevrtex()
+        .env("FAKE_BLENDER_MODE", "outside")
+        .env("FAKE_BLENDER_OUTSIDE", &victim)
+        .env_remove("CLEVRTEX_BLENDER")
+        .args(["materials", "sheet", "--names", "plain", "--retries", "0"])
+        .arg("--out")
+        .arg(dir.path().join("sheet.png"))
+        .arg("--cache")
+        .arg(dir.path().join("cache"))
+        .arg("--blender")
+        .arg(fake_blender())
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{t}");
+    assert!(t.contains("the reply names another file than"), "{t}");
+    assert_eq!(
+        std::fs::read(&victim).ok().as_deref(),
+        Some(&b"mine"[..]),
+        "the user's file was moved: {t}"
+    );
+    assert!(!dir.path().join("sheet.png").exists(), "{t}");
+}
+
+/// A scene folder is walked without following links to folders: before, two links back up
+/// (`a -> .`, `b -> .`) made `render DIR` walk the same scene over and over without end.
+#[test]
+fn render_walks_a_scene_folder_without_following_folder_links() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = one_scene(dir.path());
+    let folder = scene.parent().unwrap();
+    std::os::unix::fs::symlink(".", folder.join("a")).unwrap();
+    std::os::unix::fs::symlink(".", folder.join("b")).unwrap();
+    let out_dir = dir.path().join("out");
+    let (code, t) = crate::util::run_limited(
+        &[
+            std::ffi::OsStr::new("render"),
+            "--workers".as_ref(),
+            "1".as_ref(),
+            "--retries".as_ref(),
+            "0".as_ref(),
+            "--blender".as_ref(),
+            fake_blender().as_os_str(),
+            "--out".as_ref(),
+            out_dir.as_os_str(),
+            dir.path().join("scenes").as_os_str(),
+        ],
+        &[("FAKE_BLENDER_MODE", "crash".as_ref())],
+        120,
+    );
+    assert_eq!(code, Some(3), "{t}");
+    let ledger = std::fs::read_to_string(out_dir.join("clevrtex_clevr/failures.jsonl")).unwrap();
+    assert_eq!(
+        ledger.lines().count(),
+        1,
+        "one scene, one failure: {ledger}"
+    );
+}
+
+/// A scene file is read with a cap (4 MiB; `sample` writes a few KB): before, an 8 GiB
+/// (sparse) file was read whole, and the allocation aborted the run.
+#[test]
+fn render_reads_a_huge_scene_file_with_a_cap() {
+    let dir = tempfile::tempdir().unwrap();
+    let huge = dir.path().join("huge.json");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(8 << 30)
+        .unwrap();
+    let (code, t) = crate::util::run_limited(
+        &[
+            std::ffi::OsStr::new("render"),
+            "--blender".as_ref(),
+            fake_blender().as_os_str(),
+            "--out".as_ref(),
+            dir.path().join("out").as_os_str(),
+            huge.as_os_str(),
+        ],
+        &[],
+        120,
+    );
+    assert_eq!(code, Some(1), "{t}");
+    assert!(
+        t.contains(&format!(
+            "scene file `{}` is larger than 4 MiB",
+            huge.display()
+        )),
+        "{t}"
+    );
+}

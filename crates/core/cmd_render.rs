@@ -33,6 +33,11 @@ pub fn run(args: Args) -> CmdResult {
             files.extend(found);
         } else if p.is_file() {
             files.push(p.clone());
+        } else if p.exists() {
+            bail!(
+                "scene path `{}` is neither a file nor a folder (a FIFO or device is not read)\nhint: pass scene files or folders written by `clevrtex sample`",
+                p.display()
+            );
         } else {
             bail!(
                 "scene path `{}` does not exist\nhint: pass scene files or folders written by `clevrtex sample`",
@@ -95,8 +100,9 @@ pub fn run(args: Args) -> CmdResult {
     run_jobs(&args.run, jobs, ledger, 1, None)
 }
 
-/// Collect the `*.json` files under `dir`, recursively: `clevrtex sample --out DIR` writes
-/// them to `DIR/clevrtex_<variant>/<index / 1000>/`, and `clevrtex render DIR` must find them.
+/// Collect the `*.json` files under `dir`, recursively (not into linked folders):
+/// `clevrtex sample --out DIR` writes them to `DIR/clevrtex_<variant>/<index / 1000>/`, and
+/// `clevrtex render DIR` must find them.
 fn find_scene_files(dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> {
     let entries = std::fs::read_dir(dir).map_err(|e| {
         anyhow::anyhow!(
@@ -106,7 +112,9 @@ fn find_scene_files(dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> 
     })?;
     for entry in entries.flatten() {
         let path = entry.path();
-        if path.is_dir() {
+        // Links to folders are not followed: a link back up (`loop -> ..`) would walk the same
+        // scenes again without end.
+        if entry.file_type().is_ok_and(|t| t.is_dir()) {
             find_scene_files(&path, found)?;
         } else if path.extension().is_some_and(|e| e == "json") && path.is_file() {
             found.push(path);
@@ -115,10 +123,34 @@ fn find_scene_files(dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> 
     Ok(())
 }
 
+/// The largest scene file read: `clevrtex sample` writes a few KB (at most 255 objects); a
+/// scene file is not trusted, and its size must not size our memory.
+const MAX_SCENE_BYTES: u64 = 4 << 20;
+
 fn read_scene(path: &Path) -> anyhow::Result<SceneFile> {
-    let text = std::fs::read_to_string(path).map_err(|e| {
+    let cannot = |e: std::io::Error| {
         anyhow::anyhow!(
             "cannot read scene file `{}`: {e}\nhint: pass scene files written by `clevrtex sample`",
+            path.display()
+        )
+    };
+    let mut file = std::fs::File::open(path).map_err(cannot)?;
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(
+        &mut std::io::Read::take(&mut file, MAX_SCENE_BYTES + 1),
+        &mut bytes,
+    )
+    .map_err(cannot)?;
+    if bytes.len() as u64 > MAX_SCENE_BYTES {
+        bail!(
+            "scene file `{}` is larger than {} MiB; `clevrtex sample` writes a few KB\nhint: pass scene files written by `clevrtex sample`",
+            path.display(),
+            MAX_SCENE_BYTES >> 20
+        );
+    }
+    let text = String::from_utf8(bytes).map_err(|e| {
+        anyhow::anyhow!(
+            "bad scene file `{}`: not UTF-8 text ({e})\nhint: regenerate it with `clevrtex sample`",
             path.display()
         )
     })?;

@@ -158,7 +158,7 @@ impl Slot<'_, '_> {
                 stats.visibility_render_s += reply.timings.render_s;
                 stats.visibility_passes += 1;
                 let exr = reply_file(&reply, "visibility", &work)?;
-                let ch = Channels::read(&exr)?;
+                let ch = Channels::read_sized(&exr, (size.0 as usize, size.1 as usize))?;
                 let ids = post::instance_ids(ch.get(&crate::passes::index_channel())?, n, &exr)?;
                 let px = post::object_pixels(&ids, ch.width, n);
                 visibility_s = t.elapsed().as_secs_f64();
@@ -256,7 +256,8 @@ impl Slot<'_, '_> {
     }
 }
 
-/// A file the bridge says it wrote, which must lie in our scratch folder.
+/// A file the bridge says it wrote, which must be a regular file directly in our scratch
+/// folder `work`.
 pub(crate) fn reply_file(reply: &RenderReply, role: &str, work: &Path) -> Result<PathBuf> {
     let path = reply
         .files
@@ -268,11 +269,29 @@ pub(crate) fn reply_file(reply: &RenderReply, role: &str, work: &Path) -> Result
                 reply.files.keys().cloned().collect::<Vec<_>>().join(", ")
             ),
         })?;
-    if !path.is_file() {
+    // Blender's output is not trusted (docs/security.md): a reply naming a file elsewhere
+    // (`/home/me/secret`, `work/../x`, a link out of `work`) would have it read and copied into
+    // the dataset.
+    if path.parent() != Some(work) || path.file_name().is_none() {
         return Err(RenderError::BadOutput {
             path: path.clone(),
-            problem: format!("the `{role}` file the bridge reported does not exist"),
+            problem: format!(
+                "the `{role}` file the bridge reported is not in the worker's folder `{}`; it was not read",
+                work.display()
+            ),
         });
     }
-    Ok(path.clone())
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.is_file() => Ok(path.clone()),
+        Ok(_) => Err(RenderError::BadOutput {
+            path: path.clone(),
+            problem: format!(
+                "the `{role}` file the bridge reported is not a regular file (a link, folder or FIFO); it was not read"
+            ),
+        }),
+        Err(_) => Err(RenderError::BadOutput {
+            path: path.clone(),
+            problem: format!("the `{role}` file the bridge reported does not exist"),
+        }),
+    }
 }

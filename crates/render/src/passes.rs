@@ -74,7 +74,7 @@ fn read_shadow_exr(
     size: (usize, usize),
 ) -> Result<Channels> {
     let path = reply_file(reply, role, work)?;
-    let ch = Channels::read(&path)?;
+    let ch = Channels::read_sized(&path, size)?;
     if (ch.width, ch.height) != size {
         return Err(RenderError::BadOutput {
             path,
@@ -99,7 +99,8 @@ pub(crate) fn write_passes(
     staged: &mut Staged,
 ) -> Result<Vec<ObjectPixels>> {
     let exr_path = reply_file(reply, "passes", work)?;
-    let ch = Channels::read(&exr_path)?;
+    let asked = (scene.render.width as usize, scene.render.height as usize);
+    let ch = Channels::read_sized(&exr_path, asked)?;
     let (w, h) = (ch.width as u32, ch.height as u32);
     if (w, h) != (scene.render.width, scene.render.height) {
         return Err(RenderError::BadOutput {

@@ -65,9 +65,18 @@ fn owner_alive(dir: &Path) -> bool {
 /// Remove our folders in `$TMPDIR` whose owner process is gone. Returns how many were
 /// removed. Never fails: what cannot be removed is left for a later run.
 pub fn remove_stale() -> usize {
-    let Ok(entries) = std::fs::read_dir(std::env::temp_dir()) else {
+    remove_stale_in(&std::env::temp_dir())
+}
+
+/// [`remove_stale`] in `tmp`. `$TMPDIR` may be shared: only real folders (not links) owned by
+/// this user are candidates, so a name that merely looks like ours (another user's folder, a
+/// link planted to a folder of ours) is never removed.
+fn remove_stale_in(tmp: &Path) -> usize {
+    use std::os::unix::fs::MetadataExt;
+    let Ok(entries) = std::fs::read_dir(tmp) else {
         return 0;
     };
+    let uid = rustix::process::geteuid().as_raw();
     let mut removed = 0;
     for e in entries.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
@@ -75,7 +84,8 @@ pub fn remove_stale() -> usize {
             continue;
         }
         let path = e.path();
-        if path.is_dir() && !owner_alive(&path) && std::fs::remove_dir_all(&path).is_ok() {
+        let ours = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir() && m.uid() == uid);
+        if ours && !owner_alive(&path) && std::fs::remove_dir_all(&path).is_ok() {
             removed += 1;
         }
     }
@@ -193,6 +203,32 @@ mod tests {
         remove_stale();
         assert!(!dead.exists());
         assert!(mine.path().exists(), "a live owner's folder is kept");
+    }
+
+    /// Only our user's real folders are swept: before, a link named like our folders (to a
+    /// folder whose owner file looks stale) was removed, and so, when running as root, was
+    /// another user's folder.
+    #[test]
+    fn the_sweep_leaves_links_and_other_users_folders() {
+        let tmp = tempfile::tempdir().unwrap();
+        let stale = |dir: &Path| {
+            std::fs::create_dir_all(dir).unwrap();
+            std::fs::write(dir.join(OWNER), "4194303 1\n").unwrap();
+        };
+        let target = tmp.path().join("a-users-folder");
+        stale(&target);
+        let link = tmp.path().join("clevrtex-work-link");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let theirs = tmp.path().join("clevrtex-work-theirs");
+        stale(&theirs);
+        let foreign = std::os::unix::fs::chown(&theirs, Some(65534), Some(65534)).is_ok();
+        let dead = tmp.path().join("clevrtex-work-dead");
+        stale(&dead);
+        // Without root, chown fails and that folder is ours (and removed) too.
+        assert_eq!(remove_stale_in(tmp.path()), if foreign { 1 } else { 2 });
+        assert!(!dead.exists());
+        assert!(link.symlink_metadata().is_ok() && target.join(OWNER).exists());
+        assert_eq!(theirs.exists(), foreign, "another user's folder is kept");
     }
 
     #[test]

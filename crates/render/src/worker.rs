@@ -449,7 +449,9 @@ impl Worker {
     /// Ask the worker to render material `name` of its catalogue on the small scene of
     /// `settings.mode`, into `out_dir/<name>.png` (`out_dir` must exist), and wait at most
     /// `timeout`. Failures as for [`Worker::render`]: a material that does not build is a
-    /// [`RenderError::Bridge`] error and leaves the worker usable.
+    /// [`RenderError::Bridge`] error and leaves the worker usable; a reply naming any other
+    /// file than `out_dir/<name>.png`, or not a regular file, is a [`RenderError::Protocol`]
+    /// error.
     pub fn material(
         &mut self,
         settings: &MaterialSettings,
@@ -468,7 +470,21 @@ impl Worker {
             "displacement": settings.displacement,
             "random": settings.random,
         });
-        self.call(request, &doing, timeout)
+        let reply: MaterialReply = self.call(request, &doing, timeout)?;
+        // Blender's output is not trusted (docs/security.md): the file named must be the one
+        // asked for, since callers read it and move it into their cache.
+        let expected = out_dir.join(format!("{name}.png"));
+        let regular = std::fs::symlink_metadata(&reply.file).is_ok_and(|m| m.is_file());
+        if reply.file != expected || !regular {
+            let line = reply.file.display().to_string();
+            let problem = if reply.file != expected {
+                format!("the reply names another file than `{}`", expected.display())
+            } else {
+                format!("`{}` is not a regular file", expected.display())
+            };
+            return Err(self.fail_protocol(&doing, line, problem));
+        }
+        Ok(reply)
     }
 
     /// Send `request` (an object; its `id` is added here) and wait at most `timeout` for its
