@@ -102,6 +102,7 @@ class Worker:
             "cycles_devices": self.compat.cycles_devices(),
             "gpus": self.compat.cycles_gpus(),
             "features": self.compat.features(),
+            "compat": self.compat.parity_settings(),
         })
 
     def _scene_key(self, path):
