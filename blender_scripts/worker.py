@@ -191,6 +191,7 @@ class Worker:
                 if req.get("type") == "quit":
                     return
                 reply = self.handle(req)
+                self.builder.release_render()
             except Exception as exc:
                 self.built = None  # state after a failure is unknown: rebuild next time
                 reply = {
