@@ -418,6 +418,21 @@ def assign_materials(built, catalogue, build_material, displacement):
 # --- rendering ---------------------------------------------------------------------------
 
 
+def release_render():
+    """Free the Cycles session that persistent data keeps after a render (the worker calls
+    this after every request). Kept, it leaves one of the TBB worker threads of PyPI's bpy 4.5
+    spinning in sched_yield (measured: ~28000 context switches a second, a whole core when the
+    machine is otherwise idle, mostly kernel time) and one of bpy 5.0's busy at 100% while the
+    worker waits for its next request; freed, none (blender_scripts/dev/spin_probe.py,
+    docs/performance.md "Blender 3.4, 4.5 and 5.0 at parity"). Turning the setting off frees
+    the session (Blender's update of the property); it is turned on again for the next
+    request, whose shadow render reuses its final render's synced geometry."""
+    r = bpy.context.scene.render
+    if r.use_persistent_data:
+        r.use_persistent_data = False
+        r.use_persistent_data = True
+
+
 def _save(path, fmt):
     scene = bpy.context.scene
     if fmt == "PNG":

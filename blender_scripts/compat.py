@@ -160,6 +160,143 @@ def principled_input(node, name):
     return None if new is None else node.inputs[new]
 
 
+# Principled BSDF v2 (4.0+) rendering as 3.4's v1 (issue 24, docs/performance.md "Blender
+# 3.4, 4.5 and 5.0 at parity"). Scene files and material recipes are in 3.x terms; each
+# switch below is one difference, on by default (the study script dev/parity_measure.py
+# turns them off one at a time with `--parity-off`):
+#
+# - `coat`: v2's coat is a physical layer of weight w and IOR 1.5; v1's clearcoat was a
+#   quarter as strong (0.25 w of an F0 0.04 lobe), so Blender's own versioning of 3.x files
+#   multiplies Clearcoat by 0.25 (versioning_400.cc, version_principled_bsdf_coat). At full
+#   strength the sharp coats (roughness 0-0.15) of most recipes reflect the small studio
+#   lights 4x as brightly: the caustic fireflies of 4.5, and a darker base under the coat.
+# - `sheen`: v2's sheen is a microfiber layer; Blender's versioning multiplies a constant
+#   Sheen by 0.2 with a white tint (version_principled_bsdf_sheen).
+# - `ggx`: v1's default distribution is single-scatter GGX, v2's multiscatter GGX (energy
+#   compensated, brighter rough metals); 3.4's is kept.
+# - `ior`: v1's specular reflectance comes from `Specular` alone (F0 = 0.08 x Specular);
+#   v2's from IOR x `Specular IOR Level`, which equals v1's at IOR 1.5 (4.0-4.1 default
+#   1.45): set to 1.5.
+# - `layers`: v1 ADDS its specular and clearcoat lobes to the diffuse; v2 layers them, so the
+#   diffuse under them loses what they reflect (DiffCol 12% under 3.4's on the bench scenes,
+#   the darker 4.x image; Blender has no switch for it). [`principled_output`] builds v1's sum
+#   from v2 nodes: the principled node without its specular and coat (diffuse, metal, sheen),
+#   plus (1 - metallic) x a GGX lobe of F0 0.08 x Specular, plus the coat weight x a GGX lobe
+#   of F0 0.04 (IOR 1.5) on the unbumped normal, as v1's clearcoat.
+# - `light_tree`: Cycles 4.0+ picks light samples with its light tree by default (3.4 has
+#   none). On the bench scenes (three studio area lights and a sun, sharp coats) it is what is
+#   left of 4.x's extra noise once the BSDF matches: relative error at 64 spp 0.451 / 0.143
+#   with the tree, 0.262 / 0.093 without, 3.4 0.257 / 0.081 (full / camo). A scene file's
+#   `render.light_tree` still wins.
+PARITY = {"coat": True, "sheen": True, "ggx": True, "ior": True, "layers": True,
+          "light_tree": True}
+
+# Factor of a 3.x input's constant value for its 4.0+ input, per PARITY switch.
+_PRINCIPLED_SCALE = {"Clearcoat": ("coat", 0.25), "Sheen": ("sheen", 0.2)}
+
+
+def parity_settings():
+    """The parity switches in effect on this version (empty before 4.0: nothing to match),
+    for the run manifest and the bench."""
+    if VERSION < (4, 0, 0):
+        return {}
+    return dict(PARITY)
+
+
+def setup_principled(node):
+    """Make a new Principled BSDF node render as 3.4's v1 where v2 differs by a setting
+    ([`PARITY`]): distribution, IOR, sheen tint. No-op before 4.0."""
+    if VERSION < (4, 0, 0):
+        return
+    if PARITY["ggx"]:
+        node.distribution = "GGX"
+    if PARITY["ior"] and "IOR" in node.inputs:
+        node.inputs["IOR"].default_value = 1.5
+    if PARITY["sheen"] and "Sheen Tint" in node.inputs:
+        tint = node.inputs["Sheen Tint"]
+        if tint.type == "RGBA":
+            tint.default_value = (1.0, 1.0, 1.0, 1.0)
+
+
+def _copy_input(nt, src, dst):
+    """Give input socket `dst` what feeds `src`: its link, else its constant."""
+    if src.is_linked:
+        nt.links.new(src.links[0].from_socket, dst)
+    else:
+        dst.default_value = src.default_value
+
+
+def _lobe(nt, f0, roughness_from, normal_from):
+    """A v2 principled node that is one GGX reflection lobe of Schlick F0 `f0` (metallic, white
+    F82 tint), roughness and normal as the given input sockets (None: unbumped normal)."""
+    n = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    n.distribution = "GGX"
+    n.inputs["Metallic"].default_value = 1.0
+    n.inputs["Base Color"].default_value = (f0, f0, f0, 1.0)
+    if "Specular Tint" in n.inputs and n.inputs["Specular Tint"].type == "RGBA":
+        n.inputs["Specular Tint"].default_value = (1.0, 1.0, 1.0, 1.0)
+    _copy_input(nt, roughness_from, n.inputs["Roughness"])
+    if normal_from is not None and normal_from.is_linked:
+        nt.links.new(normal_from.links[0].from_socket, n.inputs["Normal"])
+    return n
+
+
+def _weighted(nt, shader, weight_from=None, weight=None, complement=False):
+    """`shader` times a weight (a constant `weight`, or what feeds `weight_from`), or times one
+    minus it (`complement`), as a Mix Shader with one input left empty (no light)."""
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    if weight_from is not None:
+        _copy_input(nt, weight_from, mix.inputs["Fac"])
+    else:
+        mix.inputs["Fac"].default_value = weight
+    nt.links.new(shader, mix.inputs[1 if complement else 2])
+    return mix.outputs["Shader"]
+
+
+def principled_output(nt, bsdf):
+    """The shader output of principled node `bsdf` (inputs already set in 3.x terms) to link
+    to the material output: the node's own output, or on 4.0+ with `PARITY["layers"]` v1's
+    sum of lobes built around it (see `PARITY`). Constants and links of the node's Specular,
+    Metallic, Roughness, Normal and Coat inputs are carried over to the extra nodes."""
+    if VERSION < (4, 0, 0) or not PARITY["layers"]:
+        return bsdf.outputs["BSDF"]
+    level = bsdf.inputs["Specular IOR Level"]
+    out = bsdf.outputs["BSDF"]
+    if level.is_linked:
+        return out  # not in the recipes: keep v2's layering
+    f0 = 0.08 * level.default_value
+    level.default_value = 0.0
+    if f0 > 0.0:
+        spec = _lobe(nt, f0, bsdf.inputs["Roughness"], bsdf.inputs["Normal"])
+        add = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(out, add.inputs[0])
+        nt.links.new(_weighted(nt, spec.outputs["BSDF"], weight_from=bsdf.inputs["Metallic"],
+                               complement=True), add.inputs[1])
+        out = add.outputs["Shader"]
+    coat = bsdf.inputs["Coat Weight"]
+    if not coat.is_linked and coat.default_value > 0.0:
+        lobe = _lobe(nt, 0.04, bsdf.inputs["Coat Roughness"], None)
+        weight = coat.default_value
+        coat.default_value = 0.0
+        add = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(out, add.inputs[0])
+        nt.links.new(_weighted(nt, lobe.outputs["BSDF"], weight=weight), add.inputs[1])
+        out = add.outputs["Shader"]
+    return out
+
+
+def principled_value(name, value):
+    """The value to give the input named `name` (3.x name) for a 3.x constant `value`: scaled
+    where v2's input is stronger ([`PARITY`]); anything but a number is returned as is (the
+    recipes give coat and sheen as numbers)."""
+    if VERSION < (4, 0, 0) or not isinstance(value, (int, float)):
+        return value
+    switch, factor = _PRINCIPLED_SCALE.get(name, (None, 1.0))
+    if switch is not None and PARITY[switch]:
+        return value * factor
+    return value
+
+
 def displacement_method(mat):
     """`BUMP`, `DISPLACEMENT` or `BOTH`: on `mat.cycles` up to 4.0, on the material since 4.1."""
     if hasattr(mat, "displacement_method"):
@@ -200,7 +337,8 @@ def apply_levers(cycles, r):
     """Cycles 4.x levers from a scene file's `render` (absent: this version's default, and
     ignored where this build lacks them, as 3.4 lacks all four):
 
-    - `light_tree` (4.0+): `use_light_tree`;
+    - `light_tree` (4.0+): `use_light_tree` (absent: off while `PARITY["light_tree"]`, as
+      3.4 renders);
     - `path_guiding` (CPU only, builds with it): surface guiding;
     - `blue_noise` (4.2+): `BLUE_NOISE` pattern when true, `TABULATED_SOBOL` when false;
     - `denoise`: OpenImageDenoise on the combined (RGB) pass only: Cycles never denoises
@@ -213,7 +351,9 @@ def apply_levers(cycles, r):
 
     if hasattr(cycles, "use_light_tree"):
         light_tree = r.get("light_tree")
-        cycles.use_light_tree = default("use_light_tree") if light_tree is None else light_tree
+        if light_tree is None:
+            light_tree = False if PARITY["light_tree"] else default("use_light_tree")
+        cycles.use_light_tree = light_tree
     if hasattr(cycles, "use_guiding"):
         guiding = r.get("path_guiding")
         cycles.use_guiding = default("use_guiding") if guiding is None else guiding

@@ -79,7 +79,7 @@ def _set_bsdf(g, bsdf, name, value):
     skipped where this Blender has no such input."""
     socket = compat.principled_input(bsdf, name)
     if socket is not None:
-        g.set(socket, value)
+        g.set(socket, compat.principled_value(name, value))
 
 
 def _build_layers(nt, out, recipe, instance, displace, albedo=False):
@@ -107,6 +107,7 @@ def _build_layers(nt, out, recipe, instance, displace, albedo=False):
     color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"))
     surf = recipe.get("surface") or {}
     bsdf = g.node("ShaderNodeBsdfPrincipled")
+    compat.setup_principled(bsdf)
     _set_bsdf(g, bsdf, "Base Color", color)
     if albedo:
         aov = g.node("ShaderNodeOutputAOV")
@@ -131,7 +132,7 @@ def _build_layers(nt, out, recipe, instance, displace, albedo=False):
         g.set(b.inputs["Height"], height)
         g.set(b.inputs["Distance"], bump)
         _set_bsdf(g, bsdf, "Normal", b.outputs["Normal"])
-    nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    nt.links.new(compat.principled_output(nt, bsdf), out.inputs["Surface"])
     relief = surf.get("relief", 0.0)
     if displace and relief > 0 and height is not None and hasattr(height, "node"):
         d = g.node("ShaderNodeDisplacement", space="OBJECT")

@@ -102,6 +102,7 @@ class Worker:
             "cycles_devices": self.compat.cycles_devices(),
             "gpus": self.compat.cycles_gpus(),
             "features": self.compat.features(),
+            "compat": self.compat.parity_settings(),
         })
 
     def _scene_key(self, path):
@@ -190,6 +191,7 @@ class Worker:
                 if req.get("type") == "quit":
                     return
                 reply = self.handle(req)
+                self.builder.release_render()
             except Exception as exc:
                 self.built = None  # state after a failure is unknown: rebuild next time
                 reply = {

@@ -103,6 +103,23 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
             version.starts_with('4') || version.starts_with('5'),
             "{version}"
         );
+        // Which parity settings made the sample (compat.parity_settings): every switch on for
+        // 4.x and 5.x, none on 3.4.
+        for switch in ["coat", "sheen", "ggx", "ior"] {
+            assert_eq!(
+                meta_b["blender_compat"][switch],
+                serde_json::json!(true),
+                "{stem}: {version} metadata lacks compat switch `{switch}`: {}",
+                meta_b["blender_compat"]
+            );
+        }
+        let meta_a: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(sub(&a, stem, ".json")).unwrap()).unwrap();
+        assert!(
+            meta_a.get("blender_compat").is_none(),
+            "{stem}: 3.4 needs no parity settings, got {}",
+            meta_a["blender_compat"]
+        );
 
         let ma = decode_png(&sub(&a, stem, "_flat.png")).unwrap();
         let mb = decode_png(&sub(&b, stem, "_flat.png")).unwrap();

@@ -266,6 +266,7 @@ impl ManifestPlan {
         &self,
         finished: bool,
         blender_version: String,
+        blender_compat: BTreeMap<String, serde_json::Value>,
         files: BTreeMap<String, clevrtex_render::manifest::FileEntry>,
         sample_seconds: BTreeMap<String, f64>,
     ) -> Manifest {
@@ -282,6 +283,7 @@ impl ManifestPlan {
             passes: self.passes.iter().map(|p| p.name().to_string()).collect(),
             tool_version: env!("CARGO_PKG_VERSION").into(),
             blender_version,
+            blender_compat,
             command: std::env::args().collect(),
             finished,
             files,
@@ -297,7 +299,13 @@ impl ManifestPlan {
             .earlier(out)
             .map(|m| m.sample_seconds)
             .unwrap_or_default();
-        let m = self.manifest(false, String::new(), BTreeMap::new(), seconds);
+        let m = self.manifest(
+            false,
+            String::new(),
+            BTreeMap::new(),
+            BTreeMap::new(),
+            seconds,
+        );
         let vdir = self.variant_dir(out);
         std::fs::create_dir_all(&vdir).with_context(|| {
             format!(
@@ -324,6 +332,7 @@ impl ManifestPlan {
         };
         let mut files = Vec::new();
         let mut blender_version = String::new();
+        let mut blender_compat = BTreeMap::new();
         for index in shard.iter(self.start, self.end) {
             let stem = layout::stem(&self.variant, index);
             let dir = layout::sample_dir(out, &self.variant, index);
@@ -336,6 +345,9 @@ impl ManifestPlan {
                     std::fs::read(dir.join(layout::metadata_file(&stem))).unwrap_or_default();
                 let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap_or_default();
                 blender_version = meta["blender_version"].as_str().unwrap_or("").to_string();
+                if let Some(c) = meta["blender_compat"].as_object() {
+                    blender_compat = c.clone().into_iter().collect();
+                }
             }
             if let Some(s) = seconds.get(&index).or_else(|| earlier.get(&stem)) {
                 sample_seconds.insert(stem.clone(), (s * 1000.0).round() / 1000.0);
@@ -344,7 +356,7 @@ impl ManifestPlan {
             files.extend(names.into_iter().map(|n| format!("{sub}/{n}")));
         }
         let files = clevrtex_render::manifest::hash_files(&vdir, &files)?;
-        let manifest = self.manifest(true, blender_version, files, sample_seconds);
+        let manifest = self.manifest(true, blender_version, blender_compat, files, sample_seconds);
         Ok(manifest.write(&vdir)?)
     }
 }

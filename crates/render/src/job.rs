@@ -172,10 +172,10 @@ impl Slot<'_, '_> {
             let reply = self.request(&label, &scene_path, Mode::Final, &work, timeout)?;
             let final_request_s = t.elapsed().as_secs_f64();
             let t_post = Instant::now();
-            let facts_blender = self
+            let (facts_blender, facts_compat) = self
                 .session
                 .current()
-                .map(|w| w.ready().blender_version.clone())
+                .map(|w| (w.ready().blender_version.clone(), w.ready().compat.clone()))
                 .unwrap_or_default();
             let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
             let mut staged = Staged::new(&dir)?;
@@ -202,6 +202,7 @@ impl Slot<'_, '_> {
                 &RenderFacts {
                     objects: objects.clone(),
                     blender_version: facts_blender,
+                    blender_compat: facts_compat,
                     passes: job.passes.clone(),
                 },
             );

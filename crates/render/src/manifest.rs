@@ -62,6 +62,11 @@ pub struct Manifest {
     pub tool_version: String,
     /// Blender version of the samples (from their metadata).
     pub blender_version: String,
+    /// The settings the bridge changed on that Blender to render as 3.4 does (the samples'
+    /// `blender_compat`, e.g. `{"coat": true, ...}` on 4.x); absent on 3.x and in older
+    /// manifests.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub blender_compat: BTreeMap<String, serde_json::Value>,
     /// The command line that made the run (rerunning it resumes and repairs).
     pub command: Vec<String>,
     /// Whether the run got to its end (`false`: only its plan, written before the first

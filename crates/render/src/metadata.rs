@@ -19,6 +19,8 @@ pub struct RenderFacts {
     pub objects: Vec<ObjectPixels>,
     /// Blender's version string (from the worker's `ready`).
     pub blender_version: String,
+    /// The bridge's version-parity settings (the worker's `ready.compat`).
+    pub blender_compat: BTreeMap<String, serde_json::Value>,
     /// Passes actually written (the scene's request).
     pub passes: Vec<Pass>,
 }
@@ -103,6 +105,10 @@ pub struct SampleMetadata {
     pub render: RenderSettings,
     /// Blender's version string.
     pub blender_version: String,
+    /// The settings the bridge changed on this Blender to render as 3.4 does
+    /// (`compat.parity_settings()`, e.g. `{"coat": true, ...}` on 4.x); absent on 3.x.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub blender_compat: BTreeMap<String, serde_json::Value>,
     /// This tool's version.
     pub clevrtex_version: &'static str,
 }
@@ -149,6 +155,7 @@ pub fn build(scene: &SceneFile, facts: &RenderFacts) -> SampleMetadata {
         passes: facts.passes.iter().map(|p| (p.name(), p.spec().encoding)).collect(),
         render: scene.render.clone(),
         blender_version: facts.blender_version.clone(),
+        blender_compat: facts.blender_compat.clone(),
         clevrtex_version: env!("CARGO_PKG_VERSION"),
     }
 }

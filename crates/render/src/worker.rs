@@ -73,6 +73,11 @@ pub struct Ready {
     /// What this build offers beyond 3.4's Cycles.
     #[serde(default)]
     pub features: Features,
+    /// The settings the bridge changes on this version to render as 3.4 does
+    /// (`compat.parity_settings()`: switch name to value, e.g. `{"coat": true}` on 4.x;
+    /// empty on 3.x and from older bridges).
+    #[serde(default)]
+    pub compat: BTreeMap<String, serde_json::Value>,
     /// Anything else the bridge reported.
     #[serde(flatten)]
     pub extra: BTreeMap<String, serde_json::Value>,
@@ -353,6 +358,7 @@ impl Worker {
                 cycles_devices: Vec::new(),
                 gpus: Vec::new(),
                 features: Features::default(),
+                compat: BTreeMap::new(),
                 extra: BTreeMap::new(),
             },
             startup: Duration::ZERO,
