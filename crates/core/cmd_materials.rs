@@ -14,16 +14,11 @@ use anyhow::{bail, Context};
 use clevrtex_materials::{Catalogue, Set};
 use clevrtex_render::{MaterialMode, MaterialReply, MaterialSettings, RenderError};
 
+use clevrtex_report::materials::{figures, sheet, stats};
+
 use crate::blender_session::{command_error, BlenderSession, Settings};
 use crate::exit::{CmdResult, OK};
 use crate::interrupt::{self, OnInterrupt};
-
-#[path = "materials/figures.rs"]
-mod figures;
-#[path = "materials/sheet.rs"]
-mod sheet;
-#[path = "materials/stats.rs"]
-pub(crate) mod stats;
 
 /// Arguments of `clevrtex materials`.
 #[derive(Debug, clap::Args)]
