@@ -5,8 +5,8 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use clevrtex_report::output::refuse_output_inside;
 use clevrtex_report::preview::{draw, Options, Sheet};
-use clevrtex_report::report::refuse_output_inside;
 
 use crate::exit::{self, CmdResult};
 

@@ -5,7 +5,8 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use clevrtex_report::report::{build, refuse_output_inside, summarise, Options};
+use clevrtex_report::output::refuse_output_inside;
+use clevrtex_report::report::{build, summarise, Options};
 
 use crate::exit::{self, CmdResult};
 

@@ -9,5 +9,6 @@
 
 pub mod font;
 pub mod materials;
+pub mod output;
 pub mod preview;
 pub mod report;
