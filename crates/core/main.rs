@@ -21,6 +21,7 @@ mod cmd_sample;
 mod cmd_verify;
 mod exit;
 mod interrupt;
+mod materials_blender;
 mod shard;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object

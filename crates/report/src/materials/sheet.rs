@@ -1,6 +1,42 @@
-//! The contact sheet of `clevrtex materials sheet`: rendered cells stitched into one image.
+//! The contact sheet of `clevrtex materials sheet`: the cache of rendered cells and their
+//! stitching into one image.
 
 use std::path::PathBuf;
+
+/// The cell cache: `explicit`, else `$XDG_CACHE_HOME/clevrtex/sheet` or
+/// `~/.cache/clevrtex/sheet` (the temporary folder when neither is set).
+pub fn cache_dir(explicit: Option<PathBuf>) -> PathBuf {
+    if let Some(p) = explicit {
+        return p;
+    }
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .unwrap_or_else(std::env::temp_dir);
+    base.join("clevrtex").join("sheet")
+}
+
+/// Hash of the embedded bridge scripts: a change to any of them invalidates every cached
+/// cell.
+fn scripts_hash() -> u64 {
+    let parts: Vec<&[u8]> = clevrtex_render::bridge::files()
+        .iter()
+        .flat_map(|(name, text)| [name.as_bytes(), text.as_bytes()])
+        .collect();
+    clevrtex_materials::content_hash(&parts)
+}
+
+/// The file name of a cached cell: the material's name and content hash, the bridge scripts'
+/// hash and the render settings.
+pub fn cell_file(name: &str, hash: &str, size: u32, samples: u32) -> String {
+    format!(
+        "{name}-{}-{:016x}-{}x{}.png",
+        hash,
+        scripts_hash(),
+        size,
+        samples
+    )
+}
 
 /// Stitch equally sized cell images into a grid, `cols` wide, on a dark background.
 pub fn stitch(cells: &[PathBuf], cols: usize) -> Result<image::RgbImage, image::ImageError> {
