@@ -1,12 +1,11 @@
 //! `clevrtex preview DIR --out sheet.png`: parses the arguments, has
-//! `clevrtex_report::preview` draw the contact sheet, writes it and prints what was drawn and
+//! `clevrtex_report::preview` draw and write the contact sheet, and prints what was drawn and
 //! what was left out.
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use clevrtex_report::output::refuse_output_inside;
-use clevrtex_report::preview::{draw, Options, Sheet};
+use clevrtex_report::preview::{draw, save, Options, Sheet};
 
 use crate::exit::{self, CmdResult};
 
@@ -51,12 +50,7 @@ pub fn run(args: Args) -> CmdResult {
         labelled: drew_text,
         problems,
     } = draw(&options)?;
-    let tmp = args.out.with_extension("png.clevrtex-tmp");
-    sheet
-        .save_with_format(&tmp, image::ImageFormat::Png)
-        .with_context(|| format!("cannot write `{}`", tmp.display()))?;
-    std::fs::rename(&tmp, &args.out)
-        .with_context(|| format!("cannot write `{}`", args.out.display()))?;
+    save(&sheet, &args.out)?;
     println!(
         "wrote `{}`: {} sample(s) x {} column(s) ({})",
         args.out.display(),

@@ -1,12 +1,11 @@
 //! `clevrtex report DIR --out report.html [--compare OTHER]`: parses the arguments, has
-//! `clevrtex_report::report` read the datasets and build the page, writes it and prints what
+//! `clevrtex_report::report` read the datasets, build and write the page, and prints what
 //! was read and left out. See `docs/report.md`.
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use clevrtex_report::output::refuse_output_inside;
-use clevrtex_report::report::{build, summarise, Options};
+use clevrtex_report::report::{make, write_page, Options};
 
 use crate::exit::{self, CmdResult};
 
@@ -47,35 +46,17 @@ pub fn run(args: Args) -> CmdResult {
         max_texture_samples: args.max_texture_samples,
         preview: args.preview,
     };
-    let mut sums = vec![summarise(&args.dir, &options)?];
-    if let Some(other) = &args.compare {
-        sums.push(summarise(other, &options)?);
-    }
-    let (html, drawing_problems) = build(&sums, &options)?;
-    let tmp = args.out.with_extension("html.clevrtex-tmp");
-    std::fs::write(&tmp, html.as_bytes()).with_context(|| {
-        format!(
-            "cannot write `{}`\nhint: check that the folder exists and is writable",
-            tmp.display()
-        )
-    })?;
-    std::fs::rename(&tmp, &args.out).with_context(|| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("cannot write `{}`", args.out.display())
-    })?;
-    let images: usize = sums.iter().map(|s| s.data.samples.len()).sum();
-    let measured: usize = sums.iter().map(|s| s.measures.len()).sum();
+    let report = make(&args.dir, args.compare.as_deref(), &options)?;
+    write_page(&args.out, &report.html)?;
     println!(
-        "wrote `{}` ({} KiB): {images} image(s) read, {measured} measured, in {:.1} s",
+        "wrote `{}` ({} KiB): {} image(s) read, {} measured, in {:.1} s",
         args.out.display(),
-        html.len() / 1024,
+        report.html.len() / 1024,
+        report.images,
+        report.measured,
         started.elapsed().as_secs_f64()
     );
-    let problems: Vec<&String> = sums
-        .iter()
-        .flat_map(|s| &s.problems)
-        .chain(&drawing_problems)
-        .collect();
+    let problems = report.problems;
     if !problems.is_empty() {
         for p in &problems {
             eprintln!("left out {p}");

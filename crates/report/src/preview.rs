@@ -536,3 +536,13 @@ pub fn draw(args: &Options) -> anyhow::Result<Sheet> {
         problems,
     })
 }
+
+/// Write a sheet to `out` as PNG, through a temporary file beside it.
+pub fn save(sheet: &RgbImage, out: &Path) -> anyhow::Result<()> {
+    let tmp = out.with_extension("png.clevrtex-tmp");
+    sheet
+        .save_with_format(&tmp, image::ImageFormat::Png)
+        .with_context(|| format!("cannot write `{}`", tmp.display()))?;
+    std::fs::rename(&tmp, out).with_context(|| format!("cannot write `{}`", out.display()))?;
+    Ok(())
+}

@@ -14,6 +14,8 @@
 
 use std::path::Path;
 
+use anyhow::Context;
+
 pub mod data;
 mod geometry;
 mod html;
@@ -33,6 +35,54 @@ pub struct Options {
     pub max_texture_samples: usize,
     /// Samples in the preview sheet.
     pub preview: u32,
+}
+
+/// A report made: the page, and what `clevrtex report` says about it.
+pub struct Report {
+    /// The page (HTML).
+    pub html: String,
+    /// Images whose metadata was read, over the datasets.
+    pub images: usize,
+    /// Images whose pixels were measured.
+    pub measured: usize,
+    /// What was left out, one line each: samples of the datasets, then cells of the preview.
+    pub problems: Vec<String>,
+}
+
+/// Read and measure the dataset `dir` (and `compare`, beside it) and build the page.
+pub fn make(dir: &Path, compare: Option<&Path>, options: &Options) -> anyhow::Result<Report> {
+    let mut sums = vec![summarise(dir, options)?];
+    if let Some(other) = compare {
+        sums.push(summarise(other, options)?);
+    }
+    let (html, drawing_problems) = build(&sums, options)?;
+    Ok(Report {
+        html,
+        images: sums.iter().map(|s| s.data.samples.len()).sum(),
+        measured: sums.iter().map(|s| s.measures.len()).sum(),
+        problems: sums
+            .iter()
+            .flat_map(|s| s.problems.iter().cloned())
+            .chain(drawing_problems)
+            .collect(),
+    })
+}
+
+/// Write the page to `out` through a temporary file beside it, so that a failure leaves an
+/// older page whole.
+pub fn write_page(out: &Path, html: &str) -> anyhow::Result<()> {
+    let tmp = out.with_extension("html.clevrtex-tmp");
+    std::fs::write(&tmp, html.as_bytes()).with_context(|| {
+        format!(
+            "cannot write `{}`\nhint: check that the folder exists and is writable",
+            tmp.display()
+        )
+    })?;
+    std::fs::rename(&tmp, out).with_context(|| {
+        let _ = std::fs::remove_file(&tmp);
+        format!("cannot write `{}`", out.display())
+    })?;
+    Ok(())
 }
 
 /// The page, and the problems met while drawing it (cells of the preview left empty).
