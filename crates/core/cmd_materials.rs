@@ -263,6 +263,16 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
 fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
     let mut names = materials::select(cat, &a.batch.set, &a.batch.names)?;
     names.retain(|n| !matches!(*n, "rubber" | "metal"));
+    if names.is_empty() {
+        let what = if a.batch.names.is_empty() {
+            format!("set `{}`", a.batch.set)
+        } else {
+            "`--names`".to_string()
+        };
+        bail!(
+            "no materials to compare in {what} (`rubber` and `metal` are left out)\nhint: pick another `--set` or `--names`"
+        );
+    }
     let dir = a.out_dir.clone().unwrap_or_else(|| {
         std::env::temp_dir().join(format!("clevrtex-stats-{}", std::process::id()))
     });
