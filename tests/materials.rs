@@ -512,6 +512,27 @@ fn a_fake_blend_and_a_zero_size_are_refused() {
     assert!(!sheet.exists());
 }
 
+/// `materials stats` with nothing to compare (no user materials, or only `metal`) is an error
+/// naming what was asked, before Blender starts (it panicked on an empty list).
+#[test]
+fn materials_stats_with_nothing_to_compare_is_refused() {
+    for (args, names) in [
+        (&["--set", "user"][..], "set `user`"),
+        (&["--names", "metal"][..], "`--names`"),
+    ] {
+        let mut all = vec!["materials", "stats"];
+        all.extend(args);
+        let out = run(&all);
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(1), "{t}");
+        assert!(
+            t.contains(&format!("no materials to compare in {names}")) && t.contains("hint:"),
+            "{t}"
+        );
+        assert!(!t.contains("panicked"), "{t}");
+    }
+}
+
 /// The albedo pass is the material's base colour: `metal` objects of a `clevr` scene show
 /// their CLEVR colour (Cycles' diffuse colour, the pass before issue 23, was near black on
 /// them: 5-8 of 255), and `materials measure` reads the dataset (a rendered one, end to end).

@@ -4,6 +4,8 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+// The one font loader, also for the benchmark plot (`crate::font`).
+use clevrtex_report::font;
 
 mod blender_session;
 mod cmd_bench;
@@ -18,8 +20,8 @@ mod cmd_report;
 mod cmd_sample;
 mod cmd_verify;
 mod exit;
-mod font;
 mod interrupt;
+mod materials_blender;
 mod shard;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object

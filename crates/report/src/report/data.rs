@@ -13,6 +13,8 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde_json::Value;
 
+use super::geometry::{self, Camera};
+
 /// One object of a sample's metadata.
 #[derive(Debug, Clone)]
 pub struct Object {
@@ -234,7 +236,7 @@ fn parse(
     let Some(objs) = m["objects"].as_array() else {
         bail!("no `objects` list");
     };
-    let camera = Camera::of(m);
+    let camera = camera_of(m);
     let size = match (
         m["render"]["width"].as_u64(),
         m["render"]["height"].as_u64(),
@@ -256,7 +258,7 @@ fn parse(
             let visible_pixels = o["visible_pixels"].as_u64();
             let occluded = match (&camera, size, visible_pixels) {
                 (Some(cam), Some(wh), Some(px)) => {
-                    super::geometry::silhouette_area(cam, wh, &shape, coords, rotation)
+                    geometry::silhouette_area(cam, wh, &shape, coords, rotation)
                         .map(|area| (1.0 - px as f64 / area.max(1.0)).clamp(0.0, 1.0))
                 }
                 _ => None,
@@ -294,45 +296,23 @@ fn parse(
     })
 }
 
-/// The camera of a sample's metadata (ours only): `K` and world-to-camera `E` (OpenCV axes).
-#[derive(Debug, Clone)]
-pub struct Camera {
-    pub k: [[f64; 3]; 3],
-    pub e: [[f64; 4]; 4],
-    pub location: [f64; 3],
-}
-
-impl Camera {
-    fn of(m: &Value) -> Option<Camera> {
-        let c = &m["camera"];
-        let num = |v: &Value| v.as_f64();
-        let mut k = [[0.0; 3]; 3];
-        let mut e = [[0.0; 4]; 4];
-        for r in 0..3 {
-            for col in 0..3 {
-                k[r][col] = num(&c["intrinsics"][r][col])?;
-            }
+/// The camera of a sample's metadata (ours only): `K`, world-to-camera `E` and its position.
+fn camera_of(m: &Value) -> Option<Camera> {
+    let c = &m["camera"];
+    let num = |v: &Value| v.as_f64();
+    let mut k = [[0.0; 3]; 3];
+    let mut e = [[0.0; 4]; 4];
+    for r in 0..3 {
+        for col in 0..3 {
+            k[r][col] = num(&c["intrinsics"][r][col])?;
         }
-        for (r, row) in e.iter_mut().enumerate() {
-            for (col, v) in row.iter_mut().enumerate() {
-                *v = num(&c["extrinsics"][r][col])?;
-            }
-        }
-        let w = &c["matrix_world"];
-        let location = [num(&w[0][3])?, num(&w[1][3])?, num(&w[2][3])?];
-        Some(Camera { k, e, location })
     }
-
-    /// Pixel coordinates of world point `p` (x right, y down), `None` behind the camera.
-    pub fn project(&self, p: [f64; 3]) -> Option<[f64; 2]> {
-        let c: Vec<f64> = (0..3)
-            .map(|r| self.e[r][0] * p[0] + self.e[r][1] * p[1] + self.e[r][2] * p[2] + self.e[r][3])
-            .collect();
-        if c[2] <= 1e-6 {
-            return None;
+    for (r, row) in e.iter_mut().enumerate() {
+        for (col, v) in row.iter_mut().enumerate() {
+            *v = num(&c["extrinsics"][r][col])?;
         }
-        let u = self.k[0][0] * c[0] + self.k[0][1] * c[1] + self.k[0][2] * c[2];
-        let v = self.k[1][0] * c[0] + self.k[1][1] * c[1] + self.k[1][2] * c[2];
-        Some([u / c[2], v / c[2]])
     }
+    let w = &c["matrix_world"];
+    let location = [num(&w[0][3])?, num(&w[1][3])?, num(&w[2][3])?];
+    Some(Camera { k, e, location })
 }

@@ -12,8 +12,8 @@ use clevrtex_render::dataset::{self, Kind};
 use clevrtex_scene::{layout, Pass};
 use image::RgbImage;
 
-use crate::cmd_materials::stats::{distance, lab, region_features};
-use crate::cmd_preview::{read_colour_png, read_pass_png};
+use crate::materials::stats::{distance, lab, region_features};
+use crate::preview::{read_colour_png, read_pass_png};
 
 use super::data::Sample;
 

@@ -4,7 +4,29 @@
 //! surface, within about 0.1%); other shapes give `None` (a hull would overstate them).
 //! The share occluded is then `1 - visible_pixels / area`.
 
-use super::data::Camera;
+/// A sample's camera: intrinsics `K` and world-to-camera `E` (OpenCV axes), and its position
+/// (read from our metadata by `data.rs`).
+#[derive(Debug, Clone)]
+pub struct Camera {
+    pub k: [[f64; 3]; 3],
+    pub e: [[f64; 4]; 4],
+    pub location: [f64; 3],
+}
+
+impl Camera {
+    /// Pixel coordinates of world point `p` (x right, y down), `None` behind the camera.
+    pub fn project(&self, p: [f64; 3]) -> Option<[f64; 2]> {
+        let c: Vec<f64> = (0..3)
+            .map(|r| self.e[r][0] * p[0] + self.e[r][1] * p[1] + self.e[r][2] * p[2] + self.e[r][3])
+            .collect();
+        if c[2] <= 1e-6 {
+            return None;
+        }
+        let u = self.k[0][0] * c[0] + self.k[0][1] * c[1] + self.k[0][2] * c[2];
+        let v = self.k[1][0] * c[0] + self.k[1][1] * c[1] + self.k[1][2] * c[2];
+        Some([u / c[2], v / c[2]])
+    }
+}
 
 /// Points on the shape's surface in mesh units (the mesh fills [-1, 1]^3), `None` for shapes
 /// whose silhouette is not the hull of its points.
@@ -183,5 +205,29 @@ mod tests {
         let expect = std::f64::consts::PI * r * r;
         assert!((a / expect - 1.0).abs() < 0.02, "{a} vs {expect}");
         assert!(silhouette_area(&cam, (100, 100), "monkey", [0.0, 0.0, 1.0], 0.0).is_none());
+    }
+
+    #[test]
+    fn projection_puts_the_axis_at_the_principal_point_and_nothing_behind() {
+        let cam = Camera {
+            k: [[100.0, 0.0, 50.0], [0.0, 100.0, 40.0], [0.0, 0.0, 1.0]],
+            e: [
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0, 0.0],
+                [0.0, 0.0, 0.0, 1.0],
+            ],
+            location: [0.0; 3],
+        };
+        assert_eq!(cam.project([0.0, 0.0, 5.0]), Some([50.0, 40.0]));
+        // One metre right and down at 10 m: 10 px right and down of the centre.
+        assert_eq!(cam.project([1.0, 1.0, 10.0]), Some([60.0, 50.0]));
+        assert_eq!(cam.project([0.0, 0.0, -1.0]), None);
+        // A cube reaching back to the camera's plane has no silhouette (corners behind the
+        // camera); moved 5 m in front of it, it has one.
+        assert!(silhouette_area(&cam, (100, 80), "cube", [0.0, 0.0, 1.0], 0.0).is_none());
+        let mut back = cam.clone();
+        back.e[2][3] = 5.0;
+        assert!(silhouette_area(&back, (100, 80), "cube", [0.0, 0.0, 1.0], 0.0).unwrap() > 0.0);
     }
 }

@@ -106,6 +106,56 @@ pub fn distance(a: &Features, b: &Features) -> f64 {
     hist + tex
 }
 
+/// How distinct the materials of a batch are, from two renders of each with different
+/// `random` seeds (`a` and `b`): the same material's distance between its two renders is the
+/// yardstick, so two different materials closer than the median of those could pass for one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Distinctness {
+    /// Per material: the nearest other one (itself when alone) and the distance to it.
+    pub nearest: Vec<(usize, f64)>,
+    /// Per material: the distance between its two renders.
+    pub self_distance: Vec<f64>,
+    /// The median self-distance.
+    pub threshold: f64,
+    /// The largest self-distance.
+    pub max_self: f64,
+    /// The smallest distance between different materials.
+    pub min_inter: f64,
+    /// Pairs `(i, j)`, `i < j`, of materials closer than `threshold`, with their distance.
+    pub near: Vec<(usize, usize, f64)>,
+}
+
+/// The [`Distinctness`] of materials with features `a[i]` and `b[i]`. Needs at least one.
+pub fn distinctness(a: &[Features], b: &[Features]) -> Distinctness {
+    let intra: Vec<f64> = (0..a.len()).map(|i| distance(&a[i], &b[i])).collect();
+    let mut sorted = intra.clone();
+    sorted.sort_by(f64::total_cmp);
+    let threshold = sorted[sorted.len() / 2];
+    let mut nearest = Vec::new();
+    let mut near = Vec::new();
+    let mut min_inter = f64::INFINITY;
+    for i in 0..a.len() {
+        let (j, d) = (0..a.len())
+            .filter(|&j| j != i)
+            .map(|j| (j, distance(&a[i], &a[j])))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+            .unwrap_or((i, f64::NAN));
+        min_inter = min_inter.min(d);
+        nearest.push((j, d));
+        if d < threshold && i < j {
+            near.push((i, j, d));
+        }
+    }
+    Distinctness {
+        nearest,
+        self_distance: intra,
+        threshold,
+        max_self: sorted[sorted.len() - 1],
+        min_inter,
+        near,
+    }
+}
+
 fn srgb_to_linear(c: u8) -> f64 {
     let c = f64::from(c) / 255.0;
     if c <= 0.04045 {
@@ -135,6 +185,29 @@ pub fn lab(p: [u8; 3]) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn near_copies_are_closer_than_the_median_self_distance() {
+        let tile = |v: u8, stripe: u32| {
+            let img = image::RgbImage::from_fn(32, 32, |x, _| {
+                image::Rgb(if (x / stripe).is_multiple_of(2) {
+                    [v, v, v]
+                } else {
+                    [0, 0, v]
+                })
+            });
+            region_features(&img, |_, _| true)
+        };
+        // a and a' are near-copies; c differs in colour and pattern.
+        let a = [tile(200, 2), tile(201, 2), tile(90, 8)];
+        let b = [tile(198, 2), tile(203, 2), tile(95, 8)];
+        let d = distinctness(&a, &b);
+        assert_eq!(d.nearest[0].0, 1);
+        assert_eq!(d.nearest[1].0, 0);
+        assert_eq!(d.near.len(), 1);
+        assert_eq!((d.near[0].0, d.near[0].1), (0, 1));
+        assert!(d.min_inter < d.threshold && d.max_self >= d.threshold);
+    }
 
     #[test]
     fn lab_of_white_and_black() {

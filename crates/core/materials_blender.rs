@@ -1,0 +1,140 @@
+//! The Blender renders of `clevrtex materials sheet|check|stats|cost`: one worker for a batch
+//! of materials (the shared [`BlenderSession`]: `generate`'s restart-and-retry policy, Ctrl-C
+//! stopping Blender), one `material` request per material (`docs/bridge-protocol.md`).
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::{bail, Context};
+use clevrtex_materials::Catalogue;
+use clevrtex_render::{MaterialReply, MaterialSettings, RenderError};
+
+use crate::blender_session::{command_error, BlenderSession, Settings};
+use crate::cmd_materials::BatchArgs;
+use crate::interrupt::{self, OnInterrupt};
+
+/// How one material's render came out.
+pub(crate) enum Outcome {
+    /// Rendered.
+    Done(MaterialReply),
+    /// The bridge could not build or render it (the worker survived).
+    Failed {
+        /// The bridge's message.
+        message: String,
+        /// The Python traceback (may be empty).
+        traceback: String,
+    },
+}
+
+/// One Blender worker for the materials `names` of `cat`, started on the first render, with
+/// a Ctrl-C handler that stops it.
+pub(crate) fn session(
+    cat: &Catalogue,
+    names: &[&str],
+    a: &BatchArgs,
+) -> anyhow::Result<BlenderSession> {
+    if let Some(t) = a.timeout {
+        if !(t > 0.0 && t.is_finite()) {
+            bail!(
+                "`--timeout {t}` must be a positive number of seconds\nhint: e.g. `--timeout 600`"
+            );
+        }
+    }
+    let blender = clevrtex_render::blender::locate(a.blender.as_deref())?;
+    let interrupt = interrupt::flag(OnInterrupt::Stop {
+        message: "stopping Blender",
+    });
+    BlenderSession::new(Settings {
+        blender,
+        materials_json: cat.resolved_json_for(names.iter().copied()),
+        threads: a.threads,
+        retries: a.retries,
+        // With an explicit `--timeout` that limit is the only one, as in `generate`.
+        idle_timeout: a
+            .timeout
+            .is_none()
+            .then_some(clevrtex_render::pool::IDLE_TIMEOUT),
+        interrupt,
+        startup_timeout: crate::cmd_generate::seconds("--startup-timeout", a.startup_timeout)?,
+    })
+}
+
+/// The time limit of one render: `--timeout`, else 600 s + 8 s per sample at 320x240 (the
+/// rule `generate` uses for scenes).
+fn timeout(a: &BatchArgs, s: &MaterialSettings) -> Duration {
+    let pixels = f64::from(s.size) * f64::from(s.size) / (320.0 * 240.0);
+    let auto = 600.0 + 8.0 * f64::from(s.samples) * pixels.max(0.05);
+    Duration::from_secs_f64(a.timeout.unwrap_or(auto))
+}
+
+/// Render each of `names` with `settings` into `out_dir/<name>.png`, in order. A material the
+/// bridge cannot build is an [`Outcome::Failed`] and the batch goes on; a worker that keeps
+/// failing (after `--retries` restarts) or an interrupt ends it with an error.
+pub(crate) fn render_all(
+    session: &mut BlenderSession,
+    a: &BatchArgs,
+    settings: &MaterialSettings,
+    names: &[&str],
+    out_dir: &Path,
+) -> anyhow::Result<Vec<Outcome>> {
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create `{}`", out_dir.display()))?;
+    let limit = timeout(a, settings);
+    names
+        .iter()
+        .map(
+            |name| match session.request(|w| w.material(settings, name, out_dir, limit)) {
+                Ok(reply) => Ok(Outcome::Done(reply)),
+                Err(RenderError::Bridge {
+                    message, traceback, ..
+                }) => Ok(Outcome::Failed { message, traceback }),
+                Err(e) => Err(command_error(e)),
+            },
+        )
+        .collect()
+}
+
+/// [`render_all`] into `dir`, which is removed afterwards whatever happened.
+pub(crate) fn render_all_in_temp(
+    session: &mut BlenderSession,
+    a: &BatchArgs,
+    settings: &MaterialSettings,
+    names: &[&str],
+    dir: &Path,
+) -> anyhow::Result<Vec<Outcome>> {
+    let result = render_all(session, a, settings, names, dir);
+    let _ = std::fs::remove_dir_all(dir);
+    result
+}
+
+/// Render the sheet cells of `missing` with `settings` into `cache` (as `key(name)`), through
+/// a temporary folder there that is removed whatever happened; the materials the bridge could
+/// not build come back as `name: message` lines.
+pub(crate) fn render_into_cache(
+    cat: &Catalogue,
+    missing: &[&str],
+    a: &BatchArgs,
+    settings: &MaterialSettings,
+    cache: &Path,
+    key: &dyn Fn(&str) -> String,
+) -> anyhow::Result<Vec<String>> {
+    let tmp = cache.join(format!("tmp-{}", std::process::id()));
+    let mut session = session(cat, missing, a)?;
+    let result = render_all(&mut session, a, settings, missing, &tmp).and_then(|outcomes| {
+        session.close();
+        let mut failed = Vec::new();
+        for (name, outcome) in missing.iter().zip(outcomes) {
+            match outcome {
+                Outcome::Done(reply) => {
+                    std::fs::rename(&reply.file, cache.join(key(name))).with_context(|| {
+                        format!("cannot move `{}` into the cache", reply.file.display())
+                    })?;
+                }
+                Outcome::Failed { message, .. } => failed.push(format!("{name}: {message}")),
+            }
+        }
+        Ok(failed)
+    });
+    let _ = std::fs::remove_dir_all(&tmp);
+    result
+}
