@@ -11,6 +11,9 @@ use std::path::{Path, PathBuf};
 use crate::config::{Config, Splits};
 use crate::passes::Pass;
 
+/// Suffix of temporary files (never matched by the public loader's `*.png` glob).
+pub const TMP_SUFFIX: &str = ".clevrtex-tmp";
+
 /// File stem of image `index`: `CLEVRTEX_<variant>_<index:06>`.
 pub fn stem(variant: &str, index: u64) -> String {
     format!("CLEVRTEX_{variant}_{index:06}")
