@@ -163,3 +163,42 @@ impl Manifest {
         (first..self.end).step_by(n as usize)
     }
 }
+
+/// Merge ranges `start..end` into sorted, disjoint ones (empty ones left out).
+pub fn merge_ranges(mut ranges: Vec<(u64, u64)>) -> Vec<(u64, u64)> {
+    ranges.retain(|(a, b)| a < b);
+    ranges.sort();
+    let mut out: Vec<(u64, u64)> = Vec::new();
+    for (a, b) in ranges {
+        match out.last_mut() {
+            Some(last) if a <= last.1 => last.1 = last.1.max(b),
+            _ => out.push((a, b)),
+        }
+    }
+    out
+}
+
+/// Whether `i` is in one of the sorted, disjoint `ranges` (from [`merge_ranges`]).
+pub fn in_ranges(ranges: &[(u64, u64)], i: u64) -> bool {
+    let k = ranges.partition_point(|&(_, b)| b <= i);
+    ranges.get(k).is_some_and(|&(a, b)| a <= i && i < b)
+}
+
+/// The union of the runs of `manifests`: the indices they were asked to make (every shard of
+/// a run together makes its `start..end`), as sorted, disjoint ranges.
+pub fn union<'a>(manifests: impl IntoIterator<Item = &'a Manifest>) -> Vec<(u64, u64)> {
+    merge_ranges(manifests.into_iter().map(|m| (m.start, m.end)).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_merge_and_hold() {
+        let r = merge_ranges(vec![(4, 8), (0, 4), (10, 12), (11, 11)]);
+        assert_eq!(r, [(0, 8), (10, 12)]);
+        assert!(in_ranges(&r, 0) && in_ranges(&r, 7) && in_ranges(&r, 11));
+        assert!(!in_ranges(&r, 8) && !in_ranges(&r, 12) && !in_ranges(&r, u64::MAX));
+    }
+}
