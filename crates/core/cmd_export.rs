@@ -16,12 +16,12 @@
 
 use std::collections::BTreeMap;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context};
-use clevrtex_render::dataset::{self, Kind};
+use clevrtex_scene::dataset::{self, Dataset, DatasetError, Kind, SampleRef, VariantDir};
 use clevrtex_scene::layout::Split;
-use clevrtex_scene::{layout, Pass};
+use clevrtex_scene::Pass;
 use serde_json::{json, Value};
 
 use crate::exit::{self, CmdResult};
@@ -72,39 +72,31 @@ struct Sample {
     bytes: u64,
 }
 
-/// The samples of one variant folder (under the dataset's canonical `root`), in index order,
+/// The samples of one variant folder of `ds` (found by [`Dataset::open`]), in index order,
 /// and what was not followed or not read (samples with such files are left out).
 /// File names come from the layout and the pass table, never from the metadata: a
-/// `*_filename` key only says whether the pass was written, and must name the layout's file.
-fn samples(root: &Path, vdir: &Path, skipped: &mut Vec<String>) -> anyhow::Result<Vec<Sample>> {
-    let mut found = BTreeMap::new();
-    let entries =
-        dataset::list(root, vdir).with_context(|| format!("cannot read `{}`", vdir.display()))?;
-    for (_, d, kind) in entries {
-        match kind {
-            Kind::Dir => {}
-            Kind::Skipped(why) => {
-                skipped.push(format!("`{}` {why}", d.display()));
-                continue;
-            }
-            Kind::File => continue,
-        }
-        for (name, p, kind) in
-            dataset::list(root, &d).with_context(|| format!("cannot read `{}`", d.display()))?
-        {
-            if let Some((stem, _, index)) = layout::parse_stem(&name, ".json") {
-                if let Kind::Skipped(why) = kind {
-                    skipped.push(format!("`{}` {why}", p.display()));
-                    continue;
-                }
-                found.insert(index, (stem.to_string(), d.clone()));
-            }
-        }
+/// `*_filename` key only says whether the pass was written, and must name the layout's file
+/// ([`dataset::listed_passes`]).
+fn samples(
+    ds: &Dataset,
+    vd: &VariantDir,
+    skipped: &mut Vec<String>,
+) -> anyhow::Result<Vec<Sample>> {
+    if let Some((dir, e)) = vd.unreadable.first() {
+        return Err(anyhow::anyhow!("{e}").context(format!("cannot read `{}`", dir.display())));
     }
+    skipped.extend(vd.skipped_for_metadata().map(ToString::to_string));
+    let found: BTreeMap<u64, &SampleRef> = vd
+        .samples
+        .iter()
+        .filter(|s| s.has_metadata())
+        .map(|s| (s.index, s))
+        .collect();
     let mut out = Vec::new();
-    'samples: for (index, (stem, dir)) in found {
-        let meta_path = dir.join(layout::metadata_file(&stem));
-        let bytes = match dataset::read(root, &meta_path, dataset::MAX_FILE_BYTES) {
+    'samples: for (index, s) in found {
+        let stem = s.stem.clone();
+        let meta_path = s.metadata_path();
+        let bytes = match ds.read(&meta_path, dataset::MAX_METADATA_BYTES) {
             Ok(b) => b,
             Err(why) => {
                 skipped.push(format!("`{}` {why}", meta_path.display()));
@@ -117,44 +109,22 @@ fn samples(root: &Path, vdir: &Path, skipped: &mut Vec<String>) -> anyhow::Resul
                 meta_path.display()
             )
         })?;
-        let bad = |key: &str, what: String| {
+        let bad = |e: dataset::MetadataError| {
             anyhow::anyhow!(
-                "metadata `{}` key `{key}` {what}\nhint: check the dataset with `clevrtex verify`; export takes file names from the layout, not from the metadata",
-                meta_path.display()
+                "{e}\nhint: check the dataset with `clevrtex verify`; export takes file names from the layout, not from the metadata"
             )
         };
-        let mut files = Vec::new();
-        for pass in Pass::ALL {
-            let key = match pass {
-                Pass::Rgb => "image_filename".to_string(),
-                p => format!("{}_filename", p.name()),
-            };
-            let want = layout::pass_file(&stem, pass);
-            match &meta[&key] {
-                Value::Null => {}
-                Value::String(name) if *name == want => {
-                    files.push((extension(pass), dir.join(want)))
-                }
-                other => {
-                    return Err(bad(
-                        &key,
-                        format!("is {other}, not the layout's `{want}` (or null)"),
-                    ))
-                }
-            }
-        }
-        let split = match &meta["split"] {
-            Value::Null => Split::Train,
-            Value::String(s) => match Split::parse(s) {
-                Some(x) => x,
-                None => return Err(bad("split", format!("is `{s}`, not test, val or train"))),
-            },
-            other => return Err(bad("split", format!("is {other}, not test, val or train"))),
-        };
+        let file = meta_path.display().to_string();
+        let mut files: Vec<(String, PathBuf)> = dataset::listed_passes(&meta, &file, &stem)
+            .map_err(bad)?
+            .into_iter()
+            .map(|pass| (extension(pass), s.pass_path(pass)))
+            .collect();
+        let split = dataset::split_of(&meta, &file).map_err(bad)?;
         files.push(("json".into(), meta_path));
         let mut bytes = 0;
         for (_, p) in &files {
-            match dataset::classify(root, p) {
+            match ds.classify(p) {
                 Kind::File => {}
                 Kind::Skipped(why) => {
                     skipped.push(format!("`{}` {why}", p.display()));
@@ -231,9 +201,9 @@ impl ShardWriter {
         })
     }
 
-    fn add(&mut self, root: &Path, s: &Sample) -> anyhow::Result<()> {
+    fn add(&mut self, ds: &Dataset, s: &Sample) -> anyhow::Result<()> {
         for (ext, path) in &s.files {
-            let data = dataset::read(root, path, dataset::MAX_FILE_BYTES).map_err(|why| {
+            let data = ds.read(path, dataset::MAX_FILE_BYTES).map_err(|why| {
                 anyhow::anyhow!(
                     "`{}` {why}\nhint: check the dataset with `clevrtex verify`",
                     path.display()
@@ -311,25 +281,28 @@ pub fn run(args: Args) -> CmdResult {
             args.dir.display()
         );
     }
-    let root = dataset::root(&args.dir)
-        .with_context(|| format!("cannot read `{}`", args.dir.display()))?;
+    let ds = Dataset::open(&args.dir).map_err(|e| match e {
+        DatasetError::Unreadable { cause, .. } => {
+            anyhow::Error::new(cause).context(format!("cannot read `{}`", args.dir.display()))
+        }
+        other => other.into(),
+    })?;
     let mut skipped = Vec::new();
-    let mut variants: Vec<(String, PathBuf)> = Vec::new();
-    for (name, path, kind) in dataset::list(&root, &args.dir)
-        .with_context(|| format!("cannot read `{}`", args.dir.display()))?
-    {
-        let Some(v) = name.strip_prefix("clevrtex_") else {
-            continue;
-        };
-        if args.variant.as_ref().is_some_and(|want| want != v) {
-            continue;
+    let wanted = |v: &str| args.variant.as_ref().is_none_or(|want| want == v);
+    // A `clevrtex_<variant>` folder given itself is not an output folder: nothing under it.
+    let variants: Vec<&VariantDir> = if ds.is_variant_dir {
+        Vec::new()
+    } else {
+        for (v, skip) in &ds.skipped {
+            if wanted(v) {
+                skipped.push(skip.to_string());
+            }
         }
-        match kind {
-            Kind::Dir => variants.push((v.to_string(), path)),
-            Kind::Skipped(why) => skipped.push(format!("`{}` {why}", path.display())),
-            Kind::File => {}
-        }
-    }
+        ds.variants
+            .iter()
+            .filter(|vd| wanted(&vd.variant))
+            .collect()
+    };
     if variants.is_empty() {
         bail!(
             "no `clevrtex_<variant>` folder{} in `{}`\nhint: pass the `--out` folder of `clevrtex generate`",
@@ -346,8 +319,9 @@ pub fn run(args: Args) -> CmdResult {
     let mut total_bytes = 0u64;
     let mut total_samples = 0u64;
     let mut written = std::collections::BTreeSet::new();
-    for (variant, vdir) in &variants {
-        let all = samples(&root, vdir, &mut skipped)?;
+    for vd in &variants {
+        let variant = &vd.variant;
+        let all = samples(&ds, vd, &mut skipped)?;
         let mut by_split: BTreeMap<&str, Vec<&Sample>> = BTreeMap::new();
         for s in &all {
             by_split.entry(s.split.name()).or_default().push(s);
@@ -374,7 +348,7 @@ pub fn run(args: Args) -> CmdResult {
                     n += 1;
                     shard = Some(ShardWriter::create(path)?);
                 }
-                shard.as_mut().unwrap().add(&root, s)?;
+                shard.as_mut().unwrap().add(&ds, s)?;
                 total_samples += 1;
             }
             if let Some(w) = shard {

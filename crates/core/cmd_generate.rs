@@ -11,7 +11,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
-use clevrtex_render::manifest::Manifest;
+use clevrtex_render::manifest::{Manifest, WriteManifest};
 use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, RunReport};
 use clevrtex_render::RenderError;
 use clevrtex_scene::{layout, Config, Pass, SampleRequest};

@@ -144,24 +144,38 @@ fn file_name(p: &Path) -> &str {
     p.file_name().and_then(|n| n.to_str()).unwrap_or("")
 }
 
-/// Find the ground-truth samples under `dir`, sorted by index. Without `variant`, the
-/// directory must hold exactly one variant. Gaps in the index sequence and duplicate stems
-/// are errors, as are samples missing their mask or metadata.
+/// Find the ground-truth samples under `dir` (a dataset: its `clevrtex_<variant>` folders, or
+/// one of them, walked by [`clevrtex_scene::dataset::Dataset::open`]), sorted by index.
+/// Without `variant`, the directory must hold exactly one variant. Gaps in the index sequence
+/// and duplicate stems are errors, as are samples missing their mask or metadata.
 pub fn discover_gt(
     dir: &Path,
     variant: Option<&str>,
 ) -> Result<(String, Vec<GtSample>), EvalError> {
+    use clevrtex_scene::dataset::{Dataset, DatasetError};
+    use clevrtex_scene::Pass;
     if !dir.is_dir() {
         return Err(EvalError::not_a_dir(dir));
     }
-    let files = walk(dir)?;
-    let mut by_variant: BTreeMap<String, Vec<(u64, String, PathBuf)>> = BTreeMap::new();
-    for f in &files {
-        if let Some((stem, v, idx)) = parse_stem(file_name(f), ".png") {
-            by_variant
-                .entry(v.to_string())
-                .or_default()
-                .push((idx, stem.to_string(), f.clone()));
+    let ds = Dataset::open(dir).map_err(|e| match e {
+        DatasetError::Unreadable { cause, .. } => EvalError::Io {
+            path: dir.to_path_buf(),
+            cause,
+        },
+        DatasetError::NotAFolder { .. } => EvalError::not_a_dir(dir),
+    })?;
+    let mut by_variant: BTreeMap<
+        String,
+        Vec<(u64, String, PathBuf, &clevrtex_scene::dataset::SampleRef)>,
+    > = BTreeMap::new();
+    for s in ds.variants.iter().flat_map(|vd| &vd.samples) {
+        if s.has_pass(Pass::Rgb) {
+            by_variant.entry(s.variant.clone()).or_default().push((
+                s.index,
+                s.stem.clone(),
+                s.pass_path(Pass::Rgb),
+                s,
+            ));
         }
     }
     let pattern = format!("CLEVRTEX_{}_??????.png", variant.unwrap_or("<variant>"));
@@ -193,7 +207,7 @@ pub fn discover_gt(
             }
         }
     };
-    found.sort();
+    found.sort_by(|a, b| (a.0, &a.1, &a.2).cmp(&(b.0, &b.1, &b.2)));
     for w in found.windows(2) {
         if w[0].0 == w[1].0 {
             return Err(EvalError::Duplicate {
@@ -214,24 +228,16 @@ pub fn discover_gt(
     }
     // A sample's mask and metadata must be among the files the walk found: a link out of
     // the folder, a FIFO or a device beside the image is refused, not read.
-    let walked: std::collections::HashSet<&Path> = files.iter().map(PathBuf::as_path).collect();
-    let root = clevrtex_scene::dataset::root(dir).map_err(|cause| EvalError::Io {
-        path: dir.to_path_buf(),
-        cause,
-    })?;
     let mut samples = Vec::with_capacity(found.len());
-    for (index, stem, image) in found {
-        let parent = image.parent().unwrap_or(Path::new("."));
-        let mask = parent.join(format!("{stem}_flat.png"));
-        let meta = parent.join(format!("{stem}.json"));
-        for p in [&mask, &meta] {
-            if walked.contains(p.as_path()) {
+    for (index, stem, image, s) in found {
+        let mask = s.pass_path(Pass::Mask);
+        let meta = s.metadata_path();
+        for (p, ok) in [(&mask, s.has_pass(Pass::Mask)), (&meta, s.has_metadata())] {
+            if ok {
                 continue;
             }
             if std::fs::symlink_metadata(p).is_ok() {
-                if let clevrtex_scene::dataset::Kind::Skipped(why) =
-                    clevrtex_scene::dataset::classify(&root, p)
-                {
+                if let clevrtex_scene::dataset::Kind::Skipped(why) = ds.classify(p) {
                     return Err(EvalError::GtNotRead {
                         stem,
                         path: p.clone(),

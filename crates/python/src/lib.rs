@@ -542,6 +542,27 @@ fn load_sample<'py>(
 }
 
 /// The extension module.
+/// A sample's metadata, read as every reader of a dataset reads it (`clevrtex_scene::dataset`
+/// through `clevrtex_eval::dataset::read_metadata`: a regular file opened non-blocking, at
+/// most 64 MiB). `ValueError` naming the file when it is not read (`OSError` when it cannot
+/// be opened).
+#[pyfunction]
+fn read_metadata<'py>(py: Python<'py>, path: &str) -> PyResult<Bound<'py, PyBytes>> {
+    let read = py.allow_threads(|| clevrtex_eval::dataset::read_metadata(Path::new(path)));
+    match read {
+        Ok(bytes) => Ok(PyBytes::new(py, &bytes)),
+        Err(EvalError::Io { cause, .. }) => {
+            let why = cause.to_string();
+            if why.starts_with("cannot be read") {
+                Err(PyOSError::new_err(format!("`{path}` {why}")))
+            } else {
+                Err(value_error(format!("`{path}` {why}")))
+            }
+        }
+        Err(e) => Err(eval_error(e)),
+    }
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(score, m)?)?;
@@ -549,5 +570,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(protocol_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(discover, m)?)?;
     m.add_function(wrap_pyfunction!(load_sample, m)?)?;
+    m.add_function(wrap_pyfunction!(read_metadata, m)?)?;
     Ok(())
 }

@@ -11,8 +11,8 @@ use clevrtex_scene::Pass;
 
 use crate::error::{RenderError, Result};
 
-/// Suffix of temporary files (never matched by the public loader's `*.png` glob).
-pub const TMP_SUFFIX: &str = ".clevrtex-tmp";
+/// Suffix of temporary files (the layout's, [`clevrtex_scene::layout::TMP_SUFFIX`]).
+pub use clevrtex_scene::layout::TMP_SUFFIX;
 
 /// Every file a complete sample has: one per requested pass, the metadata, and the EXRs
 /// when kept.

@@ -6,9 +6,10 @@
 //! every sample's metadata typed and naming the layout's files, every requested pass a PNG of
 //! the right size and layout, mask ids exactly `0..=N` with every object above the visibility
 //! threshold (recounted, and equal to the metadata), no temporary files, every file's bytes
-//! equal to a manifest entry, and the failure ledger summarised. Files are read through
-//! [`crate::dataset`] (no link out of the dataset, only regular files, capped), and every count
-//! taken from a file is bounded before it sizes anything ([`MAX_RUN_INDICES`]).
+//! equal to a manifest entry, and the failure ledger summarised. The dataset is walked and its
+//! metadata typed by [`Dataset::open`] and [`MetadataView`] (no link out of the dataset, only
+//! regular files, capped), and every count taken from a file is bounded before it sizes
+//! anything ([`MAX_RUN_INDICES`]).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -20,7 +21,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::Value;
 
-use crate::dataset::{self, Kind};
+use clevrtex_scene::dataset::{self, Dataset, MetadataView, VariantDir};
+use clevrtex_scene::manifest::{in_ranges, merge_ranges as merge};
+
 use crate::manifest::{self, FileEntry, Manifest, MAX_RUN_INDICES};
 use crate::output::TMP_SUFFIX;
 
@@ -121,63 +124,27 @@ type ReadManifest = (PathBuf, Manifest, PathBuf);
 /// manifest that lists it (a later run with `--overwrite` may have changed the bytes).
 type Entries = BTreeMap<(PathBuf, String), BTreeMap<String, Vec<FileEntry>>>;
 
-/// A variant folder to check: the root it was found under (as given, and canonical) and
-/// the folder itself.
-#[derive(Debug, Clone)]
-struct VariantDir {
-    given_root: PathBuf,
-    root: PathBuf,
-    dir: PathBuf,
-}
-
-/// Variant folders by variant, and what was not followed by variant.
-type VariantDirs = (
-    BTreeMap<String, Vec<VariantDir>>,
+/// Variant folders by variant (each with the dataset it was found in), and what was not
+/// followed by variant.
+type VariantDirs<'a> = (
+    BTreeMap<String, Vec<(&'a Dataset, &'a VariantDir)>>,
     BTreeMap<String, Vec<String>>,
 );
 
-/// Every `clevrtex_<variant>` folder under `roots` (a root may itself be one); entries named
-/// like one but not followed go to the second map.
-fn variant_dirs(roots: &[PathBuf]) -> Result<VariantDirs, String> {
-    let mut out: BTreeMap<String, Vec<VariantDir>> = BTreeMap::new();
+/// Every `clevrtex_<variant>` folder of the datasets `opened` (a root may itself be one);
+/// entries named like one but not followed go to the second map.
+fn variant_dirs(opened: &[Dataset]) -> VariantDirs<'_> {
+    let mut out: BTreeMap<String, Vec<(&Dataset, &VariantDir)>> = BTreeMap::new();
     let mut skipped: BTreeMap<String, Vec<String>> = BTreeMap::new();
-    for given in roots {
-        let root = dataset::root(given)
-            .map_err(|e| format!("`{}` cannot be read: {e}", given.display()))?;
-        let name = root
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        if let Some(v) = name.strip_prefix("clevrtex_") {
-            out.entry(v.to_string()).or_default().push(VariantDir {
-                given_root: given.parent().unwrap_or(Path::new(".")).to_path_buf(),
-                root: root.clone(),
-                dir: given.clone(),
-            });
-            continue;
+    for ds in opened {
+        for vd in &ds.variants {
+            out.entry(vd.variant.clone()).or_default().push((ds, vd));
         }
-        let Ok(entries) = dataset::list(&root, given) else {
-            continue;
-        };
-        for (name, d, kind) in entries {
-            let Some(v) = name.strip_prefix("clevrtex_") else {
-                continue;
-            };
-            match kind {
-                Kind::Dir => out.entry(v.to_string()).or_default().push(VariantDir {
-                    given_root: given.clone(),
-                    root: root.clone(),
-                    dir: d,
-                }),
-                Kind::Skipped(why) => skipped
-                    .entry(v.to_string())
-                    .or_default()
-                    .push(format!("`{}` {why}", d.display())),
-                Kind::File => {}
-            }
+        for (v, skip) in &ds.skipped {
+            skipped.entry(v.clone()).or_default().push(skip.to_string());
         }
     }
-    Ok((out, skipped))
+    (out, skipped)
 }
 
 /// Verify the dataset under `roots`. Errors only for unreadable roots.
@@ -187,7 +154,11 @@ pub fn verify(roots: &[PathBuf], opts: &VerifyOptions) -> Result<Vec<VariantRepo
             return Err(format!("`{}` is not a folder", r.display()));
         }
     }
-    let (dirs, mut skipped) = variant_dirs(roots)?;
+    let opened = roots
+        .iter()
+        .map(|r| Dataset::open(r).map_err(|e| e.to_string()))
+        .collect::<Result<Vec<_>, String>>()?;
+    let (dirs, mut skipped) = variant_dirs(&opened);
     let mut names: BTreeSet<String> = dirs.keys().cloned().collect();
     names.extend(skipped.keys().cloned());
     let mut reports = Vec::new();
@@ -201,26 +172,6 @@ pub fn verify(roots: &[PathBuf], opts: &VerifyOptions) -> Result<Vec<VariantRepo
         reports.push(rep);
     }
     Ok(reports)
-}
-
-/// Merge ranges into sorted, disjoint ones.
-fn merge(mut ranges: Vec<(u64, u64)>) -> Vec<(u64, u64)> {
-    ranges.retain(|(a, b)| a < b);
-    ranges.sort();
-    let mut out: Vec<(u64, u64)> = Vec::new();
-    for (a, b) in ranges {
-        match out.last_mut() {
-            Some(last) if a <= last.1 => last.1 = last.1.max(b),
-            _ => out.push((a, b)),
-        }
-    }
-    out
-}
-
-/// Whether `i` is in one of the sorted, disjoint `ranges`.
-fn in_ranges(ranges: &[(u64, u64)], i: u64) -> bool {
-    let k = ranges.partition_point(|&(_, b)| b <= i);
-    ranges.get(k).is_some_and(|&(a, b)| a <= i && i < b)
 }
 
 /// `command` with the value of its `--out` replaced by `out` (the folder that was verified,
@@ -251,7 +202,7 @@ fn with_out(command: &[String], out: &Path) -> Vec<String> {
     v
 }
 
-fn verify_variant(variant: &str, dirs: &[VariantDir]) -> VariantReport {
+fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantReport {
     let mut rep = VariantReport {
         variant: variant.to_string(),
         ..VariantReport::default()
@@ -260,37 +211,32 @@ fn verify_variant(variant: &str, dirs: &[VariantDir]) -> VariantReport {
     let mut found: BTreeMap<u64, Vec<(String, Found)>> = BTreeMap::new();
     // Manifests, with the folder their run's rerun writes into.
     let mut manifests: Vec<ReadManifest> = Vec::new();
-    for vd in dirs {
-        let entries = match dataset::list(&vd.root, &vd.dir) {
-            Ok(e) => e,
-            Err(e) => {
-                rep.skipped
-                    .push(format!("`{}` cannot be read: {e}", vd.dir.display()));
-                continue;
+    for (ds, vd) in dirs {
+        rep.skipped
+            .extend(vd.skipped.iter().map(ToString::to_string));
+        rep.temp_files.extend(vd.temp_files.iter().cloned());
+        for s in &vd.samples {
+            found.entry(s.index).or_default().push((
+                s.stem.clone(),
+                Found {
+                    root: ds.root.clone(),
+                    variant_dir: vd.dir.clone(),
+                    dir: s.dir.clone(),
+                    files: s.files.clone(),
+                },
+            ));
+        }
+        for p in &vd.manifests {
+            match Manifest::read(p) {
+                Ok(m) => manifests.push((p.clone(), m, vd.out.clone())),
+                Err(e) => rep
+                    .manifest_problems
+                    .push(format!("`{}` cannot be read: {e}", p.display())),
             }
-        };
-        for (name, p, kind) in entries {
-            if name.ends_with(TMP_SUFFIX) {
-                rep.temp_files.push(p);
-                continue;
-            }
-            match kind {
-                Kind::Skipped(why) => rep.skipped.push(format!("`{}` {why}", p.display())),
-                Kind::Dir => scan_sample_dir(vd, &p, &mut found, &mut rep),
-                Kind::File if manifest::is_manifest_name(&name) => {
-                    match Manifest::read(&p) {
-                        Ok(m) => manifests.push((p.clone(), m, vd.given_root.clone())),
-                        Err(e) => rep
-                            .manifest_problems
-                            .push(format!("`{}` cannot be read: {e}", p.display())),
-                    }
-                    rep.manifests.push(p);
-                }
-                Kind::File if name == "failures.jsonl" => {
-                    read_ledger(&vd.root, &p, &mut rep.ledger, &mut rep.skipped)
-                }
-                Kind::File => {}
-            }
+            rep.manifests.push(p.clone());
+        }
+        for p in &vd.ledgers {
+            read_ledger(ds, p, &mut rep.ledger, &mut rep.skipped);
         }
     }
 
@@ -346,7 +292,7 @@ fn verify_variant(variant: &str, dirs: &[VariantDir]) -> VariantReport {
                 let vdir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
                 for (rel, e) in &m.files {
                     let name = rel.rsplit('/').next().unwrap_or(rel);
-                    if let Some((stem, _)) = stem_of(name) {
+                    if let Some((stem, _, _)) = layout::parse_file_name(name) {
                         entries
                             .entry((vdir.clone(), stem.to_string()))
                             .or_default()
@@ -467,103 +413,24 @@ fn verify_variant(variant: &str, dirs: &[VariantDir]) -> VariantReport {
     rep
 }
 
-/// Collect the samples and temporary files of one `<index / 1000>` folder.
-fn scan_sample_dir(
-    vd: &VariantDir,
-    dir: &Path,
-    found: &mut BTreeMap<u64, Vec<(String, Found)>>,
-    rep: &mut VariantReport,
-) {
-    let entries = match dataset::list(&vd.root, dir) {
-        Ok(e) => e,
-        Err(e) => {
-            rep.skipped
-                .push(format!("`{}` cannot be read: {e}", dir.display()));
-            return;
-        }
-    };
-    let mut by_stem: BTreeMap<String, (u64, BTreeSet<String>)> = BTreeMap::new();
-    for (name, p, kind) in entries {
-        if name.ends_with(TMP_SUFFIX) || (name.starts_with('.') && name.contains(".tmp")) {
-            rep.temp_files.push(p);
-            continue;
-        }
-        let Some((stem, index)) = stem_of(&name) else {
-            continue;
-        };
-        match kind {
-            Kind::File => {}
-            Kind::Skipped(why) => {
-                rep.skipped.push(format!("`{}` {why}", p.display()));
-                continue;
-            }
-            Kind::Dir => {
-                rep.skipped
-                    .push(format!("`{}` is a folder named like a file", p.display()));
-                continue;
-            }
-        }
-        by_stem
-            .entry(stem.to_string())
-            .or_insert((index, BTreeSet::new()))
-            .1
-            .insert(name.clone());
-    }
-    for (stem, (index, files)) in by_stem {
-        found.entry(index).or_default().push((
-            stem,
-            Found {
-                root: vd.root.clone(),
-                variant_dir: vd.dir.clone(),
-                dir: dir.to_path_buf(),
-                files,
-            },
-        ));
-    }
-}
-
-/// The stem and index of a file of the layout (a pass, the metadata or a kept EXR).
-fn stem_of(name: &str) -> Option<(&str, u64)> {
-    let mut suffixes: Vec<String> = Pass::ALL
-        .iter()
-        .map(|&p| layout::pass_file("", p))
-        .collect();
-    suffixes.push(layout::metadata_file(""));
-    suffixes.extend(layout::exr_files("", true));
-    suffixes.sort_by_key(|s| std::cmp::Reverse(s.len()));
-    suffixes
-        .iter()
-        .find_map(|s| layout::parse_stem(name, s))
-        .map(|(stem, _, index)| (stem, index))
-}
-
-/// The largest failure ledger read (one line per failed image).
-const MAX_LEDGER_BYTES: u64 = 256 << 20;
-
+/// The failure ledger's entries with an index: index -> the error's first line (500 characters).
 fn read_ledger(
-    root: &Path,
+    ds: &Dataset,
     path: &Path,
     out: &mut BTreeMap<u64, String>,
     skipped: &mut Vec<String>,
 ) {
-    let bytes = match dataset::read(root, path, MAX_LEDGER_BYTES) {
-        Ok(b) => b,
+    let entries = match ds.read_ledger(path) {
+        Ok(e) => e,
         Err(why) => {
             skipped.push(format!("`{}` {why}", path.display()));
             return;
         }
     };
-    for line in String::from_utf8_lossy(&bytes).lines() {
-        if let Ok(v) = serde_json::from_str::<Value>(line) {
-            if let Some(i) = v["index"].as_u64() {
-                let err = v["error"]
-                    .as_str()
-                    .unwrap_or("")
-                    .lines()
-                    .next()
-                    .unwrap_or("");
-                out.insert(i, err.chars().take(500).collect());
-            }
+    for e in entries {
+        if let Some(i) = e.index {
+            let err = e.error.lines().next().unwrap_or("");
+            out.insert(i, err.chars().take(500).collect());
         }
     }
 }
@@ -589,18 +456,6 @@ fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
     Some((w, h))
 }
 
-/// A whole number from the metadata at `key` (dotted), within `lo..=hi`; `Err` names the key
-/// and what was found.
-fn meta_int(meta: &Value, file: &str, key: &str, lo: u64, hi: u64) -> Result<u64, String> {
-    let v = key.split('.').fold(meta, |v, k| &v[k]);
-    match v.as_u64() {
-        Some(n) if (lo..=hi).contains(&n) => Ok(n),
-        _ => Err(format!(
-            "metadata `{file}` key `{key}` is {v}, not a whole number from {lo} to {hi}"
-        )),
-    }
-}
-
 /// Check one sample; `Err` lists every problem found. `listed`: a finished manifest covers
 /// the index, so every file must be in one.
 fn check_sample(
@@ -610,7 +465,6 @@ fn check_sample(
     entries: &Entries,
     listed_run: bool,
 ) -> Result<(), Broken> {
-    use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
     let mut problems = Vec::new();
     let variant_from_stem = layout::parse_stem(&format!("{stem}.json"), ".json")
         .map(|(_, v, _)| v.to_string())
@@ -678,83 +532,37 @@ fn check_sample(
         }
     };
     // Every value that sizes or indexes something below, typed first.
-    // (width, height, objects, visibility threshold, each object's `visible_pixels`)
-    type Typed = (u32, u32, usize, u64, Vec<Option<u64>>);
-    let typed = (|| -> Result<Typed, String> {
-        let side = u64::from(MAX_IMAGE_SIDE);
-        let w = meta_int(&meta, &meta_name, "render.width", 1, side)? as u32;
-        let h = meta_int(&meta, &meta_name, "render.height", 1, side)? as u32;
-        let n = meta_int(&meta, &meta_name, "num_objects", 0, 255)? as usize;
-        let threshold = match meta.get("visibility_threshold_px") {
-            None => 0,
-            Some(_) => meta_int(
-                &meta,
-                &meta_name,
-                "visibility_threshold_px",
-                0,
-                u64::from(w) * u64::from(h),
-            )?,
-        };
-        let Some(objects) = meta["objects"].as_array() else {
-            return Err(format!(
-                "metadata `{meta_name}` key `objects` is {}, not a list",
-                short(&meta["objects"])
-            ));
-        };
-        if objects.len() != n {
-            return Err(format!(
-                "metadata `{meta_name}` key `objects` has {} entries but `num_objects` is {n}",
-                objects.len()
-            ));
-        }
-        let mut pixels = Vec::with_capacity(n);
-        for (i, o) in objects.iter().enumerate() {
-            pixels.push(match o.get("visible_pixels") {
-                None => None,
-                Some(v) => match v.as_u64() {
-                    Some(p) if p <= u64::from(w) * u64::from(h) => Some(p),
-                    _ => {
-                        return Err(format!(
-                            "metadata `{meta_name}` key `objects[{i}].visible_pixels` is {}, not a whole number from 0 to the image's {} pixels",
-                            short(v),
-                            u64::from(w) * u64::from(h)
-                        ))
-                    }
-                },
-            });
-        }
-        Ok((w, h, n, threshold, pixels))
-    })();
-    let (w, h, n, threshold, visible) = match typed {
-        Ok(t) => t,
+    let view = match MetadataView::of(&meta, &meta_name) {
+        Ok(v) => v,
         Err(e) => {
-            problems.push(e);
+            problems.push(e.to_string());
             return Err(broken(index, stem, f, problems));
         }
     };
+    let (w, h, n, threshold) = (
+        view.width,
+        view.height,
+        view.num_objects,
+        view.visibility_threshold_px,
+    );
+    let visible = &view.visible_pixels;
     if meta["image_index"].as_u64() != Some(index) {
         problems.push(format!(
             "metadata `image_index` is {} (the file name says {index})",
-            short(&meta["image_index"])
+            dataset::short(&meta["image_index"])
         ));
     }
-    let passes: Vec<Pass> = meta["passes"]
-        .as_object()
-        .map(|m| m.keys().filter_map(|k| Pass::from_name(k)).collect())
-        .unwrap_or_default();
+    let passes = view.passes.clone();
     if passes.is_empty() {
         problems.push("metadata lists no `passes`".into());
     }
     for pass in passes {
         let name = layout::pass_file(stem, pass);
-        let key = match pass {
-            Pass::Rgb => "image_filename".to_string(),
-            p => format!("{}_filename", p.name()),
-        };
+        let key = layout::filename_key(pass);
         if meta[&key].as_str() != Some(name.as_str()) {
             problems.push(format!(
                 "metadata `{key}` is {} (expected \"{name}\")",
-                short(&meta[&key])
+                dataset::short(&meta[&key])
             ));
         }
         let Some(bytes) = bytes_of.get(&name) else {
@@ -834,16 +642,6 @@ fn check_sample(
     }
 }
 
-/// A metadata value for a message: its JSON, cut at 80 characters.
-fn short(v: &Value) -> String {
-    let t = v.to_string();
-    if t.chars().count() > 80 {
-        format!("{}...", t.chars().take(80).collect::<String>())
-    } else {
-        t
-    }
-}
-
 fn broken(index: u64, stem: &str, f: &Found, problems: Vec<String>) -> Broken {
     Broken {
         index,
@@ -916,14 +714,6 @@ pub fn remove_broken(report: &VariantReport) -> std::io::Result<Removal> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn ranges_merge_and_hold() {
-        let r = merge(vec![(4, 8), (0, 4), (10, 12), (11, 11)]);
-        assert_eq!(r, [(0, 8), (10, 12)]);
-        assert!(in_ranges(&r, 0) && in_ranges(&r, 7) && in_ranges(&r, 11));
-        assert!(!in_ranges(&r, 8) && !in_ranges(&r, 12) && !in_ranges(&r, u64::MAX));
-    }
 
     #[test]
     fn the_rerun_writes_where_verify_looked() {

@@ -136,58 +136,35 @@ fn colour_map(t: f64) -> Rgb<u8> {
     Rgb([c(0), c(1), c(2)])
 }
 
-/// Largest metadata file read (a sample's JSON is a few KB).
-const MAX_METADATA_BYTES: u64 = 64 << 20;
-
-/// Find the samples to show, in index order. Folders are walked with the dataset reader
-/// (`clevrtex_render::dataset`): a link out of the dataset, a FIFO or a device is never
-/// followed or opened.
+/// Find the samples to show, in index order. The dataset is walked by its one read side
+/// (`clevrtex_scene::dataset::Dataset::open`): a link out of the dataset, a FIFO or a device
+/// is never followed or opened.
 fn find_samples(args: &Options) -> anyhow::Result<Vec<Sample>> {
-    let root = dataset::root(&args.dir).with_context(|| {
-        format!(
-            "cannot read `{}`\nhint: pass the `--out` folder of `clevrtex generate`",
-            args.dir.display()
-        )
+    use clevrtex_scene::dataset::{Dataset, DatasetError};
+    let hint = "hint: pass the `--out` folder of `clevrtex generate`";
+    let ds = Dataset::open(&args.dir).map_err(|e| {
+        let cause = match e {
+            DatasetError::Unreadable { cause, .. } => cause,
+            DatasetError::NotAFolder { path } => std::io::Error::new(
+                std::io::ErrorKind::NotADirectory,
+                format!("`{}` is not a folder", path.display()),
+            ),
+        };
+        anyhow::Error::new(cause).context(format!("cannot read `{}`\n{hint}", args.dir.display()))
     })?;
-    let mut vdirs = Vec::new();
-    let name = args
-        .dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    if name.starts_with("clevrtex_") {
-        vdirs.push(root.clone());
-    } else {
-        let entries = dataset::list(&root, &root)
-            .with_context(|| format!("cannot read `{}`", args.dir.display()))?;
-        vdirs.extend(
-            entries
-                .into_iter()
-                .filter(|(n, _, k)| *k == Kind::Dir && n.starts_with("clevrtex_"))
-                .map(|(_, p, _)| p),
-        );
-    }
+    let root = ds.root.clone();
     let mut found: Vec<(String, u64, String, PathBuf)> = Vec::new();
-    for vdir in vdirs {
-        let subs = dataset::list(&root, &vdir)
-            .with_context(|| format!("cannot read `{}`", vdir.display()))?;
-        for (_, sub, kind) in subs {
-            if kind != Kind::Dir {
-                continue;
-            }
-            let Ok(files) = dataset::list(&root, &sub) else {
-                continue;
-            };
-            for (n, _, kind) in files {
-                if let Some((stem, variant, index)) = layout::parse_stem(&n, ".json") {
-                    if let Kind::Skipped(why) = &kind {
-                        eprintln!("skipped `{}`: {why}", sub.join(&n).display());
-                        continue;
-                    }
-                    if args.variant.as_ref().is_none_or(|v| v == variant) {
-                        found.push((variant.to_string(), index, stem.to_string(), sub.clone()));
-                    }
-                }
+    for vd in &ds.variants {
+        if let Some((p, e)) = vd.unreadable.iter().find(|(p, _)| *p == vd.dir) {
+            return Err(anyhow::anyhow!("{e}").context(format!("cannot read `{}`", p.display())));
+        }
+        // A sample's metadata not followed (a link out, a FIFO): said, and left out.
+        for skip in vd.skipped_for_metadata().filter(|k| k.stem.is_some()) {
+            eprintln!("skipped `{}`: {}", skip.path.display(), skip.why);
+        }
+        for s in vd.samples.iter().filter(|s| s.has_metadata()) {
+            if args.variant.as_ref().is_none_or(|v| *v == s.variant) {
+                found.push((s.variant.clone(), s.index, s.stem.clone(), s.dir.clone()));
             }
         }
     }
@@ -218,7 +195,8 @@ fn find_samples(args: &Options) -> anyhow::Result<Vec<Sample>> {
         .into_iter()
         .map(|(_, _, stem, dir)| {
             let path = dir.join(layout::metadata_file(&stem));
-            let bytes = dataset::read(&root, &path, MAX_METADATA_BYTES)
+            let bytes = ds
+                .read(&path, clevrtex_scene::dataset::MAX_METADATA_BYTES)
                 .map_err(|why| anyhow::anyhow!("`{}` {why}", path.display()))?;
             let meta: Value = serde_json::from_slice(&bytes)
                 .with_context(|| format!("`{}` is not valid metadata", path.display()))?;

@@ -8,9 +8,24 @@
 //!   without blocking (files are opened with `O_NONBLOCK` and checked with `fstat` before a
 //!   byte is read);
 //! - a file is read with a cap ([`MAX_FILE_BYTES`]), never to the end of whatever it holds.
+//!
+//! On top of that, the one read side of the layout ([`crate::layout`]): [`Dataset::open`]
+//! walks a dataset once and finds its variant folders, samples ([`SampleRef`]: variant, index,
+//! stem, folder, the files found; paths from the pass table), manifests, ledgers, temporaries
+//! and what was not followed; [`MetadataView`] is the typed, bounded view of a sample's
+//! metadata (errors name the file and the key); the manifests' union is
+//! [`crate::manifest::union`]. No other module walks a dataset folder or parses a stem.
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::io::Read;
 use std::path::{Path, PathBuf};
+
+use serde_json::Value;
+
+use crate::layout;
+use crate::manifest::Manifest;
+use crate::scene_file::MAX_IMAGE_SIDE;
+use crate::Pass;
 
 /// The largest file of a dataset that is read (1 GiB): far over any PNG of an
 /// 8192 x 8192 image, any metadata or any manifest this tool writes.
@@ -125,6 +140,521 @@ pub fn read_regular(path: &Path, cap: u64) -> Result<Vec<u8>, String> {
     Ok(bytes)
 }
 
+/// Largest metadata file read (a sample's JSON is a few KB).
+pub const MAX_METADATA_BYTES: u64 = 64 << 20;
+
+/// Largest failure ledger read (one line per failed image).
+pub const MAX_LEDGER_BYTES: u64 = 256 << 20;
+
+/// Why a dataset cannot be opened at all (what is wrong inside it is recorded, not an error).
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// The path given is not a folder.
+    #[error("`{}` is not a folder", .path.display())]
+    NotAFolder {
+        /// The path given.
+        path: PathBuf,
+    },
+    /// The folder given cannot be resolved or listed.
+    #[error("`{}` cannot be read: {cause}", .path.display())]
+    Unreadable {
+        /// The path given.
+        path: PathBuf,
+        /// Why.
+        cause: std::io::Error,
+    },
+}
+
+/// An entry of the dataset that was not followed or not read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Skip {
+    /// Its path.
+    pub path: PathBuf,
+    /// Why, one line (`is a symbolic link leading out of the dataset ...`).
+    pub why: String,
+    /// The stem of the sample it belongs to, when its name is one of the layout's files.
+    pub stem: Option<String>,
+}
+
+impl std::fmt::Display for Skip {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "`{}` {}", self.path.display(), self.why)
+    }
+}
+
+/// One sample found: the regular files of its stem in one folder.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SampleRef {
+    /// The variant its stem names.
+    pub variant: String,
+    /// Its index.
+    pub index: u64,
+    /// Its stem, `CLEVRTEX_<variant>_<index:06>`.
+    pub stem: String,
+    /// The folder it was found in.
+    pub dir: PathBuf,
+    /// The names of its regular files in `dir` (files of the layout only; links inside the
+    /// dataset included).
+    pub files: BTreeSet<String>,
+}
+
+impl SampleRef {
+    /// The path of the file `name` in the sample's folder.
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+
+    /// The path of `pass`'s file (from the pass table), whether it exists or not.
+    pub fn pass_path(&self, pass: Pass) -> PathBuf {
+        self.path(&layout::pass_file(&self.stem, pass))
+    }
+
+    /// Whether `pass`'s file was found, a regular file.
+    pub fn has_pass(&self, pass: Pass) -> bool {
+        self.files.contains(&layout::pass_file(&self.stem, pass))
+    }
+
+    /// The metadata's file name.
+    pub fn metadata_name(&self) -> String {
+        layout::metadata_file(&self.stem)
+    }
+
+    /// The path of the metadata.
+    pub fn metadata_path(&self) -> PathBuf {
+        self.path(&self.metadata_name())
+    }
+
+    /// Whether the metadata was found, a regular file.
+    pub fn has_metadata(&self) -> bool {
+        self.files.contains(&self.metadata_name())
+    }
+
+    /// The split of the sample in a dataset of `total` images, by the layout's rule.
+    pub fn split(&self, total: u64) -> layout::Split {
+        layout::Split::of(layout::variant_splits(&self.variant), self.index, total)
+    }
+}
+
+/// One `clevrtex_<variant>` folder and what was found in it.
+#[derive(Debug, Clone, Default)]
+pub struct VariantDir {
+    /// The variant its name says.
+    pub variant: String,
+    /// The folder (under the path given).
+    pub dir: PathBuf,
+    /// The folder its runs wrote into (`--out`): the path given, or its parent when the path
+    /// given is the variant folder.
+    pub out: PathBuf,
+    /// Samples in walk order (sample folders by name, stems by name); an index may be found
+    /// in more than one folder.
+    pub samples: Vec<SampleRef>,
+    /// Run manifests (`MANIFEST-*.json`), regular files.
+    pub manifests: Vec<PathBuf>,
+    /// Failure ledgers ([`layout::LEDGER_FILE`]).
+    pub ledgers: Vec<PathBuf>,
+    /// Temporary files of writers (`*.clevrtex-tmp`, `.*.tmp*` in sample folders).
+    pub temp_files: Vec<PathBuf>,
+    /// Entries not followed or not read, in walk order: links out of the dataset, FIFOs,
+    /// devices, folders named like a sample's file, folders that cannot be listed.
+    pub skipped: Vec<Skip>,
+    /// Folders that cannot be listed (this one or a sample folder), with the error.
+    pub unreadable: Vec<(PathBuf, String)>,
+    /// Regular files and folders that are not the layout's (stray names).
+    pub strays: Vec<PathBuf>,
+}
+
+impl VariantDir {
+    /// The entries not followed that are not a sample's file, or are a sample's metadata:
+    /// what the readers of metadata report (a pass's link or FIFO is reported by who reads
+    /// the pass).
+    pub fn skipped_for_metadata(&self) -> impl Iterator<Item = &Skip> {
+        self.skipped.iter().filter(|s| match &s.stem {
+            None => true,
+            Some(stem) => s
+                .path
+                .file_name()
+                .is_some_and(|n| n.to_string_lossy() == layout::metadata_file(stem)),
+        })
+    }
+
+    /// The manifests read ([`Manifest::read`]): (path, manifest or why not).
+    pub fn read_manifests(&self) -> Vec<(PathBuf, Result<Manifest, String>)> {
+        self.manifests
+            .iter()
+            .map(|p| (p.clone(), Manifest::read(p)))
+            .collect()
+    }
+}
+
+/// A dataset folder opened: one walk, nothing read but folder listings. The one place that
+/// walks a dataset, recognises its stems and builds its files' paths (`verify`, `export`,
+/// `preview`, `report`, `eval`'s ground truth and the Python `Dataset` use it).
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    /// The path given.
+    pub given: PathBuf,
+    /// Its canonical form, which no link may leave.
+    pub root: PathBuf,
+    /// Whether the path given is itself a `clevrtex_<variant>` folder.
+    pub is_variant_dir: bool,
+    /// The variant folders, by name.
+    pub variants: Vec<VariantDir>,
+    /// Entries named `clevrtex_<variant>` that were not followed: (variant, why).
+    pub skipped: Vec<(String, Skip)>,
+}
+
+/// One line of a failure ledger.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LedgerEntry {
+    /// `variant`, when a string.
+    pub variant: Option<String>,
+    /// `index`, when a whole number.
+    pub index: Option<u64>,
+    /// `error`, when a string (else empty).
+    pub error: String,
+}
+
+impl Dataset {
+    /// Open the dataset at `path` (trusted: the command line's): an output folder of
+    /// `clevrtex generate` (its `clevrtex_<variant>` folders), or one variant folder.
+    pub fn open(path: &Path) -> Result<Dataset, DatasetError> {
+        if !path.is_dir() {
+            return Err(DatasetError::NotAFolder {
+                path: path.to_path_buf(),
+            });
+        }
+        let unreadable = |cause| DatasetError::Unreadable {
+            path: path.to_path_buf(),
+            cause,
+        };
+        let root = root(path).map_err(unreadable)?;
+        let name = root
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let mut ds = Dataset {
+            given: path.to_path_buf(),
+            root: root.clone(),
+            is_variant_dir: false,
+            variants: Vec::new(),
+            skipped: Vec::new(),
+        };
+        if let Some(v) = name.strip_prefix("clevrtex_") {
+            ds.is_variant_dir = true;
+            let out = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+            ds.variants.push(walk_variant(&root, v, path, out));
+            return Ok(ds);
+        }
+        for (name, p, kind) in list(&root, path).map_err(unreadable)? {
+            let Some(v) = name.strip_prefix("clevrtex_") else {
+                continue;
+            };
+            match kind {
+                Kind::Dir => ds
+                    .variants
+                    .push(walk_variant(&root, v, &p, path.to_path_buf())),
+                Kind::Skipped(why) => ds.skipped.push((
+                    v.to_string(),
+                    Skip {
+                        path: p,
+                        why,
+                        stem: None,
+                    },
+                )),
+                Kind::File => {}
+            }
+        }
+        Ok(ds)
+    }
+
+    /// The bytes of `path` (a file found in this dataset), at most `cap`; `Err` says why not.
+    pub fn read(&self, path: &Path, cap: u64) -> Result<Vec<u8>, String> {
+        read(&self.root, path, cap)
+    }
+
+    /// What `path` (under this dataset) is, links resolved only inside the root.
+    pub fn classify(&self, path: &Path) -> Kind {
+        classify(&self.root, path)
+    }
+
+    /// A sample's metadata: read up to [`MAX_METADATA_BYTES`] and parsed as JSON; `Err`
+    /// says why not, in one line, without the path.
+    pub fn read_metadata(&self, s: &SampleRef) -> Result<Value, String> {
+        let bytes = self.read(&s.metadata_path(), MAX_METADATA_BYTES)?;
+        serde_json::from_slice(&bytes).map_err(|e| format!("is not valid metadata: {e}"))
+    }
+
+    /// The lines of a failure ledger (read up to [`MAX_LEDGER_BYTES`]) that are JSON.
+    pub fn read_ledger(&self, path: &Path) -> Result<Vec<LedgerEntry>, String> {
+        let bytes = self.read(path, MAX_LEDGER_BYTES)?;
+        Ok(String::from_utf8_lossy(&bytes)
+            .lines()
+            .filter_map(|l| serde_json::from_str::<Value>(l).ok())
+            .map(|v| LedgerEntry {
+                variant: v["variant"].as_str().map(str::to_string),
+                index: v["index"].as_u64(),
+                error: v["error"].as_str().unwrap_or("").to_string(),
+            })
+            .collect())
+    }
+}
+
+/// Walk one variant folder: its sample folders, manifests, ledgers and temporaries.
+fn walk_variant(root: &Path, variant: &str, dir: &Path, out: PathBuf) -> VariantDir {
+    let mut vd = VariantDir {
+        variant: variant.to_string(),
+        dir: dir.to_path_buf(),
+        out,
+        ..VariantDir::default()
+    };
+    let entries = match list(root, dir) {
+        Ok(e) => e,
+        Err(e) => {
+            vd.cannot_list(dir, e);
+            return vd;
+        }
+    };
+    for (name, p, kind) in entries {
+        if name.ends_with(layout::TMP_SUFFIX) {
+            vd.temp_files.push(p);
+            continue;
+        }
+        match kind {
+            Kind::Skipped(why) => vd.skipped.push(Skip {
+                path: p,
+                why,
+                stem: None,
+            }),
+            Kind::Dir => walk_sample_dir(root, &p, &mut vd),
+            Kind::File if crate::manifest::is_manifest_name(&name) => vd.manifests.push(p),
+            Kind::File if name == layout::LEDGER_FILE => vd.ledgers.push(p),
+            Kind::File => vd.strays.push(p),
+        }
+    }
+    vd
+}
+
+impl VariantDir {
+    fn cannot_list(&mut self, dir: &Path, e: std::io::Error) {
+        self.skipped.push(Skip {
+            path: dir.to_path_buf(),
+            why: format!("cannot be read: {e}"),
+            stem: None,
+        });
+        self.unreadable.push((dir.to_path_buf(), e.to_string()));
+    }
+}
+
+/// Collect the samples, temporaries and skipped entries of one sample folder.
+fn walk_sample_dir(root: &Path, dir: &Path, vd: &mut VariantDir) {
+    let entries = match list(root, dir) {
+        Ok(e) => e,
+        Err(e) => {
+            vd.cannot_list(dir, e);
+            return;
+        }
+    };
+    let mut by_stem: BTreeMap<String, SampleRef> = BTreeMap::new();
+    for (name, p, kind) in entries {
+        if name.ends_with(layout::TMP_SUFFIX) || (name.starts_with('.') && name.contains(".tmp")) {
+            vd.temp_files.push(p);
+            continue;
+        }
+        let Some((stem, variant, index)) = layout::parse_file_name(&name) else {
+            vd.strays.push(p);
+            continue;
+        };
+        let why = match kind {
+            Kind::File => {
+                by_stem
+                    .entry(stem.to_string())
+                    .or_insert_with(|| SampleRef {
+                        variant: variant.to_string(),
+                        index,
+                        stem: stem.to_string(),
+                        dir: dir.to_path_buf(),
+                        files: BTreeSet::new(),
+                    })
+                    .files
+                    .insert(name.clone());
+                continue;
+            }
+            Kind::Skipped(why) => why,
+            Kind::Dir => "is a folder named like a file".to_string(),
+        };
+        vd.skipped.push(Skip {
+            path: p,
+            why,
+            stem: Some(stem.to_string()),
+        });
+    }
+    vd.samples.extend(by_stem.into_values());
+}
+
+/// A value of a sample's metadata that is not what a reader needs: the file and the key.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("metadata `{file}` key `{key}` {what}")]
+pub struct MetadataError {
+    /// The metadata file, as the caller names it.
+    pub file: String,
+    /// The key (dotted, `objects[i].visible_pixels` for a list's entry).
+    pub key: String,
+    /// What is wrong (`is "x", not a whole number from 1 to 8192`).
+    pub what: String,
+}
+
+/// A metadata value for a message: its JSON, cut at 80 characters.
+pub fn short(v: &Value) -> String {
+    let t = v.to_string();
+    if t.chars().count() > 80 {
+        format!("{}...", t.chars().take(80).collect::<String>())
+    } else {
+        t
+    }
+}
+
+/// The values of a sample's metadata that size or index something, typed and bounded before
+/// anything is sized by them: the image's size (at most [`MAX_IMAGE_SIDE`] a side), the
+/// objects (at most 255, a list as long as `num_objects`), the visibility threshold and each
+/// object's visible pixels (at most the image's pixels), the passes listed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MetadataView {
+    /// `render.width`.
+    pub width: u32,
+    /// `render.height`.
+    pub height: u32,
+    /// `num_objects`.
+    pub num_objects: usize,
+    /// `visibility_threshold_px` (0 when absent: the published data has none).
+    pub visibility_threshold_px: u64,
+    /// Each object's `visible_pixels`, when present.
+    pub visible_pixels: Vec<Option<u64>>,
+    /// `image_index`, when a whole number.
+    pub image_index: Option<u64>,
+    /// The passes the metadata's `passes` names (unknown names left out).
+    pub passes: Vec<Pass>,
+}
+
+/// A whole number from the metadata at `key` (dotted), within `lo..=hi`.
+pub fn meta_int(
+    meta: &Value,
+    file: &str,
+    key: &str,
+    lo: u64,
+    hi: u64,
+) -> Result<u64, MetadataError> {
+    let v = key.split('.').fold(meta, |v, k| &v[k]);
+    match v.as_u64() {
+        Some(n) if (lo..=hi).contains(&n) => Ok(n),
+        _ => Err(MetadataError {
+            file: file.to_string(),
+            key: key.to_string(),
+            what: format!("is {v}, not a whole number from {lo} to {hi}"),
+        }),
+    }
+}
+
+impl MetadataView {
+    /// The typed view of `meta` (a JSON object) of the file `file`; the error names the key.
+    pub fn of(meta: &Value, file: &str) -> Result<MetadataView, MetadataError> {
+        let err = |key: &str, what: String| MetadataError {
+            file: file.to_string(),
+            key: key.to_string(),
+            what,
+        };
+        let side = u64::from(MAX_IMAGE_SIDE);
+        let width = meta_int(meta, file, "render.width", 1, side)? as u32;
+        let height = meta_int(meta, file, "render.height", 1, side)? as u32;
+        let pixels = u64::from(width) * u64::from(height);
+        let n = meta_int(meta, file, "num_objects", 0, 255)? as usize;
+        let threshold = match meta.get("visibility_threshold_px") {
+            None => 0,
+            Some(_) => meta_int(meta, file, "visibility_threshold_px", 0, pixels)?,
+        };
+        let Some(objects) = meta["objects"].as_array() else {
+            return Err(err(
+                "objects",
+                format!("is {}, not a list", short(&meta["objects"])),
+            ));
+        };
+        if objects.len() != n {
+            return Err(err(
+                "objects",
+                format!("has {} entries but `num_objects` is {n}", objects.len()),
+            ));
+        }
+        let mut visible = Vec::with_capacity(n);
+        for (i, o) in objects.iter().enumerate() {
+            visible.push(match o.get("visible_pixels") {
+                None => None,
+                Some(v) => match v.as_u64() {
+                    Some(p) if p <= pixels => Some(p),
+                    _ => {
+                        return Err(err(
+                            &format!("objects[{i}].visible_pixels"),
+                            format!(
+                                "is {}, not a whole number from 0 to the image's {pixels} pixels",
+                                short(v)
+                            ),
+                        ))
+                    }
+                },
+            });
+        }
+        Ok(MetadataView {
+            width,
+            height,
+            num_objects: n,
+            visibility_threshold_px: threshold,
+            visible_pixels: visible,
+            image_index: meta["image_index"].as_u64(),
+            passes: meta["passes"]
+                .as_object()
+                .map(|m| m.keys().filter_map(|k| Pass::from_name(k)).collect())
+                .unwrap_or_default(),
+        })
+    }
+}
+
+/// The passes whose `*_filename` key ([`layout::filename_key`]) the metadata `meta` of
+/// `stem` sets, in pass-table order: each must name the layout's file (or be null, absent:
+/// not written). File names come from the layout, never from the metadata.
+pub fn listed_passes(meta: &Value, file: &str, stem: &str) -> Result<Vec<Pass>, MetadataError> {
+    let mut out = Vec::new();
+    for pass in Pass::ALL {
+        let key = layout::filename_key(pass);
+        let want = layout::pass_file(stem, pass);
+        match &meta[&key] {
+            Value::Null => {}
+            Value::String(name) if *name == want => out.push(pass),
+            other => {
+                return Err(MetadataError {
+                    file: file.to_string(),
+                    key,
+                    what: format!("is {other}, not the layout's `{want}` (or null)"),
+                })
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The metadata's `split` (`test`, `val` or `train`; absent: `train`, as the published data).
+pub fn split_of(meta: &Value, file: &str) -> Result<layout::Split, MetadataError> {
+    let err = |what: String| MetadataError {
+        file: file.to_string(),
+        key: "split".into(),
+        what,
+    };
+    match &meta["split"] {
+        Value::Null => Ok(layout::Split::Train),
+        Value::String(s) => {
+            layout::Split::parse(s).ok_or_else(|| err(format!("is `{s}`, not test, val or train")))
+        }
+        other => Err(err(format!("is {other}, not test, val or train"))),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -161,5 +691,184 @@ mod tests {
         assert!(read(&root, &data.join("a.json"), 1)
             .unwrap_err()
             .contains("over the 1 bytes"));
+    }
+
+    fn mkfifo(p: &Path) {
+        assert!(std::process::Command::new("mkfifo")
+            .arg(p)
+            .status()
+            .unwrap()
+            .success());
+    }
+
+    #[test]
+    fn open_finds_samples_and_what_does_not_belong() {
+        let dir = tempfile::tempdir().unwrap();
+        let outside = tempfile::tempdir().unwrap();
+        std::fs::write(outside.path().join("secret.json"), b"{}").unwrap();
+        let out = dir.path().join("out");
+        let v = out.join("clevrtex_camo");
+        let s0 = v.join("0");
+        std::fs::create_dir_all(&s0).unwrap();
+        let stem = layout::stem("camo", 3);
+        for pass in [Pass::Rgb, Pass::Mask] {
+            std::fs::write(s0.join(layout::pass_file(&stem, pass)), b"png").unwrap();
+        }
+        std::fs::write(s0.join(layout::metadata_file(&stem)), b"{}").unwrap();
+        // A sample whose metadata leads out of the dataset, one whose mask is a FIFO.
+        let out_stem = layout::stem("camo", 4);
+        std::fs::write(s0.join(layout::pass_file(&out_stem, Pass::Rgb)), b"png").unwrap();
+        std::os::unix::fs::symlink(
+            outside.path().join("secret.json"),
+            s0.join(layout::metadata_file(&out_stem)),
+        )
+        .unwrap();
+        mkfifo(&s0.join(layout::pass_file(&stem, Pass::Depth)));
+        std::fs::write(s0.join("notes.txt"), b"x").unwrap();
+        std::fs::write(s0.join(".CLEVRTEX_camo_000005.png.tmp1"), b"x").unwrap();
+        std::fs::create_dir(s0.join(layout::pass_file(&layout::stem("camo", 6), Pass::Albedo)))
+            .unwrap();
+        std::fs::write(v.join("MANIFEST-0-8-0of1.json"), b"not json").unwrap();
+        std::fs::write(
+            v.join(layout::LEDGER_FILE),
+            b"{\"variant\":\"camo\",\"index\":7,\"error\":\"boom\"}\nnot json\n",
+        )
+        .unwrap();
+        std::fs::write(v.join("x.clevrtex-tmp"), b"").unwrap();
+        std::fs::write(v.join("README"), b"").unwrap();
+        std::os::unix::fs::symlink(outside.path(), out.join("clevrtex_away")).unwrap();
+
+        let ds = Dataset::open(&out).unwrap();
+        assert!(!ds.is_variant_dir);
+        assert_eq!(ds.variants.len(), 1);
+        assert_eq!(ds.skipped.len(), 1);
+        assert_eq!(ds.skipped[0].0, "away");
+        assert!(ds.skipped[0].1.why.contains("leading out of the dataset"));
+        let vd = &ds.variants[0];
+        assert_eq!(
+            (vd.variant.as_str(), vd.out.as_path()),
+            ("camo", out.as_path())
+        );
+        let found: Vec<(u64, usize)> = vd
+            .samples
+            .iter()
+            .map(|s| (s.index, s.files.len()))
+            .collect();
+        assert_eq!(found, [(3, 3), (4, 1)]);
+        let s3 = &vd.samples[0];
+        assert!(s3.has_pass(Pass::Mask) && s3.has_metadata() && !s3.has_pass(Pass::Depth));
+        assert_eq!(
+            s3.pass_path(Pass::Mask),
+            s0.join(format!("{stem}_flat.png"))
+        );
+        assert!(!vd.samples[1].has_metadata());
+        let skipped: Vec<String> = vd.skipped.iter().map(ToString::to_string).collect();
+        assert_eq!(skipped.len(), 3, "{skipped:?}");
+        assert!(skipped
+            .iter()
+            .any(|l| l.contains("_000004.json` is a symbolic link leading out")));
+        assert!(skipped
+            .iter()
+            .any(|l| l.contains("_000003_depth_0001.png` is not a regular file")));
+        assert!(skipped
+            .iter()
+            .any(|l| l.contains("is a folder named like a file")));
+        // Metadata readers report the metadata's link, not the FIFO pass.
+        assert_eq!(vd.skipped_for_metadata().count(), 1);
+        assert_eq!(vd.temp_files.len(), 2);
+        assert_eq!(vd.strays, [s0.join("notes.txt"), v.join("README")]);
+        assert_eq!(vd.manifests, [v.join("MANIFEST-0-8-0of1.json")]);
+        assert!(vd.read_manifests()[0].1.is_err());
+        let ledger = ds.read_ledger(&vd.ledgers[0]).unwrap();
+        assert_eq!(ledger.len(), 1);
+        assert_eq!(
+            (ledger[0].index, ledger[0].error.as_str()),
+            (Some(7), "boom")
+        );
+        assert_eq!(ds.read_metadata(s3).unwrap(), serde_json::json!({}));
+
+        // The variant folder itself: its runs wrote into its parent.
+        let one = Dataset::open(&v).unwrap();
+        assert!(one.is_variant_dir);
+        assert_eq!(one.variants[0].out, out);
+        assert_eq!(one.variants[0].samples.len(), 2);
+        assert!(matches!(
+            Dataset::open(&s0.join("notes.txt")),
+            Err(DatasetError::NotAFolder { .. })
+        ));
+    }
+
+    #[test]
+    fn metadata_view_bounds_counts_and_names_file_and_key() {
+        let good = serde_json::json!({
+            "render": {"width": 4, "height": 2},
+            "num_objects": 1,
+            "visibility_threshold_px": 1,
+            "objects": [{"visible_pixels": 3}],
+            "image_index": 9,
+            "passes": {"rgb": {}, "mask": {}, "nope": {}},
+        });
+        let v = MetadataView::of(&good, "m.json").unwrap();
+        assert_eq!((v.width, v.height, v.num_objects), (4, 2, 1));
+        assert_eq!(v.visible_pixels, [Some(3)]);
+        assert_eq!(v.image_index, Some(9));
+        assert_eq!(v.passes.len(), 2);
+        let bad = |patch: serde_json::Value| {
+            let mut m = good.clone();
+            for (k, val) in patch.as_object().unwrap() {
+                m[k] = val.clone();
+            }
+            MetadataView::of(&m, "m.json").unwrap_err()
+        };
+        let e = bad(serde_json::json!({"render": {"width": "4", "height": 2}}));
+        assert_eq!(
+            (e.file.as_str(), e.key.as_str()),
+            ("m.json", "render.width")
+        );
+        assert_eq!(
+            e.to_string(),
+            "metadata `m.json` key `render.width` is \"4\", not a whole number from 1 to 8192"
+        );
+        assert_eq!(
+            bad(serde_json::json!({"render": {"width": 4, "height": 1u64 << 40}})).key,
+            "render.height"
+        );
+        assert_eq!(
+            bad(serde_json::json!({"num_objects": 1u64 << 62})).key,
+            "num_objects"
+        );
+        assert_eq!(bad(serde_json::json!({"num_objects": 2})).key, "objects");
+        assert_eq!(bad(serde_json::json!({"objects": {"a": 1}})).key, "objects");
+        assert_eq!(
+            bad(serde_json::json!({"objects": [{"visible_pixels": 9}]})).key,
+            "objects[0].visible_pixels"
+        );
+        assert_eq!(
+            bad(serde_json::json!({"visibility_threshold_px": -1})).key,
+            "visibility_threshold_px"
+        );
+
+        let stem = "CLEVRTEX_camo_000001";
+        let meta =
+            serde_json::json!({"image_filename": "CLEVRTEX_camo_000001.png", "split": "val"});
+        assert_eq!(listed_passes(&meta, "m", stem).unwrap(), [Pass::Rgb]);
+        assert_eq!(split_of(&meta, "m").unwrap(), layout::Split::Val);
+        assert_eq!(
+            split_of(&serde_json::json!({}), "m").unwrap(),
+            layout::Split::Train
+        );
+        let e = listed_passes(
+            &serde_json::json!({"mask_filename": "../../etc/passwd"}),
+            "m",
+            stem,
+        )
+        .unwrap_err();
+        assert_eq!(e.key, "mask_filename");
+        assert_eq!(
+            split_of(&serde_json::json!({"split": 3}), "m")
+                .unwrap_err()
+                .key,
+            "split"
+        );
     }
 }

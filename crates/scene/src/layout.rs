@@ -11,6 +11,9 @@ use std::path::{Path, PathBuf};
 use crate::config::{Config, Splits};
 use crate::passes::Pass;
 
+/// Suffix of temporary files (never matched by the public loader's `*.png` glob).
+pub const TMP_SUFFIX: &str = ".clevrtex-tmp";
+
 /// File stem of image `index`: `CLEVRTEX_<variant>_<index:06>`.
 pub fn stem(variant: &str, index: u64) -> String {
     format!("CLEVRTEX_{variant}_{index:06}")
@@ -27,6 +30,28 @@ pub fn parse_stem<'a>(name: &'a str, suffix: &str) -> Option<(&'a str, &'a str, 
     }
     Some((stem, variant, digits.parse().ok()?))
 }
+
+/// The stem, variant and index of a file of the layout: a pass (its suffix from the pass
+/// table), the metadata or a kept EXR; `None` for any other name.
+pub fn parse_file_name(name: &str) -> Option<(&str, &str, u64)> {
+    let mut suffixes: Vec<String> = Pass::ALL.iter().map(|&p| pass_file("", p)).collect();
+    suffixes.push(metadata_file(""));
+    suffixes.extend(exr_files("", true));
+    suffixes.sort_by_key(|s| std::cmp::Reverse(s.len()));
+    suffixes.iter().find_map(|s| parse_stem(name, s))
+}
+
+/// The metadata key naming the file of `pass`: `image_filename` for the image,
+/// `<pass>_filename` otherwise.
+pub fn filename_key(pass: Pass) -> String {
+    match pass {
+        Pass::Rgb => "image_filename".to_string(),
+        p => format!("{}_filename", p.name()),
+    }
+}
+
+/// The failure ledger's file name in a variant folder.
+pub const LEDGER_FILE: &str = "failures.jsonl";
 
 /// Longest variant name: it becomes part of folder and file names.
 pub const MAX_VARIANT_NAME: usize = 64;
@@ -222,6 +247,15 @@ mod tests {
             parse_stem(&format!("{big}.json"), ".json"),
             Some((big.as_str(), "full", 1_234_567))
         );
+        assert_eq!(
+            parse_file_name("CLEVRTEX_full_000123_flat.png"),
+            Some(("CLEVRTEX_full_000123", "full", 123))
+        );
+        assert_eq!(
+            parse_file_name("CLEVRTEX_full_000123_passes.exr"),
+            Some(("CLEVRTEX_full_000123", "full", 123))
+        );
+        assert_eq!(parse_file_name("CLEVRTEX_full_000123.txt"), None);
     }
 
     #[test]

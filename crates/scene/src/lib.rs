@@ -24,6 +24,7 @@ pub mod config;
 pub mod dataset;
 pub mod json;
 pub mod layout;
+pub mod manifest;
 pub mod metadata;
 pub mod passes;
 pub mod quality;

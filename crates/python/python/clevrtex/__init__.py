@@ -12,7 +12,6 @@ definitions and how the protocols differ: docs/eval.md.
 
 import json
 import os
-import stat
 from collections import defaultdict
 from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
@@ -297,29 +296,11 @@ MAX_METADATA_BYTES = 64 << 20
 
 
 def _read_metadata(path: str) -> bytes:
-    """A sample's metadata as the dataset reader reads files: a regular file only (a FIFO
-    swapped in never blocks: it is opened non-blocking and checked before a byte is read),
-    at most `MAX_METADATA_BYTES`."""
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            raise ValueError(f"`{path}` is not a regular file (a FIFO, socket or device); not read")
-        if st.st_size > MAX_METADATA_BYTES:
-            raise ValueError(f"`{path}` is {st.st_size} bytes, over the {MAX_METADATA_BYTES} bytes read of a sample's metadata")
-        chunks, left = [], MAX_METADATA_BYTES + 1
-        while left > 0:
-            chunk = os.read(fd, min(left, 1 << 20))
-            if not chunk:
-                break
-            chunks.append(chunk)
-            left -= len(chunk)
-        data = b"".join(chunks)
-        if len(data) > MAX_METADATA_BYTES:
-            raise ValueError(f"`{path}` grew over the {MAX_METADATA_BYTES} bytes read of a sample's metadata")
-        return data
-    finally:
-        os.close(fd)
+    """A sample's metadata as the dataset reader reads files (`clevrtex_scene::dataset`, in
+    Rust): a regular file only (a FIFO swapped in never blocks: it is opened non-blocking and
+    checked before a byte is read), at most `MAX_METADATA_BYTES`; `ValueError` naming the file
+    otherwise, `OSError` when it cannot be opened."""
+    return _native.read_metadata(path)
 
 
 class Dataset:

@@ -24,7 +24,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context};
-use clevrtex_render::dataset::{self, Kind};
+use clevrtex_render::dataset;
 use clevrtex_scene::{layout, Pass};
 use rayon::prelude::*;
 
@@ -200,7 +200,8 @@ pub fn measure_sample(
 /// One sample found: (variant, stem, folder).
 pub type Found = (String, String, PathBuf);
 
-/// The dataset's canonical root and its samples: the `--out` of `generate` or one
+/// The dataset's canonical root and its samples (found by the one read side of a dataset,
+/// `clevrtex_scene::dataset::Dataset::open`): the `--out` of `generate` or one
 /// `clevrtex_<variant>` folder.
 pub fn find_samples(dir: &Path) -> anyhow::Result<(PathBuf, Vec<Found>)> {
     let hint =
@@ -208,36 +209,19 @@ pub fn find_samples(dir: &Path) -> anyhow::Result<(PathBuf, Vec<Found>)> {
     if !dir.is_dir() {
         bail!("dataset folder `{}` does not exist\n{hint}", dir.display());
     }
-    let root = dataset::root(dir).with_context(|| format!("cannot read `{}`", dir.display()))?;
-    let list = |d: &Path| {
-        dataset::list(&root, d).with_context(|| format!("cannot read `{}`", d.display()))
-    };
-    let is_variant = root
-        .file_name()
-        .is_some_and(|n| n.to_string_lossy().starts_with("clevrtex_"));
-    let variant_dirs: Vec<PathBuf> = if is_variant {
-        vec![root.clone()]
-    } else {
-        list(&root)?
-            .into_iter()
-            .filter(|(n, _, k)| n.starts_with("clevrtex_") && *k == Kind::Dir)
-            .map(|(_, p, _)| p)
-            .collect()
-    };
+    let ds = clevrtex_scene::dataset::Dataset::open(dir).map_err(|e| match e {
+        clevrtex_scene::dataset::DatasetError::Unreadable { cause, .. } => {
+            anyhow::Error::new(cause).context(format!("cannot read `{}`", dir.display()))
+        }
+        other => other.into(),
+    })?;
     let mut out = Vec::new();
-    for vdir in variant_dirs {
-        for (_, sub, kind) in list(&vdir)? {
-            if kind != Kind::Dir {
-                continue;
-            }
-            for (name, _, kind) in list(&sub)? {
-                if kind != Kind::File {
-                    continue;
-                }
-                if let Some((stem, variant, _)) = layout::parse_stem(&name, ".json") {
-                    out.push((variant.to_string(), stem.to_string(), sub.clone()));
-                }
-            }
+    for vd in &ds.variants {
+        if let Some((d, e)) = vd.unreadable.first() {
+            return Err(anyhow::anyhow!("{e}").context(format!("cannot read `{}`", d.display())));
+        }
+        for s in vd.samples.iter().filter(|s| s.has_metadata()) {
+            out.push((s.variant.clone(), s.stem.clone(), s.dir.clone()));
         }
     }
     out.sort();
@@ -247,7 +231,7 @@ pub fn find_samples(dir: &Path) -> anyhow::Result<(PathBuf, Vec<Found>)> {
             dir.display()
         );
     }
-    Ok((root, out))
+    Ok((ds.root, out))
 }
 
 /// Measure every sample under `dir`, in parallel.

@@ -1,14 +1,14 @@
 //! Reading a dataset for the report: every sample's metadata (in parallel), the manifests and
-//! the failure ledgers. Works on our output and on the published ClevrTex layout, whose
+//! the failure ledgers, found by the one read side of a dataset (`clevrtex_scene::dataset::
+//! Dataset::open`). Works on our output and on the published ClevrTex layout, whose
 //! metadata lacks our keys (those come back as `None`).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context};
-use clevrtex_render::dataset::{self, Kind};
+use anyhow::bail;
 use clevrtex_render::manifest::Manifest;
-use clevrtex_scene::layout;
+use clevrtex_scene::dataset::{self as reader, DatasetError};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde_json::Value;
@@ -86,97 +86,55 @@ impl Dataset {
     }
 }
 
-/// Largest metadata file read (a sample's JSON is a few KB).
-const MAX_METADATA_BYTES: u64 = 64 << 20;
-/// Largest failure ledger read.
-const MAX_LEDGER_BYTES: u64 = 256 << 20;
-
-/// The `clevrtex_<variant>` folders of `dir` (or `dir` itself).
-fn variant_dirs(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    let hint = "hint: pass the `--out` folder of `clevrtex generate`, a `clevrtex_<variant>` folder, or the downloaded ClevrTex";
-    if !dir.is_dir() {
-        bail!("dataset folder `{}` does not exist\n{hint}", dir.display());
-    }
-    let name = dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    if name.starts_with("clevrtex_") {
-        return Ok(vec![dir.to_path_buf()]);
-    }
-    let root =
-        dataset::root(dir).with_context(|| format!("cannot read `{}`\n{hint}", dir.display()))?;
-    let mut v: Vec<PathBuf> = dataset::list(&root, &root)
-        .with_context(|| format!("cannot read `{}`\n{hint}", dir.display()))?
-        .into_iter()
-        .filter(|(n, _, k)| *k == Kind::Dir && n.starts_with("clevrtex_"))
-        .map(|(_, p, _)| p)
-        .collect();
-    v.sort();
-    if v.is_empty() {
-        bail!(
-            "no `clevrtex_<variant>` folder under `{}`\n{hint}",
-            dir.display()
-        );
-    }
-    Ok(v)
-}
-
 /// Read the dataset under `dir`, with a progress bar over the samples.
 pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
-    let mut found: Vec<(String, u64, String, PathBuf)> = Vec::new();
+    let mut found: Vec<(String, u64, String, &reader::SampleRef)> = Vec::new();
     let mut manifests = Vec::new();
     let mut bad_manifests = Vec::new();
     let mut failures = Vec::new();
     let mut problems = Vec::new();
     // The folders first: they say when the dataset does not exist.
-    let vdirs = variant_dirs(dir)?;
-    let root = dataset::root(dir).with_context(|| format!("cannot read `{}`", dir.display()))?;
-    for vdir in vdirs {
-        let mut subs = Vec::new();
-        for (n, p, kind) in dataset::list(&root, &vdir)
-            .with_context(|| format!("cannot read `{}`", vdir.display()))?
-        {
-            if let Kind::Skipped(why) = &kind {
-                problems.push(format!("`{}` {why}", p.display()));
-                continue;
-            }
-            if kind == Kind::Dir {
-                subs.push(p);
-            } else if n.starts_with("MANIFEST-") && n.ends_with(".json") {
-                match Manifest::read(&p) {
-                    Ok(m) => manifests.push(m),
-                    Err(e) => bad_manifests.push((p, e)),
-                }
-            } else if n == "failures.jsonl" {
-                let bytes = dataset::read(&root, &p, MAX_LEDGER_BYTES).unwrap_or_default();
-                for line in String::from_utf8_lossy(&bytes).lines() {
-                    let Ok(v) = serde_json::from_str::<Value>(line) else {
-                        continue;
-                    };
-                    failures.push(Failure {
-                        variant: v["variant"].as_str().unwrap_or("?").to_string(),
-                        index: v["index"].as_u64().unwrap_or(0),
-                        error: v["error"].as_str().unwrap_or("").to_string(),
-                    });
-                }
+    let hint = "hint: pass the `--out` folder of `clevrtex generate`, a `clevrtex_<variant>` folder, or the downloaded ClevrTex";
+    if !dir.is_dir() {
+        bail!("dataset folder `{}` does not exist\n{hint}", dir.display());
+    }
+    let ds = reader::Dataset::open(dir).map_err(|e| match e {
+        DatasetError::Unreadable { cause, .. } => {
+            anyhow::Error::new(cause).context(format!("cannot read `{}`\n{hint}", dir.display()))
+        }
+        other => other.into(),
+    })?;
+    if ds.variants.is_empty() {
+        bail!(
+            "no `clevrtex_<variant>` folder under `{}`\n{hint}",
+            dir.display()
+        );
+    }
+    for vd in &ds.variants {
+        if let Some((p, e)) = vd.unreadable.first() {
+            return Err(anyhow::anyhow!("{e}").context(format!("cannot read `{}`", p.display())));
+        }
+        problems.extend(vd.skipped_for_metadata().map(ToString::to_string));
+        for (p, m) in vd.read_manifests() {
+            match m {
+                Ok(m) => manifests.push(m),
+                Err(e) => bad_manifests.push((p, e)),
             }
         }
-        for sub in subs {
-            for (n, p, kind) in dataset::list(&root, &sub)
-                .with_context(|| format!("cannot read `{}`", sub.display()))?
-            {
-                if let Some((stem, variant, index)) = layout::parse_stem(&n, ".json") {
-                    if let Kind::Skipped(why) = &kind {
-                        problems.push(format!("`{}` {why}", p.display()));
-                        continue;
-                    }
-                    found.push((variant.to_string(), index, stem.to_string(), sub.clone()));
-                }
+        for p in &vd.ledgers {
+            for e in ds.read_ledger(p).unwrap_or_default() {
+                failures.push(Failure {
+                    variant: e.variant.unwrap_or_else(|| "?".into()),
+                    index: e.index.unwrap_or(0),
+                    error: e.error,
+                });
             }
+        }
+        for s in vd.samples.iter().filter(|s| s.has_metadata()) {
+            found.push((s.variant.clone(), s.index, s.stem.clone(), s));
         }
     }
-    found.sort();
+    found.sort_by(|a, b| (&a.0, a.1, &a.2, &a.3.dir).cmp(&(&b.0, b.1, &b.2, &b.3.dir)));
     if found.is_empty() {
         bail!(
             "no samples (`CLEVRTEX_<variant>_<index>.json`) under `{}`\nhint: pass the `--out` folder of `clevrtex generate` or the downloaded ClevrTex",
@@ -186,14 +144,12 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
     bar.set_length(found.len() as u64);
     let read = found
         .into_par_iter()
-        .map(|(variant, index, stem, dir)| {
-            let path = dir.join(layout::metadata_file(&stem));
-            let sample = dataset::read(&root, &path, MAX_METADATA_BYTES)
+        .map(|(variant, index, stem, s)| {
+            let path = s.metadata_path();
+            let dir = s.dir.clone();
+            let sample = ds
+                .read_metadata(s)
                 .map_err(|why| anyhow::anyhow!("{why}"))
-                .and_then(|bytes| {
-                    serde_json::from_slice::<Value>(&bytes)
-                        .map_err(|e| anyhow::anyhow!("is not valid metadata: {e}"))
-                })
                 .and_then(|meta| {
                     parse(variant, index, stem, dir, &meta)
                         .map_err(|e| anyhow::anyhow!("is not valid metadata: {e:#}"))

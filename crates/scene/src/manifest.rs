@@ -1,0 +1,209 @@
+//! The run manifest: what one `clevrtex generate` run (or one shard of it) made, with the size
+//! and xxh3 hash of every file, so `clevrtex verify` can check the bytes later (after a copy,
+//! on another machine, for the union of shards).
+//!
+//! `OUT/clevrtex_<variant>/MANIFEST-<start>-<end>-<k>of<n>.json`: one per range and shard
+//! (`0of1` unsharded), so runs of other ranges into one folder (a dataset grown with `--start`)
+//! and shards never overwrite each other's; `verify` takes their union. Written atomically
+//! twice: before the first image as the run's plan (`finished: false`, no files), and at the
+//! end of a run that was not interrupted with every file (`finished: true`). Paths are relative
+//! to the variant folder, e.g. `0/CLEVRTEX_full_000000.png`.
+//!
+//! The reading side and the types live here, in the pure `scene` crate, so the dataset reader
+//! ([`crate::dataset`]) and the writer (`clevrtex_render::manifest`) share one definition.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+/// Value of [`Manifest::format`].
+pub const MANIFEST_FORMAT: &str = "clevrtex-manifest";
+/// Current value of [`Manifest::version`].
+pub const MANIFEST_VERSION: u32 = 1;
+/// The most indices one manifest's range (`end - start`), or the union of a dataset's runs,
+/// may hold: 100 million, a hundred times the largest dataset anyone renders. A file with
+/// more is refused before anything is sized by it.
+pub const MAX_RUN_INDICES: u64 = 100_000_000;
+
+/// One file of the manifest.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileEntry {
+    /// Size in bytes.
+    pub size: u64,
+    /// xxh3-64 of the bytes, 16 hex digits.
+    pub xxh3: String,
+}
+
+/// What one run (or shard) made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`MANIFEST_FORMAT`].
+    pub format: String,
+    /// Always [`MANIFEST_VERSION`] for files this version writes.
+    pub version: u32,
+    /// Variant name.
+    pub variant: String,
+    /// Run seed.
+    pub seed: u64,
+    /// xxh3 of the resolved variant config (render settings and passes included), hex.
+    pub config_hash: String,
+    /// First index of the run.
+    pub start: u64,
+    /// One past the last index of the run (before sharding).
+    pub end: u64,
+    /// Size of the whole dataset (fixes the splits).
+    pub total: u64,
+    /// This shard `[k, n]`: the run made the indices of `start..end` with `index % n == k`.
+    pub shard: [u64; 2],
+    /// Passes written.
+    pub passes: Vec<String>,
+    /// `clevrtex` version.
+    pub tool_version: String,
+    /// Blender version of the samples (from their metadata).
+    pub blender_version: String,
+    /// The settings the bridge changed on that Blender to render as 3.4 does (the samples'
+    /// `blender_compat`, e.g. `{"coat": true, ...}` on 4.x); absent on 3.x and in older
+    /// manifests.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub blender_compat: BTreeMap<String, serde_json::Value>,
+    /// The command line that made the run (rerunning it resumes and repairs).
+    pub command: Vec<String>,
+    /// Whether the run got to its end (`false`: only its plan, written before the first
+    /// image; the run was interrupted or is still going). Absent in older manifests, which
+    /// were only written at the end.
+    #[serde(default = "finished_default")]
+    pub finished: bool,
+    /// Every file of the run's complete samples, by path relative to the variant folder.
+    pub files: BTreeMap<String, FileEntry>,
+    /// Seconds one worker spent on each complete sample, by stem: its visibility passes,
+    /// rejected layouts, final render and writing (what `clevrtex report` plots). Kept from
+    /// the previous manifest for samples an earlier run made; absent in older manifests.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub sample_seconds: BTreeMap<String, f64>,
+}
+
+/// xxh3-64 of `bytes` as 16 hex digits ([`clevrtex_materials::content_hash`], the one content
+/// hash of the project).
+pub fn hash_hex(bytes: &[u8]) -> String {
+    format!("{:016x}", clevrtex_materials::content_hash(&[bytes]))
+}
+
+fn finished_default() -> bool {
+    true
+}
+
+/// The manifest's file name for shard `k` of `n` of the indices `start..end`.
+pub fn file_name(start: u64, end: u64, k: u64, n: u64) -> String {
+    format!("MANIFEST-{start}-{end}-{k}of{n}.json")
+}
+
+/// Whether `name` is a manifest's file name (this version's or an older `MANIFEST-<k>of<n>.json`).
+pub fn is_manifest_name(name: &str) -> bool {
+    name.starts_with("MANIFEST-") && name.ends_with(".json")
+}
+
+impl Manifest {
+    /// This manifest's file name ([`file_name`]).
+    pub fn name(&self) -> String {
+        file_name(self.start, self.end, self.shard[0], self.shard[1])
+    }
+
+    /// Read a manifest file: a regular file (a link only within its folder), at most
+    /// [`crate::dataset::MAX_FILE_BYTES`], whose values pass [`Manifest::check`].
+    pub fn read(path: &Path) -> Result<Manifest, String> {
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let root = crate::dataset::root(dir).map_err(|e| e.to_string())?;
+        let bytes = crate::dataset::read(&root, path, crate::dataset::MAX_FILE_BYTES)?;
+        let m: Manifest = serde_json::from_slice(&bytes).map_err(|e| e.to_string())?;
+        if m.format != MANIFEST_FORMAT || m.version != MANIFEST_VERSION {
+            return Err(format!(
+                "not a version {MANIFEST_VERSION} clevrtex manifest (format `{}`, version {})",
+                m.format, m.version
+            ));
+        }
+        m.check()?;
+        Ok(m)
+    }
+
+    /// The values that size or steer a reader, checked: `start <= end`, `end - start` at most
+    /// [`MAX_RUN_INDICES`], `shard` `[k, n]` with `0 <= k < n`; the error names the key.
+    pub fn check(&self) -> Result<(), String> {
+        if self.start > self.end {
+            return Err(format!(
+                "key `start` ({}) is after `end` ({})",
+                self.start, self.end
+            ));
+        }
+        if self.end - self.start > MAX_RUN_INDICES {
+            return Err(format!(
+                "keys `start`..`end` ({}..{}) hold more than the {MAX_RUN_INDICES} indices a run may have",
+                self.start, self.end
+            ));
+        }
+        let [k, n] = self.shard;
+        if n == 0 || k >= n {
+            return Err(format!(
+                "key `shard` is [{k}, {n}], not [k, n] with 0 <= k < n"
+            ));
+        }
+        Ok(())
+    }
+
+    /// Whether `index` is one this manifest's run was asked to make.
+    pub fn covers(&self, index: u64) -> bool {
+        let [k, n] = self.shard;
+        (self.start..self.end).contains(&index) && index % n.max(1) == k
+    }
+
+    /// The indices this manifest's run was asked to make.
+    pub fn indices(&self) -> impl Iterator<Item = u64> {
+        let [k, n] = self.shard;
+        let n = n.max(1);
+        let first = if self.start >= self.end {
+            self.end
+        } else {
+            self.start + (k + n - self.start % n) % n
+        };
+        (first..self.end).step_by(n as usize)
+    }
+}
+
+/// Merge ranges `start..end` into sorted, disjoint ones (empty ones left out).
+pub fn merge_ranges(mut ranges: Vec<(u64, u64)>) -> Vec<(u64, u64)> {
+    ranges.retain(|(a, b)| a < b);
+    ranges.sort();
+    let mut out: Vec<(u64, u64)> = Vec::new();
+    for (a, b) in ranges {
+        match out.last_mut() {
+            Some(last) if a <= last.1 => last.1 = last.1.max(b),
+            _ => out.push((a, b)),
+        }
+    }
+    out
+}
+
+/// Whether `i` is in one of the sorted, disjoint `ranges` (from [`merge_ranges`]).
+pub fn in_ranges(ranges: &[(u64, u64)], i: u64) -> bool {
+    let k = ranges.partition_point(|&(_, b)| b <= i);
+    ranges.get(k).is_some_and(|&(a, b)| a <= i && i < b)
+}
+
+/// The union of the runs of `manifests`: the indices they were asked to make (every shard of
+/// a run together makes its `start..end`), as sorted, disjoint ranges.
+pub fn union<'a>(manifests: impl IntoIterator<Item = &'a Manifest>) -> Vec<(u64, u64)> {
+    merge_ranges(manifests.into_iter().map(|m| (m.start, m.end)).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_merge_and_hold() {
+        let r = merge_ranges(vec![(4, 8), (0, 4), (10, 12), (11, 11)]);
+        assert_eq!(r, [(0, 8), (10, 12)]);
+        assert!(in_ranges(&r, 0) && in_ranges(&r, 7) && in_ranges(&r, 11));
+        assert!(!in_ranges(&r, 8) && !in_ranges(&r, 12) && !in_ranges(&r, u64::MAX));
+    }
+}
