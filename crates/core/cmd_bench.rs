@@ -149,7 +149,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
         retries: args.retries,
         idle_timeout: None,
         interrupt,
-        startup_timeout: crate::cmd_generate::seconds("--startup-timeout", args.startup_timeout)?,
+        startup_timeout: crate::run_args::seconds("--startup-timeout", args.startup_timeout)?,
     })?;
     let ready = session.ready()?;
     let blender_version = ready.blender_version;

@@ -240,7 +240,7 @@ fn session(cat: &Catalogue, names: &[&str], a: &BatchArgs) -> anyhow::Result<Ble
             .is_none()
             .then_some(clevrtex_render::pool::IDLE_TIMEOUT),
         interrupt,
-        startup_timeout: crate::cmd_generate::seconds("--startup-timeout", a.startup_timeout)?,
+        startup_timeout: crate::run_args::seconds("--startup-timeout", a.startup_timeout)?,
     })
 }
 

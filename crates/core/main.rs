@@ -20,6 +20,8 @@ mod cmd_verify;
 mod exit;
 mod font;
 mod interrupt;
+mod run;
+mod run_args;
 mod shard;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object

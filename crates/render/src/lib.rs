@@ -41,6 +41,7 @@ pub use clevrtex_scene::dataset;
 pub mod device;
 mod error;
 pub mod exr_io;
+pub mod gpu_probe;
 mod group;
 mod job;
 mod ledger;
