@@ -15,5 +15,5 @@ if [ ! -x .venv-bpy50/bin/python ] || ! .venv-bpy50/bin/python -c 'import bpy' >
   .venv-bpy50/bin/pip install --quiet --disable-pip-version-check 'bpy==5.0.*'
 fi
 CLEVRTEX_TEST_BPY="$PWD/.venv-bpy50/bin/python" CLEVRTEX_REQUIRE_BPY=1 \
-  cargo test --test integration --locked -- generate:: extreme:: --skip blenders::
+  cargo test --test integration --locked -- generate:: passes:: shadow:: resume:: ledger:: blender_failures:: extreme:: --skip blenders::
 cargo run --locked --quiet -- bench render --quick --out "$out/bench"

@@ -185,15 +185,7 @@ fn texture_density_is_invariant_across_object_sizes() {
     // The worker's `material` request, as `clevrtex materials` sends it.
     let bridge = BridgeDir::create(&String::from_utf8(json.stdout).unwrap()).unwrap();
     let mut session = Session::new(
-        WorkerOptions {
-            blender,
-            script: bridge.worker_script(),
-            materials: bridge.materials_json(),
-            threads: 0,
-            startup_timeout: clevrtex_render::STARTUP_TIMEOUT,
-            interrupt: Arc::new(AtomicBool::new(false)),
-            device: Default::default(),
-        },
+        WorkerOptions::new(blender, &bridge, Arc::new(AtomicBool::new(false))),
         0,
         None,
     );

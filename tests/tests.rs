@@ -4,6 +4,7 @@
 mod util;
 
 mod bench;
+mod blender_failures;
 mod blenders;
 mod eval;
 mod eval_protocols;
@@ -11,12 +12,16 @@ mod export;
 mod extreme;
 mod generate;
 mod k8s;
+mod ledger;
 mod many_writers;
 mod materials;
+mod passes;
 mod preview;
 mod python_package;
 mod report;
+mod resume;
 mod sample;
+mod shadow;
 mod slurm;
 mod trust_paths;
 mod verify;

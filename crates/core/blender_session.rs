@@ -51,15 +51,9 @@ impl BlenderSession {
     pub fn new(settings: Settings) -> anyhow::Result<BlenderSession> {
         let bridge = BridgeDir::create(&settings.materials_json)?;
         let session = Session::new(
-            WorkerOptions {
-                blender: settings.blender,
-                script: bridge.worker_script(),
-                materials: bridge.materials_json(),
-                threads: settings.threads,
-                startup_timeout: settings.startup_timeout,
-                interrupt: settings.interrupt,
-                device: Default::default(),
-            },
+            WorkerOptions::new(settings.blender, &bridge, settings.interrupt)
+                .with_threads(settings.threads)
+                .with_startup_timeout(settings.startup_timeout),
             settings.retries,
             settings.idle_timeout,
         );

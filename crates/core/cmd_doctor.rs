@@ -123,15 +123,15 @@ fn start_worker(
     bridge: &BridgeDir,
     deadline: Duration,
 ) -> Result<Worker, clevrtex_render::RenderError> {
-    Worker::start(&WorkerOptions {
-        blender: blender.to_path_buf(),
-        script: bridge.worker_script(),
-        materials: bridge.materials_json(),
-        threads: 1,
-        startup_timeout: deadline,
-        interrupt: Arc::new(AtomicBool::new(false)),
-        device: Default::default(),
-    })
+    Worker::start(
+        &WorkerOptions::new(
+            blender.to_path_buf(),
+            bridge,
+            Arc::new(AtomicBool::new(false)),
+        )
+        .with_threads(1)
+        .with_startup_timeout(deadline),
+    )
 }
 
 fn yes_no(b: bool) -> &'static str {

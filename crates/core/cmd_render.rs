@@ -1,5 +1,5 @@
 //! `clevrtex render`: render scene files made by `clevrtex sample`, through the same pool run
-//! as `generate` (`cmd_generate.rs`: [`RunArgs`], [`run_jobs`]).
+//! as `generate` (`run.rs`: [`run_jobs`]; its options [`RunArgs`] in `run_args.rs`).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -8,8 +8,9 @@ use anyhow::bail;
 use clevrtex_render::pool::Job;
 use clevrtex_scene::{layout, SceneFile};
 
-use crate::cmd_generate::{parse_passes, run_jobs, RunArgs};
 use crate::exit::CmdResult;
+use crate::run::run_jobs;
+use crate::run_args::{parse_passes, RunArgs};
 
 /// Arguments of `clevrtex render`.
 #[derive(Debug, clap::Args)]

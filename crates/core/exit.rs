@@ -17,10 +17,8 @@ pub const ERROR: u8 = 1;
 pub const USAGE: u8 = 2;
 /// The run finished but some items failed.
 pub const PARTIAL: u8 = 3;
-/// Interrupted by Ctrl-C (128 + SIGINT).
-pub const INTERRUPTED: u8 = 130;
-/// Stopped by SIGTERM (128 + SIGTERM): a scheduler's time limit or preemption, `timeout`.
-pub const TERMINATED: u8 = 143;
+// 130 and 143 belong to the signal handling: `interrupt::INTERRUPTED`, `interrupt::TERMINATED`
+// (so that `interrupt` needs nothing from here and this file reads top-down).
 
 /// Shown at the end of `--help`.
 pub const EXIT_CODES_HELP: &str = "Exit codes: 0 ok, 1 error, 2 usage error, 3 finished with some failed items, 130 interrupted (Ctrl-C), 143 stopped by SIGTERM";

@@ -14,7 +14,10 @@ use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use signal_hook::consts::{SIGINT, SIGTERM};
 use std::sync::{Arc, Mutex, OnceLock};
 
-use crate::exit;
+/// Exit code after Ctrl-C (128 + SIGINT).
+pub const INTERRUPTED: u8 = 130;
+/// Exit code after SIGTERM (128 + SIGTERM): a scheduler's time limit or preemption, `timeout`.
+pub const TERMINATED: u8 = 143;
 
 /// What an interrupt does in the running command.
 #[derive(Debug, Clone, Copy)]
@@ -47,9 +50,9 @@ static LAST_SIGNAL: AtomicI32 = AtomicI32::new(0);
 /// (128 + SIGINT).
 pub fn exit_code() -> u8 {
     if LAST_SIGNAL.load(Ordering::SeqCst) == SIGTERM {
-        exit::TERMINATED
+        TERMINATED
     } else {
-        exit::INTERRUPTED
+        INTERRUPTED
     }
 }
 

@@ -22,6 +22,8 @@ mod cmd_verify;
 mod exit;
 mod interrupt;
 mod materials_blender;
+mod run;
+mod run_args;
 mod shard;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object

@@ -55,7 +55,7 @@ pub(crate) fn session(
             .is_none()
             .then_some(clevrtex_render::pool::IDLE_TIMEOUT),
         interrupt,
-        startup_timeout: crate::cmd_generate::seconds("--startup-timeout", a.startup_timeout)?,
+        startup_timeout: crate::run_args::seconds("--startup-timeout", a.startup_timeout)?,
     })
 }
 

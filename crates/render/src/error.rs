@@ -121,6 +121,10 @@ pub enum RenderError {
     /// The run was interrupted (Ctrl-C).
     #[error("interrupted")]
     Interrupted,
+    /// `--device` asks for GPUs the machine does not have (the message of
+    /// [`crate::device::plan`], with its hint).
+    #[error("{0}")]
+    DevicePlan(String),
     /// Reading or writing a file failed.
     #[error("{what} `{}`: {cause}\nhint: {hint}", .path.display())]
     Io {

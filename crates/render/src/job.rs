@@ -6,7 +6,6 @@
 //! The final mask confirms the counts.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -17,7 +16,6 @@ use crate::exr_io::Channels;
 use crate::metadata::{self, RenderFacts};
 use crate::output::{self, Staged};
 use crate::passes::write_passes;
-use crate::pool::{PoolEvent, Slot};
 use crate::post::{self, ObjectPixels};
 use crate::worker::{Mode, RenderReply};
 
@@ -103,196 +101,196 @@ pub struct SampleStats {
     pub objects: Vec<ObjectPixels>,
 }
 
-impl Slot<'_, '_> {
-    pub(crate) fn run_job(&mut self, job: &Job) -> Result<SampleStats> {
-        let mut stats = SampleStats {
-            index: job.index,
-            ..SampleStats::default()
-        };
-        let opts = self.opts().clone();
-        let attempts = if job.resample {
-            opts.max_attempts.max(1)
-        } else {
-            1
-        };
-        let mut threshold = 0;
-        let mut size = (0, 0);
-        for attempt in 0..attempts {
-            if self.shared.stopping() {
-                return Err(RenderError::Interrupted);
-            }
-            let t_attempt = Instant::now();
-            let mut scene = (job.scene)(attempt).map_err(|message| RenderError::Sample {
-                index: job.index,
-                attempt,
-                message,
-            })?;
-            // The bridge always renders the object-index pass: visibility and the metadata's
-            // per-object pixel counts need it. Only requested passes become files.
-            let mut bridge_passes = job.passes.clone();
-            if !bridge_passes.contains(&Pass::Mask) {
-                bridge_passes.push(Pass::Mask);
-            }
-            bridge_passes.sort();
-            scene.passes = bridge_passes;
-            threshold = post::visibility_threshold(scene.render.width, scene.render.height);
-            size = (scene.render.width, scene.render.height);
-            let work = self.scratch.path().join(format!("{}-{attempt}", job.stem));
-            let _ = std::fs::remove_dir_all(&work);
-            std::fs::create_dir_all(&work).map_err(|e| RenderError::write(&work, e))?;
-            let scene_path = work.join("scene.json");
-            let text = serde_json::to_string_pretty(&scene).expect("scene serialises");
-            post::write_file(&scene_path, text.as_bytes())?;
-            let timeout = opts.timeout.unwrap_or_else(|| auto_timeout(&scene));
-            let n = scene.objects.len();
-            let label = match &job.source {
-                Some(file) => format!("{} (scene file `{}`)", job.stem, file.display()),
-                None => format!("{} attempt {attempt}", job.stem),
-            };
-
-            let mut visibility_s = 0.0;
-            if job.resample && opts.visibility_check {
-                let t = Instant::now();
-                let reply = self.request(&label, &scene_path, Mode::Visibility, &work, timeout)?;
-                stats.visibility_build_s += reply.timings.build_s;
-                stats.visibility_render_s += reply.timings.render_s;
-                stats.visibility_passes += 1;
-                let exr = reply_file(&reply, "visibility", &work)?;
-                let ch = Channels::read_sized(&exr, (size.0 as usize, size.1 as usize))?;
-                let ids = post::instance_ids(ch.get(&crate::passes::index_channel())?, n, &exr)?;
-                let px = post::object_pixels(&ids, ch.width, n);
-                visibility_s = t.elapsed().as_secs_f64();
-                if px.iter().any(|p| p.pixels <= threshold) {
-                    self.reject(job, attempt, t_attempt, &mut stats, &work);
-                    continue;
-                }
-            }
-
-            let t = Instant::now();
-            let reply = self.request(&label, &scene_path, Mode::Final, &work, timeout)?;
-            let final_request_s = t.elapsed().as_secs_f64();
-            let t_post = Instant::now();
-            let (facts_blender, facts_compat) = self
-                .session
-                .current()
-                .map(|w| (w.ready().blender_version.clone(), w.ready().compat.clone()))
-                .unwrap_or_default();
-            let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
-            let mut staged = Staged::new(&dir)?;
-            let objects = write_passes(
-                &reply,
-                &work,
-                &scene,
-                &job.passes,
-                &job.stem,
-                opts.keep_exr,
-                &mut staged,
-            )?;
-            if job.resample && objects.iter().any(|p| p.pixels <= threshold) {
-                // The final mask disagrees with the cheap pass (e.g. displacement hides an
-                // object): reject this layout too.
-                drop(staged);
-                self.reject(job, attempt, t_attempt, &mut stats, &work);
-                continue;
-            }
-            let mut meta_scene = scene.clone();
-            meta_scene.passes = job.passes.clone();
-            let doc = metadata::build(
-                &meta_scene,
-                &RenderFacts {
-                    objects: objects.clone(),
-                    blender_version: facts_blender,
-                    blender_compat: facts_compat,
-                    passes: job.passes.clone(),
-                },
-            );
-            let meta_name = layout::metadata_file(&job.stem);
-            let text = doc.to_json_pretty();
-            staged.write(&meta_name, text.as_bytes())?;
-            // The last check before the point of no return: an interrupt now drops the staged
-            // files, so no partial sample is left.
-            if opts.interrupt.load(Ordering::SeqCst) {
-                return Err(RenderError::Interrupted);
-            }
-            staged.commit()?;
-            output::remove_other_outputs(&dir, &job.stem, &job.passes, opts.keep_exr);
-            let _ = std::fs::remove_dir_all(&work);
-            stats.attempt = attempt;
-            stats.metadata = dir.join(meta_name);
-            stats.build_s = reply.timings.build_s;
-            stats.visibility_s = visibility_s;
-            stats.render_s = reply.timings.render_s + reply.timings.shadow_render_s;
-            stats.final_request_s = final_request_s;
-            stats.post_s = t_post.elapsed().as_secs_f64();
-            stats.projected = reply.projected.clone();
-            stats.objects = objects;
-            return Ok(stats);
-        }
-        Err(RenderError::TooManyRejects {
-            index: job.index,
-            attempts,
-            threshold,
-            width: size.0,
-            height: size.1,
-        })
-    }
-
-    fn reject(
+/// What a job needs from the worker slot that runs it (the pool's slot: `pool.rs`).
+pub(crate) trait JobHost {
+    /// Whether the run is stopping (a fatal error elsewhere, or an interrupt).
+    fn stopping(&self) -> bool;
+    /// Whether the run was interrupted (Ctrl-C, SIGTERM).
+    fn interrupted(&self) -> bool;
+    /// The slot's scratch folder.
+    fn scratch(&self) -> &Path;
+    /// One request with restarts (see [`crate::Session::request`]).
+    fn request(
+        &mut self,
+        label: &str,
+        scene: &Path,
+        mode: Mode,
+        dir: &Path,
+        timeout: Duration,
+    ) -> Result<RenderReply>;
+    /// The Blender version of the slot's current worker and the bridge's version-parity
+    /// settings on it (`ready.compat`; empty if none).
+    fn blender(
         &self,
-        job: &Job,
-        attempt: u32,
-        since: Instant,
-        stats: &mut SampleStats,
-        work: &Path,
-    ) {
-        let cost = since.elapsed();
-        stats.rejects += 1;
-        stats.reject_s += cost.as_secs_f64();
-        let _ = std::fs::remove_dir_all(work);
-        (self.shared.on_event)(&PoolEvent::Rejected {
-            index: job.index,
-            attempt,
-            cost,
-        });
-    }
+    ) -> (
+        String,
+        std::collections::BTreeMap<String, serde_json::Value>,
+    );
+    /// Tell the run that attempt `attempt` of image `index` was rejected after `cost`.
+    fn rejected(&self, index: u64, attempt: u32, cost: Duration);
 }
 
-/// A file the bridge says it wrote, which must be a regular file directly in our scratch
-/// folder `work`.
-pub(crate) fn reply_file(reply: &RenderReply, role: &str, work: &Path) -> Result<PathBuf> {
-    let path = reply
-        .files
-        .get(role)
-        .ok_or_else(|| RenderError::BadOutput {
-            path: work.to_path_buf(),
-            problem: format!(
-                "the bridge reported no `{role}` file (got: {})",
-                reply.files.keys().cloned().collect::<Vec<_>>().join(", ")
-            ),
+/// What a job needs of the run's options.
+#[derive(Debug, Clone)]
+pub(crate) struct JobSettings {
+    /// Layout attempts per image before giving up on it.
+    pub(crate) max_attempts: u32,
+    /// Run the cheap visibility pass before the full render.
+    pub(crate) visibility_check: bool,
+    /// Per-request time limit; `None` = [`auto_timeout`] of each scene.
+    pub(crate) timeout: Option<Duration>,
+    /// Output root.
+    pub(crate) out: PathBuf,
+    /// Keep the float EXRs beside the PNGs.
+    pub(crate) keep_exr: bool,
+}
+
+/// Turn `job` into a written sample on `slot`: attempts, the visibility check, the final
+/// render, its passes and metadata, committed at once.
+pub(crate) fn run_job(
+    slot: &mut dyn JobHost,
+    opts: &JobSettings,
+    job: &Job,
+) -> Result<SampleStats> {
+    let mut stats = SampleStats {
+        index: job.index,
+        ..SampleStats::default()
+    };
+    let attempts = if job.resample {
+        opts.max_attempts.max(1)
+    } else {
+        1
+    };
+    let mut threshold = 0;
+    let mut size = (0, 0);
+    for attempt in 0..attempts {
+        if slot.stopping() {
+            return Err(RenderError::Interrupted);
+        }
+        let t_attempt = Instant::now();
+        let mut scene = (job.scene)(attempt).map_err(|message| RenderError::Sample {
+            index: job.index,
+            attempt,
+            message,
         })?;
-    // Blender's output is not trusted (docs/security.md): a reply naming a file elsewhere
-    // (`/home/me/secret`, `work/../x`, a link out of `work`) would have it read and copied into
-    // the dataset.
-    if path.parent() != Some(work) || path.file_name().is_none() {
-        return Err(RenderError::BadOutput {
-            path: path.clone(),
-            problem: format!(
-                "the `{role}` file the bridge reported is not in the worker's folder `{}`; it was not read",
-                work.display()
-            ),
-        });
+        // The bridge always renders the object-index pass: visibility and the metadata's
+        // per-object pixel counts need it. Only requested passes become files.
+        let mut bridge_passes = job.passes.clone();
+        if !bridge_passes.contains(&Pass::Mask) {
+            bridge_passes.push(Pass::Mask);
+        }
+        bridge_passes.sort();
+        scene.passes = bridge_passes;
+        threshold = post::visibility_threshold(scene.render.width, scene.render.height);
+        size = (scene.render.width, scene.render.height);
+        let work = slot.scratch().join(format!("{}-{attempt}", job.stem));
+        let _ = std::fs::remove_dir_all(&work);
+        std::fs::create_dir_all(&work).map_err(|e| RenderError::write(&work, e))?;
+        let scene_path = work.join("scene.json");
+        let text = serde_json::to_string_pretty(&scene).expect("scene serialises");
+        post::write_file(&scene_path, text.as_bytes())?;
+        let timeout = opts.timeout.unwrap_or_else(|| auto_timeout(&scene));
+        let n = scene.objects.len();
+        let label = match &job.source {
+            Some(file) => format!("{} (scene file `{}`)", job.stem, file.display()),
+            None => format!("{} attempt {attempt}", job.stem),
+        };
+
+        let mut visibility_s = 0.0;
+        if job.resample && opts.visibility_check {
+            let t = Instant::now();
+            let reply = slot.request(&label, &scene_path, Mode::Visibility, &work, timeout)?;
+            stats.visibility_build_s += reply.timings.build_s;
+            stats.visibility_render_s += reply.timings.render_s;
+            stats.visibility_passes += 1;
+            let exr = reply.file("visibility", &work)?;
+            let ch = Channels::read_sized(&exr, (size.0 as usize, size.1 as usize))?;
+            let ids = post::instance_ids(ch.get(&crate::passes::index_channel())?, n, &exr)?;
+            let px = post::object_pixels(&ids, ch.width, n);
+            visibility_s = t.elapsed().as_secs_f64();
+            if px.iter().any(|p| p.pixels <= threshold) {
+                reject(slot, job, attempt, t_attempt, &mut stats, &work);
+                continue;
+            }
+        }
+
+        let t = Instant::now();
+        let reply = slot.request(&label, &scene_path, Mode::Final, &work, timeout)?;
+        let final_request_s = t.elapsed().as_secs_f64();
+        let t_post = Instant::now();
+        let (facts_blender, facts_compat) = slot.blender();
+        let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
+        let mut staged = Staged::new(&dir)?;
+        let objects = write_passes(
+            &reply,
+            &work,
+            &scene,
+            &job.passes,
+            &job.stem,
+            opts.keep_exr,
+            &mut staged,
+        )?;
+        if job.resample && objects.iter().any(|p| p.pixels <= threshold) {
+            // The final mask disagrees with the cheap pass (e.g. displacement hides an
+            // object): reject this layout too.
+            drop(staged);
+            reject(slot, job, attempt, t_attempt, &mut stats, &work);
+            continue;
+        }
+        let mut meta_scene = scene.clone();
+        meta_scene.passes = job.passes.clone();
+        let doc = metadata::build(
+            &meta_scene,
+            &RenderFacts {
+                objects: objects.clone(),
+                blender_version: facts_blender,
+                blender_compat: facts_compat,
+                passes: job.passes.clone(),
+            },
+        );
+        let meta_name = layout::metadata_file(&job.stem);
+        let text = doc.to_json_pretty();
+        staged.write(&meta_name, text.as_bytes())?;
+        // The last check before the point of no return: an interrupt now drops the staged
+        // files, so no partial sample is left.
+        if slot.interrupted() {
+            return Err(RenderError::Interrupted);
+        }
+        staged.commit()?;
+        output::remove_other_outputs(&dir, &job.stem, &job.passes, opts.keep_exr);
+        let _ = std::fs::remove_dir_all(&work);
+        stats.attempt = attempt;
+        stats.metadata = dir.join(meta_name);
+        stats.build_s = reply.timings.build_s;
+        stats.visibility_s = visibility_s;
+        stats.render_s = reply.timings.render_s + reply.timings.shadow_render_s;
+        stats.final_request_s = final_request_s;
+        stats.post_s = t_post.elapsed().as_secs_f64();
+        stats.projected = reply.projected.clone();
+        stats.objects = objects;
+        return Ok(stats);
     }
-    match std::fs::symlink_metadata(path) {
-        Ok(m) if m.is_file() => Ok(path.clone()),
-        Ok(_) => Err(RenderError::BadOutput {
-            path: path.clone(),
-            problem: format!(
-                "the `{role}` file the bridge reported is not a regular file (a link, folder or FIFO); it was not read"
-            ),
-        }),
-        Err(_) => Err(RenderError::BadOutput {
-            path: path.clone(),
-            problem: format!("the `{role}` file the bridge reported does not exist"),
-        }),
-    }
+    Err(RenderError::TooManyRejects {
+        index: job.index,
+        attempts,
+        threshold,
+        width: size.0,
+        height: size.1,
+    })
+}
+
+/// Count a rejected attempt and tell the run.
+fn reject(
+    slot: &dyn JobHost,
+    job: &Job,
+    attempt: u32,
+    since: Instant,
+    stats: &mut SampleStats,
+    work: &Path,
+) {
+    let cost = since.elapsed();
+    stats.rejects += 1;
+    stats.reject_s += cost.as_secs_f64();
+    let _ = std::fs::remove_dir_all(work);
+    slot.rejected(job.index, attempt, cost);
 }

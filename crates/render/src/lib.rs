@@ -17,20 +17,16 @@
 //! ```no_run
 //! use std::sync::{atomic::AtomicBool, Arc};
 //! use std::time::Duration;
-//! use clevrtex_render::{BridgeDir, Mode, Worker, WorkerOptions, STARTUP_TIMEOUT};
+//! use clevrtex_render::{BridgeDir, Mode, Worker, WorkerOptions};
 //!
 //! # fn main() -> Result<(), clevrtex_render::RenderError> {
 //! let materials = clevrtex_render::default_materials_json().expect("valid built-in catalogue");
 //! let bridge = BridgeDir::create(&materials)?;
-//! let mut worker = Worker::start(&WorkerOptions {
-//!     blender: clevrtex_render::blender::locate(None)?,
-//!     script: bridge.worker_script(),
-//!     materials: bridge.materials_json(),
-//!     threads: 0,
-//!     startup_timeout: STARTUP_TIMEOUT,
-//!     interrupt: Arc::new(AtomicBool::new(false)),
-//!     device: Default::default(),
-//! })?;
+//! let mut worker = Worker::start(&WorkerOptions::new(
+//!     clevrtex_render::blender::locate(None)?,
+//!     &bridge,
+//!     Arc::new(AtomicBool::new(false)),
+//! ))?;
 //! let out = std::path::Path::new("/tmp/out");
 //! let reply = worker.render(&out.join("scene.json"), Mode::Final, out, Duration::from_secs(600))?;
 //! println!("rgb at {:?}", reply.files.get("rgb"));
@@ -45,6 +41,7 @@ pub use clevrtex_scene::dataset;
 pub mod device;
 mod error;
 pub mod exr_io;
+pub mod gpu_probe;
 mod group;
 mod job;
 mod ledger;

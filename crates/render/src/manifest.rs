@@ -59,3 +59,141 @@ impl WriteManifest for Manifest {
         Ok(path)
     }
 }
+
+/// What a `generate` run records in its manifest, known before its first image: written as
+/// its plan ([`Plan::write_plan`]) and, at the end, with the files it made ([`Plan::write`]).
+#[derive(Debug, Clone)]
+pub struct Plan {
+    /// Variant name.
+    pub variant: String,
+    /// Run seed.
+    pub seed: u64,
+    /// xxh3 of the resolved variant config, hex ([`hash_hex`]).
+    pub config_hash: String,
+    /// First index of the run.
+    pub start: u64,
+    /// One past the last index (before sharding).
+    pub end: u64,
+    /// Size of the whole dataset.
+    pub total: u64,
+    /// This shard `[k, n]`.
+    pub shard: [u64; 2],
+    /// Passes written.
+    pub passes: Vec<clevrtex_scene::Pass>,
+    /// Whether the float EXRs are kept (they are files of the run too).
+    pub keep_exr: bool,
+    /// `clevrtex` version.
+    pub tool_version: String,
+    /// The command line that made the run.
+    pub command: Vec<String>,
+}
+
+impl Plan {
+    /// `OUT/clevrtex_<variant>/`.
+    pub fn variant_dir(&self, out: &Path) -> PathBuf {
+        clevrtex_scene::layout::variant_dir(out, &self.variant)
+    }
+
+    /// The manifest of this run's range and shard as an earlier run left it, if readable.
+    fn earlier(&self, out: &Path) -> Option<Manifest> {
+        let name = file_name(self.start, self.end, self.shard[0], self.shard[1]);
+        Manifest::read(&self.variant_dir(out).join(name)).ok()
+    }
+
+    /// The manifest with these settings, `files` and `sample_seconds`.
+    fn manifest(
+        &self,
+        finished: bool,
+        blender_version: String,
+        blender_compat: BTreeMap<String, serde_json::Value>,
+        files: BTreeMap<String, FileEntry>,
+        sample_seconds: BTreeMap<String, f64>,
+    ) -> Manifest {
+        Manifest {
+            format: MANIFEST_FORMAT.into(),
+            version: MANIFEST_VERSION,
+            variant: self.variant.clone(),
+            seed: self.seed,
+            config_hash: self.config_hash.clone(),
+            start: self.start,
+            end: self.end,
+            total: self.total,
+            shard: self.shard,
+            passes: self.passes.iter().map(|p| p.name().to_string()).collect(),
+            tool_version: self.tool_version.clone(),
+            blender_version,
+            blender_compat,
+            command: self.command.clone(),
+            finished,
+            files,
+            sample_seconds,
+        }
+    }
+
+    /// Write the run's plan into the (existing) variant folder before the first image: its
+    /// manifest with `finished: false` and no files, so `verify` knows what the run is to
+    /// make even if it never ends. The seconds of samples an earlier run of this range made
+    /// are kept.
+    pub fn write_plan(&self, out: &Path) -> Result<PathBuf> {
+        let seconds = self
+            .earlier(out)
+            .map(|m| m.sample_seconds)
+            .unwrap_or_default();
+        let m = self.manifest(
+            false,
+            String::new(),
+            BTreeMap::new(),
+            BTreeMap::new(),
+            seconds,
+        );
+        m.write(&self.variant_dir(out))
+    }
+
+    /// Write the manifest of the run's complete samples (hashing their files).
+    /// `seconds`: time per sample made by this run, by index; those of complete samples an
+    /// earlier run made are kept from its manifest.
+    pub fn write(&self, out: &Path, seconds: &BTreeMap<u64, f64>) -> Result<PathBuf> {
+        use clevrtex_scene::layout;
+        let vdir = self.variant_dir(out);
+        let earlier = self
+            .earlier(out)
+            .map(|m| m.sample_seconds)
+            .unwrap_or_default();
+        let mut sample_seconds = BTreeMap::new();
+        let mut files = Vec::new();
+        let mut blender_version = String::new();
+        let mut blender_compat = BTreeMap::new();
+        let indices = self.manifest(
+            true,
+            String::new(),
+            BTreeMap::new(),
+            BTreeMap::new(),
+            BTreeMap::new(),
+        );
+        for index in indices.indices() {
+            let stem = layout::stem(&self.variant, index);
+            let dir = layout::sample_dir(out, &self.variant, index);
+            let names = crate::output::expected_files(&stem, &self.passes, self.keep_exr);
+            if !names.iter().all(|n| dir.join(n).is_file()) {
+                continue;
+            }
+            if blender_version.is_empty() {
+                let meta =
+                    std::fs::read(dir.join(layout::metadata_file(&stem))).unwrap_or_default();
+                let meta: serde_json::Value = serde_json::from_slice(&meta).unwrap_or_default();
+                blender_version = meta["blender_version"].as_str().unwrap_or("").to_string();
+                if let Some(c) = meta["blender_compat"].as_object() {
+                    blender_compat = c.clone().into_iter().collect();
+                }
+            }
+            if let Some(s) = seconds.get(&index).or_else(|| earlier.get(&stem)) {
+                sample_seconds.insert(stem.clone(), (s * 1000.0).round() / 1000.0);
+            }
+            let sub = (index / 1000).to_string();
+            files.extend(names.into_iter().map(|n| format!("{sub}/{n}")));
+        }
+        let files = hash_files(&vdir, &files)?;
+        let manifest = self.manifest(true, blender_version, blender_compat, files, sample_seconds);
+        manifest.write(&vdir)
+    }
+}

@@ -9,7 +9,6 @@ use clevrtex_scene::{Pass, SceneFile};
 
 use crate::error::{RenderError, Result};
 use crate::exr_io::Channels;
-use crate::job::reply_file;
 use crate::output::Staged;
 use crate::post::{self, ObjectPixels};
 use crate::worker::RenderReply;
@@ -73,7 +72,7 @@ fn read_shadow_exr(
     work: &Path,
     size: (usize, usize),
 ) -> Result<Channels> {
-    let path = reply_file(reply, role, work)?;
+    let path = reply.file(role, work)?;
     let ch = Channels::read_sized(&path, size)?;
     if (ch.width, ch.height) != size {
         return Err(RenderError::BadOutput {
@@ -98,7 +97,7 @@ pub(crate) fn write_passes(
     keep_exr: bool,
     staged: &mut Staged,
 ) -> Result<Vec<ObjectPixels>> {
-    let exr_path = reply_file(reply, "passes", work)?;
+    let exr_path = reply.file("passes", work)?;
     let asked = (scene.render.width as usize, scene.render.height as usize);
     let ch = Channels::read_sized(&exr_path, asked)?;
     let (w, h) = (ch.width as u32, ch.height as u32);
@@ -126,7 +125,7 @@ pub(crate) fn write_passes(
     for &pass in passes {
         let name = layout::pass_file(stem, pass);
         if pass.spec().source == Source::RgbPng {
-            let from = reply_file(reply, "rgb", work)?;
+            let from = reply.file("rgb", work)?;
             let bytes = std::fs::read(&from).map_err(|e| {
                 RenderError::io(
                     "cannot read render output",
@@ -154,7 +153,7 @@ pub(crate) fn write_passes(
         let names = layout::exr_files(stem, passes.contains(&Pass::Shadow));
         staged.copy(&names[0], &exr_path)?;
         if names.len() == 2 {
-            staged.copy(&names[1], &reply_file(reply, "shadow", work)?)?;
+            staged.copy(&names[1], &reply.file("shadow", work)?)?;
         }
     }
     Ok(objects)

@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 
 use crate::bridge::BridgeDir;
 use crate::error::{RenderError, Result};
+use crate::job::{JobHost, JobSettings};
 use crate::ledger::Ledger;
 use crate::output;
 use crate::session::{Hooks, Session};
@@ -183,8 +184,8 @@ impl RunReport {
     }
 }
 
-pub(crate) struct Shared<'a> {
-    pub(crate) opts: &'a PoolOptions,
+struct Shared<'a> {
+    opts: &'a PoolOptions,
     bridge: BridgeDir,
     queue: Mutex<VecDeque<Job>>,
     report: Mutex<RunReport>,
@@ -195,7 +196,7 @@ pub(crate) struct Shared<'a> {
     threads: u32,
     ledger: Mutex<Ledger>,
     failed_stems: Mutex<BTreeSet<String>>,
-    pub(crate) on_event: &'a (dyn Fn(&PoolEvent) + Sync),
+    on_event: &'a (dyn Fn(&PoolEvent) + Sync),
 }
 
 /// Render every job with `opts.workers` workers. Complete samples are skipped unless
@@ -270,7 +271,7 @@ pub fn run(
 }
 
 impl Shared<'_> {
-    pub(crate) fn stopping(&self) -> bool {
+    fn stopping(&self) -> bool {
         self.stop.load(Ordering::SeqCst) || self.opts.interrupt.load(Ordering::SeqCst)
     }
 
@@ -297,10 +298,10 @@ impl Shared<'_> {
 }
 
 /// One worker slot: a (re)startable Blender process and its scratch folder.
-pub(crate) struct Slot<'s, 'a> {
-    pub(crate) shared: &'s Shared<'a>,
-    pub(crate) session: Session,
-    pub(crate) scratch: tempfile::TempDir,
+struct Slot<'s, 'a> {
+    shared: &'s Shared<'a>,
+    session: Session,
+    scratch: tempfile::TempDir,
 }
 
 fn worker_thread(shared: &Shared, slot_index: usize) {
@@ -315,15 +316,14 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
     // With an explicit `--timeout` that limit is the only one; otherwise silence for
     // IDLE_TIMEOUT also counts as a hang.
     let session = Session::new(
-        WorkerOptions {
-            blender: opts.blender.clone(),
-            script: shared.bridge.worker_script(),
-            materials: shared.bridge.materials_json(),
-            threads: shared.threads,
-            startup_timeout: opts.startup_timeout,
-            interrupt: Arc::clone(&opts.interrupt),
-            device: crate::device::placement_for(&opts.devices, slot_index),
-        },
+        WorkerOptions::new(
+            opts.blender.clone(),
+            &shared.bridge,
+            Arc::clone(&opts.interrupt),
+        )
+        .with_threads(shared.threads)
+        .with_startup_timeout(opts.startup_timeout)
+        .with_device(crate::device::placement_for(&opts.devices, slot_index)),
         opts.retries,
         opts.timeout.is_none().then_some(IDLE_TIMEOUT),
     )
@@ -333,6 +333,13 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         session,
         scratch,
     };
+    let settings = JobSettings {
+        max_attempts: opts.max_attempts,
+        visibility_check: opts.visibility_check,
+        timeout: opts.timeout,
+        out: opts.out.clone(),
+        keep_exr: opts.keep_exr,
+    };
     loop {
         if shared.stopping() {
             break;
@@ -340,7 +347,7 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         let Some(job) = shared.queue.lock().unwrap().pop_front() else {
             break;
         };
-        match slot.run_job(&job) {
+        match crate::job::run_job(&mut slot, &settings, &job) {
             Ok(stats) => {
                 shared.report.lock().unwrap().add(&stats);
                 (shared.on_event)(&PoolEvent::Done { sample: &stats });
@@ -406,13 +413,41 @@ fn is_fatal(err: &RenderError) -> bool {
     )
 }
 
-impl Slot<'_, '_> {
-    pub(crate) fn opts(&self) -> &PoolOptions {
-        self.shared.opts
+impl JobHost for Slot<'_, '_> {
+    fn stopping(&self) -> bool {
+        self.shared.stopping()
+    }
+
+    fn interrupted(&self) -> bool {
+        self.shared.opts.interrupt.load(Ordering::SeqCst)
+    }
+
+    fn scratch(&self) -> &Path {
+        self.scratch.path()
+    }
+
+    fn blender(
+        &self,
+    ) -> (
+        String,
+        std::collections::BTreeMap<String, serde_json::Value>,
+    ) {
+        self.session
+            .current()
+            .map(|w| (w.ready().blender_version.clone(), w.ready().compat.clone()))
+            .unwrap_or_default()
+    }
+
+    fn rejected(&self, index: u64, attempt: u32, cost: Duration) {
+        (self.shared.on_event)(&PoolEvent::Rejected {
+            index,
+            attempt,
+            cost,
+        });
     }
 
     /// One request with restarts (see [`Session::request`]).
-    pub(crate) fn request(
+    fn request(
         &mut self,
         label: &str,
         scene: &Path,

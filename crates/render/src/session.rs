@@ -13,20 +13,16 @@
 //! ```no_run
 //! use std::time::Duration;
 //! use std::sync::{atomic::AtomicBool, Arc};
-//! use clevrtex_render::{BridgeDir, Mode, Session, WorkerOptions, STARTUP_TIMEOUT};
+//! use clevrtex_render::{BridgeDir, Mode, Session, WorkerOptions};
 //!
 //! # fn main() -> Result<(), clevrtex_render::RenderError> {
 //! let bridge = BridgeDir::create(&clevrtex_render::default_materials_json().unwrap())?;
 //! let mut session = Session::new(
-//!     WorkerOptions {
-//!         blender: clevrtex_render::blender::locate(None)?,
-//!         script: bridge.worker_script(),
-//!         materials: bridge.materials_json(),
-//!         threads: 0,
-//!         startup_timeout: STARTUP_TIMEOUT,
-//!         interrupt: Arc::new(AtomicBool::new(false)),
-//!         device: Default::default(),
-//!     },
+//!     WorkerOptions::new(
+//!         clevrtex_render::blender::locate(None)?,
+//!         &bridge,
+//!         Arc::new(AtomicBool::new(false)),
+//!     ),
 //!     2,    // restarts per request
 //!     None, // no idle limit
 //! );

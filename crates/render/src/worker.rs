@@ -57,6 +57,45 @@ pub struct WorkerOptions {
     pub device: crate::device::Placement,
 }
 
+impl WorkerOptions {
+    /// A worker of `blender` running `bridge`'s script and catalogue, stopped by `interrupt`:
+    /// Blender's own thread count, [`STARTUP_TIMEOUT`], the CPU. The one place a worker's
+    /// options are assembled; change one with the `with_*` methods.
+    pub fn new(
+        blender: PathBuf,
+        bridge: &crate::BridgeDir,
+        interrupt: Arc<AtomicBool>,
+    ) -> WorkerOptions {
+        WorkerOptions {
+            blender,
+            script: bridge.worker_script(),
+            materials: bridge.materials_json(),
+            threads: 0,
+            startup_timeout: STARTUP_TIMEOUT,
+            interrupt,
+            device: crate::device::Placement::cpu(),
+        }
+    }
+
+    /// These options with `threads` Cycles threads (0 = Blender's choice).
+    pub fn with_threads(mut self, threads: u32) -> WorkerOptions {
+        self.threads = threads;
+        self
+    }
+
+    /// These options with a start-up time limit of `timeout`.
+    pub fn with_startup_timeout(mut self, timeout: Duration) -> WorkerOptions {
+        self.startup_timeout = timeout;
+        self
+    }
+
+    /// These options rendering on `device`.
+    pub fn with_device(mut self, device: crate::device::Placement) -> WorkerOptions {
+        self.device = device;
+        self
+    }
+}
+
 /// The worker's `ready` message.
 #[derive(Debug, Clone, Deserialize)]
 pub struct Ready {
@@ -148,6 +187,44 @@ pub struct RenderReply {
     /// Each object's origin projected by Blender's camera: `[x, y, depth]`, pixels, y down.
     #[serde(default)]
     pub projected: Vec<[f64; 3]>,
+}
+
+impl RenderReply {
+    /// A file the bridge says it wrote, which must lie in our scratch folder `work`.
+    pub(crate) fn file(&self, role: &str, work: &Path) -> Result<PathBuf> {
+        let path = self.files.get(role).ok_or_else(|| RenderError::BadOutput {
+            path: work.to_path_buf(),
+            problem: format!(
+                "the bridge reported no `{role}` file (got: {})",
+                self.files.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+        })?;
+        // Blender's output is not trusted (docs/security.md): a reply naming a file elsewhere
+        // (`/home/me/secret`, `work/../x`, a link out of `work`) would have it read and copied
+        // into the dataset.
+        if path.parent() != Some(work) || path.file_name().is_none() {
+            return Err(RenderError::BadOutput {
+                path: path.clone(),
+                problem: format!(
+                    "the `{role}` file the bridge reported is not in the worker's folder `{}`; it was not read",
+                    work.display()
+                ),
+            });
+        }
+        match std::fs::symlink_metadata(path) {
+            Ok(m) if m.is_file() => Ok(path.clone()),
+            Ok(_) => Err(RenderError::BadOutput {
+                path: path.clone(),
+                problem: format!(
+                    "the `{role}` file the bridge reported is not a regular file (a link, folder or FIFO); it was not read"
+                ),
+            }),
+            Err(_) => Err(RenderError::BadOutput {
+                path: path.clone(),
+                problem: format!("the `{role}` file the bridge reported does not exist"),
+            }),
+        }
+    }
 }
 
 /// What a `material` request renders around the material (see

@@ -1,7 +1,7 @@
 //! The error-against-time plot (log-log, one curve per sampling mode) as SVG and PNG.
 //!
-//! Text needs a font ([`crate::font`]); without one the plot is drawn without text and the
-//! caller is told so.
+//! Text needs a font registered with plotters (the command line's `font::available`); without
+//! one the caller passes `text: false`, the plot is drawn without text and the user is told so.
 
 use std::path::Path;
 
@@ -14,15 +14,16 @@ pub type Curve = (String, Vec<(f64, f64)>);
 const W: u32 = 900;
 const H: u32 = 600;
 
-/// Write `stem.svg` and `stem.png`. Returns whether text (axes, legend) could be drawn.
+/// Write `stem.svg` and `stem.png`, with text (axes, legend) if `text` (a font is
+/// registered). Returns `text`.
 pub fn write(
     stem: &Path,
     title: &str,
     x_label: &str,
     y_label: &str,
     curves: &[Curve],
+    text: bool,
 ) -> anyhow::Result<bool> {
-    let text = crate::font::available();
     let svg = stem.with_extension("svg");
     {
         let root = SVGBackend::new(&svg, (W, H)).into_drawing_area();

@@ -186,6 +186,30 @@ pub fn ladder(quick: bool) -> Vec<Setting> {
     out
 }
 
+/// The rungs to run: the ladder (with `levers`, also the lever rungs), less those with more
+/// samples than `max_samples` and, given `only`, those whose label contains none of its words.
+pub fn select(
+    quick: bool,
+    levers: bool,
+    max_samples: Option<u32>,
+    only: Option<&[String]>,
+) -> anyhow::Result<Vec<Setting>> {
+    let settings: Vec<Setting> = ladder(quick)
+        .into_iter()
+        .chain(if levers {
+            lever_rungs(quick)
+        } else {
+            Vec::new()
+        })
+        .filter(|s| max_samples.is_none_or(|m| s.sampling.samples <= m))
+        .filter(|s| only.is_none_or(|l| l.iter().any(|w| s.label.contains(w.trim()))))
+        .collect();
+    if settings.is_empty() {
+        anyhow::bail!("no rung of the ladder is left after `--max-samples`/`--only`\nhint: raise `--max-samples` or widen `--only`");
+    }
+    Ok(settings)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

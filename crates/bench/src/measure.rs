@@ -1,0 +1,351 @@
+//! The measurement: for each scene its reference (cached) and first-sample render, then every
+//! rung, each compared with them.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context};
+use clevrtex_materials::Catalogue;
+use clevrtex_render::exr_io::Channels;
+use clevrtex_scene::quality::Sampling;
+use clevrtex_scene::SceneFile;
+
+use crate::ladder::Setting;
+use crate::metrics::{self, Errors};
+use crate::scenes::{timeout_for, with_sampling, BenchScene, REFERENCE_SEED};
+
+/// A Blender that renders one scene file: the command line hands in its session (restarts,
+/// Ctrl-C and its messages are the command's).
+pub trait Render {
+    /// Render the scene file `scene` (Mode::Final) into `dir` within `timeout`; `label`
+    /// names the render in Blender's messages. Returns Cycles' render time in seconds.
+    fn render(
+        &mut self,
+        label: &str,
+        scene: &Path,
+        dir: &Path,
+        timeout: Duration,
+    ) -> anyhow::Result<f64>;
+}
+
+/// What the measurement is doing, for the command to print.
+#[derive(Debug)]
+pub enum Event<'a> {
+    /// A scene's reference was found in the cache.
+    ReferenceCached {
+        /// The scene's label.
+        scene: &'a str,
+        /// The cache folder.
+        dir: &'a Path,
+    },
+    /// A scene's reference is being rendered.
+    ReferenceRendering {
+        /// The scene's label.
+        scene: &'a str,
+        /// Its samples.
+        samples: u32,
+    },
+    /// A scene's reference was rendered.
+    ReferenceRendered {
+        /// The scene's label.
+        scene: &'a str,
+        /// Wall time, seconds.
+        wall_s: f64,
+        /// Cycles' render time, seconds.
+        cycles_s: f64,
+    },
+    /// One rung of one scene was measured.
+    Measured {
+        /// Rungs measured so far (this one included).
+        done: usize,
+        /// Rungs to measure in all.
+        total: usize,
+        /// `<scene> <rung>`.
+        label: &'a str,
+        /// Wall time, seconds.
+        wall_s: f64,
+        /// Its relative error.
+        rel_error: f64,
+    },
+}
+
+/// One measured (setting, scene) pair.
+#[derive(Debug)]
+pub struct Row {
+    /// The scene's label.
+    pub scene: String,
+    /// The scene's variant.
+    pub variant: String,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// The rung.
+    pub setting: Setting,
+    /// Wall time of the render request, seconds.
+    pub wall_s: f64,
+    /// Cycles' render time, seconds.
+    pub cycles_s: f64,
+    /// Its error against the reference.
+    pub errors: Errors,
+}
+
+/// The sizes of a bench run, defaults resolved (`--quick` or not).
+#[derive(Debug, Clone, Copy)]
+pub struct Plan {
+    /// Number of scenes.
+    pub scenes: usize,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Fixed samples of the references.
+    pub reference_samples: u32,
+}
+
+impl Plan {
+    /// The sizes given (`None`: the default, smaller with `quick`); each must be positive.
+    pub fn new(
+        quick: bool,
+        scenes: Option<usize>,
+        width: Option<u32>,
+        height: Option<u32>,
+        reference_samples: Option<u32>,
+    ) -> anyhow::Result<Plan> {
+        let plan = Plan {
+            scenes: scenes.unwrap_or(if quick { 2 } else { 8 }),
+            width: width.unwrap_or(if quick { 160 } else { 320 }),
+            height: height.unwrap_or(if quick { 120 } else { 240 }),
+            reference_samples: reference_samples.unwrap_or(if quick { 1024 } else { 4096 }),
+        };
+        if plan.scenes == 0 || plan.width == 0 || plan.height == 0 || plan.reference_samples == 0 {
+            bail!("`--scenes`, `--width`, `--height` and `--reference-samples` must be positive\nhint: e.g. `clevrtex bench render --quick`");
+        }
+        Ok(plan)
+    }
+
+    /// The first rung with no fewer samples than the references (its error means nothing).
+    pub fn oversampled<'s>(&self, settings: &'s [Setting]) -> Option<&'s Setting> {
+        settings
+            .iter()
+            .find(|s| s.sampling.samples >= self.reference_samples)
+    }
+}
+
+/// The decoded outputs of one render.
+struct Outputs {
+    rgb: Vec<f32>,
+    srgb: Vec<u8>,
+    mask: Vec<f32>,
+    depth: Vec<f32>,
+    mean: f64,
+}
+
+fn read_outputs(dir: &Path) -> anyhow::Result<Outputs> {
+    let ch = Channels::read(&dir.join("passes.exr"))?;
+    let (r, g, b) = (
+        ch.get("ViewLayer.Combined.R")?,
+        ch.get("ViewLayer.Combined.G")?,
+        ch.get("ViewLayer.Combined.B")?,
+    );
+    let rgb: Vec<f32> = (0..r.len()).flat_map(|i| [r[i], g[i], b[i]]).collect();
+    let png = dir.join("rgb.png");
+    let srgb = image::open(&png)
+        .with_context(|| format!("cannot read `{}`", png.display()))?
+        .to_rgb8()
+        .into_raw();
+    Ok(Outputs {
+        mean: metrics::mean(&rgb),
+        rgb,
+        srgb,
+        mask: ch.get("ViewLayer.IndexOB.X")?.to_vec(),
+        depth: ch.get("ViewLayer.Depth.Z")?.to_vec(),
+    })
+}
+
+fn compare(got: &Outputs, reference: &Outputs, first_sample: &Outputs) -> Errors {
+    let rmse = metrics::rmse(&got.rgb, &reference.rgb);
+    Errors {
+        rmse_linear: rmse,
+        rel_error: metrics::ratio(rmse, reference.mean),
+        bias: metrics::ratio(got.mean - reference.mean, reference.mean),
+        psnr_srgb: metrics::psnr_u8(&got.srgb, &reference.srgb),
+        mask_equal: metrics::bits_equal(&got.mask, &first_sample.mask),
+        depth_equal: metrics::bits_equal(&got.depth, &first_sample.depth),
+    }
+}
+
+/// Render `scene` into `dir` (created, emptied of old outputs); returns wall time and
+/// Cycles' render time.
+fn render_into(
+    blender: &mut dyn Render,
+    label: &str,
+    scene: &SceneFile,
+    dir: &Path,
+) -> anyhow::Result<(f64, f64)> {
+    std::fs::create_dir_all(dir).with_context(|| {
+        format!(
+            "cannot create `{}`\nhint: pass a writable `--out`",
+            dir.display()
+        )
+    })?;
+    for f in ["rgb.png", "passes.exr"] {
+        let _ = std::fs::remove_file(dir.join(f));
+    }
+    let path = dir.join("scene.json");
+    std::fs::write(&path, clevrtex_scene::to_pretty_json(scene)?)
+        .with_context(|| format!("cannot write `{}`", path.display()))?;
+    let started = Instant::now();
+    let cycles_s = blender.render(label, &path, dir, timeout_for(scene))?;
+    Ok((started.elapsed().as_secs_f64(), cycles_s))
+}
+
+/// Where everything the measurement needs comes from.
+pub struct Bench<'a> {
+    /// The Blender.
+    pub blender: &'a mut dyn Render,
+    /// The material catalogue (the recipes of a scene's materials key its reference).
+    pub catalogue: &'a Catalogue,
+    /// The Blender's version (keys the references).
+    pub blender_version: &'a str,
+    /// Output folder: `references/` and `runs/` go here.
+    pub out: &'a Path,
+    /// Told what is going on.
+    pub on_event: &'a mut dyn FnMut(Event),
+}
+
+impl Bench<'_> {
+    /// Measure every rung of `settings` on every scene: one row per (scene, rung), in order.
+    pub fn measure(
+        &mut self,
+        plan: &Plan,
+        scenes: &[BenchScene],
+        settings: &[Setting],
+    ) -> anyhow::Result<Vec<Row>> {
+        let total = scenes.len() * settings.len();
+        let mut rows = Vec::with_capacity(total);
+        for (si, bs) in scenes.iter().enumerate() {
+            let (reference, ref_dir) = self.reference(bs, plan.reference_samples)?;
+            let geometry = self.first_sample(bs, &ref_dir)?;
+            for setting in settings {
+                let (wall_s, cycles_s, errors) =
+                    self.rung(si, bs, setting, &reference, &geometry)?;
+                (self.on_event)(Event::Measured {
+                    done: rows.len() + 1,
+                    total,
+                    label: &format!("{} {}", bs.label, setting.label),
+                    wall_s,
+                    rel_error: errors.rel_error,
+                });
+                rows.push(Row {
+                    scene: bs.label.clone(),
+                    variant: bs.scene.variant.clone(),
+                    width: plan.width,
+                    height: plan.height,
+                    setting: setting.clone(),
+                    wall_s,
+                    cycles_s,
+                    errors,
+                });
+            }
+        }
+        Ok(rows)
+    }
+
+    /// The scene's reference from the cache, or rendered into it; and the cache folder.
+    fn reference(
+        &mut self,
+        bs: &BenchScene,
+        ref_samples: u32,
+    ) -> anyhow::Result<(Outputs, PathBuf)> {
+        let mut ref_scene = with_sampling(
+            &bs.scene,
+            &Sampling {
+                samples: ref_samples,
+                ..Sampling::ORIGINAL
+            },
+        );
+        // Another Cycles seed: with the rungs' seed the reference would reuse their first
+        // samples, and a rung's error would shrink by sqrt(1 - samples / reference samples).
+        ref_scene.render.cycles_seed = REFERENCE_SEED;
+        let ref_json = clevrtex_scene::to_pretty_json(&ref_scene)?;
+        // Only the recipes of the materials this scene uses: editing another material of the
+        // catalogue must not throw away hours of references. (Bridge script changes are not
+        // tracked: delete `OUT/references` after changing how materials are built.)
+        let used = std::iter::once(bs.scene.backdrop.material.name.as_str())
+            .chain(bs.scene.objects.iter().map(|o| o.material.name.as_str()));
+        let recipes = self.catalogue.resolved_json_for(used);
+        let key = clevrtex_materials::content_hash(&[
+            ref_json.as_bytes(),
+            recipes.as_bytes(),
+            self.blender_version.as_bytes(),
+        ]);
+        let ref_dir = self.out.join("references").join(format!("{key:016x}"));
+        let reference = match read_outputs(&ref_dir) {
+            Ok(r) => {
+                (self.on_event)(Event::ReferenceCached {
+                    scene: &bs.label,
+                    dir: &ref_dir,
+                });
+                r
+            }
+            Err(_) => {
+                (self.on_event)(Event::ReferenceRendering {
+                    scene: &bs.label,
+                    samples: ref_samples,
+                });
+                let label = format!("{} reference", bs.label);
+                let (wall_s, cycles_s) = render_into(self.blender, &label, &ref_scene, &ref_dir)?;
+                (self.on_event)(Event::ReferenceRendered {
+                    scene: &bs.label,
+                    wall_s,
+                    cycles_s,
+                });
+                read_outputs(&ref_dir)?
+            }
+        };
+        Ok((reference, ref_dir))
+    }
+
+    /// Mask and depth come from each pixel's first sample, so they are compared with a
+    /// 1-sample render at the rungs' seed (cached beside the reference): equal means no
+    /// setting changes them.
+    fn first_sample(&mut self, bs: &BenchScene, ref_dir: &Path) -> anyhow::Result<Outputs> {
+        let geo_dir = ref_dir.join("first-sample");
+        match read_outputs(&geo_dir) {
+            Ok(r) => Ok(r),
+            Err(_) => {
+                let geo_scene = with_sampling(
+                    &bs.scene,
+                    &Sampling {
+                        samples: 1,
+                        ..Sampling::ORIGINAL
+                    },
+                );
+                let label = format!("{} first sample", bs.label);
+                render_into(self.blender, &label, &geo_scene, &geo_dir)?;
+                read_outputs(&geo_dir)
+            }
+        }
+    }
+
+    /// Render scene `si` at one rung into `OUT/runs/`; its wall and Cycles seconds and errors.
+    fn rung(
+        &mut self,
+        si: usize,
+        bs: &BenchScene,
+        setting: &Setting,
+        reference: &Outputs,
+        geometry: &Outputs,
+    ) -> anyhow::Result<(f64, f64, Errors)> {
+        let scene = with_sampling(&bs.scene, &setting.sampling);
+        let dir = self
+            .out
+            .join("runs")
+            .join(format!("{si:02}-{}", setting.label));
+        let label = format!("{} {}", bs.label, setting.label);
+        let (wall_s, cycles_s) = render_into(self.blender, &label, &scene, &dir)?;
+        let errors = compare(&read_outputs(&dir)?, reference, geometry);
+        Ok((wall_s, cycles_s, errors))
+    }
+}
