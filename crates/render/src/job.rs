@@ -204,7 +204,9 @@ pub(crate) fn run_job(
             stats.visibility_render_s += reply.timings.render_s;
             stats.visibility_passes += 1;
             let exr = reply.file("visibility", &work)?;
-            let ch = Channels::read_sized(&exr, (size.0 as usize, size.1 as usize))?;
+            // Bounded by its header (`Channels::read`), not held to the size asked for: Blender
+            // renders at least 4x4, and a smaller image is blamed for its rejects below.
+            let ch = Channels::read(&exr)?;
             let ids = post::instance_ids(ch.get(&crate::passes::index_channel())?, n, &exr)?;
             let px = post::object_pixels(&ids, ch.width, n);
             visibility_s = t.elapsed().as_secs_f64();
