@@ -19,6 +19,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
+use clevrtex_render::webdataset::{is_shard_name, shard_name, ShardWriter};
 use clevrtex_scene::dataset::{self, Dataset, DatasetError, Kind, SampleRef, VariantDir};
 use clevrtex_scene::layout::Split;
 use clevrtex_scene::Pass;
@@ -156,116 +157,6 @@ fn samples(
     Ok(out)
 }
 
-/// Whether `name` is one of export's shard names, `<variant>-<split>-<6 digits>.tar`.
-fn is_shard_name(name: &str) -> bool {
-    let Some(rest) = name.strip_suffix(".tar") else {
-        return false;
-    };
-    let Some((head, digits)) = rest.rsplit_once('-') else {
-        return false;
-    };
-    let Some((variant, split)) = head.rsplit_once('-') else {
-        return false;
-    };
-    !variant.is_empty()
-        && Split::parse(split).is_some()
-        && digits.len() == 6
-        && digits.bytes().all(|b| b.is_ascii_digit())
-}
-
-/// A tar shard being written under a temporary name.
-struct ShardWriter {
-    tmp: PathBuf,
-    path: PathBuf,
-    /// `None` once finished.
-    builder: Option<tar::Builder<std::io::BufWriter<std::fs::File>>>,
-    bytes: u64,
-    samples: u64,
-    first: u64,
-    last: u64,
-}
-
-impl ShardWriter {
-    fn create(path: PathBuf) -> anyhow::Result<ShardWriter> {
-        let tmp = path.with_extension("tar.clevrtex-tmp");
-        let f = std::fs::File::create(&tmp)
-            .with_context(|| format!("cannot create `{}`", tmp.display()))?;
-        Ok(ShardWriter {
-            tmp,
-            path,
-            builder: Some(tar::Builder::new(std::io::BufWriter::new(f))),
-            bytes: 0,
-            samples: 0,
-            first: 0,
-            last: 0,
-        })
-    }
-
-    fn add(&mut self, ds: &Dataset, s: &Sample) -> anyhow::Result<()> {
-        for (ext, path) in &s.files {
-            let data = ds.read(path, dataset::MAX_FILE_BYTES).map_err(|why| {
-                anyhow::anyhow!(
-                    "`{}` {why}\nhint: check the dataset with `clevrtex verify`",
-                    path.display()
-                )
-            })?;
-            let mut h = tar::Header::new_ustar();
-            h.set_size(data.len() as u64);
-            h.set_mode(0o644);
-            h.set_mtime(0);
-            h.set_uid(0);
-            h.set_gid(0);
-            h.set_entry_type(tar::EntryType::Regular);
-            let name = format!("{}.{ext}", s.stem);
-            self.builder
-                .as_mut()
-                .expect("not finished")
-                .append_data(&mut h, &name, data.as_slice())
-                .with_context(|| format!("cannot write `{}`", self.tmp.display()))?;
-            self.bytes += 512 + (data.len() as u64).div_ceil(512) * 512;
-        }
-        if self.samples == 0 {
-            self.first = s.index;
-        }
-        self.last = s.index;
-        self.samples += 1;
-        Ok(())
-    }
-
-    /// Finish the tar, flush it to disk and rename it to its final name.
-    fn finish(mut self) -> anyhow::Result<Value> {
-        let w = self
-            .builder
-            .take()
-            .expect("finished once")
-            .into_inner()
-            .with_context(|| format!("cannot write `{}`", self.tmp.display()))?;
-        let f = w
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .with_context(|| format!("cannot write `{}`", self.tmp.display()))?;
-        f.sync_all()
-            .with_context(|| format!("cannot write `{}`", self.tmp.display()))?;
-        std::fs::rename(&self.tmp, &self.path)
-            .with_context(|| format!("cannot write `{}`", self.path.display()))?;
-        let size = std::fs::metadata(&self.path)?.len();
-        Ok(json!({
-            "file": self.path.file_name().unwrap().to_string_lossy(),
-            "samples": self.samples,
-            "bytes": size,
-            "first_index": self.first,
-            "last_index": self.last,
-        }))
-    }
-}
-
-impl Drop for ShardWriter {
-    fn drop(&mut self) {
-        // Unfinished (an error): leave no partial shard.
-        let _ = std::fs::remove_file(&self.tmp);
-    }
-}
-
 /// Run `clevrtex export`.
 pub fn run(args: Args) -> CmdResult {
     let Format::Webdataset = args.format;
@@ -335,20 +226,23 @@ pub fn run(args: Args) -> CmdResult {
                 }
                 if shard
                     .as_ref()
-                    .is_some_and(|w| w.samples > 0 && w.bytes + s.bytes > args.shard_size)
+                    .is_some_and(|w| w.samples() > 0 && w.bytes() + s.bytes > args.shard_size)
                 {
                     let done = shard.take().unwrap().finish()?;
                     total_bytes += done["bytes"].as_u64().unwrap_or(0);
                     index.push(json!({"variant": variant, "split": split, "shard": done}));
                 }
                 if shard.is_none() {
-                    let name = format!("{variant}-{split}-{n:06}.tar");
+                    let name = shard_name(variant, split, n);
                     written.insert(name.clone());
                     let path = args.out.join(name);
                     n += 1;
                     shard = Some(ShardWriter::create(path)?);
                 }
-                shard.as_mut().unwrap().add(&ds, s)?;
+                shard
+                    .as_mut()
+                    .unwrap()
+                    .add(&ds.root, s.index, &s.stem, &s.files)?;
                 total_samples += 1;
             }
             if let Some(w) = shard {

@@ -55,6 +55,7 @@ pub mod run_lock;
 mod session;
 pub mod tmp;
 pub mod verify;
+pub mod webdataset;
 mod worker;
 
 pub use bridge::BridgeDir;
