@@ -350,6 +350,11 @@ impl Config {
         BUILTIN.iter().map(|(n, _)| *n).collect()
     }
 
+    /// The built-in variants' names, comma-separated, for help texts and hints.
+    pub fn variant_list() -> String {
+        Config::variant_names().join(", ")
+    }
+
     /// The built-in config of `variant`.
     pub fn builtin(variant: &str) -> Result<Config, ConfigError> {
         match BUILTIN.iter().find(|(n, _)| *n == variant) {
@@ -361,7 +366,7 @@ impl Config {
                 problem: "unknown variant".into(),
                 hint: format!(
                     "use one of {}, or copy one of `configs/` and pass it with `--config`",
-                    Config::variant_names().join(", ")
+                    Config::variant_list()
                 ),
             }),
         }
