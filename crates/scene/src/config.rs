@@ -115,14 +115,7 @@ pub struct ColorRule {
 impl ColorRule {
     /// The colour in linear RGB (the sRGB transfer function undone), as Blender wants it.
     pub fn linear(&self) -> [f64; 3] {
-        self.srgb.map(|c| {
-            let c = f64::from(c) / 255.0;
-            if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            }
-        })
+        self.srgb.map(clevrtex_materials::srgb_to_linear)
     }
 }
 
