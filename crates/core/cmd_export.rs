@@ -56,11 +56,7 @@ pub struct Args {
 /// The extension of a pass in a WebDataset sample (after the stem and a dot): `png` for the
 /// image, `flat.png` for the mask (its suffix in the published layout), `<pass>.png` otherwise.
 fn extension(pass: Pass) -> String {
-    match pass {
-        Pass::Rgb => "png".into(),
-        Pass::Mask => "flat.png".into(),
-        p => format!("{}.png", p.name()),
-    }
+    pass.spec().webdataset_key.into()
 }
 
 /// One sample to export: its metadata and the (extension, path) of each file.
@@ -125,19 +121,16 @@ fn samples(root: &Path, vdir: &Path, skipped: &mut Vec<String>) -> anyhow::Resul
         };
         let mut files = Vec::new();
         for pass in Pass::ALL {
-            let key = match pass {
-                Pass::Rgb => "image_filename".to_string(),
-                p => format!("{}_filename", p.name()),
-            };
+            let key = pass.metadata_key();
             let want = layout::pass_file(&stem, pass);
-            match &meta[&key] {
+            match &meta[key] {
                 Value::Null => {}
                 Value::String(name) if *name == want => {
                     files.push((extension(pass), dir.join(want)))
                 }
                 other => {
                     return Err(bad(
-                        &key,
+                        key,
                         format!("is {other}, not the layout's `{want}` (or null)"),
                     ))
                 }
@@ -416,7 +409,10 @@ pub fn run(args: Args) -> CmdResult {
         "source": args.dir.display().to_string(),
         "samples": total_samples,
         "shards": index,
-        "keys": ["__key__ = stem", "png", "flat.png", "depth.png", "normal.png", "albedo.png", "shadow.png", "json"],
+        "keys": std::iter::once("__key__ = stem")
+            .chain(Pass::ALL.map(|p| p.spec().webdataset_key))
+            .chain(["json"])
+            .collect::<Vec<_>>(),
     });
     let index_path = args.out.join("index.json");
     let tmp = args.out.join("index.json.clevrtex-tmp");

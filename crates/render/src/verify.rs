@@ -747,14 +747,11 @@ fn check_sample(
     }
     for pass in passes {
         let name = layout::pass_file(stem, pass);
-        let key = match pass {
-            Pass::Rgb => "image_filename".to_string(),
-            p => format!("{}_filename", p.name()),
-        };
-        if meta[&key].as_str() != Some(name.as_str()) {
+        let key = pass.metadata_key();
+        if meta[key].as_str() != Some(name.as_str()) {
             problems.push(format!(
                 "metadata `{key}` is {} (expected \"{name}\")",
-                short(&meta[&key])
+                short(&meta[key])
             ));
         }
         let Some(bytes) = bytes_of.get(&name) else {
