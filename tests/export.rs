@@ -70,6 +70,20 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let index: serde_json::Value =
         serde_json::from_slice(&std::fs::read(shards.join("index.json")).unwrap()).unwrap();
+    // The keys written by hand before they came from the pass table.
+    assert_eq!(
+        index["keys"],
+        serde_json::json!([
+            "__key__ = stem",
+            "png",
+            "flat.png",
+            "depth.png",
+            "normal.png",
+            "albedo.png",
+            "shadow.png",
+            "json"
+        ]),
+    );
     let train_shards = index["shards"]
         .as_array()
         .unwrap()

@@ -1022,3 +1022,22 @@ fn a_billion_scenes_stream_in_bounded_memory() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// The variant names in `--help` come from the variant table, so a new variant shows up in
+/// every command that lists them.
+#[test]
+fn help_lists_the_variant_table() {
+    let list = Config::variant_list();
+    assert!(list.contains("clevr"), "{list}");
+    for cmd in [
+        &["sample", "--help"][..],
+        &["generate", "--help"],
+        &["eval", "--help"],
+    ] {
+        let out = crate::util::run(cmd);
+        assert!(out.status.success(), "{}", text(&out));
+        // clap wraps the help at the terminal's width: compare with line breaks folded.
+        let help = text(&out).split_whitespace().collect::<Vec<_>>().join(" ");
+        assert!(help.contains(&list), "{cmd:?}: {help}");
+    }
+}

@@ -35,9 +35,11 @@ pub struct RenderArgs {
     /// references. Numbers are for comparing settings, not for the docs' per-image costs.
     #[arg(long)]
     quick: bool,
-    /// Number of scenes (default 8, 2 with `--quick`); scene i is image i of the variant
-    /// `full, camo, pbg, vbg, grassbg, outd, clevr, full` (cycling), seed 2024.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", help = format!(
+        "Number of scenes (default 8, 2 with `--quick`); scene i is image i of the variant `{}` (cycling), seed {}",
+        clevrtex_bench::scenes::VARIANTS.join(", "),
+        clevrtex_bench::scenes::SEED
+    ))]
     scenes: Option<usize>,
     /// Output folder: CSV, plot, renders and the reference cache.
     #[arg(long, default_value = "bench-out", value_name = "DIR")]

@@ -20,9 +20,10 @@ pub struct Args {
     pub preds: PathBuf,
     /// Ground-truth dataset directory in the published layout.
     pub gt: PathBuf,
-    /// Variant name in the file names (`full`, `pbg`, `vbg`, `grassbg`, `camo`, `outd`, ...);
-    /// inferred when the dataset holds one.
-    #[arg(long)]
+    #[arg(long, help = format!(
+        "Variant name in the file names ({}, ...); inferred when the dataset holds one",
+        clevrtex_scene::config::Config::variant_list()
+    ))]
     pub variant: Option<String>,
     /// Which samples to score, by position in the index sequence [default: test; all for outd].
     #[arg(long, value_enum)]

@@ -57,11 +57,7 @@ pub struct Args {
 /// The extension of a pass in a WebDataset sample (after the stem and a dot): `png` for the
 /// image, `flat.png` for the mask (its suffix in the published layout), `<pass>.png` otherwise.
 fn extension(pass: Pass) -> String {
-    match pass {
-        Pass::Rgb => "png".into(),
-        Pass::Mask => "flat.png".into(),
-        p => format!("{}.png", p.name()),
-    }
+    pass.spec().webdataset_key.into()
 }
 
 /// One sample to export: its metadata and the (extension, path) of each file.
@@ -284,7 +280,10 @@ pub fn run(args: Args) -> CmdResult {
         "source": args.dir.display().to_string(),
         "samples": total_samples,
         "shards": index,
-        "keys": ["__key__ = stem", "png", "flat.png", "depth.png", "normal.png", "albedo.png", "shadow.png", "json"],
+        "keys": std::iter::once("__key__ = stem")
+            .chain(Pass::ALL.map(|p| p.spec().webdataset_key))
+            .chain(["json"])
+            .collect::<Vec<_>>(),
     });
     let index_path = args.out.join("index.json");
     let tmp = args.out.join("index.json.clevrtex-tmp");

@@ -16,8 +16,8 @@ use crate::run_args::{parse_passes, positive, within, RunArgs};
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::shard::SHARD_HELP)]
 pub struct GenerateArgs {
-    /// Built-in variant: full, pbg, vbg, grassbg, camo, outd, clevr.
-    #[arg(long, default_value = "full", conflicts_with = "config")]
+    #[arg(long, default_value = "full", conflicts_with = "config",
+        help = format!("Built-in variant: {}", Config::variant_list()))]
     variant: String,
     /// A variant config file (JSON, like those in `configs/`) instead of `--variant`.
     #[arg(long, value_name = "FILE")]

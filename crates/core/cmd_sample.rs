@@ -16,9 +16,9 @@ use crate::interrupt::{self, OnInterrupt};
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::shard::SHARD_HELP)]
 pub struct Args {
-    /// Built-in variant: full, pbg, vbg, grassbg, camo, outd or clevr.
     #[arg(
         long,
+        help = format!("Built-in variant: {}", Config::variant_list()),
         value_name = "NAME",
         required_unless_present = "config",
         conflicts_with = "config"

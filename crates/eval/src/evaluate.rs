@@ -586,8 +586,7 @@ fn score_sample(
         _ => None,
     };
     let mut scores = score_image(&truth, &pred.labels, pred.slots, recon);
-    let mse = Metric::ALL.iter().position(|&m| m == Metric::Mse);
-    let mse = mse.expect("MSE is a metric");
+    let mse = Metric::Mse.index();
     if pred.recon.is_some() && scores.values[mse].is_none() {
         // Finite values whose squared error overflows (e.g. 1e30) are undefined too.
         if !matches!(recon_issue, Some(ReconIssue::Undefined { .. })) {

@@ -51,86 +51,116 @@ pub enum Metric {
 /// Number of metrics in [`Metric::ALL`].
 pub const METRICS: usize = 17;
 
+/// The protocol family whose metrics these are: `clevrtex` (and `native`), `deepmind`, `ocl`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    /// The public ClevrTex evaluator's.
+    Clevrtex,
+    /// DeepMind's `multi_object_datasets`.
+    Deepmind,
+    /// The object-centric learning framework's.
+    Ocl,
+}
+
+/// One row of the metric table.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MetricSpec {
+    /// The metric.
+    pub metric: Metric,
+    /// Its name in reports, JSON, CSV and the Python package.
+    pub name: &'static str,
+    /// The protocol family that reports it by default.
+    pub family: Family,
+    /// Decimals in the report's table (and its confidence interval).
+    pub decimals: usize,
+}
+
+/// The metric table, in report order (the order of [`Metric`]'s variants, checked at compile
+/// time): every list of metrics (all, each protocol's) and every name comes from here.
+#[rustfmt::skip]
+pub const TABLE: [MetricSpec; METRICS] = [
+    MetricSpec { metric: Metric::MIoU, name: "mIoU", family: Family::Clevrtex, decimals: 6 },
+    MetricSpec { metric: Metric::MIoUFg, name: "mIoU_fg", family: Family::Clevrtex, decimals: 6 },
+    MetricSpec { metric: Metric::MIoUGt, name: "mIoU_gt", family: Family::Clevrtex, decimals: 6 },
+    MetricSpec { metric: Metric::Ari, name: "ARI", family: Family::Clevrtex, decimals: 6 },
+    MetricSpec { metric: Metric::AriFg, name: "ARI_FG", family: Family::Clevrtex, decimals: 6 },
+    MetricSpec { metric: Metric::Mse, name: "MSE", family: Family::Clevrtex, decimals: 4 },
+    MetricSpec { metric: Metric::Dice, name: "DICE", family: Family::Clevrtex, decimals: 6 },
+    MetricSpec { metric: Metric::DiceFg, name: "DICE_fg", family: Family::Clevrtex, decimals: 6 },
+    MetricSpec { metric: Metric::Acc, name: "acc", family: Family::Clevrtex, decimals: 6 },
+    MetricSpec { metric: Metric::MSc, name: "mSC", family: Family::Clevrtex, decimals: 6 },
+    MetricSpec { metric: Metric::DmFgAri, name: "dm_FG_ARI", family: Family::Deepmind, decimals: 6 },
+    MetricSpec { metric: Metric::OclAri, name: "ocl_ARI", family: Family::Ocl, decimals: 6 },
+    MetricSpec { metric: Metric::OclFgAri, name: "ocl_FG_ARI", family: Family::Ocl, decimals: 6 },
+    MetricSpec { metric: Metric::OclMIoU, name: "ocl_mIoU", family: Family::Ocl, decimals: 6 },
+    MetricSpec { metric: Metric::OclMIoUFg, name: "ocl_mIoU_fg", family: Family::Ocl, decimals: 6 },
+    MetricSpec { metric: Metric::MBo, name: "mBO", family: Family::Ocl, decimals: 6 },
+    MetricSpec { metric: Metric::CorLoc, name: "CorLoc", family: Family::Ocl, decimals: 6 },
+];
+
+const _: () = {
+    let mut i = 0;
+    while i < METRICS {
+        assert!(TABLE[i].metric as usize == i, "TABLE is in Metric's order");
+        i += 1;
+    }
+};
+
+/// The metrics of `family`, in table order; `N` must be their number (checked at compile time).
+const fn family<const N: usize>(family: Family) -> [Metric; N] {
+    let mut out = [Metric::MIoU; N];
+    let (mut i, mut n) = (0, 0);
+    while i < METRICS {
+        if TABLE[i].family as u8 == family as u8 {
+            assert!(n < N, "more metrics of the family than N");
+            out[n] = TABLE[i].metric;
+            n += 1;
+        }
+        i += 1;
+    }
+    assert!(n == N, "fewer metrics of the family than N");
+    out
+}
+
 impl Metric {
     /// The `clevrtex` protocol's metrics (the public ClevrTex evaluator's), in report order.
-    pub const CLEVRTEX: [Metric; 10] = [
-        Metric::MIoU,
-        Metric::MIoUFg,
-        Metric::MIoUGt,
-        Metric::Ari,
-        Metric::AriFg,
-        Metric::Mse,
-        Metric::Dice,
-        Metric::DiceFg,
-        Metric::Acc,
-        Metric::MSc,
-    ];
+    pub const CLEVRTEX: [Metric; 10] = family(Family::Clevrtex);
 
     /// The `deepmind` protocol's metrics.
-    pub const DEEPMIND: [Metric; 1] = [Metric::DmFgAri];
+    pub const DEEPMIND: [Metric; 1] = family(Family::Deepmind);
 
     /// The `ocl` protocol's metrics.
-    pub const OCL: [Metric; 6] = [
-        Metric::OclAri,
-        Metric::OclFgAri,
-        Metric::OclMIoU,
-        Metric::OclMIoUFg,
-        Metric::MBo,
-        Metric::CorLoc,
-    ];
+    pub const OCL: [Metric; 6] = family(Family::Ocl);
 
     /// Every metric, in report order: the `clevrtex` ones, then `deepmind`'s, then `ocl`'s.
-    pub const ALL: [Metric; METRICS] = [
-        Metric::MIoU,
-        Metric::MIoUFg,
-        Metric::MIoUGt,
-        Metric::Ari,
-        Metric::AriFg,
-        Metric::Mse,
-        Metric::Dice,
-        Metric::DiceFg,
-        Metric::Acc,
-        Metric::MSc,
-        Metric::DmFgAri,
-        Metric::OclAri,
-        Metric::OclFgAri,
-        Metric::OclMIoU,
-        Metric::OclMIoUFg,
-        Metric::MBo,
-        Metric::CorLoc,
-    ];
+    pub const ALL: [Metric; METRICS] = {
+        let mut out = [Metric::MIoU; METRICS];
+        let mut i = 0;
+        while i < METRICS {
+            out[i] = TABLE[i].metric;
+            i += 1;
+        }
+        out
+    };
 
     /// Position in [`Metric::ALL`] (and in [`Scores::values`]).
     pub fn index(self) -> usize {
         self as usize
     }
 
+    /// The metric's row in [`TABLE`].
+    pub fn spec(self) -> &'static MetricSpec {
+        &TABLE[self.index()]
+    }
+
     /// The metric called `name` (as in reports), if any.
     pub fn from_name(name: &str) -> Option<Metric> {
-        Metric::ALL.into_iter().find(|m| m.name() == name)
+        TABLE.iter().find(|s| s.name == name).map(|s| s.metric)
     }
 
     /// The metric's name in reports, JSON and CSV.
     pub fn name(self) -> &'static str {
-        match self {
-            Metric::MIoU => "mIoU",
-            Metric::MIoUFg => "mIoU_fg",
-            Metric::MIoUGt => "mIoU_gt",
-            Metric::Ari => "ARI",
-            Metric::AriFg => "ARI_FG",
-            Metric::Mse => "MSE",
-            Metric::Dice => "DICE",
-            Metric::DiceFg => "DICE_fg",
-            Metric::Acc => "acc",
-            Metric::MSc => "mSC",
-            Metric::DmFgAri => "dm_FG_ARI",
-            Metric::OclAri => "ocl_ARI",
-            Metric::OclFgAri => "ocl_FG_ARI",
-            Metric::OclMIoU => "ocl_mIoU",
-            Metric::OclMIoUFg => "ocl_mIoU_fg",
-            Metric::MBo => "mBO",
-            Metric::CorLoc => "CorLoc",
-        }
+        self.spec().name
     }
 }
 

@@ -32,7 +32,12 @@ pub fn to_json(r: &Report, tool_version: &str) -> Value {
         for (name, grp) in groups {
             g.insert(
                 name.clone(),
-                json!({"count": grp.count, "mIoU": grp.iou, "MSE": num(grp.mse), "mBO": grp.best_overlap}),
+                json!({
+                    "count": grp.count,
+                    (Metric::MIoU.name()): grp.iou,
+                    (Metric::Mse.name()): num(grp.mse),
+                    (Metric::MBo.name()): grp.best_overlap,
+                }),
             );
         }
         breakdowns.insert((*kind).into(), Value::Object(g));
@@ -166,9 +171,9 @@ pub fn to_table(r: &Report) -> String {
             "\n{:<30} {:>6} {:>8} {:>8} {:>10}",
             format!("by {kind}"),
             "count",
-            "mIoU",
-            "mBO",
-            "MSE"
+            Metric::MIoU.name(),
+            Metric::MBo.name(),
+            Metric::Mse.name()
         );
         for (name, g) in groups {
             let mse = g.mse.map_or("n/a".to_string(), |v| format!("{v:.3}"));
@@ -190,9 +195,5 @@ pub fn to_table(r: &Report) -> String {
 }
 
 fn fmt_val(m: Metric, v: f64) -> String {
-    if m == Metric::Mse {
-        format!("{v:.4}")
-    } else {
-        format!("{v:.6}")
-    }
+    format!("{v:.*}", m.spec().decimals)
 }

@@ -396,6 +396,18 @@ fn schema() -> Result<&'static Schema, Error> {
         .map_err(Clone::clone)
 }
 
+/// An 8-bit sRGB component as linear light in [0, 1] (the sRGB transfer function undone): the
+/// project's one conversion, for material colours, variant colours (`clevrtex_scene`) and
+/// image statistics. Here because every crate depends on this one.
+pub fn srgb_to_linear(c: u8) -> f64 {
+    let c = f64::from(c) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 /// Contents of an embedded file under `materials/` by relative path.
 pub fn embedded_file(rel: &str) -> Option<&'static str> {
     embedded::EMBEDDED

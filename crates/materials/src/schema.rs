@@ -546,12 +546,7 @@ pub(crate) fn parse_color(v: &Value) -> Option<[f64; 3]> {
     }
     let mut out = [0.0; 3];
     for (i, o) in out.iter_mut().enumerate() {
-        let c = u8::from_str_radix(&s[2 * i..2 * i + 2], 16).ok()? as f64 / 255.0;
-        let lin = if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        };
+        let lin = crate::srgb_to_linear(u8::from_str_radix(&s[2 * i..2 * i + 2], 16).ok()?);
         *o = (lin * 1e5).round() / 1e5;
     }
     Some(out)

@@ -558,11 +558,11 @@ fn check_sample(
     }
     for pass in passes {
         let name = layout::pass_file(stem, pass);
-        let key = layout::filename_key(pass);
-        if meta[&key].as_str() != Some(name.as_str()) {
+        let key = pass.metadata_key();
+        if meta[key].as_str() != Some(name.as_str()) {
             problems.push(format!(
                 "metadata `{key}` is {} (expected \"{name}\")",
-                dataset::short(&meta[&key])
+                dataset::short(&meta[key])
             ));
         }
         let Some(bytes) = bytes_of.get(&name) else {

@@ -9,7 +9,9 @@
 //! user's file and calls [`Config::from_json_str`].
 
 use std::collections::BTreeSet;
+use std::sync::OnceLock;
 
+use clevrtex_materials::Catalogue;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
@@ -115,14 +117,7 @@ pub struct ColorRule {
 impl ColorRule {
     /// The colour in linear RGB (the sRGB transfer function undone), as Blender wants it.
     pub fn linear(&self) -> [f64; 3] {
-        self.srgb.map(|c| {
-            let c = f64::from(c) / 255.0;
-            if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            }
-        })
+        self.srgb.map(clevrtex_materials::srgb_to_linear)
     }
 }
 
@@ -143,7 +138,7 @@ pub struct ObjectRules {
     /// `None` (the default) = objects use bump only.
     pub displacement: Option<f64>,
     /// Catalogue materials that set up true displacement; filled only when `displacement` is
-    /// set, so the default configuration never reads the material recipes.
+    /// set.
     pub displacing: BTreeSet<String>,
 }
 
@@ -333,21 +328,22 @@ struct MaterialSelect {
     exclude: Vec<String>,
 }
 
-#[derive(Deserialize)]
-struct Catalogue {
-    materials: Vec<CatalogueEntry>,
-}
-
-#[derive(Deserialize)]
-struct CatalogueEntry {
-    name: String,
-    set: String,
+/// The built-in material catalogue, read once (names and sets select a variant's materials;
+/// the recipes say which displace).
+fn catalogue() -> &'static Catalogue {
+    static CATALOGUE: OnceLock<Catalogue> = OnceLock::new();
+    CATALOGUE.get_or_init(|| Catalogue::builtin().expect("built-in material catalogue is valid"))
 }
 
 impl Config {
     /// Names of the built-in variants.
     pub fn variant_names() -> Vec<&'static str> {
         BUILTIN.iter().map(|(n, _)| *n).collect()
+    }
+
+    /// The built-in variants' names, comma-separated, for help texts and hints.
+    pub fn variant_list() -> String {
+        Config::variant_names().join(", ")
     }
 
     /// The built-in config of `variant`.
@@ -361,7 +357,7 @@ impl Config {
                 problem: "unknown variant".into(),
                 hint: format!(
                     "use one of {}, or copy one of `configs/` and pass it with `--config`",
-                    Config::variant_names().join(", ")
+                    Config::variant_list()
                 ),
             }),
         }
@@ -452,8 +448,7 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
         problem: problem.to_string(),
         hint: hint.to_string(),
     };
-    let catalogue: Catalogue = serde_json::from_str(clevrtex_materials::CATALOGUE_JSON)
-        .expect("built-in material catalogue is valid JSON");
+    let catalogue = catalogue();
 
     if let Some(problem) = crate::layout::variant_name_problem(&file.name) {
         return Err(err(
@@ -524,7 +519,7 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
     let materials = resolve(
         &file.objects.materials,
         "objects.materials",
-        &catalogue,
+        catalogue,
         &err,
     )?;
 
@@ -546,7 +541,7 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
                 "add e.g. `\"materials\": {\"include\": [\"plain\"]}`",
             ))
         }
-        (Some(sel), false) => resolve(sel, "background.materials", &catalogue, &err)?,
+        (Some(sel), false) => resolve(sel, "background.materials", catalogue, &err)?,
     };
     for (key, v) in [
         ("objects.displacement", file.objects.displacement),
@@ -565,11 +560,9 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
         }
     }
 
-    // Only read the material recipes when asked, so the default path stays as it was.
     let displacing: BTreeSet<String> = match file.objects.displacement {
         None => BTreeSet::new(),
-        Some(_) => clevrtex_materials::Catalogue::builtin()
-            .expect("built-in material catalogue is valid")
+        Some(_) => catalogue
             .iter()
             .filter(|m| m.displaces)
             .map(|m| m.name.clone())
@@ -689,8 +682,8 @@ fn resolve(
     catalogue: &Catalogue,
     err: &MakeError<'_>,
 ) -> Result<Vec<String>, ConfigError> {
-    let sets: BTreeSet<&str> = catalogue.materials.iter().map(|m| m.set.as_str()).collect();
-    let known = |name: &str| catalogue.materials.iter().any(|m| m.name == name);
+    let sets: BTreeSet<&str> = catalogue.iter().map(|m| m.set.name()).collect();
+    let known = |name: &str| catalogue.get(name).is_some();
     let mut out = BTreeSet::new();
     for (i, s) in sel.sets.iter().enumerate() {
         if !sets.contains(s.as_str()) {
@@ -706,9 +699,8 @@ fn resolve(
         }
         out.extend(
             catalogue
-                .materials
                 .iter()
-                .filter(|m| &m.set == s)
+                .filter(|m| m.set.name() == s)
                 .map(|m| m.name.clone()),
         );
     }

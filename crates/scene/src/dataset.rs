@@ -616,21 +616,21 @@ impl MetadataView {
     }
 }
 
-/// The passes whose `*_filename` key ([`layout::filename_key`]) the metadata `meta` of
+/// The passes whose `*_filename` key ([`Pass::metadata_key`], the pass table's) the metadata `meta` of
 /// `stem` sets, in pass-table order: each must name the layout's file (or be null, absent:
 /// not written). File names come from the layout, never from the metadata.
 pub fn listed_passes(meta: &Value, file: &str, stem: &str) -> Result<Vec<Pass>, MetadataError> {
     let mut out = Vec::new();
     for pass in Pass::ALL {
-        let key = layout::filename_key(pass);
+        let key = pass.metadata_key();
         let want = layout::pass_file(stem, pass);
-        match &meta[&key] {
+        match &meta[key] {
             Value::Null => {}
             Value::String(name) if *name == want => out.push(pass),
             other => {
                 return Err(MetadataError {
                     file: file.to_string(),
-                    key,
+                    key: key.to_string(),
                     what: format!("is {other}, not the layout's `{want}` (or null)"),
                 })
             }

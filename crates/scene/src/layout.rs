@@ -41,15 +41,6 @@ pub fn parse_file_name(name: &str) -> Option<(&str, &str, u64)> {
     suffixes.iter().find_map(|s| parse_stem(name, s))
 }
 
-/// The metadata key naming the file of `pass`: `image_filename` for the image,
-/// `<pass>_filename` otherwise.
-pub fn filename_key(pass: Pass) -> String {
-    match pass {
-        Pass::Rgb => "image_filename".to_string(),
-        p => format!("{}_filename", p.name()),
-    }
-}
-
 /// The failure ledger's file name in a variant folder.
 pub const LEDGER_FILE: &str = "failures.jsonl";
 

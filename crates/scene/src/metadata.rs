@@ -164,6 +164,36 @@ mod tests {
     use super::*;
 
     #[test]
+    fn every_pass_file_is_under_the_pass_tables_metadata_key() {
+        let config = crate::config::Config::builtin("full").unwrap();
+        let req = crate::SampleRequest {
+            seed: 1,
+            index: 0,
+            attempt: 0,
+            total: 10,
+        };
+        let mut scene = crate::sample::sample(&config, &req).unwrap();
+        scene.passes = Pass::ALL.to_vec();
+        let meta = serde_json::to_value(metadata(&scene)).unwrap();
+        let keys: Vec<&str> = meta
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(String::as_str)
+            .filter(|k| k.ends_with("_filename"))
+            .collect();
+        assert_eq!(keys.len(), Pass::ALL.len(), "{keys:?}");
+        for pass in Pass::ALL {
+            let key = pass.metadata_key();
+            assert_eq!(
+                meta[key].as_str(),
+                Some(layout::pass_file(&scene.stem, pass).as_str()),
+                "{key}"
+            );
+        }
+    }
+
+    #[test]
     fn relationships_use_the_threshold() {
         let dirs = Directions {
             behind: [0.0, 1.0, 0.0],

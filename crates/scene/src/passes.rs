@@ -127,6 +127,10 @@ pub struct PassSpec {
     pub exr_layers: &'static [(&'static str, &'static str)],
     /// File name suffix after the stem: `<stem><suffix>.png`.
     pub file_suffix: &'static str,
+    /// The metadata key naming the pass's file (`<pass>_filename`; `image_filename` for rgb).
+    pub metadata_key: &'static str,
+    /// The pass's key (extension) in a WebDataset sample (`clevrtex export`).
+    pub webdataset_key: &'static str,
     /// The PNG written.
     pub png: PngKind,
     /// The encoding written into the metadata.
@@ -155,6 +159,8 @@ const SPECS: [PassSpec; 6] = [
         source: Source::RgbPng,
         exr_layers: &[],
         file_suffix: "",
+        metadata_key: "image_filename",
+        webdataset_key: "png",
         png: PngKind::Rgb8,
         encoding: encoding(
             8,
@@ -168,6 +174,8 @@ const SPECS: [PassSpec; 6] = [
         source: Source::PassesExr,
         exr_layers: &[("IndexOB", "X")],
         file_suffix: "_flat",
+        metadata_key: "mask_filename",
+        webdataset_key: "flat.png",
         png: PngKind::Palette8,
         encoding: encoding(
             8,
@@ -181,6 +189,8 @@ const SPECS: [PassSpec; 6] = [
         source: Source::PassesExr,
         exr_layers: &[("Depth", "Z")],
         file_suffix: "_depth_0001",
+        metadata_key: "depth_filename",
+        webdataset_key: "depth.png",
         png: PngKind::Gray16,
         encoding: Encoding {
             scale: Some(DEPTH_SCALE_M),
@@ -198,6 +208,8 @@ const SPECS: [PassSpec; 6] = [
         source: Source::PassesExr,
         exr_layers: &[("Normal", "XYZ")],
         file_suffix: "_normal_0001",
+        metadata_key: "normal_filename",
+        webdataset_key: "normal.png",
         png: PngKind::Rgb16,
         encoding: Encoding {
             space: Some("world"),
@@ -211,6 +223,8 @@ const SPECS: [PassSpec; 6] = [
         source: Source::PassesExr,
         exr_layers: &[("BaseCol", "RGB")],
         file_suffix: "_albedo_0001",
+        metadata_key: "albedo_filename",
+        webdataset_key: "albedo.png",
         png: PngKind::Rgb8,
         encoding: encoding(
             8,
@@ -224,6 +238,8 @@ const SPECS: [PassSpec; 6] = [
         source: Source::ShadowExr,
         exr_layers: &[("DiffDir", "RGB")],
         file_suffix: "_shadow_0001",
+        metadata_key: "shadow_filename",
+        webdataset_key: "shadow.png",
         png: PngKind::Gray8,
         encoding: Encoding {
             undefined: Some(SHADOW_UNDEFINED),
@@ -264,6 +280,11 @@ impl Pass {
     /// The pass called `name`, if any.
     pub fn from_name(name: &str) -> Option<Pass> {
         Pass::ALL.into_iter().find(|p| p.name() == name)
+    }
+
+    /// The metadata key naming the pass's file (`<pass>_filename`; `image_filename` for rgb).
+    pub fn metadata_key(self) -> &'static str {
+        self.spec().metadata_key
     }
 }
 

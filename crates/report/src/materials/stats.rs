@@ -156,14 +156,7 @@ pub fn distinctness(a: &[Features], b: &[Features]) -> Distinctness {
     }
 }
 
-fn srgb_to_linear(c: u8) -> f64 {
-    let c = f64::from(c) / 255.0;
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
+use clevrtex_materials::srgb_to_linear;
 
 /// CIELAB (D65) of an sRGB pixel.
 pub fn lab(p: [u8; 3]) -> [f64; 3] {
