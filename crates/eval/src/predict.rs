@@ -84,12 +84,15 @@ fn labels_from_ids<I: Iterator<Item = i64>>(
     Ok((labels, max as usize + 1))
 }
 
-/// A float type soft masks can hold.
-trait MaskValue:
+/// A float type soft masks are compared in.
+pub trait MaskValue:
     Copy + PartialOrd + std::ops::Add<Output = Self> + std::ops::Sub<Output = Self>
 {
+    /// Zero.
     const ZERO: Self;
+    /// One.
     const ONE: Self;
+    /// Whether the value is NaN.
     fn nan(self) -> bool;
 }
 
@@ -112,44 +115,64 @@ impl MaskValue for f64 {
 /// Argmax of `f32` soft masks `(K, n)`: first index on ties, NaN counts as the maximum; with
 /// `no_background` a background slot `1 - Σ_k m_k` (summed in k order) is put in front.
 pub fn argmax_masks(data: &[f32], k: usize, n: usize, no_background: bool) -> Vec<u32> {
-    argmax(data, k, n, no_background)
+    argmax_by(data, k, n, no_background, |v| v)
 }
 
-/// Argmax over the K masks (`data` is `(K, n)`), first index on ties, NaN as the maximum.
-/// With `no_background`, a background slot `1 - Σ_k m_k` is put in front.
-fn argmax<T: MaskValue>(data: &[T], k: usize, n: usize, no_background: bool) -> Vec<u32> {
-    if n == 0 || data.len() < k * n || k == 0 {
-        return vec![0; n];
+/// The one argmax kernel of `clevrtex eval` and the Python package: over the `k` soft masks
+/// `m` (`(k, n)`), each value compared as `value(v)`; first index on ties, NaN the maximum;
+/// with `no_background` a background `1 - Σ_k m_k` (summed in k order) in front. Blocked over
+/// pixels and branch-free, so it vectorises and reads `m` once.
+pub fn argmax_by<S: Copy, T: MaskValue>(
+    m: &[S],
+    k: usize,
+    n: usize,
+    no_background: bool,
+    value: impl Fn(S) -> T,
+) -> Vec<u32> {
+    use crate::metrics::BLOCK;
+    let mut out = vec![0u32; n];
+    if k == 0 || n == 0 || m.len() < k * n {
+        return out;
     }
-    let data = &data[..k * n];
-    let mut best: Vec<T>;
-    let mut idx: Vec<u32>;
-    let first;
-    if no_background {
-        let mut sum = vec![T::ZERO; n];
-        for m in data.chunks_exact(n) {
-            sum.iter_mut().zip(m).for_each(|(s, &v)| *s = *s + v);
-        }
-        best = sum.into_iter().map(|s| T::ONE - s).collect();
-        idx = vec![0; n];
-        first = 0;
-    } else {
-        best = data[..n].to_vec();
-        idx = vec![0; n];
-        first = 1;
-    }
-    let offset = usize::from(no_background);
-    for (slot, m) in data.chunks_exact(n).enumerate().skip(first) {
-        let label = (slot + offset) as u32;
-        for i in 0..n {
-            let (b, v) = (best[i], m[i]);
-            if !b.nan() && (v.nan() || v > b) {
-                best[i] = v;
-                idx[i] = label;
+    // Two buffers each for the running maximum and its index, swapped per mask: writing a
+    // select into the other buffer keeps LLVM from turning it into a conditional store,
+    // which it cannot vectorise without AVX.
+    let (mut best, mut best2) = ([T::ZERO; BLOCK], [T::ZERO; BLOCK]);
+    let (mut idx, mut idx2) = ([0u32; BLOCK], [0u32; BLOCK]);
+    for (start, o) in (0..n).step_by(BLOCK).zip(out.chunks_mut(BLOCK)) {
+        let len = o.len();
+        let slot = |s: usize| &m[s * n + start..s * n + start + len];
+        let (mut b, mut b2) = (&mut best[..len], &mut best2[..len]);
+        let (mut i, mut i2) = (&mut idx[..len], &mut idx2[..len]);
+        i.fill(0);
+        let (first, offset) = if no_background {
+            b.fill(T::ZERO);
+            for s in 0..k {
+                b.iter_mut()
+                    .zip(slot(s))
+                    .for_each(|(b, &v)| *b = *b + value(v));
             }
+            b.iter_mut().for_each(|b| *b = T::ONE - *b);
+            (0, 1)
+        } else {
+            b.iter_mut().zip(slot(0)).for_each(|(b, &v)| *b = value(v));
+            (1, 0)
+        };
+        for s in first..k {
+            let label = (s + offset) as u32;
+            let src = b.iter().zip(i.iter()).zip(slot(s));
+            for ((nb, ni), ((&ob, &oi), &v)) in b2.iter_mut().zip(i2.iter_mut()).zip(src) {
+                let v = value(v);
+                let take = !ob.nan() & (v.nan() | (v > ob));
+                *nb = if take { v } else { ob };
+                *ni = if take { label } else { oi };
+            }
+            std::mem::swap(&mut b, &mut b2);
+            std::mem::swap(&mut i, &mut i2);
         }
+        o.copy_from_slice(i);
     }
-    idx
+    out
 }
 
 fn segmentation_from_array(
@@ -199,12 +222,9 @@ fn segmentation_from_array(
                 ));
             }
             let labels = match &arr.data {
-                NpyData::F32(v) => argmax(v, k, n, no_background),
-                NpyData::F64(v) => argmax(v, k, n, no_background),
-                NpyData::Int(v) => {
-                    let f: Vec<f64> = v.iter().map(|&x| x as f64).collect();
-                    argmax(&f, k, n, no_background)
-                }
+                NpyData::F32(v) => argmax_by(v, k, n, no_background, |x| x),
+                NpyData::F64(v) => argmax_by(v, k, n, no_background, |x| x),
+                NpyData::Int(v) => argmax_by(v, k, n, no_background, |x| x as f64),
             };
             Ok((labels, slots))
         }

@@ -7,8 +7,8 @@ use std::path::Path;
 
 use clevrtex_eval::dataset::discover_gt;
 use clevrtex_eval::error::MAX_SLOTS;
-#[cfg(doc)]
-use clevrtex_eval::predict::argmax_masks;
+use clevrtex_eval::metrics::squared_errors;
+use clevrtex_eval::predict::argmax_by;
 use clevrtex_eval::resize::{crop_box, crop_resize_bilinear_rgb, crop_resize_nearest};
 use clevrtex_eval::{read, score_image, EvalError, Metric, Split};
 use numpy::{PyReadonlyArray, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
@@ -26,34 +26,6 @@ fn eval_error(e: EvalError) -> PyErr {
         EvalError::Io { .. } => PyOSError::new_err(e.to_string()),
         other => value_error(other),
     }
-}
-
-/// Segment ids as numpy hands them over: `(batch, pixels)`, C-contiguous, any integer dtype
-/// (the Python half converts everything else: bools, integral floats, other byte orders).
-#[derive(FromPyObject)]
-enum Ids<'py> {
-    U8(PyReadonlyArray2<'py, u8>),
-    U16(PyReadonlyArray2<'py, u16>),
-    U32(PyReadonlyArray2<'py, u32>),
-    U64(PyReadonlyArray2<'py, u64>),
-    I8(PyReadonlyArray2<'py, i8>),
-    I16(PyReadonlyArray2<'py, i16>),
-    I32(PyReadonlyArray2<'py, i32>),
-    I64(PyReadonlyArray2<'py, i64>),
-}
-
-/// The numpy memory of an [`Ids`] array, borrowed without a copy (`Send`, so the scoring can
-/// read it with the GIL released).
-#[derive(Clone, Copy)]
-enum IdSlice<'a> {
-    U8(&'a [u8]),
-    U16(&'a [u16]),
-    U32(&'a [u32]),
-    U64(&'a [u64]),
-    I8(&'a [i8]),
-    I16(&'a [i16]),
-    I32(&'a [i32]),
-    I64(&'a [i64]),
 }
 
 /// Soft masks or images: `(batch, channels, pixels)` float32 or float64, C-contiguous.
@@ -88,21 +60,6 @@ fn c_slice<'a, T: numpy::Element, D: numpy::ndarray::Dimension>(
     }
 }
 
-impl<'py> Ids<'py> {
-    fn slice(&self) -> PyResult<(IdSlice<'_>, Vec<usize>)> {
-        Ok(match self {
-            Ids::U8(a) => c_slice(a).map(|(s, d)| (IdSlice::U8(s), d))?,
-            Ids::U16(a) => c_slice(a).map(|(s, d)| (IdSlice::U16(s), d))?,
-            Ids::U32(a) => c_slice(a).map(|(s, d)| (IdSlice::U32(s), d))?,
-            Ids::U64(a) => c_slice(a).map(|(s, d)| (IdSlice::U64(s), d))?,
-            Ids::I8(a) => c_slice(a).map(|(s, d)| (IdSlice::I8(s), d))?,
-            Ids::I16(a) => c_slice(a).map(|(s, d)| (IdSlice::I16(s), d))?,
-            Ids::I32(a) => c_slice(a).map(|(s, d)| (IdSlice::I32(s), d))?,
-            Ids::I64(a) => c_slice(a).map(|(s, d)| (IdSlice::I64(s), d))?,
-        })
-    }
-}
-
 impl<'py> Floats<'py> {
     fn slice(&self) -> PyResult<(FloatSlice<'_>, Vec<usize>)> {
         Ok(match self {
@@ -112,21 +69,74 @@ impl<'py> Floats<'py> {
     }
 }
 
+/// Defines, for each (variant, integer type), the segment-id arrays as numpy hands them over
+/// ([`Ids`]), their borrowed memory ([`IdSlice`]) and the dispatch between the two, so the list
+/// of id dtypes is written once.
+macro_rules! ids {
+    ($($v:ident($t:ty)),*) => {
+        /// Segment ids as numpy hands them over: `(batch, pixels)`, C-contiguous, any integer
+        /// dtype (the Python half converts everything else: bools, integral floats, other byte
+        /// orders).
+        #[derive(FromPyObject)]
+        enum Ids<'py> {
+            $($v(PyReadonlyArray2<'py, $t>),)*
+        }
+
+        /// The numpy memory of an [`Ids`] array, borrowed without a copy (`Send`, so the
+        /// scoring can read it with the GIL released).
+        #[derive(Clone, Copy)]
+        enum IdSlice<'a> {
+            $($v(&'a [$t]),)*
+        }
+
+        impl<'py> Ids<'py> {
+            fn slice(&self) -> PyResult<(IdSlice<'_>, Vec<usize>)> {
+                Ok(match self {
+                    $(Ids::$v(a) => c_slice(a).map(|(s, d)| (IdSlice::$v(s), d))?,)*
+                })
+            }
+        }
+
+        impl IdSlice<'_> {
+            /// Ids `range` as `u32` labels, or `None` when one lies outside `0..MAX_SLOTS`.
+            fn labels(self, range: std::ops::Range<usize>) -> Option<Vec<u32>> {
+                match self {
+                    $(IdSlice::$v(v) => labels(&v[range]),)*
+                }
+            }
+
+            /// Smallest and largest id, for the message when one is out of range.
+            fn min_max(self) -> Option<(i128, i128)> {
+                match self {
+                    $(IdSlice::$v(v) => min_max(v),)*
+                }
+            }
+        }
+
+        $(impl Id for $t {
+            #[inline(always)]
+            fn wide(self) -> u64 {
+                self as u64
+            }
+        })*
+    };
+}
+ids!(
+    U8(u8),
+    U16(u16),
+    U32(u32),
+    U64(u64),
+    I8(i8),
+    I16(i16),
+    I32(i32),
+    I64(i64)
+);
+
 /// An integer segment id type.
 trait Id: Copy + Ord + Into<i128> {
     /// The id as `u64`; a negative id wraps to a huge one, so one comparison checks the range.
     fn wide(self) -> u64;
 }
-
-macro_rules! id {
-    ($($t:ty),*) => {$(impl Id for $t {
-        #[inline(always)]
-        fn wide(self) -> u64 {
-            self as u64
-        }
-    })*};
-}
-id!(u8, u16, u32, u64, i8, i16, i32, i64);
 
 /// Ids as `u32` labels, or `None` when one lies outside `0..MAX_SLOTS`.
 fn labels<T: Id>(v: &[T]) -> Option<Vec<u32>> {
@@ -147,34 +157,6 @@ fn min_max<T: Id>(v: &[T]) -> Option<(i128, i128)> {
 }
 
 impl IdSlice<'_> {
-    /// Ids `range` as `u32` labels, or `None` when one lies outside `0..MAX_SLOTS`.
-    fn labels(self, range: std::ops::Range<usize>) -> Option<Vec<u32>> {
-        match self {
-            IdSlice::U8(v) => labels(&v[range]),
-            IdSlice::U16(v) => labels(&v[range]),
-            IdSlice::U32(v) => labels(&v[range]),
-            IdSlice::U64(v) => labels(&v[range]),
-            IdSlice::I8(v) => labels(&v[range]),
-            IdSlice::I16(v) => labels(&v[range]),
-            IdSlice::I32(v) => labels(&v[range]),
-            IdSlice::I64(v) => labels(&v[range]),
-        }
-    }
-
-    /// Smallest and largest id, for the message when one is out of range.
-    fn min_max(self) -> Option<(i128, i128)> {
-        match self {
-            IdSlice::U8(v) => min_max(v),
-            IdSlice::U16(v) => min_max(v),
-            IdSlice::U32(v) => min_max(v),
-            IdSlice::U64(v) => min_max(v),
-            IdSlice::I8(v) => min_max(v),
-            IdSlice::I16(v) => min_max(v),
-            IdSlice::I32(v) => min_max(v),
-            IdSlice::I64(v) => min_max(v),
-        }
-    }
-
     /// Every image's labels (`batch` images of `pixels`), or the error naming `what` and the
     /// offending id when one lies outside `0..MAX_SLOTS`.
     fn batch_labels(self, batch: usize, pixels: usize, what: &str) -> PyResult<Vec<Vec<u32>>> {
@@ -212,90 +194,26 @@ impl Value for f64 {
     }
 }
 
-/// Pixels per block of the argmax: its running maxima stay in L1 while the K masks stream by.
-const BLOCK: usize = 256;
-
-/// The argmax over `k` soft masks `m` (`(k, n)`) of one image, as [`argmax_masks`]: first index
-/// on ties, NaN the maximum; with `no_background` a background `1 - Σ_k m_k` (summed in k
-/// order) in front. Blocked over pixels and branch-free, so it vectorises and reads `m` once.
+/// The argmax over `k` soft masks `m` (`(k, n)`) of one image, eval's kernel
+/// ([`argmax_by`]) with every value compared as `f32`.
 fn argmax<T: Value>(m: &[T], k: usize, n: usize, no_background: bool) -> Vec<u32> {
-    let mut out = vec![0u32; n];
-    if k == 0 || n == 0 || m.len() < k * n {
-        return out;
-    }
-    // Two buffers each for the running maximum and its index, swapped per mask: writing a
-    // select into the other buffer keeps LLVM from turning it into a conditional store,
-    // which it cannot vectorise without AVX.
-    let (mut best, mut best2) = ([0.0f32; BLOCK], [0.0f32; BLOCK]);
-    let (mut idx, mut idx2) = ([0u32; BLOCK], [0u32; BLOCK]);
-    for (start, o) in (0..n).step_by(BLOCK).zip(out.chunks_mut(BLOCK)) {
-        let len = o.len();
-        let slot = |s: usize| &m[s * n + start..s * n + start + len];
-        let (mut b, mut b2) = (&mut best[..len], &mut best2[..len]);
-        let (mut i, mut i2) = (&mut idx[..len], &mut idx2[..len]);
-        i.fill(0);
-        let (first, offset) = if no_background {
-            b.fill(0.0);
-            for s in 0..k {
-                b.iter_mut().zip(slot(s)).for_each(|(b, v)| *b += v.f32());
-            }
-            b.iter_mut().for_each(|b| *b = 1.0 - *b);
-            (0, 1)
-        } else {
-            b.iter_mut().zip(slot(0)).for_each(|(b, v)| *b = v.f32());
-            (1, 0)
-        };
-        for s in first..k {
-            let label = (s + offset) as u32;
-            let src = b.iter().zip(i.iter()).zip(slot(s));
-            for ((nb, ni), ((&ob, &oi), v)) in b2.iter_mut().zip(i2.iter_mut()).zip(src) {
-                let v = v.f32();
-                let take = !ob.is_nan() & (v.is_nan() | (v > ob));
-                *nb = if take { v } else { ob };
-                *ni = if take { label } else { oi };
-            }
-            std::mem::swap(&mut b, &mut b2);
-            std::mem::swap(&mut i, &mut i2);
-        }
-        o.copy_from_slice(i);
-    }
-    out
+    argmax_by(m, k, n, no_background, T::f32)
 }
 
-/// Per true label, the squared error of `pred` against `truth` images (`(3, pixels)` each),
-/// and the total (difference and square in f32, sums in f64 in pixel order; docs/eval.md).
+/// Per true label, the squared error of `pred` against `truth` images (`(3, pixels)` each,
+/// planar), and the total: eval's kernel ([`squared_errors`]; difference and square in f32,
+/// sums in f64 in pixel order; docs/eval.md).
 fn squared_error<T: Value>(t: &[u32], tr: &[T], pr: &[T], slots: usize) -> (Vec<f64>, f64) {
     let pixels = t.len();
-    let mut per_true = vec![0.0f64; slots];
-    let mut total = 0.0f64;
-    let mut e = [0.0f64; BLOCK];
-    let (mut label, mut run) = (0usize, 0.0f64);
-    for (start, t) in (0..pixels).step_by(BLOCK).zip(t.chunks(BLOCK)) {
-        // Each pixel's error (independent, so it vectorises), then the sums in pixel order.
-        let e = &mut e[..t.len()];
-        e.fill(0.0);
+    let (total, per_true) = squared_errors(t, slots, |start, e| {
         for c in 0..3 {
-            let range = c * pixels + start..c * pixels + start + t.len();
+            let range = c * pixels + start..c * pixels + start + e.len();
             for ((e, p), t) in e.iter_mut().zip(&pr[range.clone()]).zip(&tr[range]) {
                 let d = p.f32() - t.f32();
                 *e += (d * d) as f64;
             }
         }
-        for (&l, &e) in t.iter().zip(e.iter()) {
-            // The running sum of a run of one label stays in a register (same additions in
-            // the same order as `per_true[l] += e`, without a store-to-load wait per pixel).
-            if l as usize != label {
-                per_true[label] = run;
-                label = l as usize;
-                run = per_true[label];
-            }
-            run += e;
-            total += e;
-        }
-    }
-    if !per_true.is_empty() {
-        per_true[label] = run;
-    }
+    });
     (per_true, total)
 }
 
