@@ -1122,3 +1122,47 @@ fn eval_checks_a_ground_truth_png_size_from_its_header() {
         "{t}"
     );
 }
+
+/// A variant whose objects are plain-coloured (`objects_plain_coloured` in its config: `vbg`
+/// and `clevr`) is broken down by colour; `clevr` was not (only `vbg` by name).
+#[test]
+fn eval_breaks_clevr_down_by_colour() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gt, preds) = (dir.path().join("gt"), dir.path().join("preds"));
+    let sub = gt.join("clevrtex_clevr/0");
+    std::fs::create_dir_all(&sub).unwrap();
+    std::fs::create_dir_all(&preds).unwrap();
+    let stem = "CLEVRTEX_clevr_000000";
+    let meta = serde_json::json!({
+        "image_index": 0, "split": "test", "num_objects": 1, "ground_material": "plain",
+        "objects": [{"color": "red", "material": "rubber", "shape": "cube", "size": "large"}],
+    });
+    std::fs::write(sub.join(format!("{stem}.json")), meta.to_string()).unwrap();
+    image::RgbImage::from_pixel(16, 12, image::Rgb([90, 120, 150]))
+        .save(sub.join(format!("{stem}.png")))
+        .unwrap();
+    // The object covers the left half.
+    let mask = image::GrayImage::from_fn(16, 12, |x, _| image::Luma([u8::from(x < 8)]));
+    mask.save(sub.join(format!("{stem}_flat.png"))).unwrap();
+    mask.save(preds.join(format!("{stem}_mask.png"))).unwrap();
+    let json = dir.path().join("r.json");
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&gt),
+        "--protocol",
+        "native",
+        "--split",
+        "all",
+        "--bootstrap",
+        "0",
+        "--json",
+        s(&json),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("by color"), "{stdout}");
+    let r: Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(r["breakdowns"]["color"]["red"]["count"], 1, "{r}");
+    assert_eq!(r["breakdowns"]["color"]["red"]["mIoU"], 1.0, "{r}");
+}

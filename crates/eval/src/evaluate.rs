@@ -328,6 +328,7 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
         });
     }
     let pred_index = index_preds(preds, &variant)?;
+    let by_colour = clevrtex_scene::layout::variant_colour_breakdown(&variant);
     let missing: Vec<&str> = samples
         .iter()
         .filter(|s| {
@@ -349,7 +350,7 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
         .par_iter()
         .map(|s| {
             let files = pred_index.get(&s.stem).cloned().unwrap_or_default();
-            score_sample(s, &files, &variant, opts)
+            score_sample(s, &files, by_colour, opts)
         })
         .collect::<Result<Vec<_>, _>>()?;
 
@@ -498,7 +499,7 @@ fn gt_png_size(bytes: &[u8], path: &Path) -> Result<(usize, usize), EvalError> {
 fn score_sample(
     s: &crate::dataset::GtSample,
     files: &PredFiles,
-    variant: &str,
+    by_colour: bool,
     opts: &Options,
 ) -> Result<ImageResult, EvalError> {
     let mask_bytes = read_file(&s.mask)?;
@@ -628,7 +629,7 @@ fn score_sample(
                 groups.push((kind, v.clone()));
             }
         }
-        if variant == "vbg" {
+        if by_colour {
             if let Some(c) = &o.color {
                 groups.push(("color", c.clone()));
             }

@@ -396,6 +396,13 @@ fn discover(
     })
 }
 
+/// Whether a variant's objects are plain-coloured, so that its metadata and results carry
+/// their colour (the variant config's property, `Config::colour_breakdown`: `vbg`, `clevr`).
+#[pyfunction]
+fn colour_breakdown(variant: &str) -> bool {
+    clevrtex_scene::layout::variant_colour_breakdown(variant)
+}
+
 /// A variant with only a test split (its config says `"splits": "test_only"`, e.g. `outd`).
 fn is_test_only(variant: &str) -> bool {
     clevrtex_eval::Split::Val.range(10, variant).is_err()
@@ -487,6 +494,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(metric_names, m)?)?;
     m.add_function(wrap_pyfunction!(protocol_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(discover, m)?)?;
+    m.add_function(wrap_pyfunction!(colour_breakdown, m)?)?;
     m.add_function(wrap_pyfunction!(load_sample, m)?)?;
     m.add_function(wrap_pyfunction!(read_metadata, m)?)?;
     Ok(())

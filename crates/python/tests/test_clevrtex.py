@@ -272,6 +272,30 @@ def test_dataset_equals_the_public_loader():
         ds[10]
 
 
+def test_colours_follow_the_variant_config(tmp_path):
+    # The variant config's property (it lists `objects.colors`), not a variant name.
+    from clevrtex import _native
+
+    assert {v: _native.colour_breakdown(v) for v in ("full", "camo", "vbg", "clevr", "mine")} == {
+        "full": False, "camo": False, "vbg": True, "clevr": True, "mine": False,
+    }
+    # The vbg fixture under clevr and full names: clevr keeps the colours, full drops them.
+    src = os.path.join(GT, "clevrtex_vbg", "0")
+    for variant, keeps in (("clevr", True), ("full", False)):
+        dst = tmp_path / variant / f"clevrtex_{variant}" / "0"
+        dst.mkdir(parents=True)
+        for name in os.listdir(src):
+            data = open(os.path.join(src, name), "rb").read()
+            if name.endswith(".json"):
+                data = data.replace(b"vbg", variant.encode())
+            (dst / name.replace("_vbg_", f"_{variant}_")).write_bytes(data)
+        ds = clevrtex.Dataset(str(tmp_path / variant), variant, split="all")
+        assert len(ds) == 10
+        for i in range(len(ds)):
+            objects = ds[i][3]["objects"]
+            assert objects and all(("color" in o) == keeps for o in objects), (variant, i)
+
+
 def test_the_gil_is_released_while_scoring():
     # 300 segments per image: the matching is cubic, so one call takes a while.
     rng = np.random.default_rng(0)

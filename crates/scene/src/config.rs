@@ -281,6 +281,15 @@ pub struct Config {
     pub base: BaseScene,
 }
 
+impl Config {
+    /// Whether the variant's objects are plain-coloured (its config lists `objects.colors`, as
+    /// `vbg` and `clevr` do): their colour is then a property worth scoring by, so `eval` and
+    /// the Python `Dataset` break results down and report metadata by colour.
+    pub fn colour_breakdown(&self) -> bool {
+        !self.objects.colors.is_empty()
+    }
+}
+
 // ---- file shapes -------------------------------------------------------------------------
 
 #[derive(Deserialize)]

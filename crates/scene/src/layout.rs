@@ -169,6 +169,12 @@ pub fn variant_splits(variant: &str) -> Splits {
         .unwrap_or(Splits::Standard)
 }
 
+/// Whether a variant is broken down by object colour ([`Config::colour_breakdown`] of its
+/// built-in config; `false` for a variant that is not built in).
+pub fn variant_colour_breakdown(variant: &str) -> bool {
+    Config::builtin(variant).is_ok_and(|c| c.colour_breakdown())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -331,6 +331,8 @@ class Dataset:
         self.side = None if resize is None else int(resize[0])
         self.return_metadata = return_metadata
         self.dataset_variant, self._samples = _native.discover(str(path), dataset_variant, split)
+        # Objects carry their colour where the variant's config gives them one (vbg, clevr).
+        self._by_colour = _native.colour_breakdown(self.dataset_variant)
         self.split = split
 
     def __len__(self) -> int:
@@ -340,7 +342,7 @@ class Dataset:
         objs = []
         for obj in meta.get("objects", []):
             o = {k: obj.get(k) for k in ("material", "shape", "size", "rotation")}
-            if self.dataset_variant == "vbg":
+            if self._by_colour:
                 o["color"] = obj.get("color")
             objs.append(o)
         return {"ground_material": meta.get("ground_material"), "objects": objs}
