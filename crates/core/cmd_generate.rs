@@ -14,7 +14,7 @@ use crate::run_args::{parse_passes, positive, within, RunArgs};
 
 /// Arguments of `clevrtex generate`.
 #[derive(Debug, clap::Args)]
-#[command(after_help = crate::shard::SHARD_HELP)]
+#[command(after_help = clevrtex_scene::shard::SHARD_HELP)]
 pub struct GenerateArgs {
     #[arg(long, default_value = "full", conflicts_with = "config",
         help = format!("Built-in variant: {}", Config::variant_list()))]
@@ -118,8 +118,8 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     if total < end {
         bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset");
     }
-    let range =
-        crate::shard::resolve(args.shard.as_deref(), args.shard_count)?.indices(args.start, end);
+    let range = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?
+        .indices(args.start, end);
     // Draw the first layouts before starting Blender: a config whose objects can never be
     // placed fails here once (exit 1), as in `sample`, not once per image into the ledger.
     for &index in range.iter().take(PREFLIGHT_LAYOUTS) {
@@ -161,7 +161,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         })
         .collect();
     let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
-    let shard = crate::shard::resolve(args.shard.as_deref(), args.shard_count)?;
+    let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
     let plan = manifest::Plan {
         variant: variant.clone(),
         seed: args.seed,

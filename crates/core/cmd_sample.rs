@@ -14,7 +14,7 @@ use crate::interrupt::{self, OnInterrupt};
 
 /// Arguments of `clevrtex sample`.
 #[derive(Debug, clap::Args)]
-#[command(after_help = crate::shard::SHARD_HELP)]
+#[command(after_help = clevrtex_scene::shard::SHARD_HELP)]
 pub struct Args {
     #[arg(
         long,
@@ -77,7 +77,7 @@ fn load_config(args: &Args) -> anyhow::Result<Config> {
 pub fn run(args: Args) -> CmdResult {
     let started = Instant::now();
     let config = load_config(&args)?;
-    let shard = crate::shard::resolve(args.shard.as_deref(), args.shard_count)?;
+    let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
     let end = args.start.checked_add(args.count).with_context(|| {
         format!(
             "`--start {}` plus `-n {}` overflows",

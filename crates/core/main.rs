@@ -24,7 +24,6 @@ mod interrupt;
 mod materials_blender;
 mod run;
 mod run_args;
-mod shard;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object
 /// segmentation, in the style of ClevrTex.

@@ -1,13 +1,328 @@
-//! WebDataset tar shards, as `clevrtex export` writes them: the shard names
-//! (`<variant>-<split>-<6 digits>.tar`, [`shard_name`], [`is_shard_name`]) and the writer of
-//! one shard ([`ShardWriter`]: reproducible headers, a temporary name until complete).
+//! WebDataset tar shards, as `clevrtex export` writes them: the export of a dataset
+//! ([`export`]), the shard names (`<variant>-<split>-<6 digits>.tar`, [`shard_name`],
+//! [`is_shard_name`]) and the writer of one shard ([`ShardWriter`]: reproducible headers, a
+//! temporary name until complete).
+//!
+//! `OUT/<variant>-<split>-%06d.tar`, each at most `shard_size` bytes (one sample is never
+//! split; a sample larger than the limit gets a shard of its own), samples in index order. In a
+//! shard a sample is the files `<stem>.png`, `<stem>.flat.png`, `<stem>.depth.png`,
+//! `<stem>.normal.png`, `<stem>.albedo.png`, `<stem>.shadow.png` (the passes it has) and
+//! `<stem>.json`, so WebDataset's key is the stem. Splits come from each sample's metadata
+//! (`split`, the public loader's rule; only `test`, `val` or `train`). The files are those of
+//! the layout (`clevrtex_scene::layout`): a metadata `*_filename` only says whether a pass was
+//! written and must name the layout's file. Links leading out of the dataset are not followed
+//! and non-regular files not read (their samples are left out and listed). Shards of an
+//! earlier export into OUT that this one did not write are removed (only names of the form
+//! above). Tar headers carry no time, owner or mode of the machine: the same dataset gives the
+//! same bytes. Each shard is written under a temporary name and renamed when complete;
+//! `OUT/index.json` lists the shards and their sample counts.
 
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
+use clevrtex_scene::dataset::{Dataset, DatasetError, Kind, SampleRef, VariantDir};
 use clevrtex_scene::layout::Split;
+use clevrtex_scene::Pass;
 use serde_json::{json, Value};
 
 use crate::dataset;
+
+/// What can go wrong in an export. Shown as the command's error: the message, then (as the
+/// error's source) the cause.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// A file or folder could not be read, created, written or removed.
+    #[error("{what}")]
+    Io {
+        /// What failed and what to do.
+        what: String,
+        /// The OS error.
+        #[source]
+        cause: std::io::Error,
+    },
+    /// A sample's metadata is not JSON.
+    #[error("{what}")]
+    Json {
+        /// Which file, and what to do.
+        what: String,
+        /// The parser's error.
+        #[source]
+        cause: serde_json::Error,
+    },
+    /// Anything else, with the file and what to do.
+    #[error("{0}")]
+    Message(String),
+    /// A shard could not be written.
+    #[error(transparent)]
+    Shard(#[from] ShardError),
+    /// The dataset could not be opened.
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
+    /// The stop flag was raised (Ctrl-C, SIGTERM): the shard being written was removed.
+    #[error("interrupted")]
+    Interrupted,
+}
+
+/// What [`export`] did.
+#[derive(Debug)]
+pub struct ExportReport {
+    /// Samples written.
+    pub samples: u64,
+    /// Shards written.
+    pub shards: usize,
+    /// Bytes of the shards written.
+    pub bytes: u64,
+    /// `OUT/index.json`.
+    pub index: PathBuf,
+    /// Shards of an earlier export that this one did not write, removed.
+    pub stale: Vec<String>,
+    /// Files or folders not followed or not read (their samples are left out), one line each.
+    pub skipped: Vec<String>,
+}
+
+/// One sample to export: its metadata and the (extension, path) of each file.
+struct Sample {
+    index: u64,
+    stem: String,
+    split: Split,
+    files: Vec<(String, PathBuf)>,
+    bytes: u64,
+}
+
+/// The samples of one variant folder of `ds` (found by [`Dataset::open`]), in index order,
+/// and what was not followed or not read (samples with such files are left out).
+/// File names come from the layout and the pass table, never from the metadata: a
+/// `*_filename` key only says whether the pass was written, and must name the layout's file
+/// ([`dataset::listed_passes`]).
+fn samples(
+    ds: &Dataset,
+    vd: &VariantDir,
+    skipped: &mut Vec<String>,
+) -> Result<Vec<Sample>, ExportError> {
+    if let Some((dir, e)) = vd.unreadable.first() {
+        return Err(ExportError::Message(format!(
+            "cannot read `{}`: {e}",
+            dir.display()
+        )));
+    }
+    skipped.extend(vd.skipped_for_metadata().map(ToString::to_string));
+    let found: BTreeMap<u64, &SampleRef> = vd
+        .samples
+        .iter()
+        .filter(|s| s.has_metadata())
+        .map(|s| (s.index, s))
+        .collect();
+    let mut out = Vec::new();
+    'samples: for (index, s) in found {
+        let stem = s.stem.clone();
+        let meta_path = s.metadata_path();
+        let bytes = match ds.read(&meta_path, dataset::MAX_METADATA_BYTES) {
+            Ok(b) => b,
+            Err(why) => {
+                skipped.push(format!("`{}` {why}", meta_path.display()));
+                continue;
+            }
+        };
+        let meta: Value = serde_json::from_slice(&bytes).map_err(|cause| ExportError::Json {
+            what: format!(
+                "`{}` is not valid metadata\nhint: check the dataset with `clevrtex verify`",
+                meta_path.display()
+            ),
+            cause,
+        })?;
+        let bad = |e: dataset::MetadataError| {
+            ExportError::Message(format!(
+                "{e}\nhint: check the dataset with `clevrtex verify`; export takes file names from the layout, not from the metadata"
+            ))
+        };
+        let file = meta_path.display().to_string();
+        let mut files: Vec<(String, PathBuf)> = dataset::listed_passes(&meta, &file, &stem)
+            .map_err(bad)?
+            .into_iter()
+            .map(|pass| (pass.spec().webdataset_key.to_string(), s.pass_path(pass)))
+            .collect();
+        let split = dataset::split_of(&meta, &file).map_err(bad)?;
+        files.push(("json".into(), meta_path));
+        let mut bytes = 0;
+        for (_, p) in &files {
+            match ds.classify(p) {
+                Kind::File => {}
+                Kind::Skipped(why) => {
+                    skipped.push(format!("`{}` {why}", p.display()));
+                    continue 'samples;
+                }
+                Kind::Dir => {
+                    skipped.push(format!("`{}` is a folder", p.display()));
+                    continue 'samples;
+                }
+            }
+            bytes += std::fs::metadata(p)
+                .map_err(|cause| ExportError::Io {
+                    what: format!(
+                        "`{}` (a pass the metadata of `{stem}` lists) is missing\nhint: check the dataset with `clevrtex verify`",
+                        p.display()
+                    ),
+                    cause,
+                })?
+                .len()
+                + 1024;
+        }
+        out.push(Sample {
+            index,
+            split,
+            stem,
+            files,
+            bytes,
+        });
+    }
+    Ok(out)
+}
+
+fn io_err(what: String) -> impl FnOnce(std::io::Error) -> ExportError {
+    move |cause| ExportError::Io { what, cause }
+}
+
+/// Export the dataset under `dir` (an output folder of `clevrtex generate`) as WebDataset
+/// shards of at most `shard_size` bytes into `out` (created if missing), the variant `variant`
+/// only or every variant found. Stops between samples when `stop` is raised
+/// ([`ExportError::Interrupted`]; the shard being written is removed).
+pub fn export(
+    dir: &Path,
+    out: &Path,
+    variant: Option<&str>,
+    shard_size: u64,
+    stop: &AtomicBool,
+) -> Result<ExportReport, ExportError> {
+    let ds = Dataset::open(dir).map_err(|e| match e {
+        DatasetError::Unreadable { cause, .. } => ExportError::Io {
+            what: format!("cannot read `{}`", dir.display()),
+            cause,
+        },
+        other => other.into(),
+    })?;
+    let mut skipped = Vec::new();
+    let wanted = |v: &str| variant.is_none_or(|want| want == v);
+    // A `clevrtex_<variant>` folder given itself is not an output folder: nothing under it.
+    let variants: Vec<&VariantDir> = if ds.is_variant_dir {
+        Vec::new()
+    } else {
+        for (v, skip) in &ds.skipped {
+            if wanted(v) {
+                skipped.push(skip.to_string());
+            }
+        }
+        ds.variants
+            .iter()
+            .filter(|vd| wanted(&vd.variant))
+            .collect()
+    };
+    if variants.is_empty() {
+        return Err(ExportError::Message(format!(
+            "no `clevrtex_<variant>` folder{} in `{}`\nhint: pass the `--out` folder of `clevrtex generate`",
+            variant.map(|v| format!(" for `{v}`")).unwrap_or_default(),
+            dir.display()
+        )));
+    }
+    std::fs::create_dir_all(out).map_err(io_err(format!("cannot create `{}`", out.display())))?;
+    let mut index = Vec::new();
+    let mut total_bytes = 0u64;
+    let mut total_samples = 0u64;
+    let mut written = BTreeSet::new();
+    for vd in &variants {
+        let variant = &vd.variant;
+        let all = samples(&ds, vd, &mut skipped)?;
+        let mut by_split: BTreeMap<&str, Vec<&Sample>> = BTreeMap::new();
+        for s in &all {
+            by_split.entry(s.split.name()).or_default().push(s);
+        }
+        for (split, list) in by_split {
+            let mut shard: Option<ShardWriter> = None;
+            let mut n = 0;
+            for s in list {
+                if stop.load(Ordering::SeqCst) {
+                    return Err(ExportError::Interrupted);
+                }
+                if shard
+                    .as_ref()
+                    .is_some_and(|w| w.samples() > 0 && w.bytes() + s.bytes > shard_size)
+                {
+                    let done = shard.take().unwrap().finish()?;
+                    total_bytes += done["bytes"].as_u64().unwrap_or(0);
+                    index.push(json!({"variant": variant, "split": split, "shard": done}));
+                }
+                if shard.is_none() {
+                    let name = shard_name(variant, split, n);
+                    written.insert(name.clone());
+                    n += 1;
+                    shard = Some(ShardWriter::create(out.join(name))?);
+                }
+                shard
+                    .as_mut()
+                    .unwrap()
+                    .add(&ds.root, s.index, &s.stem, &s.files)?;
+                total_samples += 1;
+            }
+            if let Some(w) = shard {
+                let done = w.finish()?;
+                total_bytes += done["bytes"].as_u64().unwrap_or(0);
+                index.push(json!({"variant": variant, "split": split, "shard": done}));
+            }
+        }
+    }
+    let stale = remove_stale(out, &written)?;
+    let shards = index.len();
+    let doc = json!({
+        "format": "webdataset",
+        "source": dir.display().to_string(),
+        "samples": total_samples,
+        "shards": index,
+        "keys": std::iter::once("__key__ = stem")
+            .chain(Pass::ALL.map(|p| p.spec().webdataset_key))
+            .chain(["json"])
+            .collect::<Vec<_>>(),
+    });
+    let index_path = out.join("index.json");
+    let tmp = out.join("index.json.clevrtex-tmp");
+    let mut f = std::fs::File::create(&tmp)
+        .map_err(io_err(format!("cannot create `{}`", tmp.display())))?;
+    let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise") + "\n";
+    f.write_all(text.as_bytes())
+        .and_then(|()| f.sync_all())
+        .and_then(|()| std::fs::rename(&tmp, &index_path))
+        .map_err(io_err(format!("cannot write `{}`", index_path.display())))?;
+    Ok(ExportReport {
+        samples: total_samples,
+        shards,
+        bytes: total_bytes,
+        index: index_path,
+        stale,
+        skipped,
+    })
+}
+
+/// Shards of an earlier export into `out` that this one did not write (fewer samples, another
+/// variant): removed, so `index.json` and the shards on disk agree. Only export's own shard
+/// names are touched.
+fn remove_stale(out: &Path, written: &BTreeSet<String>) -> Result<Vec<String>, ExportError> {
+    let mut stale = Vec::new();
+    for e in std::fs::read_dir(out)
+        .map_err(io_err(format!("cannot read `{}`", out.display())))?
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let file = e.file_type().is_ok_and(|t| t.is_file() || t.is_symlink());
+        if file && is_shard_name(&name) && !written.contains(&name) {
+            std::fs::remove_file(e.path()).map_err(io_err(format!(
+                "cannot remove the stale shard `{}` of an earlier export\nhint: remove it by hand, or export into an empty folder",
+                e.path().display()
+            )))?;
+            stale.push(name);
+        }
+    }
+    Ok(stale)
+}
 
 /// What can go wrong while writing a shard. Shown as the command's error: the message, then
 /// (as the error's source) the OS error.

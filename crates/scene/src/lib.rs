@@ -31,6 +31,7 @@ pub mod quality;
 mod rng;
 pub mod sample;
 pub mod scene_file;
+pub mod shard;
 
 pub use camera::{look_at_matrix, project, track_matrix};
 pub use config::{Config, ConfigError};

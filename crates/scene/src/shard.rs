@@ -1,7 +1,10 @@
 //! Sharding shared by `clevrtex sample` and `clevrtex generate`: which indices this process
 //! makes, from `--shard K/N` or the cluster's array-job variables.
 
-use anyhow::bail;
+/// A shard that cannot be worked out: the message names the flag or variable and what to do.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct ShardError(pub String);
 
 /// Shown in `--help` of every command that shards.
 pub const SHARD_HELP: &str = "Sharding: `--shard K/N` keeps the indices with `index % N == K`, so \
@@ -38,29 +41,29 @@ impl Shard {
 }
 
 /// Parse `K/N`.
-fn parse_shard(text: &str, origin: &str) -> anyhow::Result<Shard> {
+fn parse_shard(text: &str, origin: &str) -> Result<Shard, ShardError> {
     let parsed = text
         .split_once('/')
         .and_then(|(k, n)| Some((k.trim().parse().ok()?, n.trim().parse().ok()?)));
     match parsed {
         Some((k, n)) if n > 0 && k < n => Ok(Shard { k, n }),
-        _ => bail!(
+        _ => Err(ShardError(format!(
             "invalid shard `{text}` from {origin}\nhint: give `K/N` with 0 <= K < N, e.g. `--shard 0/4`"
-        ),
+        ))),
     }
 }
 
-fn env_u64(name: &str) -> anyhow::Result<Option<u64>> {
+fn env_u64(name: &str) -> Result<Option<u64>, ShardError> {
     match std::env::var(name) {
         Ok(v) => v.trim().parse().map(Some).map_err(|_| {
-            anyhow::anyhow!("environment variable `{name}` is `{v}`, not a whole number\nhint: unset it or pass `--shard K/N`")
+            ShardError(format!("environment variable `{name}` is `{v}`, not a whole number\nhint: unset it or pass `--shard K/N`"))
         }),
         Err(_) => Ok(None),
     }
 }
 
 /// `--shard`, else SLURM array variables, else JOB_COMPLETION_INDEX, else everything.
-pub fn resolve(shard: Option<&str>, shard_count: Option<u64>) -> anyhow::Result<Shard> {
+pub fn resolve(shard: Option<&str>, shard_count: Option<u64>) -> Result<Shard, ShardError> {
     if let Some(s) = shard {
         return parse_shard(s, "`--shard`");
     }
@@ -82,14 +85,14 @@ pub fn resolve(shard: Option<&str>, shard_count: Option<u64>) -> anyhow::Result<
                 "(SLURM_ARRAY_TASK_ID - SLURM_ARRAY_TASK_MIN) / SLURM_ARRAY_TASK_STEP and SLURM_ARRAY_TASK_COUNT",
             );
         }
-        (Some(id), None) => bail!(
+        (Some(id), None) => return Err(ShardError(format!(
             "SLURM_ARRAY_TASK_ID is `{id}` but SLURM_ARRAY_TASK_COUNT is not set, so the number of shards is unknown\nhint: pass `--shard K/N`, or unset SLURM_ARRAY_TASK_ID to make every index"
-        ),
+        ))),
         _ => {}
     }
     if let Some(k) = env_u64("JOB_COMPLETION_INDEX")? {
         let Some(n) = shard_count else {
-            bail!("JOB_COMPLETION_INDEX is `{k}` but the number of shards is unknown\nhint: pass `--shard-count N` or set CLEVRTEX_SHARD_COUNT to the job's completion count");
+            return Err(ShardError(format!("JOB_COMPLETION_INDEX is `{k}` but the number of shards is unknown\nhint: pass `--shard-count N` or set CLEVRTEX_SHARD_COUNT to the job's completion count")));
         };
         return parse_shard(&format!("{k}/{n}"), "JOB_COMPLETION_INDEX / --shard-count");
     }
