@@ -85,7 +85,7 @@ pub fn run(args: Args) -> CmdResult {
                     ready.cycles_devices.join(", ")
                 }
             );
-            println!("{}", features_line(&ready));
+            println!("{}", ready.features_line());
             if !ready.cycles_devices.iter().any(|d| d == "CPU") {
                 problems.push("Cycles reports no CPU device".to_string());
             }
@@ -134,35 +134,6 @@ fn start_worker(
     )
 }
 
-fn yes_no(b: bool) -> &'static str {
-    if b {
-        "yes"
-    } else {
-        "no"
-    }
-}
-
-/// `gpus: ...; oidn: yes; path guiding: yes; light tree: yes` of a started worker.
-fn features_line(ready: &clevrtex_render::Ready) -> String {
-    let gpus = if ready.gpus.is_empty() {
-        "none".to_string()
-    } else {
-        ready
-            .gpus
-            .iter()
-            .map(|g| format!("{} `{}`", g.kind, g.name))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
-    let f = &ready.features;
-    format!(
-        "gpus: {gpus}; oidn: {}; path guiding: {}; light tree: {}",
-        yes_no(f.oidn),
-        yes_no(f.path_guiding),
-        yes_no(f.light_tree)
-    )
-}
-
 /// One line per Blender found (PATH, `CLEVRTEX_BLENDER`, `./.venv-bpy`): its kind, version,
 /// Cycles devices and features, and which one `generate` uses. Probed in parallel; a
 /// Blender that does not start is listed with why, and is not a problem of this check.
@@ -194,7 +165,7 @@ fn list_blenders(checked: &std::path::Path, explicit: bool, deadline: Duration) 
                             format!(
                                 "cycles devices: {}; {}",
                                 ready.cycles_devices.join(", "),
-                                features_line(&ready)
+                                ready.features_line()
                             )
                         }
                         Err(e) => {

@@ -1,10 +1,9 @@
 //! `clevrtex verify`: completeness and integrity of a dataset, or of the union of shards.
 
-use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use clevrtex_render::verify::{self, VariantReport, VerifyOptions};
+use clevrtex_render::verify::{self, index_ranges, shell_words, VariantReport, VerifyOptions};
 
 use crate::exit::{self, CmdResult};
 
@@ -31,37 +30,17 @@ pub struct Args {
     jobs: Option<usize>,
 }
 
-/// Indices as compact ranges: `0, 3..=5, 9`.
-fn ranges(v: &[u64]) -> String {
-    let mut out = Vec::new();
-    let mut i = 0;
-    while i < v.len() {
-        let mut j = i;
-        while j + 1 < v.len() && v[j + 1] == v[j] + 1 {
-            j += 1;
-        }
-        out.push(if i == j {
-            v[i].to_string()
-        } else {
-            format!("{}..={}", v[i], v[j])
-        });
-        i = j + 1;
-    }
-    let shown = out.len().min(20);
-    let mut s = out[..shown].join(", ");
-    if out.len() > shown {
-        let _ = write!(s, ", ... ({} more ranges)", out.len() - shown);
-    }
-    s
-}
-
 fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
     println!(
         "{}: {} of {} expected samples whole ({})",
         r.variant, r.ok, r.expected, r.expected_from
     );
     if r.missing_count > 0 {
-        println!("  missing ({}): {}", r.missing_count, ranges(&r.missing));
+        println!(
+            "  missing ({}): {}",
+            r.missing_count,
+            index_ranges(&r.missing)
+        );
     }
     if !r.duplicates.is_empty() {
         println!("  duplicated indices ({}):", r.duplicates.len());
@@ -89,7 +68,7 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
         println!(
             "  outside the run's indices ({}, not counted as errors): {}",
             r.unexpected.len(),
-            ranges(&r.unexpected)
+            index_ranges(&r.unexpected)
         );
     }
     if !r.temp_files.is_empty() {
@@ -118,7 +97,7 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
         println!(
             "  failure ledger: {} image(s) recorded as failed: {}",
             idx.len(),
-            ranges(&idx)
+            index_ranges(&idx)
         );
         if let Some((i, e)) = r.ledger.iter().next() {
             println!("    e.g. {i}: {e}");
@@ -147,23 +126,6 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
             );
         }
     }
-}
-
-/// A command line as a shell would read it back.
-fn shell_words(args: &[String]) -> String {
-    args.iter()
-        .map(|a| {
-            if !a.is_empty()
-                && a.chars()
-                    .all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c))
-            {
-                a.clone()
-            } else {
-                format!("'{}'", a.replace('\'', "'\\''"))
-            }
-        })
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 /// Run `clevrtex verify`.
@@ -220,7 +182,7 @@ pub fn run(args: Args) -> CmdResult {
                 println!(
                     "{}: kept broken sample(s) {}: no run of the manifests covers them, so no known command remakes them\nhint: remove them by hand if they are not wanted, or remake them with `clevrtex generate --start I -n N --out DIR`",
                     r.variant,
-                    ranges(&done.kept)
+                    index_ranges(&done.kept)
                 );
             }
         }

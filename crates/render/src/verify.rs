@@ -711,9 +711,63 @@ pub fn remove_broken(report: &VariantReport) -> std::io::Result<Removal> {
     Ok(out)
 }
 
+/// Indices (sorted) as compact ranges for a message: `0, 3..=5, 9`; at most 20 ranges shown.
+pub fn index_ranges(v: &[u64]) -> String {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < v.len() {
+        let mut j = i;
+        while j + 1 < v.len() && v[j + 1] == v[j] + 1 {
+            j += 1;
+        }
+        out.push(if i == j {
+            v[i].to_string()
+        } else {
+            format!("{}..={}", v[i], v[j])
+        });
+        i = j + 1;
+    }
+    let shown = out.len().min(20);
+    let mut s = out[..shown].join(", ");
+    if out.len() > shown {
+        s += &format!(", ... ({} more ranges)", out.len() - shown);
+    }
+    s
+}
+
+/// A command line (a manifest's, untrusted) as a shell would read it back: each word that is
+/// not plainly safe is single-quoted, so a printed rerun command runs only that command.
+pub fn shell_words(args: &[String]) -> String {
+    args.iter()
+        .map(|a| {
+            if !a.is_empty()
+                && a.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c))
+            {
+                a.clone()
+            } else {
+                format!("'{}'", a.replace('\'', "'\\''"))
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ranges_and_rerun_commands_print_safely() {
+        assert_eq!(index_ranges(&[0, 3, 4, 5, 9]), "0, 3..=5, 9");
+        let many: Vec<u64> = (0..50).map(|i| 2 * i).collect();
+        assert!(index_ranges(&many).ends_with(", ... (30 more ranges)"));
+        let cmd = ["clevrtex", "generate", "--out", "a b", "x;rm -rf ~", "it's"].map(String::from);
+        assert_eq!(
+            shell_words(&cmd),
+            r"clevrtex generate --out 'a b' 'x;rm -rf ~' 'it'\''s'"
+        );
+    }
 
     #[test]
     fn the_rerun_writes_where_verify_looked() {

@@ -122,6 +122,30 @@ pub struct Ready {
     pub extra: BTreeMap<String, serde_json::Value>,
 }
 
+impl Ready {
+    /// `gpus: ...; oidn: yes; path guiding: yes; light tree: yes`, for `doctor`.
+    pub fn features_line(&self) -> String {
+        let gpus: Vec<String> = self
+            .gpus
+            .iter()
+            .map(|g| format!("{} `{}`", g.kind, g.name))
+            .collect();
+        let yes_no = |b: bool| if b { "yes" } else { "no" };
+        let f = &self.features;
+        format!(
+            "gpus: {}; oidn: {}; path guiding: {}; light tree: {}",
+            if gpus.is_empty() {
+                "none".to_string()
+            } else {
+                gpus.join(", ")
+            },
+            yes_no(f.oidn),
+            yes_no(f.path_guiding),
+            yes_no(f.light_tree)
+        )
+    }
+}
+
 /// Optional Cycles features of a Blender build (`features` of the `ready` reply).
 #[derive(Debug, Clone, Default, Deserialize)]
 pub struct Features {
