@@ -123,7 +123,7 @@ pub const MAX_FILE_BYTES: u64 = clevrtex_scene::dataset::MAX_FILE_BYTES;
 pub fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
     clevrtex_scene::dataset::read_regular(path, MAX_FILE_BYTES).map_err(|why| EvalError::Io {
         path: path.to_path_buf(),
-        cause: std::io::Error::other(why),
+        cause: why.into_io(),
     })
 }
 
@@ -136,7 +136,7 @@ pub const MAX_METADATA_BYTES: u64 = 64 << 20;
 pub fn read_metadata(path: &Path) -> Result<Vec<u8>, EvalError> {
     clevrtex_scene::dataset::read_regular(path, MAX_METADATA_BYTES).map_err(|why| EvalError::Io {
         path: path.to_path_buf(),
-        cause: std::io::Error::other(why),
+        cause: why.into_io(),
     })
 }
 

@@ -467,24 +467,40 @@ fn load_sample<'py>(
 }
 
 /// The extension module.
-/// A sample's metadata, read as every reader of a dataset reads it (`clevrtex_scene::dataset`
-/// through `clevrtex_eval::dataset::read_metadata`: a regular file opened non-blocking, at
-/// most 64 MiB). `ValueError` naming the file when it is not read (`OSError` when it cannot
-/// be opened).
+/// A sample's metadata, read as every reader of a dataset reads it
+/// (`clevrtex_scene::dataset`): checked again when read, so that a link swapped in after
+/// `discover` that leads out of the dataset `root` is not followed; a regular file opened
+/// non-blocking, at most 64 MiB. `ValueError` naming the file when it is not read, `OSError`
+/// (its subclass by errno: `FileNotFoundError`, `PermissionError`) when it cannot be opened.
 #[pyfunction]
-fn read_metadata<'py>(py: Python<'py>, path: &str) -> PyResult<Bound<'py, PyBytes>> {
-    let read = py.allow_threads(|| clevrtex_eval::dataset::read_metadata(Path::new(path)));
-    match read {
-        Ok(bytes) => Ok(PyBytes::new(py, &bytes)),
-        Err(EvalError::Io { cause, .. }) => {
-            let why = cause.to_string();
-            if why.starts_with("cannot be read") {
-                Err(PyOSError::new_err(format!("`{path}` {why}")))
-            } else {
-                Err(value_error(format!("`{path}` {why}")))
+fn read_metadata<'py>(py: Python<'py>, path: &str, root: &str) -> PyResult<Bound<'py, PyBytes>> {
+    use clevrtex_scene::dataset::{classify, read_regular, Kind, ReadError};
+    let p = Path::new(path);
+    let read = py.allow_threads(|| {
+        let root = Path::new(root).canonicalize().map_err(ReadError::Io)?;
+        if let Kind::Skipped(why) = classify(&root, p) {
+            if !why.starts_with("cannot be read") {
+                return Ok(Err(why.replace("; skipped", "; not read")));
             }
         }
-        Err(e) => Err(eval_error(e)),
+        read_regular(p, clevrtex_eval::dataset::MAX_METADATA_BYTES).map(Ok)
+    });
+    match read {
+        Ok(Ok(bytes)) => Ok(PyBytes::new(py, &bytes)),
+        Ok(Err(why)) => Err(value_error(format!("`{path}` {why}"))),
+        // OSError(errno, message, filename) is the subclass of its errno.
+        Err(ReadError::Io(e)) => Err(PyOSError::new_err((
+            e.raw_os_error().unwrap_or(0),
+            format!("`{path}` cannot be read: {e}"),
+            path.to_string(),
+        ))),
+        Err(ReadError::NotRegular) => Err(value_error(format!(
+            "`{path}` is not a regular file (a FIFO, socket or device); not read"
+        ))),
+        Err(ReadError::TooLarge { len, cap }) => Err(value_error(format!(
+            "`{path}` {}, over the {cap} bytes read of a sample's metadata; not read",
+            len.map_or("grew".to_string(), |n| format!("is {n} bytes"))
+        ))),
     }
 }
 

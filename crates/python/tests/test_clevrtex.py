@@ -418,3 +418,25 @@ def test_dataset_reads_untrusted_samples_within_bounds(tmp_path):
     os.symlink(outside, mask)
     with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000002_flat.png` is a symbolic link leading out"):
         clevrtex.Dataset(str(gt), "vbg", split="all")
+
+    # Files changed after the `Dataset` was made (issue 22's before/after comparison): a deleted
+    # metadata file is a FileNotFoundError (errno 2, as `open` gives), a FIFO is not read, and
+    # a link swapped in that leads out of the dataset is not followed.
+    os.remove(mask)
+    shutil.copy(outside, mask)
+    ds = clevrtex.Dataset(str(gt), "vbg", split="all")
+    meta2 = sub / "CLEVRTEX_vbg_000002.json"
+    secret = tmp_path / "secret.json"
+    shutil.copy(meta2, secret)
+    os.remove(meta2)
+    with pytest.raises(FileNotFoundError, match=r"CLEVRTEX_vbg_000002.json` cannot be read") as e:
+        ds[2]
+    assert e.value.errno == 2 and e.value.filename == str(meta2)
+    os.mkfifo(meta2)
+    with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000002.json` is not a regular file .*; not read"):
+        ds[2]
+    os.remove(meta2)
+    os.symlink(secret, meta2)
+    with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000002.json` is a symbolic link leading out of the dataset .*; not followed"):
+        ds[2]
+    assert ds[3][0] == 3

@@ -104,38 +104,86 @@ pub fn read(root: &Path, path: &Path, cap: u64) -> Result<Vec<u8>, String> {
     if let Kind::Skipped(why) = classify(root, path) {
         return Err(why);
     }
-    read_regular(path, cap)
+    read_regular(path, cap).map_err(|e| e.to_string())
+}
+
+/// Why [`read_regular`] read nothing. Shown as one line without the path.
+#[derive(Debug)]
+pub enum ReadError {
+    /// The file cannot be opened or read (the OS error, its kind and number kept).
+    Io(std::io::Error),
+    /// Not a regular file (a FIFO, socket or device): never read.
+    NotRegular,
+    /// Larger than the cap (`len` bytes, or more than `cap` read when it grew).
+    TooLarge {
+        /// Its size when opened, `None` when it grew while read.
+        len: Option<u64>,
+        /// The cap.
+        cap: u64,
+    },
+}
+
+impl std::fmt::Display for ReadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReadError::Io(e) => write!(f, "cannot be read: {e}"),
+            ReadError::NotRegular => {
+                f.write_str("is not a regular file (a FIFO, socket or device); skipped")
+            }
+            ReadError::TooLarge {
+                len: Some(len),
+                cap,
+            } => {
+                write!(
+                    f,
+                    "is {len} bytes, over the {cap} bytes read of a dataset's file"
+                )
+            }
+            ReadError::TooLarge { len: None, cap } => {
+                write!(f, "grew over the {cap} bytes read of a dataset's file")
+            }
+        }
+    }
+}
+
+impl std::error::Error for ReadError {}
+
+impl ReadError {
+    /// As an I/O error of the same message, keeping the kind of an OS error (a missing file
+    /// stays `NotFound`).
+    pub fn into_io(self) -> std::io::Error {
+        match self {
+            ReadError::Io(e) => std::io::Error::new(e.kind(), format!("cannot be read: {e}")),
+            other => std::io::Error::other(other.to_string()),
+        }
+    }
 }
 
 /// The bytes of `path` if it is a regular file (checked on the open file: a FIFO or device is
-/// never read, and never blocks), at most `cap` bytes; `Err` says why not, in one line. For a
-/// path already found by walking a root with [`classify`].
-pub fn read_regular(path: &Path, cap: u64) -> Result<Vec<u8>, String> {
+/// never read, and never blocks), at most `cap` bytes. For a path already found by walking a
+/// root with [`classify`].
+pub fn read_regular(path: &Path, cap: u64) -> Result<Vec<u8>, ReadError> {
     use std::os::unix::fs::OpenOptionsExt;
     // Non-blocking: a FIFO swapped in after `classify` must not hang the command.
     let f = std::fs::OpenOptions::new()
         .read(true)
         .custom_flags(O_NONBLOCK)
         .open(path)
-        .map_err(|e| format!("cannot be read: {e}"))?;
-    let meta = f.metadata().map_err(|e| format!("cannot be read: {e}"))?;
+        .map_err(ReadError::Io)?;
+    let meta = f.metadata().map_err(ReadError::Io)?;
     if !meta.is_file() {
-        return Err("is not a regular file (a FIFO, socket or device); skipped".into());
+        return Err(ReadError::NotRegular);
     }
     if meta.len() > cap {
-        return Err(format!(
-            "is {} bytes, over the {cap} bytes read of a dataset's file",
-            meta.len()
-        ));
+        let len = Some(meta.len());
+        return Err(ReadError::TooLarge { len, cap });
     }
     let mut bytes = Vec::with_capacity(meta.len() as usize);
     f.take(cap + 1)
         .read_to_end(&mut bytes)
-        .map_err(|e| format!("cannot be read: {e}"))?;
+        .map_err(ReadError::Io)?;
     if bytes.len() as u64 > cap {
-        return Err(format!(
-            "grew over the {cap} bytes read of a dataset's file"
-        ));
+        return Err(ReadError::TooLarge { len: None, cap });
     }
     Ok(bytes)
 }

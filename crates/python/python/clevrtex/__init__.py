@@ -295,12 +295,13 @@ def evaluate(
 MAX_METADATA_BYTES = 64 << 20
 
 
-def _read_metadata(path: str) -> bytes:
+def _read_metadata(path: str, root: str) -> bytes:
     """A sample's metadata as the dataset reader reads files (`clevrtex_scene::dataset`, in
     Rust): a regular file only (a FIFO swapped in never blocks: it is opened non-blocking and
-    checked before a byte is read), at most `MAX_METADATA_BYTES`; `ValueError` naming the file
-    otherwise, `OSError` when it cannot be opened."""
-    return _native.read_metadata(path)
+    checked before a byte is read), not a link leading out of the dataset `root`, at most
+    `MAX_METADATA_BYTES`; `ValueError` naming the file otherwise, `OSError` (its errno's
+    subclass, e.g. `FileNotFoundError`) when it cannot be opened."""
+    return _native.read_metadata(path, root)
 
 
 class Dataset:
@@ -330,7 +331,8 @@ class Dataset:
         self.crop = crop
         self.side = None if resize is None else int(resize[0])
         self.return_metadata = return_metadata
-        self.dataset_variant, self._samples = _native.discover(str(path), dataset_variant, split)
+        self._root = str(path)
+        self.dataset_variant, self._samples = _native.discover(self._root, dataset_variant, split)
         # Objects carry their colour where the variant's config gives them one (vbg, clevr).
         self._by_colour = _native.colour_breakdown(self.dataset_variant)
         self.split = split
@@ -359,7 +361,7 @@ class Dataset:
         if not self.return_metadata:
             return index, img, msk
         try:
-            data = json.loads(_read_metadata(meta))
+            data = json.loads(_read_metadata(meta, self._root))
         except UnicodeDecodeError as e:
             raise ValueError(f"`{meta}` is not valid metadata: {e}") from None
         except json.JSONDecodeError as e:
