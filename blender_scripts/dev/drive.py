@@ -25,6 +25,20 @@ def cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def read_reply(proc, tag, echo_other=False):
+    """The next reply line of the worker `proc` (its JSON), skipping other stdout lines
+    (printed with `echo_other`: stdout must carry only replies); exits when the worker does."""
+    while True:
+        line = proc.stdout.readline()
+        if not line:
+            raise SystemExit("worker exited with %s" % proc.wait())
+        line = line.decode()
+        if line.startswith(tag + " "):
+            return json.loads(line[len(tag) + 1:])
+        if echo_other:
+            print("NOT A REPLY (stdout must carry only replies):", line.rstrip())
+
+
 def main():
     out = os.path.abspath(sys.argv[1])
     os.makedirs(out, exist_ok=True)
@@ -39,14 +53,7 @@ def main():
     proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log)
 
     def reply():
-        while True:
-            line = proc.stdout.readline()
-            if not line:
-                raise SystemExit("worker exited with %s" % proc.wait())
-            line = line.decode()
-            if line.startswith(tag + " "):
-                return json.loads(line[len(tag) + 1:])
-            print("NOT A REPLY (stdout must carry only replies):", line.rstrip())
+        return read_reply(proc, tag, echo_other=True)
 
     print("ready", reply(), "after %.2f s" % (time.perf_counter() - t0))
     n = 0

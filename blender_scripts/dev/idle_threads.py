@@ -19,6 +19,9 @@ import subprocess
 import sys
 import time
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from drive import read_reply  # noqa: E402
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCRIPTS = os.path.dirname(HERE)
 TICK = os.sysconf("SC_CLK_TCK")
@@ -94,13 +97,7 @@ def main():
     PID[0] = proc.pid
 
     def reply():
-        while True:
-            line = proc.stdout.readline()
-            if not line:
-                raise SystemExit("worker exited with %s" % proc.wait())
-            line = line.decode()
-            if line.startswith(tag + " "):
-                return json.loads(line[len(tag) + 1:])
+        return read_reply(proc, tag)
 
     r = reply()
     print("ready:", r.get("blender") or r.get("version") or "")

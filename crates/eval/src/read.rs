@@ -474,31 +474,22 @@ pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
         }
         a
     }
+    /// Each element read by `read` and widened to `i64` (every type this takes fits).
+    fn ints<'a, T: Into<i64>>(
+        chunks: std::slice::ChunksExact<'a, u8>,
+        read: impl Fn(&'a [u8]) -> T,
+    ) -> Vec<i64> {
+        chunks.map(|c| read(c).into()).collect()
+    }
     let chunks = body.chunks_exact(size.max(1));
     let data = match (kind, size) {
         (b'b', 1) => NpyData::Int(body.iter().map(|&b| (b != 0) as i64).collect()),
         (b'u', 1) => NpyData::Int(body.iter().map(|&b| b as i64).collect()),
         (b'i', 1) => NpyData::Int(body.iter().map(|&b| b as i8 as i64).collect()),
-        (b'u', 2) => NpyData::Int(
-            chunks
-                .map(|c| u16::from_le_bytes(word(c, big)) as i64)
-                .collect(),
-        ),
-        (b'i', 2) => NpyData::Int(
-            chunks
-                .map(|c| i16::from_le_bytes(word(c, big)) as i64)
-                .collect(),
-        ),
-        (b'u', 4) => NpyData::Int(
-            chunks
-                .map(|c| u32::from_le_bytes(word(c, big)) as i64)
-                .collect(),
-        ),
-        (b'i', 4) => NpyData::Int(
-            chunks
-                .map(|c| i32::from_le_bytes(word(c, big)) as i64)
-                .collect(),
-        ),
+        (b'u', 2) => NpyData::Int(ints(chunks, |c| u16::from_le_bytes(word(c, big)))),
+        (b'i', 2) => NpyData::Int(ints(chunks, |c| i16::from_le_bytes(word(c, big)))),
+        (b'u', 4) => NpyData::Int(ints(chunks, |c| u32::from_le_bytes(word(c, big)))),
+        (b'i', 4) => NpyData::Int(ints(chunks, |c| i32::from_le_bytes(word(c, big)))),
         (b'u', 8) => NpyData::Int(
             chunks
                 .map(|c| {

@@ -68,12 +68,7 @@ pub fn bars(
             .max(1e-3)
             * 1.15;
         let k = categories.len().max(1);
-        let mut b = ChartBuilder::on(&root);
-        b.margin(10);
-        if text {
-            b.x_label_area_size(if k > 8 { 70 } else { 35 })
-                .y_label_area_size(45);
-        }
+        let mut b = builder(&root, text.then_some(if k > 8 { 70 } else { 35 }));
         let mut chart = b
             .build_cartesian_2d(0f64..k as f64, 0f64..top)
             .map_err(fail)?;
@@ -126,12 +121,37 @@ pub fn bars(
                 }))
                 .map_err(fail)?;
         }
-        if text {
-            legend(&root, series)?;
-        }
-        root.present().map_err(fail)?;
+        finish(&root, text.then_some(series))?;
     }
     Ok(svg)
+}
+
+/// A chart on `root` with the plots' margin and, for plots with text, label areas
+/// (`x_labels` pixels under the x axis).
+fn builder<'a, 'b, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, plotters::coord::Shift>,
+    x_labels: Option<u32>,
+) -> ChartBuilder<'a, 'b, DB> {
+    let mut b = ChartBuilder::on(root);
+    b.margin(10);
+    if let Some(x) = x_labels {
+        b.x_label_area_size(x).y_label_area_size(45);
+    }
+    b
+}
+
+/// The legend of `series` (when given: plots with text), then the drawing finished.
+fn finish<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    series: Option<&[Series]>,
+) -> anyhow::Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    if let Some(series) = series {
+        legend(root, series)?;
+    }
+    root.present().map_err(fail)
 }
 
 fn legend<DB: DrawingBackend>(
@@ -212,11 +232,7 @@ pub fn histogram(x_label: &str, series: &[Series], marker: Option<f64>, log_x: b
     {
         let root = SVGBackend::with_string(&mut svg, (W, H)).into_drawing_area();
         root.fill(&WHITE).map_err(fail)?;
-        let mut b = ChartBuilder::on(&root);
-        b.margin(10);
-        if text {
-            b.x_label_area_size(35).y_label_area_size(45);
-        }
+        let mut b = builder(&root, text.then_some(35));
         let mut chart = b.build_cartesian_2d(lo..hi, 0f64..top).map_err(fail)?;
         let mut mesh = chart.configure_mesh();
         if text {
@@ -259,10 +275,7 @@ pub fn histogram(x_label: &str, series: &[Series], marker: Option<f64>, log_x: b
                 )))
                 .map_err(fail)?;
         }
-        if text {
-            legend(&root, series)?;
-        }
-        root.present().map_err(fail)?;
+        finish(&root, text.then_some(series))?;
     }
     Ok(svg)
 }
@@ -294,11 +307,7 @@ pub fn scatter(x_label: &str, y_label: &str, series: &[(&str, Vec<(f64, f64)>)])
     {
         let root = SVGBackend::with_string(&mut svg, (W, H)).into_drawing_area();
         root.fill(&WHITE).map_err(fail)?;
-        let mut b = ChartBuilder::on(&root);
-        b.margin(10);
-        if text {
-            b.x_label_area_size(35).y_label_area_size(45);
-        }
+        let mut b = builder(&root, text.then_some(35));
         let mut chart = b.build_cartesian_2d(x0..x1, y0..y1).map_err(fail)?;
         let mut mesh = chart.configure_mesh();
         if text {
@@ -322,11 +331,8 @@ pub fn scatter(x_label: &str, y_label: &str, series: &[(&str, Vec<(f64, f64)>)])
                 )
                 .map_err(fail)?;
         }
-        if text {
-            let names: Vec<Series> = series.iter().map(|(n, _)| (*n, Vec::new())).collect();
-            legend(&root, &names)?;
-        }
-        root.present().map_err(fail)?;
+        let names: Vec<Series> = series.iter().map(|(n, _)| (*n, Vec::new())).collect();
+        finish(&root, text.then_some(&names))?;
     }
     Ok(svg)
 }
