@@ -48,13 +48,13 @@ pub fn remove_other_outputs(dir: &Path, stem: &str, passes: &[Pass], keep_exr: b
 /// their writer's owner tag ([`crate::tmp::owner_tag`]): files of live runs (other shards
 /// writing into the same folder) and of other machines are left alone.
 pub fn remove_stale_temps(dir: &Path) {
-    if let Ok(entries) = std::fs::read_dir(dir) {
-        for e in entries.flatten() {
-            let name = e.file_name().to_string_lossy().into_owned();
-            if let Some(stem) = name.strip_suffix(TMP_SUFFIX) {
-                if crate::tmp::tagged_name_is_stale(stem) {
-                    let _ = std::fs::remove_file(e.path());
-                }
+    let Ok(root) = crate::dataset::root(dir) else {
+        return;
+    };
+    for (name, path, kind) in crate::dataset::list(&root, dir).unwrap_or_default() {
+        if let Some(stem) = name.strip_suffix(TMP_SUFFIX) {
+            if kind == crate::dataset::Kind::File && crate::tmp::tagged_name_is_stale(stem) {
+                let _ = std::fs::remove_file(path);
             }
         }
     }

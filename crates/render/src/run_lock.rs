@@ -127,14 +127,13 @@ impl RunLock {
             .map_err(|e| io("create", &guard_path, e))?;
         guard.lock().map_err(|e| io("lock", &guard_path, e))?;
         let root = crate::dataset::root(variant_dir).map_err(|e| io("read", variant_dir, e))?;
-        let entries = std::fs::read_dir(variant_dir).map_err(|e| io("read", variant_dir, e))?;
+        let entries =
+            crate::dataset::list(&root, variant_dir).map_err(|e| io("read", variant_dir, e))?;
         let mine = file_name(start, end, shard[0], shard[1]);
-        for e in entries.flatten() {
-            let name = e.file_name().to_string_lossy().into_owned();
+        for (name, path, _) in entries {
             if !(name.starts_with(PREFIX) && name.ends_with(".lock")) {
                 continue;
             }
-            let path = e.path();
             let holder = crate::dataset::read(&root, &path, MAX_LOCK_BYTES)
                 .and_then(|b| serde_json::from_slice::<Holder>(&b).map_err(|e| e.to_string()));
             let holder = match holder {
