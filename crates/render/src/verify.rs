@@ -404,7 +404,13 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
         if !needs(m) {
             continue;
         }
-        let c = with_out(&m.command, out);
+        // Only a `clevrtex generate` command is offered, run as `clevrtex` (a manifest is
+        // untrusted: its program name could be anything); others get the plain hint.
+        if m.command.get(1).map(String::as_str) != Some("generate") {
+            continue;
+        }
+        let mut c = with_out(&m.command, out);
+        c[0] = "clevrtex".into();
         if !commands.contains(&c) {
             commands.push(c);
         }
@@ -735,10 +741,13 @@ pub fn index_ranges(v: &[u64]) -> String {
     s
 }
 
-/// A command line (a manifest's, untrusted) as a shell would read it back: each word that is
-/// not plainly safe is single-quoted, so a printed rerun command runs only that command.
+/// A command line (a manifest's, untrusted) as a shell would read it back: control characters
+/// escaped ([`clevrtex_scene::text::printable`]: no escape sequence reaches the terminal), each
+/// word that is not plainly safe single-quoted, so a printed rerun command runs only that
+/// command.
 pub fn shell_words(args: &[String]) -> String {
     args.iter()
+        .map(|a| clevrtex_scene::text::printable(a).into_owned())
         .map(|a| {
             if !a.is_empty()
                 && a.chars()
@@ -767,6 +776,8 @@ mod tests {
             shell_words(&cmd),
             r"clevrtex generate --out 'a b' 'x;rm -rf ~' 'it'\''s'"
         );
+        let hidden = ["\u{1b}[2K\rclevrtex".to_string()];
+        assert_eq!(shell_words(&hidden), r"'\u{1b}[2K\u{d}clevrtex'");
     }
 
     #[test]
