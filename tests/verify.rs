@@ -432,3 +432,117 @@ fn verify_rerun_hint_offers_only_clevrtex_generate_and_escapes_it() {
         "{t}"
     );
 }
+
+/// The manifest of the fixture's shard folder `dir`.
+fn manifest_of(dir: &Path) -> PathBuf {
+    std::fs::read_dir(dir.join("clevrtex_clevr"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| {
+            p.file_name()
+                .unwrap()
+                .to_string_lossy()
+                .starts_with("MANIFEST-")
+        })
+        .unwrap()
+}
+
+/// Hostile pass (issue 21, repro-11 and repro-17): a folder given twice is counted once
+/// (`verify D D` and `verify D D/clevrtex_clevr` called the whole dataset broken: every index
+/// "duplicated" with itself), and a dataset with nothing in it is not whole (an emptied
+/// variant folder, or `clevrtex_` with no variant name, gave "0 of 0 whole", exit 0).
+#[test]
+fn verify_counts_a_folder_given_twice_once_and_fails_an_empty_dataset() {
+    let Some((_dir, a, b)) = copy() else { return };
+    for twice in [vec![&a, &b, &a], vec![&a, &b, &b.join("clevrtex_clevr")]] {
+        let dirs: Vec<&Path> = twice.iter().map(|p| p.as_path()).collect();
+        let (out, t) = verify(&dirs);
+        assert_eq!(out.status.code(), Some(0), "{t}");
+        assert!(t.contains("4 of 4 expected samples whole"), "{t}");
+    }
+    // Emptied: no sample, no manifest.
+    std::fs::remove_dir_all(a.join("clevrtex_clevr/0")).unwrap();
+    std::fs::remove_file(manifest_of(&a)).unwrap();
+    let (out, t) = verify(&[&a]);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(t.contains("no sample and no run manifest"), "{t}");
+    // `clevrtex_` holding samples: named, not passed over.
+    let bare = b.join("clevrtex_");
+    std::fs::rename(b.join("clevrtex_clevr"), &bare).unwrap();
+    let (out, t) = verify(&[&b]);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(t.contains("is not a variant folder"), "{t}");
+}
+
+/// Hostile pass (issue 21, repro-02): the missing list is capped at `MAX_LISTED` indices and
+/// says so; it printed "missing (1999996): 4..=1000003" as if that were the whole gap.
+#[test]
+fn verify_says_where_its_missing_list_stops() {
+    let Some((_dir, a, b)) = copy() else { return };
+    for d in [&a, &b] {
+        let m = manifest_of(d);
+        let mut v: Value = serde_json::from_slice(&std::fs::read(&m).unwrap()).unwrap();
+        v["end"] = 2_000_000.into();
+        v["total"] = 2_000_000.into();
+        std::fs::write(&m, serde_json::to_vec(&v).unwrap()).unwrap();
+    }
+    let (out, t) = verify(&[&a, &b]);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains("missing (1999996): 4..=1000003, and 999996 more after 1000003 (not listed)"),
+        "{t}"
+    );
+}
+
+/// Hostile pass (issue 21, repro-20): without a manifest, kept EXRs are checked too (a
+/// garbage `_passes.exr` or a truncated `_shadow.exr` verified whole).
+#[test]
+fn verify_checks_kept_exrs_without_a_manifest() {
+    let Some(blender) = blender_or_skip("verify_checks_kept_exrs_without_a_manifest") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = clevrtex()
+        .args(["generate", "--variant", "clevr", "-n", "2", "--seed", "5"])
+        .args([
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--samples",
+            "1",
+            "--workers",
+            "1",
+        ])
+        .args(["--passes", "rgb,mask,shadow", "--keep-exr", "--blender"])
+        .arg(&blender)
+        .arg("--out")
+        .arg(&out)
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let v = out.join("clevrtex_clevr");
+    std::fs::remove_file(manifest_of(&out)).unwrap();
+    let (o, t) = verify(&[&out]);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    let exr = |i: u64, s: &str| v.join(format!("0/CLEVRTEX_clevr_{i:06}_{s}.exr"));
+    assert!(exr(0, "passes").is_file() && exr(1, "shadow").is_file());
+    std::fs::write(exr(0, "passes"), b"garbage").unwrap();
+    let shadow = std::fs::read(exr(1, "shadow")).unwrap();
+    std::fs::write(exr(1, "shadow"), &shadow[..shadow.len() / 2]).unwrap();
+    let (o, t) = verify(&[&out]);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(t.contains("0 of 2 expected samples whole"), "{t}");
+    assert!(
+        t.contains("`CLEVRTEX_clevr_000000_passes.exr` is not a readable EXR"),
+        "{t}"
+    );
+    assert!(
+        t.contains("`CLEVRTEX_clevr_000001_shadow.exr` does not decode"),
+        "{t}"
+    );
+}

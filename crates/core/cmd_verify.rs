@@ -36,8 +36,16 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
         r.variant, r.ok, r.expected, r.expected_from
     );
     if r.missing_count > 0 {
+        // The list is capped (`verify::MAX_LISTED`); say where it stops.
+        let more = match r.missing_count - r.missing.len() as u64 {
+            0 => String::new(),
+            n => format!(
+                ", and {n} more after {} (not listed)",
+                r.missing.last().unwrap_or(&0)
+            ),
+        };
         println!(
-            "  missing ({}): {}",
+            "  missing ({}): {}{more}",
             r.missing_count,
             index_ranges(&r.missing)
         );

@@ -136,9 +136,15 @@ type VariantDirs<'a> = (
 fn variant_dirs(opened: &[Dataset]) -> VariantDirs<'_> {
     let mut out: BTreeMap<String, Vec<(&Dataset, &VariantDir)>> = BTreeMap::new();
     let mut skipped: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    // A folder given twice (`verify D D`, `verify D D/clevrtex_full`, a link to it) is one
+    // folder: counted once, not as duplicates of itself.
+    let mut seen = BTreeSet::new();
     for ds in opened {
         for vd in &ds.variants {
-            out.entry(vd.variant.clone()).or_default().push((ds, vd));
+            let canonical = crate::dataset::root(&vd.dir).unwrap_or_else(|_| vd.dir.clone());
+            if seen.insert(canonical) {
+                out.entry(vd.variant.clone()).or_default().push((ds, vd));
+            }
         }
         for (v, skip) in &ds.skipped {
             skipped.entry(v.clone()).or_default().push(skip.to_string());
@@ -247,6 +253,16 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
     let mut ranges = Vec::new();
     // Finished shards by run (start, end, n).
     let mut finished: BTreeMap<(u64, u64, u64), BTreeSet<u64>> = BTreeMap::new();
+    if manifests.is_empty() && found.is_empty() && !dirs.is_empty() {
+        // Nothing to check is not a whole dataset (a copy that lost its files).
+        rep.manifest_problems.push(format!(
+            "no sample and no run manifest in {}: nothing here was made by `clevrtex generate`, or its files were lost\nhint: check the folder given; a dataset has `<variant folder>/<bucket>/CLEVRTEX_<variant>_<index>.*` files",
+            dirs.iter()
+                .map(|(_, vd)| format!("`{}`", vd.dir.display()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
     if manifests.is_empty() {
         if let Some((&max, places)) = found.last_key_value() {
             if max >= MAX_RUN_INDICES {
@@ -557,6 +573,13 @@ fn check_sample(
             "metadata `image_index` is {} (the file name says {index})",
             dataset::short(&meta["image_index"])
         ));
+    }
+    // Kept EXRs (`--keep-exr`): checked without a manifest too (their bytes are the
+    // manifest's business when there is one).
+    for (name, bytes) in bytes_of.iter().filter(|(n, _)| n.ends_with(".exr")) {
+        if let Err(why) = crate::exr_io::check_kept(bytes, (w as usize, h as usize)) {
+            problems.push(format!("`{name}` {why}"));
+        }
     }
     let passes = view.passes.clone();
     if passes.is_empty() {

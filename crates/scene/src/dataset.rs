@@ -397,6 +397,19 @@ impl Dataset {
             let Some(v) = name.strip_prefix("clevrtex_") else {
                 continue;
             };
+            // `clevrtex_` followed by no variant name (or one no run could have written) is
+            // named, not passed over: its samples would go unchecked.
+            if let Some(why) = crate::layout::variant_name_problem(v) {
+                ds.skipped.push((
+                    v.to_string(),
+                    Skip {
+                        path: p,
+                        why: format!("is not a variant folder: the name after `clevrtex_` {why}"),
+                        stem: None,
+                    },
+                ));
+                continue;
+            }
             match kind {
                 Kind::Dir => ds
                     .variants
