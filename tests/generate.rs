@@ -597,7 +597,7 @@ fn bad_sizes_attempts_configs_and_scene_files_fail_up_front() {
     let (code, t) = gen(&["--width", "100000", "--height", "100000"]);
     assert_eq!(code, Some(1), "{t}");
     assert!(
-        t.contains("`--width 100000` is more than the 8192 allowed"),
+        t.contains("`--width 100000` is more than the 4096 allowed"),
         "{t}"
     );
     let (code, t) = gen(&["--max-attempts", "0"]);
@@ -635,7 +635,7 @@ fn bad_sizes_attempts_configs_and_scene_files_fail_up_front() {
     for (edit, want) in [
         (
             ("/render/width", serde_json::json!(0)),
-            "`render.width` = 0: must be between 1 and 8192",
+            "`render.width` = 0: must be between 1 and 4096",
         ),
         (
             ("/objects/1/location/0", serde_json::json!(1e308)),

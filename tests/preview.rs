@@ -94,16 +94,16 @@ fn preview_reports_a_sample_whose_rgb_and_mask_differ_in_size_and_goes_on() {
     assert!(sheet.is_file(), "{t}");
 }
 
-/// A sample of another shape (RGB and mask 1x8192, a few hundred bytes each) is shrunk into
-/// its cell, and a first sample of that shape does not make every row 8192 cells tall: it was
-/// scaled to the cell's width (1024x8388608) and the sheet sized by it, gigabytes for a tiny
-/// file (an abort under a memory limit).
+/// A sample of another shape (RGB and mask 1x4096, the largest side, a few hundred bytes each)
+/// is shrunk into its cell, and a first sample of that shape does not make every row 4096
+/// cells tall: it was scaled to the cell's width (1024x4194304) and the sheet sized by it,
+/// gigabytes for a tiny file (an abort under a memory limit).
 #[test]
 fn preview_shrinks_a_tall_thin_sample_into_its_cell() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     crate::util::hand_png_sample(&data, "clevr", 0, (16, 12), (16, 12));
-    crate::util::hand_png_sample(&data, "clevr", 1, (1, 8192), (1, 8192));
+    crate::util::hand_png_sample(&data, "clevr", 1, (1, 4096), (1, 4096));
     for (indices, rows) in [("0,1", 768), ("1,0", 2048)] {
         let sheet = dir.path().join(format!("sheet-{indices}.png"));
         let args: Vec<&std::ffi::OsStr> = vec![

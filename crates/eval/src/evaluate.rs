@@ -490,7 +490,7 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 }
 
 /// The size a ground-truth PNG declares in its header, checked before it is decoded: each side
-/// at most the 8192 pixels any ClevrTex image has (a 1 MB mask declaring 30000x30000 decoded
+/// at most the 4096 pixels any clevrtex image has (a 1 MB mask declaring 30000x30000 decoded
 /// to 4.5 GB of labels).
 fn gt_png_size(bytes: &[u8], path: &Path) -> Result<(usize, usize), EvalError> {
     read::png_size_of_dataset_image(bytes).map_err(|r| corrupt(path, r, GT_HINT))

@@ -84,7 +84,7 @@ pub fn png_size(bytes: &[u8]) -> Result<(usize, usize), String> {
     Ok((info.width as usize, info.height as usize))
 }
 
-/// [`png_size`], refused when a side is over the 8192 pixels any ClevrTex image has: for a
+/// [`png_size`], refused when a side is over the 4096 pixels any clevrtex image has: for a
 /// dataset's own PNGs (ground truth), whose size nothing else bounds before decoding.
 pub fn png_size_of_dataset_image(bytes: &[u8]) -> Result<(usize, usize), String> {
     let (w, h) = png_size(bytes)?;

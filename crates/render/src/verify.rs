@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 
 use clevrtex_scene::layout;
 use clevrtex_scene::passes::PngKind;
+use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
 use clevrtex_scene::Pass;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -480,6 +481,39 @@ fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
 
 /// Check one sample; `Err` lists every problem found. `listed`: a finished manifest covers
 /// the index, so every file must be in one.
+/// Pixels of samples being decoded at once, over all threads: four samples of the largest size.
+const PIXEL_BUDGET: u64 = 4 * (MAX_IMAGE_SIDE as u64) * (MAX_IMAGE_SIDE as u64);
+
+/// A share of [`PIXEL_BUDGET`], held while a sample is decoded (waits while the budget is
+/// spent; a sample larger than the whole budget waits for all of it).
+struct PixelBudget(u64);
+
+static BUDGET: (std::sync::Mutex<u64>, std::sync::Condvar) = (
+    std::sync::Mutex::new(PIXEL_BUDGET),
+    std::sync::Condvar::new(),
+);
+
+impl PixelBudget {
+    fn take(pixels: u64) -> PixelBudget {
+        let want = pixels.min(PIXEL_BUDGET);
+        let (lock, freed) = &BUDGET;
+        let mut left = lock.lock().unwrap_or_else(|e| e.into_inner());
+        while *left < want {
+            left = freed.wait(left).unwrap_or_else(|e| e.into_inner());
+        }
+        *left -= want;
+        PixelBudget(want)
+    }
+}
+
+impl Drop for PixelBudget {
+    fn drop(&mut self) {
+        let (lock, freed) = &BUDGET;
+        *lock.lock().unwrap_or_else(|e| e.into_inner()) += self.0;
+        freed.notify_all();
+    }
+}
+
 fn check_sample(
     index: u64,
     stem: &str,
@@ -568,6 +602,10 @@ fn check_sample(
         view.visibility_threshold_px,
     );
     let visible = &view.visible_pixels;
+    // Decoding costs ~12 bytes a pixel over a sample's passes: however many threads check
+    // samples, at most `PIXEL_BUDGET` pixels are decoded at once (about 0.8 GB), so that
+    // samples declaring the largest size cannot add up to gigabytes on a many-core machine.
+    let _budget = PixelBudget::take(u64::from(w) * u64::from(h));
     if meta["image_index"].as_u64() != Some(index) {
         problems.push(format!(
             "metadata `image_index` is {} (the file name says {index})",

@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clevrtex_render::dataset::{self, Kind};
 use clevrtex_render::post::{decode_png_bytes, DecodedPng};
+use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
 use clevrtex_scene::{layout, Pass};
 use image::{Rgb, RgbImage};
 use plotters::prelude::*;
@@ -228,8 +229,8 @@ fn pass_skipped(s: &Sample, pass: Pass) -> Option<String> {
     }
 }
 
-/// Most pixels a pass PNG of a sample may declare (8192x8192, the largest render size).
-pub(crate) const MAX_PASS_PIXELS: u64 = 8192 * 8192;
+/// Most pixels a pass PNG of a sample may declare (the largest render size).
+pub(crate) const MAX_PASS_PIXELS: u64 = (MAX_IMAGE_SIDE as u64) * (MAX_IMAGE_SIDE as u64);
 
 /// The size a PNG declares in its header (`None` when `bytes` do not start like a PNG).
 fn png_header_size(bytes: &[u8]) -> Option<(u32, u32)> {

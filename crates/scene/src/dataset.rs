@@ -27,8 +27,8 @@ use crate::manifest::Manifest;
 use crate::scene_file::MAX_IMAGE_SIDE;
 use crate::Pass;
 
-/// The largest file of a dataset that is read (1 GiB): far over any PNG of an
-/// 8192 x 8192 image, any metadata or any manifest this tool writes.
+/// The largest file of a dataset that is read (1 GiB): far over any PNG of the largest
+/// image, any metadata or any manifest this tool writes.
 pub const MAX_FILE_BYTES: u64 = 1 << 30;
 
 /// What a folder entry is, links resolved only inside the root.
@@ -560,7 +560,7 @@ pub struct MetadataError {
     pub file: String,
     /// The key (dotted, `objects[i].visible_pixels` for a list's entry).
     pub key: String,
-    /// What is wrong (`is "x", not a whole number from 1 to 8192`).
+    /// What is wrong (`is "x", not a whole number from 1 to 4096`).
     pub what: String,
 }
 
@@ -888,7 +888,7 @@ mod tests {
         );
         assert_eq!(
             e.to_string(),
-            "metadata `m.json` key `render.width` is \"4\", not a whole number from 1 to 8192"
+            "metadata `m.json` key `render.width` is \"4\", not a whole number from 1 to 4096"
         );
         assert_eq!(
             bad(serde_json::json!({"render": {"width": 4, "height": 1u64 << 40}})).key,

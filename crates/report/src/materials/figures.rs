@@ -33,8 +33,9 @@ pub use super::regions::{
     MIN_KEPT, MIN_STD_L,
 };
 
-/// The largest image measured (width and height), checked in the PNG header.
-pub const MAX_SIDE: u32 = 8192;
+/// The largest image measured (width and height), checked in the PNG header: the largest
+/// any clevrtex image has.
+pub const MAX_SIDE: u32 = clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
 /// The largest metadata file read.
 const MAX_METADATA_BYTES: u64 = 16 << 20;
 

@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::bail;
 use clevrtex_render::manifest::Manifest;
 use clevrtex_scene::dataset::{self as reader, DatasetError};
+use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde_json::Value;
@@ -197,7 +198,9 @@ fn parse(
         m["render"]["width"].as_u64(),
         m["render"]["height"].as_u64(),
     ) {
-        (Some(w @ 1..=8192), Some(h @ 1..=8192)) => Some((w as u32, h as u32)),
+        (Some(w @ 1..), Some(h @ 1..)) if w.max(h) <= u64::from(MAX_IMAGE_SIDE) => {
+            Some((w as u32, h as u32))
+        }
         _ => None,
     };
     let objects = objs
