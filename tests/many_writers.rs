@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use crate::util::{blender_or_skip, clevrtex, fake_blender, text};
 
 /// `clevrtex generate` of clevr at 32x24 with rgb and mask into `out`, plus `extra`.
-fn generate(blender: &Path, out: &Path, extra: &[&str]) -> Command {
+pub(crate) fn generate(blender: &Path, out: &Path, extra: &[&str]) -> Command {
     let mut c = clevrtex();
     c.args(["generate", "--variant", "clevr", "--seed", "4"])
         .args(["--width", "32", "--height", "24", "--samples", "1"])
@@ -93,7 +93,7 @@ fn wait_for(path: &Path) {
 }
 
 /// The output of `c`, killed (a failure) if it runs over `secs`.
-fn output_within(mut c: Command, secs: u64) -> Output {
+pub(crate) fn output_within(mut c: Command, secs: u64) -> Output {
     let mut child = c
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

@@ -2,9 +2,10 @@
 //! file never becomes a path outside `--out`, and no command deletes what its run did not
 //! create.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use crate::util::{clevrtex, fake_blender, text};
+use crate::many_writers::{generate, output_within};
+use crate::util::{clevrtex, fake_blender, hand_png_sample, text};
 
 /// `clevrtex sample` of one `clevr` scene into `dir/scenes`; the path of its scene file.
 fn one_scene(dir: &Path) -> std::path::PathBuf {
@@ -241,4 +242,86 @@ fn render_reads_a_huge_scene_file_with_a_cap() {
         )),
         "{t}"
     );
+}
+
+/// Every file under `dir` (recursively, links not followed) with its bytes, to show that a
+/// folder outside `--out` was left as it was.
+fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(d).unwrap().flatten() {
+            let m = std::fs::symlink_metadata(e.path()).unwrap();
+            if m.is_dir() {
+                stack.push(e.path());
+            } else {
+                out.push((e.path(), std::fs::read(e.path()).unwrap_or_default()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// A dataset handed over to be resumed or grown is untrusted: a bucket folder
+/// (`clevrtex_clevr/0`) or the variant folder (`clevrtex_clevr`) that is a link leading out of
+/// `--out` is refused by `generate` (also with `--overwrite`) and by `sample`, naming the
+/// link, and nothing outside is read as a finished sample, written or removed. Before the
+/// check, `generate` skipped the sample found behind the link (exit 0) and wrote its lock and
+/// manifest through a linked variant folder, and `sample` overwrote the scene file there
+/// (hostile pass 3, repro-16 and repro-22; with Blender and `--overwrite`, generate deleted
+/// the other passes' files of the sample outside).
+#[test]
+fn generate_and_sample_write_nothing_through_a_folder_linked_out_of_out() {
+    let dir = tempfile::tempdir().unwrap();
+    hand_png_sample(&dir.path().join("other"), "clevr", 0, (32, 24), (32, 24));
+    let outside = dir.path().join("other/clevrtex_clevr/0");
+    let before = tree(&outside);
+    let out = dir.path().join("data");
+    std::fs::create_dir_all(out.join("clevrtex_clevr")).unwrap();
+    let link = out.join("clevrtex_clevr/0");
+    std::os::unix::fs::symlink(&outside, &link).unwrap();
+    let refused = |o: &std::process::Output, link: &Path| {
+        let t = text(o);
+        assert_eq!(o.status.code(), Some(1), "{t}");
+        assert!(
+            t.contains(&format!(
+                "`{}` is a symbolic link leading out",
+                link.display()
+            )),
+            "{t}"
+        );
+        assert!(t.contains("nothing is written through it"), "{t}");
+    };
+    for extra in [&[][..], &["--overwrite"][..]] {
+        let mut c = generate(&fake_blender(), &out, &[&["-n", "2"][..], extra].concat());
+        c.env("FAKE_BLENDER_MODE", "crash");
+        refused(&output_within(c, 60), &link);
+        assert_eq!(tree(&outside), before, "changed through the link");
+    }
+    let o = clevrtex()
+        .args(["sample", "--variant", "clevr", "-n", "2", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    refused(&o, &link);
+    assert_eq!(tree(&outside), before, "changed through the link");
+
+    // The variant folder itself linked out (to an empty folder): nothing appears there.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let out2 = dir.path().join("data2");
+    std::fs::create_dir(&out2).unwrap();
+    let link2 = out2.join("clevrtex_clevr");
+    std::os::unix::fs::symlink(&empty, &link2).unwrap();
+    let mut c = generate(&fake_blender(), &out2, &["-n", "1"]);
+    c.env("FAKE_BLENDER_MODE", "crash");
+    refused(&output_within(c, 60), &link2);
+    let o = clevrtex()
+        .args(["sample", "--variant", "clevr", "-n", "1", "--out"])
+        .arg(&out2)
+        .output()
+        .unwrap();
+    refused(&o, &link2);
+    assert!(tree(&empty).is_empty(), "{:?}", tree(&empty));
 }

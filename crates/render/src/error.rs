@@ -121,6 +121,10 @@ pub enum RenderError {
     /// The run was interrupted (Ctrl-C).
     #[error("interrupted")]
     Interrupted,
+    /// The output folder holds something this run will not write through (a link leading out
+    /// of `--out` where the layout has a folder, a FIFO, ...): the message names it, with a hint.
+    #[error("{0}")]
+    Refused(String),
     /// `--device` asks for GPUs the machine does not have (the message of
     /// [`crate::device::plan`], with its hint).
     #[error("{0}")]

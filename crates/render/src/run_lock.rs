@@ -115,7 +115,9 @@ impl RunLock {
                 p.display()
             )
         };
-        std::fs::create_dir_all(variant_dir).map_err(|e| io("create", variant_dir, e))?;
+        // The variant folder of `--out`: a link out of it is refused, naming it.
+        let out = variant_dir.parent().unwrap_or(Path::new("."));
+        clevrtex_scene::layout::make_dir(out, variant_dir)?;
         // A file opened for writing, as the failure ledger's: on NFS `flock` is emulated
         // with POSIX locks, which need a writable descriptor (a folder's is read-only).
         let guard_path = variant_dir.join(GUARD);
