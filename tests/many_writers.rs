@@ -267,3 +267,41 @@ fn an_overlapping_run_refuses_while_the_range_is_held() {
     assert!(!t.contains("overlap"), "{t}");
     assert!(!held.exists(), "the new run's lock went with it");
 }
+
+/// A FIFO in place of the run lock's guard, the ledger or the ledger's lock never blocks
+/// `generate`: it is opened without blocking, found not to be a regular file and refused,
+/// naming it. Before, `generate` blocked on the open for good (SIGTERM did not end it either;
+/// hostile pass 3, repro-14).
+#[test]
+fn a_fifo_in_place_of_a_lock_or_the_ledger_never_blocks_generate() {
+    let entry =
+        r#"{"index":0,"stem":"CLEVRTEX_clevr_000000","variant":"clevr","error":"x","time_unix":0}"#;
+    for name in [
+        ".clevrtex-runs.lock",
+        "failures.jsonl",
+        ".failures.jsonl.lock",
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("data");
+        crate::util::hand_png_sample(&out, "clevr", 0, (32, 24), (32, 24));
+        let vdir = out.join("clevrtex_clevr");
+        if name == ".failures.jsonl.lock" {
+            std::fs::write(vdir.join("failures.jsonl"), format!("{entry}\n")).unwrap();
+        }
+        let fifo = vdir.join(name);
+        assert!(Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success());
+        let mut c = generate(&fake_blender(), &out, &["-n", "1"]);
+        c.env("FAKE_BLENDER_MODE", "crash");
+        let o = output_within(c, 30);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{name}: {t}");
+        assert!(
+            t.contains(&format!("`{}` is not a regular file", fifo.display())),
+            "{name}: {t}"
+        );
+    }
+}

@@ -325,3 +325,74 @@ fn generate_and_sample_write_nothing_through_a_folder_linked_out_of_out() {
     refused(&o, &link2);
     assert!(tree(&empty).is_empty(), "{:?}", tree(&empty));
 }
+
+/// The run lock's guard (`.clevrtex-runs.lock`), the ledger's lock (`.failures.jsonl.lock`)
+/// and the ledger (`failures.jsonl`) of a handed-over dataset are opened without following a
+/// link: a link in their place is refused, naming it, and nothing is created, read, copied or
+/// deleted through it. Before, `generate` created files outside `--out` through dangling links
+/// named like the locks, copied an outside file's entries into the dataset's ledger and
+/// deleted the ledger's link (hostile pass 3, repro-13 and repro-15).
+#[test]
+fn generate_opens_no_lock_or_ledger_through_a_link() {
+    let entry =
+        r#"{"index":0,"stem":"CLEVRTEX_clevr_000000","variant":"clevr","error":"x","time_unix":0}"#;
+    for name in [
+        ".clevrtex-runs.lock",
+        ".failures.jsonl.lock",
+        "failures.jsonl",
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("data");
+        hand_png_sample(&out, "clevr", 0, (32, 24), (32, 24));
+        let vdir = out.join("clevrtex_clevr");
+        let outside = dir.path().join("outside");
+        std::fs::create_dir(&outside).unwrap();
+        let secret = format!(
+            "{entry}\n{}\n",
+            entry
+                .replace("000000", "000009")
+                .replace(r#""index":0"#, r#""index":9"#)
+                .replace(r#""x""#, r#""SECRET""#)
+        );
+        let target = if name == "failures.jsonl" {
+            std::fs::write(outside.join("secret.jsonl"), &secret).unwrap();
+            outside.join("secret.jsonl")
+        } else {
+            // A ledger entry, so that the run takes the ledger's lock.
+            std::fs::write(vdir.join("failures.jsonl"), format!("{entry}\n")).unwrap();
+            outside.join(format!("created-via-{name}"))
+        };
+        let link = vdir.join(name);
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let mut c = generate(&fake_blender(), &out, &["-n", "1"]);
+        c.env("FAKE_BLENDER_MODE", "crash");
+        let o = output_within(c, 60);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{name}: {t}");
+        assert!(
+            t.contains(&format!("`{}` is a symbolic link", link.display())),
+            "{t}"
+        );
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink(),
+            "{name}: the link was removed"
+        );
+        if name == "failures.jsonl" {
+            assert_eq!(std::fs::read_to_string(&target).unwrap(), secret);
+        } else {
+            assert!(!target.exists(), "created through the link `{name}`");
+            assert_eq!(
+                std::fs::read_to_string(vdir.join("failures.jsonl")).unwrap(),
+                format!("{entry}\n")
+            );
+        }
+        assert_eq!(
+            tree(&outside).len(),
+            usize::from(name == "failures.jsonl"),
+            "{name}"
+        );
+    }
+}

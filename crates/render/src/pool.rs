@@ -211,7 +211,7 @@ pub fn run(
     let started = Instant::now();
     let stems: BTreeSet<String> = jobs.iter().map(|j| j.stem.clone()).collect();
     let bridge = BridgeDir::create(&opts.materials_json)?;
-    let ledger = Ledger::open(&opts.ledger);
+    let ledger = Ledger::open(&opts.ledger)?;
     let mut todo = VecDeque::new();
     let mut report = RunReport {
         workers: opts.workers.max(1),
