@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::many_writers::{generate, output_within};
-use crate::util::{clevrtex, fake_blender, hand_png_sample, text};
+use crate::util::{blender_or_skip, clevrtex, fake_blender, hand_png_sample, text};
 
 /// `clevrtex sample` of one `clevr` scene into `dir/scenes`; the path of its scene file.
 fn one_scene(dir: &Path) -> std::path::PathBuf {
@@ -395,4 +395,83 @@ fn generate_opens_no_lock_or_ledger_through_a_link() {
             "{name}"
         );
     }
+}
+
+/// A Blender that wraps the real one (`blender`) and answers the final render's `done` per
+/// `$HOSTILE_MODE`: `small_png` puts an 8x6 PNG in place of the RGB image; `ctrl_chars`
+/// answers with an `error` whose message and traceback hold terminal escape sequences.
+fn hostile_blender(dir: &Path, blender: &Path) -> PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let script = format!(
+        r#"#!/usr/bin/env python3
+import base64, json, os, subprocess, sys, threading
+REAL = {real:?}
+MODE = os.environ.get("HOSTILE_MODE", "")
+if "--version" in sys.argv:
+    os.execv(REAL, [REAL] + sys.argv[1:])
+args = sys.argv[1:]
+tag = args[args.index("--tag") + 1]
+child = subprocess.Popen([REAL] + args, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+requests = {{}}
+def forward():
+    for line in sys.stdin.buffer:
+        try:
+            r = json.loads(line)
+            requests[r.get("id")] = r
+        except ValueError:
+            pass
+        child.stdin.write(line)
+        child.stdin.flush()
+    child.stdin.close()
+threading.Thread(target=forward, daemon=True).start()
+PNG = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAgAAAAGCAIAAABxZ0isAAAAEUlEQVR42mM4YWODFTEMpAQAr9U8ASfI0t8AAAAASUVORK5CYII=")
+for line in child.stdout:
+    if line.startswith(tag.encode() + b" "):
+        r = json.loads(line[len(tag) + 1:])
+        if r.get("type") == "done" and r.get("mode") == "final":
+            if MODE == "small_png":
+                out_dir = requests.get(r.get("id"), {{}}).get("out_dir", "")
+                with open(os.path.join(out_dir, "rgb.png"), "wb") as f:
+                    f.write(PNG)
+            elif MODE == "ctrl_chars":
+                r = {{"type": "error", "id": r.get("id"), "message": "\x1b[31mboom\x1b[2K\r looks fine", "traceback": "\x1b]52;c;ZXZpbA==\x07\x1b]0;title\x07\n"}}
+            line = (tag + " " + json.dumps(r) + "\n").encode()
+    sys.stdout.buffer.write(line)
+    sys.stdout.buffer.flush()
+sys.exit(child.wait())
+"#,
+        real = blender.display().to_string()
+    );
+    let path = dir.join("hostile-blender");
+    std::fs::write(&path, script).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+    path
+}
+
+/// Blender's output is untrusted: an RGB image of another size than asked for fails the image
+/// (exit 3, the sizes named; checked from the PNG's header as the EXRs are). Before,
+/// `generate` wrote the 8x6 image as the sample (exit 0, "[1/1] wrote"; `verify` then called
+/// it broken; hostile pass 3, repro-10).
+#[test]
+fn generate_fails_an_rgb_image_of_another_size_than_asked_for() {
+    let Some(blender) = blender_or_skip("generate_fails_an_rgb_image_of_another_size") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let hostile = hostile_blender(dir.path(), &blender);
+    let out = dir.path().join("small");
+    let mut c = generate(&hostile, &out, &["-n", "1", "--retries", "0"]);
+    c.env("HOSTILE_MODE", "small_png");
+    let o = output_within(c, 300);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains("the RGB image is 8x6 but the scene asks for 32x24"),
+        "{t}"
+    );
+    assert!(
+        !out.join("clevrtex_clevr/0/CLEVRTEX_clevr_000000.png")
+            .exists(),
+        "{t}"
+    );
 }
