@@ -305,3 +305,28 @@ fn a_fifo_in_place_of_a_lock_or_the_ledger_never_blocks_generate() {
         );
     }
 }
+
+/// A lock's holder is read from a file in the dataset: its command is printed with its
+/// control characters escaped. Before, generate's overlap error printed it raw (an ESC[2K
+/// could erase the line; hostile pass 3, repro-12).
+#[test]
+fn a_lock_holders_command_is_printed_escaped() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    let vdir = out.join("clevrtex_clevr");
+    std::fs::create_dir_all(&vdir).unwrap();
+    let holder = serde_json::json!({
+        "host": "elsewhere\u{1b}]0;title\u{7}", "pid": 4242, "pid_start": 1, "start": 0, "end": 4,
+        "shard": [0, 1], "command": ["clevrtex", "\u{1b}[2K\rgenerate"],
+    });
+    std::fs::write(vdir.join(".clevrtex-run-0-4-0of1.lock"), holder.to_string()).unwrap();
+    let mut c = generate(&fake_blender(), &out, &["-n", "2"]);
+    c.env("FAKE_BLENDER_MODE", "crash");
+    let o = output_within(c, 60);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(t.contains("overlap those of another run"), "{t}");
+    assert!(t.contains(r"clevrtex \u{1b}[2K\u{d}generate"), "{t}");
+    assert!(t.contains(r"elsewhere\u{1b}]0;title\u{7}"), "{t}");
+    assert!(!t.contains('\x1b') && !t.contains('\x07'), "{t:?}");
+}

@@ -475,3 +475,28 @@ fn generate_fails_an_rgb_image_of_another_size_than_asked_for() {
         "{t}"
     );
 }
+
+/// Blender's error reply is untrusted text: its message and traceback reach the terminal with
+/// their control characters escaped (`clevrtex_scene::text::printable`). Before, `generate`
+/// printed ESC[31m, ESC[2K + CR, OSC 52 (the clipboard) and OSC 0 raw (hostile pass 3,
+/// repro-12).
+#[test]
+fn generate_escapes_blenders_error_reply() {
+    let Some(blender) = blender_or_skip("generate_escapes_blenders_error_reply") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let hostile = hostile_blender(dir.path(), &blender);
+    let out = dir.path().join("ctrl");
+    let mut c = generate(&hostile, &out, &["-n", "1", "--retries", "0"]);
+    c.env("HOSTILE_MODE", "ctrl_chars");
+    let o = output_within(c, 300);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains(r"\u{1b}[31mboom\u{1b}[2K\u{d} looks fine"),
+        "{t}"
+    );
+    assert!(t.contains(r"\u{1b}]52;c;ZXZpbA==\u{7}"), "{t}");
+    assert!(!t.contains('\x1b') && !t.contains('\x07'), "{t:?}");
+}

@@ -17,6 +17,8 @@ use std::time::{Duration, SystemTime};
 
 use serde::{Deserialize, Serialize};
 
+use clevrtex_scene::text::printable;
+
 /// How often a holder touches its lock file.
 pub const HEARTBEAT: Duration = Duration::from_secs(20);
 /// A lock of another host not touched for this long is stale.
@@ -205,13 +207,13 @@ impl RunLock {
                     shard[1],
                     variant_dir.display(),
                     holder.pid,
-                    holder.host,
+                    printable(&holder.host),
                     holder.start,
                     holder.end,
                     holder.shard[0],
                     holder.shard[1],
                     path.display(),
-                    holder.command.join(" "),
+                    printable(&holder.command.join(" ")),
                     path.display()
                 ));
             }
