@@ -140,7 +140,11 @@ pub(crate) fn open_lock_file(path: &Path) -> Result<std::fs::File, String> {
 /// Whether the holder of a lock file (its `holder`, the file's modification time) is gone.
 fn is_stale(holder: &Holder, modified: Option<SystemTime>) -> bool {
     if holder.host == crate::tmp::hostname() {
-        return !crate::tmp::process_alive(holder.pid, holder.pid_start);
+        // A start time of 0 (unknown) proves nothing: where this host's start times can be
+        // read (always on Linux), a run here wrote its own, and where they cannot, no pid is
+        // known to be alive either. So a lock naming this host with `pid_start` 0 (a file
+        // someone wrote, e.g. naming pid 1) is stale.
+        return holder.pid_start == 0 || !crate::tmp::process_alive(holder.pid, holder.pid_start);
     }
     modified
         .and_then(|m| SystemTime::now().duration_since(m).ok())
@@ -347,6 +351,27 @@ mod tests {
         .unwrap();
         let err = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec![]).unwrap_err();
         assert!(err.contains("host `elsewhere`"), "{err}");
+    }
+
+    #[test]
+    fn a_holder_of_this_host_with_an_unknown_start_time_is_stale() {
+        let dir = tempfile::tempdir().unwrap();
+        let forged = Holder {
+            host: crate::tmp::hostname(),
+            pid: 1,
+            pid_start: 0,
+            start: 0,
+            end: 8,
+            shard: [0, 1],
+            command: vec![],
+        };
+        std::fs::write(
+            dir.path().join(file_name(0, 8, 0, 1)),
+            serde_json::to_string(&forged).unwrap(),
+        )
+        .unwrap();
+        let lock = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec![]);
+        assert!(lock.is_ok(), "{lock:?}");
     }
 
     #[test]
