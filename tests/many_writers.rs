@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use crate::util::{blender_or_skip, clevrtex, fake_blender, text};
 
 /// `clevrtex generate` of clevr at 32x24 with rgb and mask into `out`, plus `extra`.
-fn generate(blender: &Path, out: &Path, extra: &[&str]) -> Command {
+pub(crate) fn generate(blender: &Path, out: &Path, extra: &[&str]) -> Command {
     let mut c = clevrtex();
     c.args(["generate", "--variant", "clevr", "--seed", "4"])
         .args(["--width", "32", "--height", "24", "--samples", "1"])
@@ -93,7 +93,7 @@ fn wait_for(path: &Path) {
 }
 
 /// The output of `c`, killed (a failure) if it runs over `secs`.
-fn output_within(mut c: Command, secs: u64) -> Output {
+pub(crate) fn output_within(mut c: Command, secs: u64) -> Output {
     let mut child = c
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -266,4 +266,67 @@ fn an_overlapping_run_refuses_while_the_range_is_held() {
     assert_eq!(o.status.code(), Some(3), "{t}");
     assert!(!t.contains("overlap"), "{t}");
     assert!(!held.exists(), "the new run's lock went with it");
+}
+
+/// A FIFO in place of the run lock's guard, the ledger or the ledger's lock never blocks
+/// `generate`: it is opened without blocking, found not to be a regular file and refused,
+/// naming it. Before, `generate` blocked on the open for good (SIGTERM did not end it either;
+/// hostile pass 3, repro-14).
+#[test]
+fn a_fifo_in_place_of_a_lock_or_the_ledger_never_blocks_generate() {
+    let entry =
+        r#"{"index":0,"stem":"CLEVRTEX_clevr_000000","variant":"clevr","error":"x","time_unix":0}"#;
+    for name in [
+        ".clevrtex-runs.lock",
+        "failures.jsonl",
+        ".failures.jsonl.lock",
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("data");
+        crate::util::hand_png_sample(&out, "clevr", 0, (32, 24), (32, 24));
+        let vdir = out.join("clevrtex_clevr");
+        if name == ".failures.jsonl.lock" {
+            std::fs::write(vdir.join("failures.jsonl"), format!("{entry}\n")).unwrap();
+        }
+        let fifo = vdir.join(name);
+        assert!(Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success());
+        let mut c = generate(&fake_blender(), &out, &["-n", "1"]);
+        c.env("FAKE_BLENDER_MODE", "crash");
+        let o = output_within(c, 30);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{name}: {t}");
+        assert!(
+            t.contains(&format!("`{}` is not a regular file", fifo.display())),
+            "{name}: {t}"
+        );
+    }
+}
+
+/// A lock's holder is read from a file in the dataset: its command is printed with its
+/// control characters escaped. Before, generate's overlap error printed it raw (an ESC[2K
+/// could erase the line; hostile pass 3, repro-12).
+#[test]
+fn a_lock_holders_command_is_printed_escaped() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    let vdir = out.join("clevrtex_clevr");
+    std::fs::create_dir_all(&vdir).unwrap();
+    let holder = serde_json::json!({
+        "host": "elsewhere\u{1b}]0;title\u{7}", "pid": 4242, "pid_start": 1, "start": 0, "end": 4,
+        "shard": [0, 1], "command": ["clevrtex", "\u{1b}[2K\rgenerate"],
+    });
+    std::fs::write(vdir.join(".clevrtex-run-0-4-0of1.lock"), holder.to_string()).unwrap();
+    let mut c = generate(&fake_blender(), &out, &["-n", "2"]);
+    c.env("FAKE_BLENDER_MODE", "crash");
+    let o = output_within(c, 60);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(t.contains("overlap those of another run"), "{t}");
+    assert!(t.contains(r"clevrtex \u{1b}[2K\u{d}generate"), "{t}");
+    assert!(t.contains(r"elsewhere\u{1b}]0;title\u{7}"), "{t}");
+    assert!(!t.contains('\x1b') && !t.contains('\x07'), "{t:?}");
 }

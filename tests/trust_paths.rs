@@ -2,9 +2,10 @@
 //! file never becomes a path outside `--out`, and no command deletes what its run did not
 //! create.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use crate::util::{clevrtex, fake_blender, text};
+use crate::many_writers::{generate, output_within};
+use crate::util::{blender_or_skip, clevrtex, fake_blender, hand_png_sample, text};
 
 /// `clevrtex sample` of one `clevr` scene into `dir/scenes`; the path of its scene file.
 fn one_scene(dir: &Path) -> std::path::PathBuf {
@@ -241,4 +242,261 @@ fn render_reads_a_huge_scene_file_with_a_cap() {
         )),
         "{t}"
     );
+}
+
+/// Every file under `dir` (recursively, links not followed) with its bytes, to show that a
+/// folder outside `--out` was left as it was.
+fn tree(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(d).unwrap().flatten() {
+            let m = std::fs::symlink_metadata(e.path()).unwrap();
+            if m.is_dir() {
+                stack.push(e.path());
+            } else {
+                out.push((e.path(), std::fs::read(e.path()).unwrap_or_default()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// A dataset handed over to be resumed or grown is untrusted: a bucket folder
+/// (`clevrtex_clevr/0`) or the variant folder (`clevrtex_clevr`) that is a link leading out of
+/// `--out` is refused by `generate` (also with `--overwrite`) and by `sample`, naming the
+/// link, and nothing outside is read as a finished sample, written or removed. Before the
+/// check, `generate` skipped the sample found behind the link (exit 0) and wrote its lock and
+/// manifest through a linked variant folder, and `sample` overwrote the scene file there
+/// (hostile pass 3, repro-16 and repro-22; with Blender and `--overwrite`, generate deleted
+/// the other passes' files of the sample outside).
+#[test]
+fn generate_and_sample_write_nothing_through_a_folder_linked_out_of_out() {
+    let dir = tempfile::tempdir().unwrap();
+    hand_png_sample(&dir.path().join("other"), "clevr", 0, (32, 24), (32, 24));
+    let outside = dir.path().join("other/clevrtex_clevr/0");
+    let before = tree(&outside);
+    let out = dir.path().join("data");
+    std::fs::create_dir_all(out.join("clevrtex_clevr")).unwrap();
+    let link = out.join("clevrtex_clevr/0");
+    std::os::unix::fs::symlink(&outside, &link).unwrap();
+    let refused = |o: &std::process::Output, link: &Path| {
+        let t = text(o);
+        assert_eq!(o.status.code(), Some(1), "{t}");
+        assert!(
+            t.contains(&format!(
+                "`{}` is a symbolic link leading out",
+                link.display()
+            )),
+            "{t}"
+        );
+        assert!(t.contains("nothing is written through it"), "{t}");
+    };
+    for extra in [&[][..], &["--overwrite"][..]] {
+        let mut c = generate(&fake_blender(), &out, &[&["-n", "2"][..], extra].concat());
+        c.env("FAKE_BLENDER_MODE", "crash");
+        refused(&output_within(c, 60), &link);
+        assert_eq!(tree(&outside), before, "changed through the link");
+    }
+    let o = clevrtex()
+        .args(["sample", "--variant", "clevr", "-n", "2", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    refused(&o, &link);
+    assert_eq!(tree(&outside), before, "changed through the link");
+
+    // The variant folder itself linked out (to an empty folder): nothing appears there.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let out2 = dir.path().join("data2");
+    std::fs::create_dir(&out2).unwrap();
+    let link2 = out2.join("clevrtex_clevr");
+    std::os::unix::fs::symlink(&empty, &link2).unwrap();
+    let mut c = generate(&fake_blender(), &out2, &["-n", "1"]);
+    c.env("FAKE_BLENDER_MODE", "crash");
+    refused(&output_within(c, 60), &link2);
+    let o = clevrtex()
+        .args(["sample", "--variant", "clevr", "-n", "1", "--out"])
+        .arg(&out2)
+        .output()
+        .unwrap();
+    refused(&o, &link2);
+    assert!(tree(&empty).is_empty(), "{:?}", tree(&empty));
+}
+
+/// The run lock's guard (`.clevrtex-runs.lock`), the ledger's lock (`.failures.jsonl.lock`)
+/// and the ledger (`failures.jsonl`) of a handed-over dataset are opened without following a
+/// link: a link in their place is refused, naming it, and nothing is created, read, copied or
+/// deleted through it. Before, `generate` created files outside `--out` through dangling links
+/// named like the locks, copied an outside file's entries into the dataset's ledger and
+/// deleted the ledger's link (hostile pass 3, repro-13 and repro-15).
+#[test]
+fn generate_opens_no_lock_or_ledger_through_a_link() {
+    let entry =
+        r#"{"index":0,"stem":"CLEVRTEX_clevr_000000","variant":"clevr","error":"x","time_unix":0}"#;
+    for name in [
+        ".clevrtex-runs.lock",
+        ".failures.jsonl.lock",
+        "failures.jsonl",
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("data");
+        hand_png_sample(&out, "clevr", 0, (32, 24), (32, 24));
+        let vdir = out.join("clevrtex_clevr");
+        let outside = dir.path().join("outside");
+        std::fs::create_dir(&outside).unwrap();
+        let secret = format!(
+            "{entry}\n{}\n",
+            entry
+                .replace("000000", "000009")
+                .replace(r#""index":0"#, r#""index":9"#)
+                .replace(r#""x""#, r#""SECRET""#)
+        );
+        let target = if name == "failures.jsonl" {
+            std::fs::write(outside.join("secret.jsonl"), &secret).unwrap();
+            outside.join("secret.jsonl")
+        } else {
+            // A ledger entry, so that the run takes the ledger's lock.
+            std::fs::write(vdir.join("failures.jsonl"), format!("{entry}\n")).unwrap();
+            outside.join(format!("created-via-{name}"))
+        };
+        let link = vdir.join(name);
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let mut c = generate(&fake_blender(), &out, &["-n", "1"]);
+        c.env("FAKE_BLENDER_MODE", "crash");
+        let o = output_within(c, 60);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{name}: {t}");
+        assert!(
+            t.contains(&format!("`{}` is a symbolic link", link.display())),
+            "{t}"
+        );
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink(),
+            "{name}: the link was removed"
+        );
+        if name == "failures.jsonl" {
+            assert_eq!(std::fs::read_to_string(&target).unwrap(), secret);
+        } else {
+            assert!(!target.exists(), "created through the link `{name}`");
+            assert_eq!(
+                std::fs::read_to_string(vdir.join("failures.jsonl")).unwrap(),
+                format!("{entry}\n")
+            );
+        }
+        assert_eq!(
+            tree(&outside).len(),
+            usize::from(name == "failures.jsonl"),
+            "{name}"
+        );
+    }
+}
+
+/// A Blender that wraps the real one (`blender`) and answers the final render's `done` per
+/// `$HOSTILE_MODE`: `small_png` puts an 8x6 PNG in place of the RGB image; `ctrl_chars`
+/// answers with an `error` whose message and traceback hold terminal escape sequences.
+fn hostile_blender(dir: &Path, blender: &Path) -> PathBuf {
+    use std::os::unix::fs::PermissionsExt;
+    let script = format!(
+        r#"#!/usr/bin/env python3
+import base64, json, os, subprocess, sys, threading
+REAL = {real:?}
+MODE = os.environ.get("HOSTILE_MODE", "")
+if "--version" in sys.argv:
+    os.execv(REAL, [REAL] + sys.argv[1:])
+args = sys.argv[1:]
+tag = args[args.index("--tag") + 1]
+child = subprocess.Popen([REAL] + args, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+requests = {{}}
+def forward():
+    for line in sys.stdin.buffer:
+        try:
+            r = json.loads(line)
+            requests[r.get("id")] = r
+        except ValueError:
+            pass
+        child.stdin.write(line)
+        child.stdin.flush()
+    child.stdin.close()
+threading.Thread(target=forward, daemon=True).start()
+PNG = base64.b64decode("iVBORw0KGgoAAAANSUhEUgAAAAgAAAAGCAIAAABxZ0isAAAAEUlEQVR42mM4YWODFTEMpAQAr9U8ASfI0t8AAAAASUVORK5CYII=")
+for line in child.stdout:
+    if line.startswith(tag.encode() + b" "):
+        r = json.loads(line[len(tag) + 1:])
+        if r.get("type") == "done" and r.get("mode") == "final":
+            if MODE == "small_png":
+                out_dir = requests.get(r.get("id"), {{}}).get("out_dir", "")
+                with open(os.path.join(out_dir, "rgb.png"), "wb") as f:
+                    f.write(PNG)
+            elif MODE == "ctrl_chars":
+                r = {{"type": "error", "id": r.get("id"), "message": "\x1b[31mboom\x1b[2K\r looks fine", "traceback": "\x1b]52;c;ZXZpbA==\x07\x1b]0;title\x07\n"}}
+            line = (tag + " " + json.dumps(r) + "\n").encode()
+    sys.stdout.buffer.write(line)
+    sys.stdout.buffer.flush()
+sys.exit(child.wait())
+"#,
+        real = blender.display().to_string()
+    );
+    let path = dir.join("hostile-blender");
+    std::fs::write(&path, script).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+    path
+}
+
+/// Blender's output is untrusted: an RGB image of another size than asked for fails the image
+/// (exit 3, the sizes named; checked from the PNG's header as the EXRs are). Before,
+/// `generate` wrote the 8x6 image as the sample (exit 0, "[1/1] wrote"; `verify` then called
+/// it broken; hostile pass 3, repro-10).
+#[test]
+fn generate_fails_an_rgb_image_of_another_size_than_asked_for() {
+    let Some(blender) = blender_or_skip("generate_fails_an_rgb_image_of_another_size") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let hostile = hostile_blender(dir.path(), &blender);
+    let out = dir.path().join("small");
+    let mut c = generate(&hostile, &out, &["-n", "1", "--retries", "0"]);
+    c.env("HOSTILE_MODE", "small_png");
+    let o = output_within(c, 300);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains("the RGB image is 8x6 but the scene asks for 32x24"),
+        "{t}"
+    );
+    assert!(
+        !out.join("clevrtex_clevr/0/CLEVRTEX_clevr_000000.png")
+            .exists(),
+        "{t}"
+    );
+}
+
+/// Blender's error reply is untrusted text: its message and traceback reach the terminal with
+/// their control characters escaped (`clevrtex_scene::text::printable`). Before, `generate`
+/// printed ESC[31m, ESC[2K + CR, OSC 52 (the clipboard) and OSC 0 raw (hostile pass 3,
+/// repro-12).
+#[test]
+fn generate_escapes_blenders_error_reply() {
+    let Some(blender) = blender_or_skip("generate_escapes_blenders_error_reply") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let hostile = hostile_blender(dir.path(), &blender);
+    let out = dir.path().join("ctrl");
+    let mut c = generate(&hostile, &out, &["-n", "1", "--retries", "0"]);
+    c.env("HOSTILE_MODE", "ctrl_chars");
+    let o = output_within(c, 300);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    assert!(
+        t.contains(r"\u{1b}[31mboom\u{1b}[2K\u{d} looks fine"),
+        "{t}"
+    );
+    assert!(t.contains(r"\u{1b}]52;c;ZXZpbA==\u{7}"), "{t}");
+    assert!(!t.contains('\x1b') && !t.contains('\x07'), "{t:?}");
 }

@@ -109,12 +109,8 @@ pub fn run(args: Args) -> CmdResult {
         for &i in &chunk {
             let d = sample_dir(&args.out, &config.name, i);
             if last_dir.as_ref() != Some(&d) {
-                std::fs::create_dir_all(&d).map_err(|e| {
-                    anyhow::anyhow!(
-                        "cannot create `{}`: {e}\nhint: check that `--out` is a writable folder",
-                        d.display()
-                    )
-                })?;
+                // A folder of the layout that is a link out of `--out` is refused, naming it.
+                clevrtex_scene::layout::make_dir(&args.out, &d).map_err(anyhow::Error::msg)?;
                 last_dir = Some(d);
             }
         }

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use clevrtex_render::manifest;
 use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, RunReport};
 use clevrtex_render::RenderError;
@@ -164,13 +164,7 @@ pub(crate) fn run_jobs(
                 std::env::args().collect(),
             )
             .map_err(|e| anyhow::anyhow!(e))?;
-            let vdir = plan.variant_dir(&args.out);
-            std::fs::create_dir_all(&vdir).with_context(|| {
-                format!(
-                    "cannot create `{}`\nhint: pass a writable folder with `--out`",
-                    vdir.display()
-                )
-            })?;
+            // The lock made the variant folder (`layout::make_dir`: not a link out of `--out`).
             plan.write_plan(&args.out)?;
             Some(lock)
         }

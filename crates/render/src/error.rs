@@ -5,6 +5,8 @@ use std::path::PathBuf;
 use std::process::ExitStatus;
 use std::time::Duration;
 
+use clevrtex_scene::text::{printable, printable_lines};
+
 /// Smallest image (in pixels) at which every object of a default layout can cover a pixel:
 /// below it, layouts are rejected because of the image's size, not of the configuration.
 const MIN_VISIBLE_IMAGE_PX: u64 = 32 * 24;
@@ -35,7 +37,7 @@ impl std::fmt::Display for Tails {
             } else {
                 writeln!(f, "--- {label} (last {} lines)", lines.len())?;
                 for line in lines {
-                    writeln!(f, "{line}")?;
+                    writeln!(f, "{}", printable(line))?;
                 }
             }
         }
@@ -92,7 +94,7 @@ pub enum RenderError {
         tails: Box<Tails>,
     },
     /// The worker printed a reply line that is not valid protocol.
-    #[error("blender worker `{}` sent a malformed reply while {doing}: `{line}` ({problem})\n{tails}hint: a reply line was cut or garbled (the worker crashed mid-write, or something else in Blender wrote to the reply stream); the request is retried with a fresh worker; if it keeps happening, run `clevrtex doctor` and report it with the output above", .program.display())]
+    #[error("blender worker `{}` sent a malformed reply while {doing}: `{}` ({})\n{tails}hint: a reply line was cut or garbled (the worker crashed mid-write, or something else in Blender wrote to the reply stream); the request is retried with a fresh worker; if it keeps happening, run `clevrtex doctor` and report it with the output above", .program.display(), printable(.line), printable(.problem))]
     Protocol {
         /// The program.
         program: PathBuf,
@@ -106,7 +108,7 @@ pub enum RenderError {
         tails: Box<Tails>,
     },
     /// The bridge reported an error for one request (the worker stays usable).
-    #[error("the blender bridge failed while {doing}: {message}\n{traceback}hint: check the scene file; if it came from `clevrtex sample`, this is a bug: please report it with the traceback")]
+    #[error("the blender bridge failed while {doing}: {}\n{}hint: check the scene file; if it came from `clevrtex sample`, this is a bug: please report it with the traceback", printable(.message), printable_lines(.traceback))]
     Bridge {
         /// What the worker was doing.
         doing: String,
@@ -121,6 +123,10 @@ pub enum RenderError {
     /// The run was interrupted (Ctrl-C).
     #[error("interrupted")]
     Interrupted,
+    /// The output folder holds something this run will not write through (a link leading out
+    /// of `--out` where the layout has a folder, a FIFO, ...): the message names it, with a hint.
+    #[error("{0}")]
+    Refused(String),
     /// `--device` asks for GPUs the machine does not have (the message of
     /// [`crate::device::plan`], with its hint).
     #[error("{0}")]

@@ -222,7 +222,7 @@ pub(crate) fn run_job(
         let t_post = Instant::now();
         let (facts_blender, facts_compat) = slot.blender();
         let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
-        let mut staged = Staged::new(&dir)?;
+        let mut staged = Staged::new(&opts.out, &dir)?;
         let objects = write_passes(
             &reply,
             &work,

@@ -12,6 +12,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
 use crate::error::{RenderError, Result};
@@ -26,34 +27,73 @@ pub(crate) struct Ledger {
     unreadable: usize,
 }
 
-/// Entries by stem, each one JSON line (without the newline), and the unreadable lines.
-fn load(path: &Path) -> (BTreeMap<String, String>, usize) {
+/// Entries by stem, each one JSON line (without the newline), and the unreadable lines. The
+/// ledger lives in a folder that may be a dataset handed over: only a regular file is read
+/// (not through a link, which could lead anywhere, nor a FIFO, which would block), with the
+/// dataset reader's cap; anything else in its place is refused, naming it.
+fn load(path: &Path) -> std::result::Result<(BTreeMap<String, String>, usize), String> {
     let mut entries = BTreeMap::new();
     let mut unreadable = 0;
-    if let Ok(text) = std::fs::read_to_string(path) {
-        for line in text.lines().filter(|l| !l.trim().is_empty()) {
-            let stem = serde_json::from_str::<serde_json::Value>(line)
-                .ok()
-                .and_then(|v| v["stem"].as_str().map(str::to_string));
-            match stem {
-                // Older tools appended: the last line of a stem is its latest failure.
-                Some(stem) => {
-                    entries.insert(stem, line.to_string());
-                }
-                None => unreadable += 1,
+    let refuse = |what: &str| {
+        format!(
+            "the failure ledger `{}` {what}; it is not followed or read, and not changed\nhint: remove it (or put the ledger file itself in its place) and run again",
+            path.display()
+        )
+    };
+    match std::fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok((entries, 0)),
+        Err(e) => return Err(format!("cannot read `{}`: {e}", path.display())),
+        Ok(m) if m.file_type().is_symlink() => return Err(refuse("is a symbolic link")),
+        Ok(m) if !m.is_file() => {
+            return Err(refuse(
+                "is not a regular file (a FIFO, socket, device or folder)",
+            ))
+        }
+        Ok(_) => {}
+    }
+    let bytes = match crate::dataset::read_regular(path, crate::dataset::MAX_LEDGER_BYTES) {
+        Ok(b) => b,
+        Err(crate::dataset::ReadError::Io(e)) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Ok((entries, 0))
+        }
+        Err(e) => return Err(refuse(&e.to_string())),
+    };
+    let text = String::from_utf8_lossy(&bytes);
+    for line in text.lines().filter(|l| !l.trim().is_empty()) {
+        let stem = serde_json::from_str::<serde_json::Value>(line)
+            .ok()
+            .and_then(|v| v["stem"].as_str().map(str::to_string));
+        match stem {
+            // Older tools appended: the last line of a stem is its latest failure.
+            Some(stem) => {
+                entries.insert(stem, line.to_string());
             }
+            None => unreadable += 1,
         }
     }
-    (entries, unreadable)
+    Ok((entries, unreadable))
 }
 
 impl Ledger {
-    /// The ledger at `path` (it need not exist), counting its unreadable lines.
-    pub(crate) fn open(path: &Path) -> Ledger {
-        Ledger {
+    /// The ledger at `path` (it need not exist), counting its unreadable lines. `Err` when
+    /// something other than a regular file is in its place (a link, a FIFO).
+    pub(crate) fn open(path: &Path) -> Result<Ledger> {
+        // Its lock file is judged when it is opened ([`crate::run_lock::open_lock_file`], at
+        // the first change): a link or FIFO there is refused, naming it; a folder there fails
+        // the write as a full disk would.
+        Ok(Ledger {
             path: path.to_path_buf(),
-            unreadable: load(path).1,
-        }
+            unreadable: load(path).map_err(RenderError::Refused)?.1,
+        })
+    }
+
+    /// The lock file beside the ledger, `.<name>.lock`.
+    fn lock_path(&self) -> PathBuf {
+        let name = self.path.file_name().unwrap_or_default().to_string_lossy();
+        self.path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join(format!(".{name}.lock"))
     }
 
     /// The ledger's file.
@@ -76,13 +116,10 @@ impl Ledger {
         let dir = self.path.parent().unwrap_or(Path::new("."));
         std::fs::create_dir_all(dir)?;
         let name = self.path.file_name().unwrap_or_default().to_string_lossy();
-        let lock = std::fs::OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .write(true)
-            .open(dir.join(format!(".{name}.lock")))?;
+        let lock =
+            crate::run_lock::open_lock_file(&self.lock_path()).map_err(std::io::Error::other)?;
         lock.lock()?;
-        let (mut entries, unreadable) = load(&self.path);
+        let (mut entries, unreadable) = load(&self.path).map_err(std::io::Error::other)?;
         if !change(&mut entries) && unreadable == 0 {
             return Ok(());
         }
@@ -98,10 +135,16 @@ impl Ledger {
             output::TMP_SUFFIX
         ));
         let body: String = entries.values().map(|l| format!("{l}\n")).collect();
-        let written = std::fs::File::create(&tmp).and_then(|mut f| {
-            f.write_all(body.as_bytes())?;
-            f.sync_all()
-        });
+        let written = std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .custom_flags(crate::post::no_follow_no_block())
+            .open(&tmp)
+            .and_then(|mut f| {
+                f.write_all(body.as_bytes())?;
+                f.sync_all()
+            });
         let renamed = written.and_then(|()| std::fs::rename(&tmp, &self.path));
         if renamed.is_err() {
             let _ = std::fs::remove_file(&tmp);
@@ -132,7 +175,7 @@ impl Ledger {
     /// now (a rerun made them), so the ledger lists only what is still missing; the file goes
     /// when nothing is. Entries of other runs (other shards) are kept.
     pub(crate) fn prune(&self, ran: &BTreeSet<String>, failed: &BTreeSet<String>) -> Result<()> {
-        if !self.path.exists() {
+        if std::fs::symlink_metadata(&self.path).is_err() {
             return Ok(());
         }
         self.update(|entries| {
@@ -140,6 +183,13 @@ impl Ledger {
             entries.retain(|stem, _| !ran.contains(stem) || failed.contains(stem));
             entries.len() != before
         })
-        .map_err(|e| RenderError::write(&self.path, e))
+        .map_err(|e| match e.kind() {
+            // A refusal of [`load`] or [`crate::run_lock::open_lock_file`], with its hint.
+            std::io::ErrorKind::Other => RenderError::Refused(format!(
+                "cannot update the failure ledger `{}`: {e}",
+                self.path.display()
+            )),
+            _ => RenderError::write(&self.path, e),
+        })
     }
 }

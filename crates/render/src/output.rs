@@ -69,9 +69,11 @@ pub struct Staged {
 }
 
 impl Staged {
-    /// Start staging files into `dir` (created if missing).
-    pub fn new(dir: &Path) -> Result<Staged> {
-        std::fs::create_dir_all(dir).map_err(|e| RenderError::write(dir, e))?;
+    /// Start staging files into `dir`, a sample folder of the layout under `out` (created if
+    /// missing; a link out of `out` or anything but a folder in its place is refused:
+    /// [`clevrtex_scene::layout::make_dir`]).
+    pub fn new(out: &Path, dir: &Path) -> Result<Staged> {
+        clevrtex_scene::layout::make_dir(out, dir).map_err(RenderError::Refused)?;
         Ok(Staged {
             dir: dir.to_path_buf(),
             files: Vec::new(),
@@ -182,11 +184,11 @@ mod tests {
     fn uncommitted_files_vanish() {
         let dir = tempfile::tempdir().unwrap();
         {
-            let mut s = Staged::new(dir.path()).unwrap();
+            let mut s = Staged::new(dir.path(), dir.path()).unwrap();
             s.write("a.png", b"x").unwrap();
         }
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
-        let mut s = Staged::new(dir.path()).unwrap();
+        let mut s = Staged::new(dir.path(), dir.path()).unwrap();
         s.write("a.png", b"x").unwrap();
         s.commit().unwrap();
         assert!(dir.path().join("a.png").is_file());

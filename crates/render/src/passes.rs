@@ -134,6 +134,22 @@ pub(crate) fn write_passes(
                     "the Blender worker's temporary folder vanished; rerun",
                 )
             })?;
+            // Checked from its header as the EXRs are: an image of another size than the one
+            // asked for fails the image (`verify` would call the sample broken).
+            match post::png_size(&bytes) {
+                Some(size) if size == (w, h) => {}
+                found => {
+                    return Err(RenderError::BadOutput {
+                        path: from,
+                        problem: match found {
+                            Some((pw, ph)) => {
+                                format!("the RGB image is {pw}x{ph} but the scene asks for {w}x{h}")
+                            }
+                            None => "the RGB image is not a PNG (no PNG header)".to_string(),
+                        },
+                    })
+                }
+            }
             // Blender's timing stamps out: the same pixels give the same bytes.
             staged.write(&name, &post::strip_png_text(&bytes, &from)?)?;
             continue;

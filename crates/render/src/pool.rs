@@ -211,7 +211,7 @@ pub fn run(
     let started = Instant::now();
     let stems: BTreeSet<String> = jobs.iter().map(|j| j.stem.clone()).collect();
     let bridge = BridgeDir::create(&opts.materials_json)?;
-    let ledger = Ledger::open(&opts.ledger);
+    let ledger = Ledger::open(&opts.ledger)?;
     let mut todo = VecDeque::new();
     let mut report = RunReport {
         workers: opts.workers.max(1),
@@ -222,6 +222,9 @@ pub fn run(
     for job in jobs {
         let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
         if cleaned.insert(dir.clone()) {
+            // Before a file in it is read, swept or skipped as complete: a folder of the
+            // layout that is a link out of `--out` (a dataset handed over) is refused.
+            layout::make_dir(&opts.out, &dir).map_err(RenderError::Refused)?;
             output::remove_stale_temps(&dir);
         }
         if !opts.overwrite && output::is_complete(&dir, &job.stem, &job.passes, opts.keep_exr) {
@@ -402,7 +405,7 @@ pub fn default_workers() -> usize {
     }
 }
 
-/// Errors that stop the whole run: no Blender, or output that cannot be written.
+/// Errors that stop the whole run: no Blender, or output that cannot (or will not) be written.
 fn is_fatal(err: &RenderError) -> bool {
     matches!(
         err,
@@ -410,6 +413,7 @@ fn is_fatal(err: &RenderError) -> bool {
             | RenderError::Spawn { .. }
             | RenderError::WorkerStart(_)
             | RenderError::Io { .. }
+            | RenderError::Refused(_)
     )
 }
 

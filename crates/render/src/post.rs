@@ -352,9 +352,36 @@ pub fn strip_png_text(bytes: &[u8], path: &Path) -> Result<Vec<u8>> {
     Ok(out)
 }
 
+/// Width and height from a PNG's header, when `bytes` starts like a PNG (`verify`, and the
+/// RGB image Blender writes, checked against the size asked for).
+pub(crate) fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
+    if bytes.len() < 24 || &bytes[..8] != b"\x89PNG\r\n\x1a\n" || &bytes[12..16] != b"IHDR" {
+        return None;
+    }
+    let w = u32::from_be_bytes(bytes[16..20].try_into().ok()?);
+    let h = u32::from_be_bytes(bytes[20..24].try_into().ok()?);
+    Some((w, h))
+}
+
+/// `O_NOFOLLOW | O_NONBLOCK`, for [`std::os::unix::fs::OpenOptionsExt::custom_flags`]: how a
+/// file in an output folder that may hold anyone's files is opened (a link in its place is
+/// not followed, a FIFO does not block).
+pub(crate) fn no_follow_no_block() -> i32 {
+    (rustix::fs::OFlags::NOFOLLOW | rustix::fs::OFlags::NONBLOCK).bits() as i32
+}
+
 /// Write bytes to `path` and flush them to disk (so a full disk is reported here, not lost).
+/// A link in the place of `path` is not followed (the open fails), so nothing is written
+/// through a link planted under a temporary's name.
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut f = std::fs::File::create(path).map_err(|e| RenderError::write(path, e))?;
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .custom_flags(no_follow_no_block())
+        .open(path)
+        .map_err(|e| RenderError::write(path, e))?;
     f.write_all(bytes)
         .and_then(|_| f.sync_all())
         .map_err(|e| RenderError::write(path, e))

@@ -17,6 +17,8 @@ use std::time::{Duration, SystemTime};
 
 use serde::{Deserialize, Serialize};
 
+use clevrtex_scene::text::printable;
+
 /// How often a holder touches its lock file.
 pub const HEARTBEAT: Duration = Duration::from_secs(20);
 /// A lock of another host not touched for this long is stale.
@@ -88,10 +90,61 @@ pub fn overlaps(a: (u64, u64, [u64; 2]), b: (u64, u64, [u64; 2])) -> bool {
     n2 > 1_000_000
 }
 
+/// Open (creating it) the lock file `path` of a variant folder, to `flock` it: the run lock's
+/// guard ([`GUARD`]) and the failure ledger's. The folder may be a dataset handed over, so
+/// nothing in its place is trusted: the file is opened without following a link (a link,
+/// dangling or not, could create or lock a file outside the dataset) and without blocking (a
+/// FIFO would block the open for good), and must be a regular file. Anything else is refused
+/// with a message naming it. Opened for writing: on NFS `flock` is emulated with POSIX locks,
+/// which need a writable descriptor.
+pub(crate) fn open_lock_file(path: &Path) -> Result<std::fs::File, String> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let refuse = |what: &str| {
+        format!(
+            "`{}` {what}, where clevrtex keeps a lock file; it is not opened\nhint: delete it (clevrtex makes this file itself, a regular file) and run again",
+            path.display()
+        )
+    };
+    let kind = |meta: &std::fs::Metadata| {
+        if meta.file_type().is_symlink() {
+            "is a symbolic link"
+        } else {
+            "is not a regular file (a FIFO, socket, device or folder)"
+        }
+    };
+    let opened = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .custom_flags(crate::post::no_follow_no_block())
+        .open(path);
+    let file = match opened {
+        Ok(f) => f,
+        Err(e) => {
+            return Err(match std::fs::symlink_metadata(path) {
+                Ok(m) if !m.is_file() => refuse(kind(&m)),
+                _ => format!(
+                    "cannot create `{}`: {e}\nhint: pass a writable folder with `--out`",
+                    path.display()
+                ),
+            })
+        }
+    };
+    match file.metadata() {
+        Ok(m) if m.is_file() => Ok(file),
+        Ok(m) => Err(refuse(kind(&m))),
+        Err(e) => Err(format!("cannot read `{}`: {e}", path.display())),
+    }
+}
+
 /// Whether the holder of a lock file (its `holder`, the file's modification time) is gone.
 fn is_stale(holder: &Holder, modified: Option<SystemTime>) -> bool {
     if holder.host == crate::tmp::hostname() {
-        return !crate::tmp::process_alive(holder.pid, holder.pid_start);
+        // A start time of 0 (unknown) proves nothing: where this host's start times can be
+        // read (always on Linux), a run here wrote its own, and where they cannot, no pid is
+        // known to be alive either. So a lock naming this host with `pid_start` 0 (a file
+        // someone wrote, e.g. naming pid 1) is stale.
+        return holder.pid_start == 0 || !crate::tmp::process_alive(holder.pid, holder.pid_start);
     }
     modified
         .and_then(|m| SystemTime::now().duration_since(m).ok())
@@ -115,16 +168,11 @@ impl RunLock {
                 p.display()
             )
         };
-        std::fs::create_dir_all(variant_dir).map_err(|e| io("create", variant_dir, e))?;
-        // A file opened for writing, as the failure ledger's: on NFS `flock` is emulated
-        // with POSIX locks, which need a writable descriptor (a folder's is read-only).
+        // The variant folder of `--out`: a link out of it is refused, naming it.
+        let out = variant_dir.parent().unwrap_or(Path::new("."));
+        clevrtex_scene::layout::make_dir(out, variant_dir)?;
         let guard_path = variant_dir.join(GUARD);
-        let guard = std::fs::OpenOptions::new()
-            .create(true)
-            .truncate(false)
-            .write(true)
-            .open(&guard_path)
-            .map_err(|e| io("create", &guard_path, e))?;
+        let guard = open_lock_file(&guard_path)?;
         guard.lock().map_err(|e| io("lock", &guard_path, e))?;
         let root = crate::dataset::root(variant_dir).map_err(|e| io("read", variant_dir, e))?;
         let entries =
@@ -163,13 +211,13 @@ impl RunLock {
                     shard[1],
                     variant_dir.display(),
                     holder.pid,
-                    holder.host,
+                    printable(&holder.host),
                     holder.start,
                     holder.end,
                     holder.shard[0],
                     holder.shard[1],
                     path.display(),
-                    holder.command.join(" "),
+                    printable(&holder.command.join(" ")),
                     path.display()
                 ));
             }
@@ -190,18 +238,23 @@ impl RunLock {
             crate::output::TMP_SUFFIX
         ));
         let text = serde_json::to_string_pretty(&holder).expect("lock serialises") + "\n";
-        std::fs::write(&tmp, text)
-            .and_then(|()| std::fs::rename(&tmp, &path))
-            .map_err(|e| {
+        crate::post::write_file(&tmp, text.as_bytes())
+            .map_err(|e| e.to_string())
+            .and_then(|()| std::fs::rename(&tmp, &path).map_err(|e| io("write", &path, e)))
+            .inspect_err(|_| {
                 let _ = std::fs::remove_file(&tmp);
-                io("write", &path, e)
             })?;
         drop(guard);
         let (tx, rx) = mpsc::channel::<()>();
         let beat_path = path.clone();
         let beat = std::thread::spawn(move || {
+            use std::os::unix::fs::OpenOptionsExt;
             while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(HEARTBEAT) {
-                if let Ok(f) = std::fs::OpenOptions::new().append(true).open(&beat_path) {
+                if let Ok(f) = std::fs::OpenOptions::new()
+                    .append(true)
+                    .custom_flags(crate::post::no_follow_no_block())
+                    .open(&beat_path)
+                {
                     let _ = f.set_modified(SystemTime::now());
                 }
             }
@@ -226,7 +279,7 @@ impl Drop for RunLock {
             let _ = b.join();
         }
         // Remove the file only while it is still ours (never another run's lock).
-        let ours = std::fs::read(&self.path)
+        let ours = crate::dataset::read_regular(&self.path, MAX_LOCK_BYTES)
             .ok()
             .and_then(|b| serde_json::from_slice::<Holder>(&b).ok())
             .is_some_and(|h| h.pid == std::process::id() && h.host == crate::tmp::hostname());
@@ -298,5 +351,49 @@ mod tests {
         .unwrap();
         let err = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec![]).unwrap_err();
         assert!(err.contains("host `elsewhere`"), "{err}");
+    }
+
+    #[test]
+    fn a_holder_of_this_host_with_an_unknown_start_time_is_stale() {
+        let dir = tempfile::tempdir().unwrap();
+        let forged = Holder {
+            host: crate::tmp::hostname(),
+            pid: 1,
+            pid_start: 0,
+            start: 0,
+            end: 8,
+            shard: [0, 1],
+            command: vec![],
+        };
+        std::fs::write(
+            dir.path().join(file_name(0, 8, 0, 1)),
+            serde_json::to_string(&forged).unwrap(),
+        )
+        .unwrap();
+        let lock = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec![]);
+        assert!(lock.is_ok(), "{lock:?}");
+    }
+
+    #[test]
+    fn a_lock_file_that_is_a_link_or_a_fifo_is_refused_unopened() {
+        let dir = tempfile::tempdir().unwrap();
+        let outside = dir.path().join("outside");
+        let lock = dir.path().join(GUARD);
+        std::os::unix::fs::symlink(&outside, &lock).unwrap();
+        let err = open_lock_file(&lock).unwrap_err();
+        assert!(
+            err.contains("is a symbolic link") && err.contains(GUARD),
+            "{err}"
+        );
+        assert!(!outside.exists(), "created through the link");
+        std::fs::remove_file(&lock).unwrap();
+        let st = std::process::Command::new("mkfifo")
+            .arg(&lock)
+            .status()
+            .unwrap();
+        assert!(st.success());
+        let err = open_lock_file(&lock).unwrap_err();
+        assert!(err.contains("not a regular file"), "{err}");
+        assert!(open_lock_file(&dir.path().join("plain.lock")).is_ok());
     }
 }

@@ -469,16 +469,6 @@ fn png_layout(kind: PngKind) -> (u8, usize, bool) {
     }
 }
 
-/// Width and height from a PNG's header, when `bytes` starts like a PNG.
-fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
-    if bytes.len() < 24 || &bytes[..8] != b"\x89PNG\r\n\x1a\n" || &bytes[12..16] != b"IHDR" {
-        return None;
-    }
-    let w = u32::from_be_bytes(bytes[16..20].try_into().ok()?);
-    let h = u32::from_be_bytes(bytes[20..24].try_into().ok()?);
-    Some((w, h))
-}
-
 /// Check one sample; `Err` lists every problem found. `listed`: a finished manifest covers
 /// the index, so every file must be in one.
 /// Pixels of samples being decoded at once, over all threads: four samples of the largest size.
@@ -637,7 +627,7 @@ fn check_sample(
             continue;
         };
         // The header's size before decoding: a PNG claiming a huge size is never allocated.
-        if let Some((pw, ph)) = png_size(bytes) {
+        if let Some((pw, ph)) = crate::post::png_size(bytes) {
             if (pw, ph) != (w, h) {
                 problems.push(format!("`{name}` is {pw}x{ph} (the metadata says {w}x{h})"));
                 continue;

@@ -78,6 +78,66 @@ pub fn sample_dir(out: &Path, variant: &str, index: u64) -> PathBuf {
     variant_dir(out, variant).join((index / 1000).to_string())
 }
 
+/// Make `dir`, a folder of the layout under `out` (a variant folder or a sample folder), and
+/// every folder between, before anything is written into it. The one place the write side
+/// makes the layout's folders: an `--out` handed over (to resume or grow it) is untrusted, so
+/// every folder from `out` down to `dir` must be a folder inside `out`, judged as the read
+/// side judges ([`crate::dataset::classify`] against the canonical `out`). A link leading out
+/// of `out`, a dangling link, a FIFO or a file where a folder belongs is refused, naming it,
+/// and nothing is written through it. `out` itself (the command line's) is trusted.
+pub fn make_dir(out: &Path, dir: &Path) -> Result<(), String> {
+    let hint = "hint: remove it (or put the real folder in its place), or pass another `--out`";
+    std::fs::create_dir_all(out).map_err(|e| {
+        format!(
+            "cannot create `{}`: {e}\nhint: pass a writable folder with `--out`",
+            out.display()
+        )
+    })?;
+    let root = crate::dataset::root(out)
+        .map_err(|e| format!("cannot resolve `{}`: {e}", out.display()))?;
+    let rel = dir.strip_prefix(out).map_err(|_| {
+        format!(
+            "`{}` is not under the output folder `{}`",
+            dir.display(),
+            out.display()
+        )
+    })?;
+    let mut path = out.to_path_buf();
+    for part in rel.components() {
+        path.push(part);
+        if let Err(e) = std::fs::symlink_metadata(&path) {
+            if e.kind() != std::io::ErrorKind::NotFound {
+                return Err(format!("cannot read `{}`: {e}", path.display()));
+            }
+            match std::fs::create_dir(&path) {
+                Err(e) if e.kind() != std::io::ErrorKind::AlreadyExists => {
+                    return Err(format!(
+                        "cannot create `{}`: {e}\nhint: pass a writable folder with `--out`",
+                        path.display()
+                    ))
+                }
+                _ => {}
+            }
+        }
+        match crate::dataset::classify(&root, &path) {
+            crate::dataset::Kind::Dir => {}
+            crate::dataset::Kind::File => {
+                return Err(format!(
+                "`{}` is a file where the dataset's layout has a folder; nothing written\n{hint}",
+                path.display()
+            ))
+            }
+            crate::dataset::Kind::Skipped(why) => {
+                return Err(format!(
+                    "`{}` {why}; nothing is written through it\n{hint}",
+                    path.display()
+                ))
+            }
+        }
+    }
+    Ok(())
+}
+
 /// File name of `pass` for the image with file stem `stem`: `<stem><suffix>.png`.
 pub fn pass_file(stem: &str, pass: Pass) -> String {
     format!("{stem}{}.png", pass.spec().file_suffix)
@@ -268,5 +328,42 @@ mod tests {
         assert_eq!(Split::of(s, 1, 15), Split::Val);
         assert_eq!(Split::Val.range(s, 15), 1..3);
         assert_eq!(Split::Train.range(Splits::TestOnly, 7), 7..7);
+    }
+
+    #[test]
+    fn make_dir_makes_the_layouts_folders_and_refuses_a_link_out() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let bucket = sample_dir(&out, "camo", 4711);
+        make_dir(&out, &bucket).unwrap();
+        assert!(bucket.is_dir());
+        make_dir(&out, &bucket).unwrap();
+        // A link inside `out` is followed (it stays inside); one leading out is refused.
+        let inside = sample_dir(&out, "camo", 0);
+        std::os::unix::fs::symlink(&bucket, &inside).unwrap();
+        make_dir(&out, &inside).unwrap();
+        let elsewhere = dir.path().join("elsewhere");
+        std::fs::create_dir(&elsewhere).unwrap();
+        let linked = sample_dir(&out, "camo", 1000);
+        std::os::unix::fs::symlink(&elsewhere, &linked).unwrap();
+        let err = make_dir(&out, &linked).unwrap_err();
+        assert!(
+            err.contains(&format!(
+                "`{}` is a symbolic link leading out",
+                linked.display()
+            )),
+            "{err}"
+        );
+        // The variant folder linked out: refused before a sample folder is made through it.
+        let out2 = dir.path().join("out2");
+        std::fs::create_dir(&out2).unwrap();
+        std::os::unix::fs::symlink(&elsewhere, variant_dir(&out2, "camo")).unwrap();
+        let err = make_dir(&out2, &sample_dir(&out2, "camo", 0)).unwrap_err();
+        assert!(err.contains("clevrtex_camo` is a symbolic link"), "{err}");
+        assert_eq!(std::fs::read_dir(&elsewhere).unwrap().count(), 0);
+        // A file where a folder belongs.
+        std::fs::write(variant_dir(&out, "full"), b"x").unwrap();
+        let err = make_dir(&out, &sample_dir(&out, "full", 0)).unwrap_err();
+        assert!(err.contains("is a file where"), "{err}");
     }
 }
