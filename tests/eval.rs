@@ -1166,3 +1166,41 @@ fn eval_breaks_clevr_down_by_colour() {
     assert_eq!(r["breakdowns"]["color"]["red"]["count"], 1, "{r}");
     assert_eq!(r["breakdowns"]["color"]["red"]["mIoU"], 1.0, "{r}");
 }
+
+/// Hostile pass (issue 21, repro-21): a ground-truth sample whose image is missing, a FIFO or
+/// a link out of the dataset is an error naming it; it was left out silently ("9 images",
+/// exit 0), which also shifts the splits (taken by position).
+#[test]
+fn eval_names_a_ground_truth_sample_without_its_image() {
+    let preds = data("eval/preds/png");
+    for how in ["missing", "fifo", "link out"] {
+        let dir = tempfile::tempdir().unwrap();
+        let g = dir.path().join("gt");
+        copy_dir(&gt(), &g);
+        let image = g.join("clevrtex_vbg/0/CLEVRTEX_vbg_000009.png");
+        std::fs::remove_file(&image).unwrap();
+        match how {
+            "fifo" => {
+                let st = std::process::Command::new("mkfifo")
+                    .arg(&image)
+                    .status()
+                    .unwrap();
+                assert!(st.success());
+            }
+            "link out" => std::os::unix::fs::symlink(
+                gt().join("clevrtex_vbg/0/CLEVRTEX_vbg_000009.png"),
+                &image,
+            )
+            .unwrap(),
+            _ => {}
+        }
+        let args: Vec<&std::ffi::OsStr> = ["eval".as_ref(), preds.as_os_str(), g.as_os_str()]
+            .into_iter()
+            .chain(["--split", "all", "--bootstrap", "0"].map(std::ffi::OsStr::new))
+            .collect();
+        let out = crate::util::run_within(&args, 60);
+        let t = text(&out);
+        assert_eq!(out.status.code(), Some(1), "{how}: {t}");
+        assert!(t.contains("CLEVRTEX_vbg_000009.png"), "{how}: {t}");
+    }
+}

@@ -168,8 +168,11 @@ pub fn discover_gt(
         String,
         Vec<(u64, String, PathBuf, &clevrtex_scene::dataset::SampleRef)>,
     > = BTreeMap::new();
+    // A sample is any stem with an image, a mask or metadata: one whose image is missing (or
+    // not read) is an error below, not left out (that would shift the splits, taken by
+    // position).
     for s in ds.variants.iter().flat_map(|vd| &vd.samples) {
-        if s.has_pass(Pass::Rgb) {
+        if s.has_pass(Pass::Rgb) || s.has_pass(Pass::Mask) || s.has_metadata() {
             by_variant.entry(s.variant.clone()).or_default().push((
                 s.index,
                 s.stem.clone(),
@@ -226,13 +229,17 @@ pub fn discover_gt(
             });
         }
     }
-    // A sample's mask and metadata must be among the files the walk found: a link out of
-    // the folder, a FIFO or a device beside the image is refused, not read.
+    // A sample's image, mask and metadata must be among the files the walk found: a link out
+    // of the folder, a FIFO or a device in their place is refused, not read.
     let mut samples = Vec::with_capacity(found.len());
     for (index, stem, image, s) in found {
         let mask = s.pass_path(Pass::Mask);
         let meta = s.metadata_path();
-        for (p, ok) in [(&mask, s.has_pass(Pass::Mask)), (&meta, s.has_metadata())] {
+        for (p, ok) in [
+            (&image, s.has_pass(Pass::Rgb)),
+            (&mask, s.has_pass(Pass::Mask)),
+            (&meta, s.has_metadata()),
+        ] {
             if ok {
                 continue;
             }
