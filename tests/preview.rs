@@ -265,3 +265,78 @@ fn preview_checks_a_mask_png_size_from_its_header_before_decoding() {
     );
     assert!(sheet.is_file(), "{t}");
 }
+
+/// Hostile pass (issue 21, repro-03, 04, 05, 09): a sample whose metadata is not an object,
+/// does not parse, is a folder, or fails the shared check (`num_objects` -1), or whose image is
+/// missing, is named and left out (exit 3), and the others are drawn; `preview` drew them
+/// silently (exit 0) or failed the whole run (exit 1), `report` used invalid metadata.
+#[test]
+fn preview_and_report_leave_out_a_broken_sample_and_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    for i in 0..5 {
+        crate::util::hand_png_sample(&data, "clevr", i, (16, 12), (16, 12));
+    }
+    let sub = data.join("clevrtex_clevr/0");
+    let meta = |i: u64| sub.join(format!("CLEVRTEX_clevr_{i:06}.json"));
+    let cases: [(&str, Box<dyn Fn()>); 4] = [
+        (
+            "is [1,2,3], not an object",
+            Box::new(|| std::fs::write(meta(1), "[1, 2, 3]").unwrap()),
+        ),
+        (
+            "is not valid metadata",
+            Box::new(|| std::fs::write(meta(1), "{{").unwrap()),
+        ),
+        (
+            "`num_objects`",
+            Box::new(|| {
+                let m = r#"{"image_index": 1, "split": "test", "num_objects": -1, "objects": []}"#;
+                std::fs::write(meta(1), m).unwrap()
+            }),
+        ),
+        (
+            "CLEVRTEX_clevr_000001.png` is missing",
+            Box::new(|| std::fs::remove_file(sub.join("CLEVRTEX_clevr_000001.png")).unwrap()),
+        ),
+    ];
+    for (i, (want, damage)) in cases.iter().enumerate() {
+        let copy = dir.path().join(format!("case{i}"));
+        let st = std::process::Command::new("cp")
+            .arg("-a")
+            .arg(&data)
+            .arg(&copy)
+            .status()
+            .unwrap();
+        assert!(st.success());
+        std::fs::rename(&data, dir.path().join("orig")).unwrap();
+        std::fs::rename(&copy, &data).unwrap();
+        damage();
+        let sheet = dir.path().join(format!("s{i}.png"));
+        let o = clevrtex()
+            .arg("preview")
+            .arg(&data)
+            .arg("--out")
+            .arg(&sheet)
+            .output()
+            .unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(3), "{want}: {t}");
+        assert!(t.contains(want) && sheet.is_file(), "{want}: {t}");
+        if i < 3 {
+            let page = dir.path().join(format!("r{i}.html"));
+            let o = clevrtex()
+                .arg("report")
+                .arg(&data)
+                .arg("--out")
+                .arg(&page)
+                .output()
+                .unwrap();
+            let t = text(&o);
+            assert_eq!(o.status.code(), Some(3), "report, {want}: {t}");
+            assert!(page.is_file(), "report, {want}: {t}");
+        }
+        std::fs::remove_dir_all(&data).unwrap();
+        std::fs::rename(dir.path().join("orig"), &data).unwrap();
+    }
+}

@@ -49,6 +49,7 @@ pub fn run(args: Args) -> CmdResult {
         columns,
         labelled: drew_text,
         problems,
+        left_out,
     } = draw(&options)?;
     save(&sheet, &args.out)?;
     println!(
@@ -63,12 +64,16 @@ pub fn run(args: Args) -> CmdResult {
             "warning: no TrueType font found (install fonts-dejavu-core): the sheet has no labels"
         );
     }
-    if !problems.is_empty() {
-        for p in &problems {
-            eprintln!("skipped a cell of {p}");
-        }
+    for p in &left_out {
+        eprintln!("left out the sample of {p}");
+    }
+    for p in &problems {
+        eprintln!("skipped a cell of {p}");
+    }
+    if !problems.is_empty() || !left_out.is_empty() {
         eprintln!(
-            "{} cell(s) left empty\nhint: `clevrtex verify` checks every file of the dataset",
+            "{} sample(s) left out, {} cell(s) left empty\nhint: `clevrtex verify` checks every file of the dataset",
+            left_out.len(),
             problems.len()
         );
         return Ok(exit::PARTIAL);

@@ -57,6 +57,9 @@ pub struct Sheet {
     /// Cells left empty, one line each (`<stem>: <file>: <why>`): a sample whose files cannot
     /// be read, or whose RGB image and mask differ in size, is reported and the sheet goes on.
     pub problems: Vec<String>,
+    /// Samples left out, one line each: their metadata cannot be read, parsed or checked
+    /// ([`dataset::check_metadata`]).
+    pub left_out: Vec<String>,
 }
 
 /// Columns of the sheet, in order.
@@ -140,7 +143,7 @@ fn colour_map(t: f64) -> Rgb<u8> {
 /// Find the samples to show, in index order. The dataset is walked by its one read side
 /// (`clevrtex_scene::dataset::Dataset::open`): a link out of the dataset, a FIFO or a device
 /// is never followed or opened.
-fn find_samples(args: &Options) -> anyhow::Result<Vec<Sample>> {
+fn find_samples(args: &Options) -> anyhow::Result<(Vec<Sample>, Vec<String>)> {
     use clevrtex_scene::dataset::{Dataset, DatasetError};
     let hint = "hint: pass the `--out` folder of `clevrtex generate`";
     let ds = Dataset::open(&args.dir).map_err(|e| {
@@ -155,13 +158,14 @@ fn find_samples(args: &Options) -> anyhow::Result<Vec<Sample>> {
     })?;
     let root = ds.root.clone();
     let mut found: Vec<(String, u64, String, PathBuf)> = Vec::new();
+    let mut left_out = Vec::new();
     for vd in &ds.variants {
         if let Some((p, e)) = vd.unreadable.iter().find(|(p, _)| *p == vd.dir) {
             return Err(anyhow::anyhow!("{e}").context(format!("cannot read `{}`", p.display())));
         }
-        // A sample's metadata not followed (a link out, a FIFO): said, and left out.
+        // A sample's metadata not followed (a link out, a FIFO, a folder): said, and left out.
         for skip in vd.skipped_for_metadata().filter(|k| k.stem.is_some()) {
-            eprintln!("skipped `{}`: {}", skip.path.display(), skip.why);
+            left_out.push(skip.to_string());
         }
         for s in vd.samples.iter().filter(|s| s.has_metadata()) {
             if args.variant.as_ref().is_none_or(|v| *v == s.variant) {
@@ -192,23 +196,41 @@ fn find_samples(args: &Options) -> anyhow::Result<Vec<Sample>> {
             args.variant.as_ref().map(|v| format!(" for variant `{v}`")).unwrap_or_default()
         );
     }
-    wanted
-        .into_iter()
-        .map(|(_, _, stem, dir)| {
-            let path = dir.join(layout::metadata_file(&stem));
-            let bytes = ds
-                .read(&path, clevrtex_scene::dataset::MAX_METADATA_BYTES)
-                .map_err(|why| anyhow::anyhow!("`{}` {why}", path.display()))?;
-            let meta: Value = serde_json::from_slice(&bytes)
-                .with_context(|| format!("`{}` is not valid metadata", path.display()))?;
-            Ok(Sample {
+    // A sample whose metadata cannot be read, parsed or checked is said and left out (exit 3);
+    // the others are drawn.
+    let mut samples = Vec::new();
+    for (_, _, stem, dir) in wanted {
+        let path = dir.join(layout::metadata_file(&stem));
+        let meta = ds
+            .read(&path, clevrtex_scene::dataset::MAX_METADATA_BYTES)
+            .and_then(|b| {
+                serde_json::from_slice::<Value>(&b)
+                    .map_err(|e| format!("is not valid metadata: {e}"))
+            })
+            .map_err(|why| format!("`{}` {why}", path.display()))
+            .and_then(|meta| {
+                let file = path.display().to_string();
+                dataset::check_metadata(&meta, &file).map_err(|e| e.to_string())?;
+                Ok(meta)
+            });
+        match meta {
+            Ok(meta) => samples.push(Sample {
                 stem,
                 dir,
                 meta,
                 root: root.clone(),
-            })
-        })
-        .collect()
+            }),
+            Err(why) => left_out.push(why),
+        }
+    }
+    if samples.is_empty() && !left_out.is_empty() {
+        bail!(
+            "no sample of `{}` can be drawn:\n  {}\nhint: check the dataset with `clevrtex verify`",
+            args.dir.display(),
+            left_out.join("\n  ")
+        );
+    }
+    Ok((samples, left_out))
 }
 
 /// The file of `pass` of a sample, if it exists.
@@ -313,6 +335,17 @@ fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
         anyhow::bail!("{why}");
     }
     let Some(path) = pass_path(s, col.pass()) else {
+        // Absent and not listed: the sample lacks the pass. Listed (the metadata's `*_filename`,
+        // or the image and mask, which every sample has): missing, or a folder in its place.
+        let p = s.dir.join(layout::pass_file(&s.stem, col.pass()));
+        let listed = matches!(col.pass(), Pass::Rgb | Pass::Mask)
+            || s.meta[col.pass().metadata_key()].is_string();
+        if dataset::classify(&s.root, &p) == Kind::Dir {
+            anyhow::bail!("`{}` is a folder", p.display());
+        }
+        if listed {
+            anyhow::bail!("`{}` is missing", p.display());
+        }
         return Ok(None);
     };
     let to_rgb = |p: &Path| read_colour_png(&s.root, p);
@@ -383,7 +416,7 @@ fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
 
 /// Draw the sheet of `args` (without writing it).
 pub fn draw(args: &Options) -> anyhow::Result<Sheet> {
-    let samples = find_samples(args)?;
+    let (samples, left_out) = find_samples(args)?;
     // Columns: those some chosen sample has.
     let cols: Vec<Column> = ALL
         .into_iter()
@@ -513,6 +546,7 @@ pub fn draw(args: &Options) -> anyhow::Result<Sheet> {
         columns: cols.iter().map(|c| c.title()).collect(),
         labelled: drew_text,
         problems,
+        left_out,
     })
 }
 

@@ -677,6 +677,45 @@ impl MetadataView {
     }
 }
 
+/// The check every reader that shows or measures a sample applies to its metadata (`preview`,
+/// `report`): a JSON object; ours (with `render`) must give a whole [`MetadataView`]; the
+/// downloaded ClevrTex's (no `render`) must type its keys that are there (`objects` a list,
+/// `num_objects` 0 to 255 and equal to its length). The error names the file and key.
+pub fn check_metadata(meta: &Value, file: &str) -> Result<(), MetadataError> {
+    let err = |key: &str, what: String| MetadataError {
+        file: file.to_string(),
+        key: key.to_string(),
+        what,
+    };
+    if !meta.is_object() {
+        return Err(err(
+            "(top level)",
+            format!("is {}, not an object", short(meta)),
+        ));
+    }
+    if meta.get("render").is_some() {
+        return MetadataView::of(meta, file).map(|_| ());
+    }
+    let objects = match meta.get("objects") {
+        None => None,
+        Some(Value::Array(a)) => Some(a.len()),
+        Some(v) => return Err(err("objects", format!("is {}, not a list", short(v)))),
+    };
+    if meta.get("num_objects").is_some() {
+        let n = meta_int(meta, file, "num_objects", 0, 255)? as usize;
+        if objects.is_some_and(|len| len != n) {
+            return Err(err(
+                "objects",
+                format!(
+                    "has {} entries but `num_objects` is {n}",
+                    objects.unwrap_or(0)
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// The passes whose `*_filename` key ([`Pass::metadata_key`], the pass table's) the metadata `meta` of
 /// `stem` sets, in pass-table order: each must name the layout's file (or be null, absent:
 /// not written). File names come from the layout, never from the metadata.

@@ -148,15 +148,18 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
         .map(|(variant, index, stem, s)| {
             let path = s.metadata_path();
             let dir = s.dir.clone();
+            let file = path.display().to_string();
             let sample = ds
                 .read_metadata(s)
-                .map_err(|why| anyhow::anyhow!("{why}"))
+                .map_err(|why| format!("`{file}` {why}"))
                 .and_then(|meta| {
+                    // Typed and bounded as every reader checks it (the error names the key).
+                    reader::check_metadata(&meta, &file).map_err(|e| e.to_string())?;
                     parse(variant, index, stem, dir, &meta)
-                        .map_err(|e| anyhow::anyhow!("is not valid metadata: {e:#}"))
+                        .map_err(|e| format!("`{file}` is not valid metadata: {e:#}"))
                 });
             bar.inc(1);
-            sample.map_err(|e| format!("`{}` {e}", path.display()))
+            sample
         })
         .collect::<Vec<_>>();
     let mut samples = Vec::new();
