@@ -279,7 +279,9 @@ fn preview_and_report_leave_out_a_broken_sample_and_say_so() {
     }
     let sub = data.join("clevrtex_clevr/0");
     let meta = |i: u64| sub.join(format!("CLEVRTEX_clevr_{i:06}.json"));
-    let cases: [(&str, Box<dyn Fn()>); 4] = [
+    // (what the message says, how the copy is damaged)
+    type Case<'a> = (&'a str, Box<dyn Fn() + 'a>);
+    let cases: [Case; 4] = [
         (
             "is [1,2,3], not an object",
             Box::new(|| std::fs::write(meta(1), "[1, 2, 3]").unwrap()),
