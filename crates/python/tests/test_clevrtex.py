@@ -440,3 +440,38 @@ def test_dataset_reads_untrusted_samples_within_bounds(tmp_path):
     with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000002.json` is a symbolic link leading out of the dataset .*; not followed"):
         ds[2]
     assert ds[3][0] == 3
+
+
+def test_hostile_arrays_and_metadata_are_named(tmp_path):
+    """Issue 21's second hostile pass (repro-06, 07, 08): non-numeric arrays, metadata values
+    that cannot tag a statistic, and metadata `objects` of the wrong type raise ValueError
+    naming the argument or file, before any state changes."""
+    import shutil
+
+    rng = np.random.default_rng(5)
+    img = rng.random((2, 3, 8, 8), dtype=np.float32)
+    ids = rng.integers(0, 3, size=(2, 1, 8, 8))
+    for bad in (ids.astype(object), ids.astype(str), ids.astype(np.complex64), ids.astype("datetime64[s]")):
+        with pytest.raises(ValueError, match=r"`pred_masks` has dtype .*use a bool, integer or float array"):
+            clevrtex.Evaluator().update(img, bad, img, ids)
+        with pytest.raises(ValueError, match=r"`preds` has dtype"):
+            clevrtex.evaluate(bad[:, 0], ids[:, 0])
+    ev = clevrtex.Evaluator()
+    meta = [{"ground_material": "a", "objects": []}, {"ground_material": "b", "objects": [{"shape": {1, 2}}]}]
+    with pytest.raises(ValueError, match=r"`true_metadata\[1\]\['objects'\]\[0\]\['shape'\]` is a set"):
+        ev.update(img, ids, img, ids, meta)
+    assert ev.stats["mIoU"].n == 0  # nothing was counted
+    with pytest.raises(ValueError, match=r"`true_metadata` is a int"):
+        ev.update(img, ids, img, ids, 5)
+    gt = tmp_path / "gt"
+    shutil.copytree(GT, gt)
+    f = gt / "clevrtex_vbg" / "0" / "CLEVRTEX_vbg_000001.json"
+    m = json.loads(f.read_text())
+    ds = clevrtex.Dataset(str(gt), "vbg", split="all")
+    for objects, what in ((5, "not a list"), (None, "not a list"), ("abc", "not a list"), ([None], r"objects\[0\]` is a NoneType")):
+        f.write_text(json.dumps(dict(m, objects=objects)))
+        with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000001.json` key `" + ("objects` is a" if what == "not a list" else "") ):
+            ds[1]
+    f.write_text("[" * 200000 + "]" * 200000)
+    with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000001.json` is not valid metadata"):
+        ds[1]

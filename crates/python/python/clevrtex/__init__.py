@@ -34,18 +34,29 @@ def protocol_metrics(protocol: str) -> List[str]:
     return list(_native.protocol_metrics(protocol))
 
 
+def _numeric(x: np.ndarray, what: str) -> np.ndarray:
+    """`x` if its dtype is a number type scores can be read from (bool, integer or float),
+    else a ValueError naming the argument and its dtype (object, str, complex, dates, records
+    gave bare numpy or pyo3 TypeErrors)."""
+    if x.dtype.kind not in "biuf":
+        raise ValueError(
+            f"`{what}` has dtype `{x.dtype}`: use a bool, integer or float array"
+        )
+    return x
+
+
 def _numpy(x: Any, what: str) -> np.ndarray:
     """A numpy view of `x`: numpy arrays as they are, torch tensors through
     `.detach().cpu().numpy()` (without importing torch), anything else through `__array__`."""
     if isinstance(x, np.ndarray):
-        return x
+        return _numeric(x, what)
     for step in ("detach", "cpu"):
         if hasattr(x, step):
             x = getattr(x, step)()
     if hasattr(x, "numpy"):
-        return np.asarray(x.numpy())
+        return _numeric(np.asarray(x.numpy()), what)
     try:
-        return np.asarray(x)
+        return _numeric(np.asarray(x), what)
     except Exception as e:  # pragma: no cover - message only
         raise TypeError(f"`{what}` must be a numpy array or a torch tensor, not {type(x).__name__}") from e
 
@@ -128,6 +139,15 @@ def _tag(v: Any) -> Any:
         return json.dumps(v)
 
 
+def _taggable(v: Any, what: str) -> None:
+    """A ValueError naming `what` unless `v` can tag a statistic (hashable, or JSON), checked
+    before a batch is scored so that a bad value changes no state."""
+    try:
+        _tag(v)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{what} is a {type(v).__name__}, which cannot tag a statistic: {e}") from None
+
+
 class Evaluator:
     """Drop-in for the public `CLEVRTEX_Evaluator`: `update(pred_image, pred_masks, true_image,
     true_masks, true_metadata=None)` per batch, then `statistic(name, tag=None)`.
@@ -185,6 +205,8 @@ class Evaluator:
                 f"`true_masks` is {tm.shape}, expected (B, 1, H, W) ids or (B, K, H, W) / (B, K, 1, H, W) one-hot with (B, H, W) = ({b}, {h}, {w}) from `pred_image` {pi.shape}"
             )
         if true_metadata is not None:
+            if not hasattr(true_metadata, "__len__") or isinstance(true_metadata, (str, bytes, dict)):
+                raise ValueError(f"`true_metadata` is a {type(true_metadata).__name__}, not a list of one dict per image")
             if len(true_metadata) != b:
                 raise ValueError(f"`true_metadata` has {len(true_metadata)} entries but the batch has {b} images")
             for i, meta in enumerate(true_metadata):
@@ -192,9 +214,13 @@ class Evaluator:
                     raise ValueError(f"`true_metadata[{i}]` is a {type(meta).__name__}, not a dict")
                 if not isinstance(meta.get("objects", []), (list, tuple)):
                     raise ValueError(f"`true_metadata[{i}]['objects']` is a {type(meta['objects']).__name__}, not a list")
+                _taggable(meta.get("ground_material"), f"`true_metadata[{i}]['ground_material']`")
                 for j, obj in enumerate(meta.get("objects", [])):
                     if not isinstance(obj, dict):
                         raise ValueError(f"`true_metadata[{i}]['objects'][{j}]` is a {type(obj).__name__}, not a dict")
+                    for k, v in obj.items():
+                        if k != "rotation":
+                            _taggable(v, f"`true_metadata[{i}]['objects'][{j}][{k!r}]`")
         pm = pm.reshape(b, -1, h * w)
         k_pred = pm.shape[1] + (0 if self.masks_have_background else 1)
         if tm.ndim == 4 and tm.shape[1] == 1:
@@ -340,9 +366,14 @@ class Dataset:
     def __len__(self) -> int:
         return len(self._samples)
 
-    def _format_metadata(self, meta: dict) -> dict:
+    def _format_metadata(self, meta: dict, path: str) -> dict:
+        objects = meta.get("objects", [])
+        if not isinstance(objects, list):
+            raise ValueError(f"`{path}` key `objects` is a {type(objects).__name__}, not a list")
         objs = []
-        for obj in meta.get("objects", []):
+        for i, obj in enumerate(objects):
+            if not isinstance(obj, dict):
+                raise ValueError(f"`{path}` key `objects[{i}]` is a {type(obj).__name__}, not an object")
             o = {k: obj.get(k) for k in ("material", "shape", "size", "rotation")}
             if self._by_colour:
                 o["color"] = obj.get("color")
@@ -362,10 +393,8 @@ class Dataset:
             return index, img, msk
         try:
             data = json.loads(_read_metadata(meta, self._root))
-        except UnicodeDecodeError as e:
-            raise ValueError(f"`{meta}` is not valid metadata: {e}") from None
-        except json.JSONDecodeError as e:
+        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
             raise ValueError(f"`{meta}` is not valid metadata: {e}") from None
         if not isinstance(data, dict):
             raise ValueError(f"`{meta}` is not valid metadata: a {type(data).__name__}, not an object")
-        return index, img, msk, self._format_metadata(data)
+        return index, img, msk, self._format_metadata(data, meta)
