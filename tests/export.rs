@@ -314,3 +314,21 @@ fn export_removes_the_shards_of_an_earlier_export_it_did_not_write() {
         serde_json::from_slice(&std::fs::read(out.join("index.json")).unwrap()).unwrap();
     assert_eq!(index["shards"].as_array().unwrap().len(), 1, "{index}");
 }
+
+/// Hostile pass (issue 21, minor): an OUT inside the dataset (`export DIR DIR/clevrtex_clevr/x`)
+/// is refused, as `preview` and `report` refuse an `--out` there; shards were written into the
+/// dataset without a word.
+#[test]
+fn export_refuses_an_out_inside_the_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    hand_sample(&data, 0, serde_json::json!({}), 600);
+    for out in [data.join("wds"), data.join("clevrtex_clevr/wds/new")] {
+        let (code, t) = export(&data, &out, &[]);
+        assert_eq!(code, Some(1), "{t}");
+        assert!(t.contains("is inside the dataset"), "{t}");
+        assert!(!out.exists(), "{t}");
+    }
+    let (code, t) = export(&data, &dir.path().join("wds"), &[]);
+    assert_eq!(code, Some(0), "{t}");
+}

@@ -218,7 +218,11 @@ fn segmentation_from_array(
                 return Err(corrupt(
                     path,
                     format!("`masks` has {k} slots"),
-                    &format!("give between 1 and {} masks", MAX_SLOTS - 1),
+                    &format!(
+                        "give between 1 and {} masks ({} with --no-background, which adds one)",
+                        MAX_SLOTS,
+                        MAX_SLOTS - 1
+                    ),
                 ));
             }
             let labels = match &arr.data {

@@ -202,6 +202,22 @@ pub fn export(
         },
         other => other.into(),
     })?;
+    // Shards written into the dataset would become stray files of it (and a later export of
+    // it would pack nothing new): refused, as `preview` and `report` refuse an `--out` there.
+    let existing = out
+        .ancestors()
+        .find(|p| p.exists())
+        .unwrap_or(Path::new("."));
+    if existing
+        .canonicalize()
+        .is_ok_and(|o| o.starts_with(&ds.root))
+    {
+        return Err(ExportError::Message(format!(
+            "`{}` is inside the dataset `{}`: its shards would become files of the dataset\nhint: export into a folder outside the dataset",
+            out.display(),
+            dir.display()
+        )));
+    }
     let mut skipped = Vec::new();
     let wanted = |v: &str| variant.is_none_or(|want| want == v);
     // A `clevrtex_<variant>` folder given itself is not an output folder: nothing under it.
