@@ -332,11 +332,7 @@ mod tests {
             shard: [0, 1],
             command: vec![],
         };
-        std::fs::write(
-            dir.path().join(file_name(0, 8, 0, 1)),
-            serde_json::to_string(&dead).unwrap(),
-        )
-        .unwrap();
+        plant(dir.path(), &dead);
         let c = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec![]).unwrap();
         drop(c);
         // Another host's lock, recently touched: live.
@@ -344,13 +340,18 @@ mod tests {
             host: "elsewhere".into(),
             ..dead
         };
-        std::fs::write(
-            dir.path().join(file_name(0, 8, 0, 1)),
-            serde_json::to_string(&other).unwrap(),
-        )
-        .unwrap();
+        plant(dir.path(), &other);
         let err = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec![]).unwrap_err();
         assert!(err.contains("host `elsewhere`"), "{err}");
+    }
+
+    /// Write `holder` as the lock of the run 0..8 (one shard) in `dir`, as another run would.
+    fn plant(dir: &Path, holder: &Holder) {
+        std::fs::write(
+            dir.join(file_name(0, 8, 0, 1)),
+            serde_json::to_string(holder).unwrap(),
+        )
+        .unwrap();
     }
 
     #[test]
@@ -365,11 +366,7 @@ mod tests {
             shard: [0, 1],
             command: vec![],
         };
-        std::fs::write(
-            dir.path().join(file_name(0, 8, 0, 1)),
-            serde_json::to_string(&forged).unwrap(),
-        )
-        .unwrap();
+        plant(dir.path(), &forged);
         let lock = RunLock::acquire(dir.path(), 0, 8, [0, 1], vec![]);
         assert!(lock.is_ok(), "{lock:?}");
     }
