@@ -212,6 +212,41 @@ fn render_walks_a_scene_folder_without_following_folder_links() {
     );
 }
 
+/// A file link in a scene folder that leads out of it is not followed, and said (the hostile
+/// pass's minor finding: `render` read the file it led to, then failed to parse it and stopped).
+#[test]
+fn render_follows_no_scene_file_link_out_of_its_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = one_scene(dir.path());
+    let folder = scene.parent().unwrap();
+    let outside = dir.path().join("outside.json");
+    std::fs::write(&outside, "not a scene").unwrap();
+    std::os::unix::fs::symlink(&outside, folder.join("zz_link.json")).unwrap();
+    let out_dir = dir.path().join("out");
+    let (code, t) = crate::util::run_limited(
+        &[
+            std::ffi::OsStr::new("render"),
+            "--workers".as_ref(),
+            "1".as_ref(),
+            "--retries".as_ref(),
+            "0".as_ref(),
+            "--blender".as_ref(),
+            fake_blender().as_os_str(),
+            "--out".as_ref(),
+            out_dir.as_os_str(),
+            dir.path().join("scenes").as_os_str(),
+        ],
+        &[("FAKE_BLENDER_MODE", "crash".as_ref())],
+        120,
+    );
+    // The one real scene is rendered (the fake Blender crashes: exit 3); the link is named.
+    assert_eq!(code, Some(3), "{t}");
+    assert!(
+        t.contains("zz_link.json` is a symbolic link leading out") && !t.contains("bad scene file"),
+        "{t}"
+    );
+}
+
 /// A scene file is read with a cap (4 MiB; `sample` writes a few KB): before, an 8 GiB
 /// (sparse) file was read whole, and the allocation aborted the run.
 #[test]

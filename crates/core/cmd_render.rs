@@ -29,7 +29,9 @@ pub fn run(args: Args) -> CmdResult {
     for p in &args.scenes {
         if p.is_dir() {
             let mut found = Vec::new();
-            find_scene_files(p, &mut found)?;
+            let root = clevrtex_scene::dataset::root(p)
+                .map_err(|e| anyhow::anyhow!("cannot read folder `{}`: {e}", p.display()))?;
+            find_scene_files(&root, p, &mut found)?;
             found.sort();
             files.extend(found);
         } else if p.is_file() {
@@ -101,10 +103,11 @@ pub fn run(args: Args) -> CmdResult {
     run_jobs(&args.run, jobs, ledger, 1, None)
 }
 
-/// Collect the `*.json` files under `dir`, recursively (not into linked folders):
-/// `clevrtex sample --out DIR` writes them to `DIR/clevrtex_<variant>/<index / 1000>/`, and
-/// `clevrtex render DIR` must find them.
-fn find_scene_files(dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+/// Collect the `*.json` files under `dir` (in the folder given, canonical `root`),
+/// recursively (not into linked folders): `clevrtex sample --out DIR` writes them to
+/// `DIR/clevrtex_<variant>/<index / 1000>/`, and `clevrtex render DIR` must find them. A file
+/// link leading out of the folder given is not followed (the folder is untrusted), and said.
+fn find_scene_files(root: &Path, dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> {
     let entries = std::fs::read_dir(dir).map_err(|e| {
         anyhow::anyhow!(
             "cannot read folder `{}`: {e}\nhint: pass a readable folder of scene files",
@@ -116,9 +119,19 @@ fn find_scene_files(dir: &Path, found: &mut Vec<PathBuf>) -> anyhow::Result<()> 
         // Links to folders are not followed: a link back up (`loop -> ..`) would walk the same
         // scenes again without end.
         if entry.file_type().is_ok_and(|t| t.is_dir()) {
-            find_scene_files(&path, found)?;
-        } else if path.extension().is_some_and(|e| e == "json") && path.is_file() {
-            found.push(path);
+            find_scene_files(root, &path, found)?;
+        } else if path.extension().is_some_and(|e| e == "json") {
+            match clevrtex_scene::dataset::classify(root, &path) {
+                clevrtex_scene::dataset::Kind::File => found.push(path),
+                clevrtex_scene::dataset::Kind::Skipped(why) => {
+                    eprintln!(
+                        "warning: scene file `{}` {}",
+                        clevrtex_scene::text::printable(&path.display().to_string()),
+                        why
+                    )
+                }
+                clevrtex_scene::dataset::Kind::Dir => {}
+            }
         }
     }
     Ok(())
