@@ -210,7 +210,9 @@ fn find_samples(args: &Options) -> anyhow::Result<(Vec<Sample>, Vec<String>)> {
             .map_err(|why| format!("`{}` {why}", path.display()))
             .and_then(|meta| {
                 let file = path.display().to_string();
-                dataset::check_metadata(&meta, &file).map_err(|e| e.to_string())?;
+                dataset::check_metadata(&meta, &file).map_err(|e| {
+                    format!("`{file}` is not valid metadata: key `{}` {}", e.key, e.what)
+                })?;
                 Ok(meta)
             });
         match meta {

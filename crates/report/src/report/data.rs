@@ -154,7 +154,9 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
                 .map_err(|why| format!("`{file}` {why}"))
                 .and_then(|meta| {
                     // Typed and bounded as every reader checks it (the error names the key).
-                    reader::check_metadata(&meta, &file).map_err(|e| e.to_string())?;
+                    reader::check_metadata(&meta, &file).map_err(|e| {
+                        format!("`{file}` is not valid metadata: key `{}` {}", e.key, e.what)
+                    })?;
                     parse(variant, index, stem, dir, &meta)
                         .map_err(|e| format!("`{file}` is not valid metadata: {e:#}"))
                 });
