@@ -376,8 +376,15 @@ fn eval_ground_truth_gaps_duplicates_and_holes() {
         text(&out)
     );
 
-    // A gap in the index sequence.
-    std::fs::remove_file(sample.join("CLEVRTEX_vbg_000005.png")).unwrap();
+    // A gap in the index sequence: a sample absent (a sample with only its image missing is
+    // named instead: `eval_names_a_ground_truth_sample_without_its_image`).
+    for f in [
+        "CLEVRTEX_vbg_000005.png",
+        "CLEVRTEX_vbg_000005_flat.png",
+        "CLEVRTEX_vbg_000005.json",
+    ] {
+        std::fs::remove_file(sample.join(f)).unwrap();
+    }
     let out = run(&["eval", s(&preds), s(&g), "--split", "all"]);
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
     assert!(
