@@ -408,22 +408,51 @@ fn is_test_only(variant: &str) -> bool {
     clevrtex_eval::Split::Val.range(10, variant).is_err()
 }
 
+/// The largest `resize` side (the largest image a dataset has).
+const MAX_SIDE: usize = clevrtex_scene::scene_file::MAX_IMAGE_SIDE as usize;
+
 /// Read one sample as the public `CLEVRTEX` loader does: `(rgb, labels, height, width)` with
 /// `rgb` 8-bit interleaved and `labels` little-endian u32; with `crop`, the centre square of
 /// side `int(0.8 min(W, H))`; resized to `side` (Pillow-exact bilinear for the image, nearest
-/// for the mask), or kept at the crop's size when `side` is `None`.
+/// for the mask), or kept at the crop's size when `side` is `None`. With `root` (the dataset's
+/// folder), each file is checked again against it when read: a link swapped in after the
+/// `Dataset` was made that leads out of the dataset is not followed (ValueError).
 #[pyfunction]
-#[pyo3(signature = (image, mask, crop=true, side=Some(128)))]
+#[pyo3(signature = (image, mask, crop=true, side=Some(128), root=None))]
 fn load_sample<'py>(
     py: Python<'py>,
     image: &str,
     mask: &str,
     crop: bool,
     side: Option<usize>,
+    root: Option<&str>,
 ) -> PyResult<(Bound<'py, PyBytes>, Bound<'py, PyBytes>, usize, usize)> {
+    if let Some(s) = side.filter(|&s| s == 0 || s > MAX_SIDE) {
+        return Err(value_error(format!(
+            "`resize` side {s} is outside 1..{MAX_SIDE} (the benchmark's is 128)"
+        )));
+    }
     let (rgb, labels, h, w) = py.allow_threads(|| -> PyResult<_> {
-        // The dataset's reader: a regular file only (a FIFO never blocks), capped.
+        let root = root
+            .map(|r| Path::new(r).canonicalize())
+            .transpose()
+            .map_err(|e| {
+                PyOSError::new_err(format!("`{}` cannot be read: {e}", root.unwrap_or("")))
+            })?;
+        // The dataset's reader: a regular file only (a FIFO never blocks), capped; inside the
+        // dataset when its root is known.
         let read_file = |p: &str| {
+            if let Some(root) = &root {
+                use clevrtex_scene::dataset::{classify, Kind};
+                if let Kind::Skipped(why) = classify(root, Path::new(p)) {
+                    if !why.starts_with("cannot be read") {
+                        return Err(value_error(format!(
+                            "`{p}` {}",
+                            why.replace("; skipped", "; not read")
+                        )));
+                    }
+                }
+            }
             clevrtex_eval::dataset::read_file(Path::new(p))
                 .map_err(|e| PyOSError::new_err(e.to_string()))
         };

@@ -475,3 +475,27 @@ def test_hostile_arrays_and_metadata_are_named(tmp_path):
     f.write_text("[" * 200000 + "]" * 200000)
     with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000001.json` is not valid metadata"):
         ds[1]
+
+
+def test_dataset_follows_no_image_link_swapped_in_and_bounds_resize(tmp_path):
+    """Issue 21's third hostile pass: an image or mask replaced by a link out of the dataset
+    after the `Dataset` was made was read through it; `resize=(100000, 100000)` killed the
+    interpreter (a 30 GB allocation). Both are ValueErrors now."""
+    import shutil
+
+    gt = tmp_path / "gt"
+    shutil.copytree(GT, gt)
+    ds = clevrtex.Dataset(str(gt), "vbg", split="all")
+    for name in ("CLEVRTEX_vbg_000003.png", "CLEVRTEX_vbg_000003_flat.png"):
+        f = gt / "clevrtex_vbg" / "0" / name
+        outside = tmp_path / name
+        shutil.copy(f, outside)
+        os.remove(f)
+        os.symlink(outside, f)
+        with pytest.raises(ValueError, match=name + r"` is a symbolic link leading out of the dataset"):
+            ds[3]
+        os.remove(f)
+        shutil.copy(outside, f)
+    assert ds[3][0] == 3
+    with pytest.raises(ValueError, match=r"`resize` must be 1 to 4096 a side"):
+        clevrtex.Dataset(str(gt), "vbg", split="all", resize=(100000, 100000))

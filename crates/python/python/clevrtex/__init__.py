@@ -354,6 +354,8 @@ class Dataset:
             raise ValueError(f"unknown split `{split}`; known: test, val, train, all")
         if resize is not None and (len(resize) != 2 or resize[0] != resize[1]):
             raise ValueError(f"`resize` must be square (the benchmark's is (128, 128)), not {resize}")
+        if resize is not None and not 1 <= int(resize[0]) <= 4096:
+            raise ValueError(f"`resize` must be 1 to 4096 a side (the benchmark's is (128, 128)), not {resize}")
         self.crop = crop
         self.side = None if resize is None else int(resize[0])
         self.return_metadata = return_metadata
@@ -385,7 +387,7 @@ class Dataset:
         if ind < -n or ind >= n:
             raise IndexError(ind)
         index, image, mask, meta = self._samples[ind]
-        rgb, labels, h, w = _native.load_sample(image, mask, self.crop, self.side)
+        rgb, labels, h, w = _native.load_sample(image, mask, self.crop, self.side, self._root)
         img = np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).transpose(2, 0, 1).astype(np.float32) / np.float32(255)
         msk = np.frombuffer(labels, dtype="<u4").reshape(1, h, w)
         msk = msk.astype(np.uint8) if (msk.size == 0 or msk.max() < 256) else msk.astype(np.int64)
