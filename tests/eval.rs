@@ -1211,3 +1211,34 @@ fn eval_names_a_ground_truth_sample_without_its_image() {
         assert!(t.contains("CLEVRTEX_vbg_000009.png"), "{how}: {t}");
     }
 }
+
+/// Third hostile pass (issue 21): object names from the ground truth's metadata reach the
+/// table escaped (an OSC title sequence and a screen clear were printed raw).
+#[test]
+fn eval_prints_metadata_names_escaped() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gt");
+    copy_dir(&gt(), &g);
+    let f = g.join("clevrtex_vbg/0/CLEVRTEX_vbg_000000.json");
+    let mut m: Value = serde_json::from_slice(&std::fs::read(&f).unwrap()).unwrap();
+    for o in m["objects"].as_array_mut().unwrap() {
+        o["shape"] = "\u{1b}]0;PWNED\u{7}\u{1b}[2J".into();
+    }
+    std::fs::write(&f, m.to_string()).unwrap();
+    let preds = data("eval/preds/png");
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&g),
+        "--split",
+        "all",
+        "--bootstrap",
+        "0",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("PWNED") && !stdout.contains('\u{1b}'),
+        "{stdout}"
+    );
+}

@@ -180,7 +180,12 @@ pub fn to_table(r: &Report) -> String {
             let _ = writeln!(
                 s,
                 "  {:<28} {:>6} {:>8.4} {:>8.4} {:>10}",
-                name, g.count, g.iou, g.best_overlap, mse
+                // A material or shape name from the (untrusted) metadata: escaped.
+                clevrtex_scene::text::printable(name),
+                g.count,
+                g.iou,
+                g.best_overlap,
+                mse
             );
         }
     }

@@ -79,7 +79,7 @@ pub fn tables(samples: &[SampleFigures]) -> String {
         let _ = writeln!(
             out,
             "{:<10} {:>6} {:>13} {:>13} {:>22} {:>13}",
-            name,
+            clevrtex_scene::text::printable(name),
             s.images,
             f(med(&s.object_spread), 1),
             f(med(&s.background_spread), 1),
@@ -107,7 +107,8 @@ pub fn tables(samples: &[SampleFigures]) -> String {
         let _ = writeln!(
             out,
             "{:<26} {:>7} {:>10} {:>10} {:>9} {:>8}",
-            name,
+            // A material name from the (untrusted) metadata: escaped.
+            clevrtex_scene::text::printable(name),
             regions,
             f(med(&s.object_spread), 1),
             f(med(&s.background_spread), 1),
