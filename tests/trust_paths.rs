@@ -177,16 +177,10 @@ fn materials_move_no_file_a_blender_reply_names_outside_its_folder() {
     assert!(!dir.path().join("sheet.png").exists(), "{t}");
 }
 
-/// A scene folder is walked without following links to folders: before, two links back up
-/// (`a -> .`, `b -> .`) made `render DIR` walk the same scene over and over without end.
-#[test]
-fn render_walks_a_scene_folder_without_following_folder_links() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = one_scene(dir.path());
-    let folder = scene.parent().unwrap();
-    std::os::unix::fs::symlink(".", folder.join("a")).unwrap();
-    std::os::unix::fs::symlink(".", folder.join("b")).unwrap();
-    let out_dir = dir.path().join("out");
+/// `clevrtex render DIR/scenes --out DIR/out` with one worker, no retries and a fake Blender
+/// that crashes on every render: the output folder, the exit code and the text.
+fn render_scenes_with_a_crashing_blender(dir: &Path) -> (PathBuf, Option<i32>, String) {
+    let out_dir = dir.join("out");
     let (code, t) = crate::util::run_limited(
         &[
             std::ffi::OsStr::new("render"),
@@ -198,11 +192,24 @@ fn render_walks_a_scene_folder_without_following_folder_links() {
             fake_blender().as_os_str(),
             "--out".as_ref(),
             out_dir.as_os_str(),
-            dir.path().join("scenes").as_os_str(),
+            dir.join("scenes").as_os_str(),
         ],
         &[("FAKE_BLENDER_MODE", "crash".as_ref())],
         120,
     );
+    (out_dir, code, t)
+}
+
+/// A scene folder is walked without following links to folders: before, two links back up
+/// (`a -> .`, `b -> .`) made `render DIR` walk the same scene over and over without end.
+#[test]
+fn render_walks_a_scene_folder_without_following_folder_links() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = one_scene(dir.path());
+    let folder = scene.parent().unwrap();
+    std::os::unix::fs::symlink(".", folder.join("a")).unwrap();
+    std::os::unix::fs::symlink(".", folder.join("b")).unwrap();
+    let (out_dir, code, t) = render_scenes_with_a_crashing_blender(dir.path());
     assert_eq!(code, Some(3), "{t}");
     let ledger = std::fs::read_to_string(out_dir.join("clevrtex_clevr/failures.jsonl")).unwrap();
     assert_eq!(
@@ -222,23 +229,7 @@ fn render_follows_no_scene_file_link_out_of_its_folder() {
     let outside = dir.path().join("outside.json");
     std::fs::write(&outside, "not a scene").unwrap();
     std::os::unix::fs::symlink(&outside, folder.join("zz_link.json")).unwrap();
-    let out_dir = dir.path().join("out");
-    let (code, t) = crate::util::run_limited(
-        &[
-            std::ffi::OsStr::new("render"),
-            "--workers".as_ref(),
-            "1".as_ref(),
-            "--retries".as_ref(),
-            "0".as_ref(),
-            "--blender".as_ref(),
-            fake_blender().as_os_str(),
-            "--out".as_ref(),
-            out_dir.as_os_str(),
-            dir.path().join("scenes").as_os_str(),
-        ],
-        &[("FAKE_BLENDER_MODE", "crash".as_ref())],
-        120,
-    );
+    let (_, code, t) = render_scenes_with_a_crashing_blender(dir.path());
     // The one real scene is rendered (the fake Blender crashes: exit 3); the link is named.
     assert_eq!(code, Some(3), "{t}");
     assert!(
