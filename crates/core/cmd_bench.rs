@@ -4,12 +4,12 @@
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 use anyhow::Context;
+use clevrtex_bench::measure::WorkerResult;
 use clevrtex_bench::measure::{Bench, Plan};
 use clevrtex_bench::{csv, ladder, scenes, summary, Event, Render, Row};
-use clevrtex_render::Mode;
+use clevrtex_render::{RenderReply, Worker};
 
 use crate::blender_session::{command_error, BlenderSession, Settings};
 use crate::exit::{self, CmdResult};
@@ -92,17 +92,11 @@ pub fn run(args: Args) -> CmdResult {
 /// The bench renders through the command's Blender session: restarts are warned about and
 /// Ctrl-C exits with 130, as in every command.
 impl Render for BlenderSession {
-    fn render(
+    fn request(
         &mut self,
-        label: &str,
-        scene: &Path,
-        dir: &Path,
-        timeout: Duration,
-    ) -> anyhow::Result<f64> {
-        let reply = self
-            .request(|w| w.render_labelled(label, scene, Mode::Final, dir, timeout))
-            .map_err(command_error)?;
-        Ok(reply.timings.render_s)
+        call: &mut dyn FnMut(&mut Worker) -> WorkerResult,
+    ) -> anyhow::Result<RenderReply> {
+        BlenderSession::request(self, call).map_err(command_error)
     }
 }
 

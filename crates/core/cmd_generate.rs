@@ -163,17 +163,20 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
     let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
     let plan = manifest::Plan {
-        variant: variant.clone(),
-        seed: args.seed,
-        config_hash: clevrtex_render::manifest::hash_hex(format!("{config:?}").as_bytes()),
-        start: args.start,
-        end,
-        total,
-        shard: [shard.k, shard.n],
+        run: manifest::Manifest {
+            variant: variant.clone(),
+            seed: args.seed,
+            config_hash: manifest::hash_hex(format!("{config:?}").as_bytes()),
+            start: args.start,
+            end,
+            total,
+            shard: [shard.k, shard.n],
+            tool_version: env!("CARGO_PKG_VERSION").into(),
+            command: std::env::args().collect(),
+            ..manifest::Manifest::unfinished()
+        },
         passes: passes.clone(),
         keep_exr: args.run.keep_exr,
-        tool_version: env!("CARGO_PKG_VERSION").into(),
-        command: std::env::args().collect(),
     };
     crate::run::run_jobs(&args.run, jobs, ledger, args.max_attempts, Some(plan))
 }

@@ -2,7 +2,6 @@
 //! `clevrtex_report::preview` draw and write the contact sheet, and prints what was drawn and
 //! what was left out.
 
-use std::path::PathBuf;
 
 use clevrtex_report::output::refuse_output_inside;
 use clevrtex_report::preview::{draw, save, Options, Sheet};
@@ -12,13 +11,8 @@ use crate::exit::{self, CmdResult};
 /// Arguments of `clevrtex preview`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The dataset: an output folder of `clevrtex generate`, a `clevrtex_<variant>` folder, or
-    /// the downloaded ClevrTex.
-    #[arg(value_name = "DIR")]
-    dir: PathBuf,
-    /// The sheet to write (PNG).
-    #[arg(long, value_name = "FILE")]
-    out: PathBuf,
+    #[command(flatten)]
+    data: crate::run_args::DatasetDir,
     /// How many samples (the first N by index), unless `--indices` names them.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=256))]
     n: u32,
@@ -35,9 +29,9 @@ pub struct Args {
 
 /// Run `clevrtex preview`.
 pub fn run(args: Args) -> CmdResult {
-    refuse_output_inside(&args.out, &[&args.dir])?;
+    refuse_output_inside(&args.data.out, &[&args.data.dir])?;
     let options = Options {
-        dir: args.dir.clone(),
+        dir: args.data.dir.clone(),
         n: args.n,
         indices: args.indices.clone(),
         variant: args.variant.clone(),
@@ -51,10 +45,10 @@ pub fn run(args: Args) -> CmdResult {
         problems,
         left_out,
     } = draw(&options)?;
-    save(&sheet, &args.out)?;
+    save(&sheet, &args.data.out)?;
     println!(
         "wrote `{}`: {} sample(s) x {} column(s) ({})",
-        args.out.display(),
+        args.data.out.display(),
         samples,
         columns.len(),
         columns.join(", ")

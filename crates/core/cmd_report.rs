@@ -12,13 +12,8 @@ use crate::exit::{self, CmdResult};
 /// Arguments of `clevrtex report`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The dataset: an output folder of `clevrtex generate`, a `clevrtex_<variant>` folder, or
-    /// the downloaded ClevrTex.
-    #[arg(value_name = "DIR")]
-    dir: PathBuf,
-    /// The page to write (HTML).
-    #[arg(long, value_name = "FILE")]
-    out: PathBuf,
+    #[command(flatten)]
+    data: crate::run_args::DatasetDir,
     /// A second dataset to put beside the first, with a two-sample test per statistic.
     #[arg(long, value_name = "OTHER_DIR")]
     compare: Option<PathBuf>,
@@ -38,19 +33,19 @@ pub fn run(args: Args) -> CmdResult {
             "`--max-texture-samples 0` measures nothing\nhint: pass at least 1 (default 200)"
         );
     }
-    let mut dirs = vec![args.dir.as_path()];
+    let mut dirs = vec![args.data.dir.as_path()];
     dirs.extend(args.compare.as_deref());
-    refuse_output_inside(&args.out, &dirs)?;
+    refuse_output_inside(&args.data.out, &dirs)?;
     let started = std::time::Instant::now();
     let options = Options {
         max_texture_samples: args.max_texture_samples,
         preview: args.preview,
     };
-    let report = make(&args.dir, args.compare.as_deref(), &options)?;
-    write_page(&args.out, &report.html)?;
+    let report = make(&args.data.dir, args.compare.as_deref(), &options)?;
+    write_page(&args.data.out, &report.html)?;
     println!(
         "wrote `{}` ({} KiB): {} image(s) read, {} measured, in {:.1} s",
-        args.out.display(),
+        args.data.out.display(),
         report.html.len() / 1024,
         report.images,
         report.measured,

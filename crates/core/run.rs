@@ -158,9 +158,9 @@ pub(crate) fn run_jobs(
         Some(plan) => {
             let lock = clevrtex_render::run_lock::RunLock::acquire(
                 &plan.variant_dir(&args.out),
-                plan.start,
-                plan.end,
-                plan.shard,
+                plan.run.start,
+                plan.run.end,
+                plan.run.shard,
                 std::env::args().collect(),
             )
             .map_err(|e| anyhow::anyhow!(e))?;

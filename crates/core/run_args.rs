@@ -1,6 +1,7 @@
 //! What the commands that render share on their command line: the run options of `generate`
 //! and `render` ([`RunArgs`]), `--passes` ([`parse_passes`]), `--device` ([`device_choice`])
-//! and the checks of numbers given as flags ([`seconds`], [`positive`], [`within`]).
+//! and the checks of numbers given as flags ([`seconds`], [`positive`], [`within`]); and the
+//! dataset folder that `preview` and `report` read and the file they write ([`DatasetDir`]).
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -113,4 +114,16 @@ pub(crate) fn device_choice(name: &str) -> anyhow::Result<DeviceChoice> {
         );
     };
     Ok(choice)
+}
+
+/// What `preview` and `report` read and write.
+#[derive(Debug, clap::Args)]
+pub struct DatasetDir {
+    /// The dataset: an output folder of `clevrtex generate`, a `clevrtex_<variant>` folder, or
+    /// the downloaded ClevrTex.
+    #[arg(value_name = "DIR")]
+    pub(crate) dir: PathBuf,
+    /// The file to write: the sheet (PNG) for `preview`, the page (HTML) for `report`.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) out: PathBuf,
 }

@@ -2,11 +2,12 @@
 //! rung, each compared with them.
 
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use anyhow::{bail, Context};
+use anyhow::{bail, Context, Result};
 use clevrtex_materials::Catalogue;
 use clevrtex_render::exr_io::Channels;
+use clevrtex_render::{Mode, RenderReply, Worker};
 use clevrtex_scene::quality::Sampling;
 use clevrtex_scene::SceneFile;
 
@@ -14,19 +15,16 @@ use crate::ladder::Setting;
 use crate::metrics::{self, Errors};
 use crate::scenes::{timeout_for, with_sampling, BenchScene, REFERENCE_SEED};
 
-/// A Blender that renders one scene file: the command line hands in its session (restarts,
+/// A Blender session to run worker requests on: the command line hands in its own (restarts,
 /// Ctrl-C and its messages are the command's).
 pub trait Render {
-    /// Render the scene file `scene` (Mode::Final) into `dir` within `timeout`; `label`
-    /// names the render in Blender's messages. Returns Cycles' render time in seconds.
-    fn render(
-        &mut self,
-        label: &str,
-        scene: &Path,
-        dir: &Path,
-        timeout: Duration,
-    ) -> anyhow::Result<f64>;
+    /// Run `call` on the session's worker, with the command's restarts.
+    fn request(&mut self, call: &mut dyn FnMut(&mut Worker) -> WorkerResult)
+        -> Result<RenderReply>;
 }
+
+/// What one render request to a worker returns.
+pub type WorkerResult = clevrtex_render::Result<RenderReply>;
 
 /// What the measurement is doing, for the command to print.
 #[derive(Debug)]
@@ -196,7 +194,10 @@ fn render_into(
     std::fs::write(&path, clevrtex_scene::to_pretty_json(scene)?)
         .with_context(|| format!("cannot write `{}`", path.display()))?;
     let started = Instant::now();
-    let cycles_s = blender.render(label, &path, dir, timeout_for(scene))?;
+    let timeout = timeout_for(scene);
+    let reply =
+        blender.request(&mut |w| w.render_labelled(label, &path, Mode::Final, dir, timeout))?;
+    let cycles_s = reply.timings.render_s;
     Ok((started.elapsed().as_secs_f64(), cycles_s))
 }
 

@@ -448,17 +448,9 @@ fn npy_header(bytes: &[u8]) -> Result<NpyHeader, String> {
 pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
     let header = npy_header(bytes)?;
     let nbytes = header.nbytes();
-    let NpyHeader {
-        descr,
-        fortran,
-        shape,
-        big,
-        kind,
-        size,
-        count: _,
-        data_start,
-    } = header;
-    let body = &bytes[data_start..];
+    let (big, size) = (header.big, header.size);
+    let (descr, shape) = (header.descr, header.shape);
+    let body = &bytes[header.data_start..];
     if body.len() < nbytes {
         return Err(format!(
             "truncated data: {} bytes for shape {shape:?} of `{descr}` ({nbytes} needed)",
@@ -482,7 +474,7 @@ pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
         chunks.map(|c| read(c).into()).collect()
     }
     let chunks = body.chunks_exact(size.max(1));
-    let data = match (kind, size) {
+    let data = match (header.kind, size) {
         (b'b', 1) => NpyData::Int(body.iter().map(|&b| (b != 0) as i64).collect()),
         (b'u', 1) => NpyData::Int(body.iter().map(|&b| b as i64).collect()),
         (b'i', 1) => NpyData::Int(body.iter().map(|&b| b as i8 as i64).collect()),
@@ -512,7 +504,7 @@ pub fn npy(bytes: &[u8]) -> Result<NpyArray, String> {
             ))
         }
     };
-    let data = if fortran && shape.len() > 1 {
+    let data = if header.fortran && shape.len() > 1 {
         match data {
             NpyData::Int(v) => NpyData::Int(fortran_to_c(&v, &shape)),
             NpyData::F32(v) => NpyData::F32(fortran_to_c(&v, &shape)),

@@ -17,7 +17,7 @@ use crate::metadata::{self, RenderFacts};
 use crate::output::{self, Staged};
 use crate::passes::write_passes;
 use crate::post::{self, ObjectPixels};
-use crate::worker::{Mode, RenderReply};
+use crate::worker::{Mode, RenderReply, Worker};
 
 /// Makes the scene of a job for a given attempt number.
 pub type SceneMaker = Arc<dyn Fn(u32) -> std::result::Result<SceneFile, String> + Send + Sync>;
@@ -109,14 +109,10 @@ pub(crate) trait JobHost {
     fn interrupted(&self) -> bool;
     /// The slot's scratch folder.
     fn scratch(&self) -> &Path;
-    /// One request with restarts (see [`crate::Session::request`]).
+    /// Run `call` on the slot's worker, with restarts (see [`crate::Session::request`]).
     fn request(
         &mut self,
-        label: &str,
-        scene: &Path,
-        mode: Mode,
-        dir: &Path,
-        timeout: Duration,
+        call: &mut dyn FnMut(&mut Worker) -> Result<RenderReply>,
     ) -> Result<RenderReply>;
     /// The Blender version of the slot's current worker and the bridge's version-parity
     /// settings on it (`ready.compat`; empty if none).
@@ -199,7 +195,9 @@ pub(crate) fn run_job(
         let mut visibility_s = 0.0;
         if job.resample && opts.visibility_check {
             let t = Instant::now();
-            let reply = slot.request(&label, &scene_path, Mode::Visibility, &work, timeout)?;
+            let reply = slot.request(&mut |w| {
+                w.render_labelled(&label, &scene_path, Mode::Visibility, &work, timeout)
+            })?;
             stats.visibility_build_s += reply.timings.build_s;
             stats.visibility_render_s += reply.timings.render_s;
             stats.visibility_passes += 1;
@@ -217,7 +215,9 @@ pub(crate) fn run_job(
         }
 
         let t = Instant::now();
-        let reply = slot.request(&label, &scene_path, Mode::Final, &work, timeout)?;
+        let reply = slot.request(&mut |w| {
+            w.render_labelled(&label, &scene_path, Mode::Final, &work, timeout)
+        })?;
         let final_request_s = t.elapsed().as_secs_f64();
         let t_post = Instant::now();
         let (facts_blender, facts_compat) = slot.blender();

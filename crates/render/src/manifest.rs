@@ -64,40 +64,24 @@ impl WriteManifest for Manifest {
 /// its plan ([`Plan::write_plan`]) and, at the end, with the files it made ([`Plan::write`]).
 #[derive(Debug, Clone)]
 pub struct Plan {
-    /// Variant name.
-    pub variant: String,
-    /// Run seed.
-    pub seed: u64,
-    /// xxh3 of the resolved variant config, hex ([`hash_hex`]).
-    pub config_hash: String,
-    /// First index of the run.
-    pub start: u64,
-    /// One past the last index (before sharding).
-    pub end: u64,
-    /// Size of the whole dataset.
-    pub total: u64,
-    /// This shard `[k, n]`.
-    pub shard: [u64; 2],
+    /// The run's manifest as planned ([`Manifest::unfinished`] and the run's settings): the
+    /// Blender, files and seconds are filled in when it is written.
+    pub run: Manifest,
     /// Passes written.
     pub passes: Vec<clevrtex_scene::Pass>,
     /// Whether the float EXRs are kept (they are files of the run too).
     pub keep_exr: bool,
-    /// `clevrtex` version.
-    pub tool_version: String,
-    /// The command line that made the run.
-    pub command: Vec<String>,
 }
 
 impl Plan {
     /// `OUT/clevrtex_<variant>/`.
     pub fn variant_dir(&self, out: &Path) -> PathBuf {
-        clevrtex_scene::layout::variant_dir(out, &self.variant)
+        clevrtex_scene::layout::variant_dir(out, &self.run.variant)
     }
 
     /// The manifest of this run's range and shard as an earlier run left it, if readable.
     fn earlier(&self, out: &Path) -> Option<Manifest> {
-        let name = file_name(self.start, self.end, self.shard[0], self.shard[1]);
-        Manifest::read(&self.variant_dir(out).join(name)).ok()
+        Manifest::read(&self.variant_dir(out).join(self.run.name())).ok()
     }
 
     /// The manifest with these settings, `files` and `sample_seconds`.
@@ -110,23 +94,13 @@ impl Plan {
         sample_seconds: BTreeMap<String, f64>,
     ) -> Manifest {
         Manifest {
-            format: MANIFEST_FORMAT.into(),
-            version: MANIFEST_VERSION,
-            variant: self.variant.clone(),
-            seed: self.seed,
-            config_hash: self.config_hash.clone(),
-            start: self.start,
-            end: self.end,
-            total: self.total,
-            shard: self.shard,
             passes: self.passes.iter().map(|p| p.name().to_string()).collect(),
-            tool_version: self.tool_version.clone(),
             blender_version,
             blender_compat,
-            command: self.command.clone(),
             finished,
             files,
             sample_seconds,
+            ..self.run.clone()
         }
     }
 
@@ -163,16 +137,9 @@ impl Plan {
         let mut files = Vec::new();
         let mut blender_version = String::new();
         let mut blender_compat = BTreeMap::new();
-        let indices = self.manifest(
-            true,
-            String::new(),
-            BTreeMap::new(),
-            BTreeMap::new(),
-            BTreeMap::new(),
-        );
-        for index in indices.indices() {
-            let stem = layout::stem(&self.variant, index);
-            let dir = layout::sample_dir(out, &self.variant, index);
+        for index in self.run.indices() {
+            let stem = layout::stem(&self.run.variant, index);
+            let dir = layout::sample_dir(out, &self.run.variant, index);
             let names = crate::output::expected_files(&stem, &self.passes, self.keep_exr);
             if !names.iter().all(|n| dir.join(n).is_file()) {
                 continue;

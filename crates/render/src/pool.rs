@@ -18,7 +18,7 @@ use crate::job::{JobHost, JobSettings};
 use crate::ledger::Ledger;
 use crate::output;
 use crate::session::{Hooks, Session};
-use crate::worker::{Mode, RenderReply, Worker, WorkerOptions};
+use crate::worker::{RenderReply, Worker, WorkerOptions};
 use clevrtex_scene::layout;
 
 pub use crate::job::{auto_timeout, Job, SampleStats, SceneMaker};
@@ -450,19 +450,12 @@ impl JobHost for Slot<'_, '_> {
         });
     }
 
-    /// One request with restarts (see [`Session::request`]).
+    /// Run `call` on the slot's worker, with restarts (see [`Session::request`]).
     fn request(
         &mut self,
-        label: &str,
-        scene: &Path,
-        mode: Mode,
-        dir: &Path,
-        timeout: Duration,
+        call: &mut dyn FnMut(&mut Worker) -> Result<RenderReply>,
     ) -> Result<RenderReply> {
-        let mut hooks = PoolHooks(self.shared);
-        self.session.request(&mut hooks, |w| {
-            w.render_labelled(label, scene, mode, dir, timeout)
-        })
+        self.session.request(&mut PoolHooks(self.shared), call)
     }
 }
 

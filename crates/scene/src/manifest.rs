@@ -104,6 +104,30 @@ pub fn is_manifest_name(name: &str) -> bool {
 }
 
 impl Manifest {
+    /// A manifest of this format and version that names no run yet: not finished, no Blender,
+    /// no files (a run's plan starts from it).
+    pub fn unfinished() -> Manifest {
+        Manifest {
+            format: MANIFEST_FORMAT.into(),
+            version: MANIFEST_VERSION,
+            variant: String::new(),
+            seed: 0,
+            config_hash: String::new(),
+            start: 0,
+            end: 0,
+            total: 0,
+            shard: [0, 1],
+            passes: Vec::new(),
+            tool_version: String::new(),
+            blender_version: String::new(),
+            blender_compat: BTreeMap::new(),
+            command: Vec::new(),
+            finished: false,
+            files: BTreeMap::new(),
+            sample_seconds: BTreeMap::new(),
+        }
+    }
+
     /// This manifest's file name ([`file_name`]).
     pub fn name(&self) -> String {
         file_name(self.start, self.end, self.shard[0], self.shard[1])
