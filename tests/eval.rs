@@ -394,6 +394,33 @@ fn eval_ground_truth_gaps_duplicates_and_holes() {
     );
 }
 
+/// Ground-truth metadata goes through the dataset reader's check, as in `preview`, `report`,
+/// `export` and the Python `Dataset`: a count that disagrees with the object list is named.
+#[test]
+fn eval_names_ground_truth_metadata_the_dataset_reader_rejects() {
+    let preds = data("eval/preds/png");
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gt");
+    copy_dir(&gt(), &g);
+    let meta_path = g.join("clevrtex_vbg/0/CLEVRTEX_vbg_000001.json");
+    let mut meta: Value = serde_json::from_slice(&std::fs::read(&meta_path).unwrap()).unwrap();
+    let n = meta["objects"].as_array().unwrap().len();
+    meta["num_objects"] = (n + 1).into();
+    std::fs::write(&meta_path, meta.to_string()).unwrap();
+    let out = run(&["eval", s(&preds), s(&g), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let e = stderr(&out);
+    assert!(
+        e.contains("CLEVRTEX_vbg_000001.json")
+            && e.contains(&format!(
+                "key `objects` has {n} entries but `num_objects` is {}",
+                n + 1
+            )),
+        "{}",
+        text(&out)
+    );
+}
+
 #[test]
 fn eval_variant_and_split_errors() {
     let preds = data("eval/preds/png");

@@ -239,6 +239,24 @@ fn export_takes_file_names_from_the_layout_and_splits_from_the_fixed_set() {
     assert!(escaped.is_empty(), "a shard was written outside OUT");
 }
 
+/// Metadata goes through the dataset reader's check, as in `preview`, `report`, `eval` and
+/// the Python `Dataset`: export packs no sample whose metadata that check rejects.
+#[test]
+fn export_refuses_metadata_the_dataset_reader_rejects() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    hand_sample(&data, 0, serde_json::json!({}), 100);
+    hand_sample(&data, 1, serde_json::json!({"objects": 5}), 100);
+    let out = dir.path().join("wds");
+    let (code, t) = export(&data, &out, &[]);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000001.json` key `objects` is 5, not a list"),
+        "{t}"
+    );
+    assert!(t.contains("clevrtex verify"), "{t}");
+}
+
 #[test]
 fn export_follows_no_link_out_of_the_dataset_and_reads_no_fifo() {
     let dir = tempfile::tempdir().unwrap();
@@ -313,6 +331,37 @@ fn export_removes_the_shards_of_an_earlier_export_it_did_not_write() {
     let index: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("index.json")).unwrap()).unwrap();
     assert_eq!(index["shards"].as_array().unwrap().len(), 1, "{index}");
+}
+
+/// A file named like a shard that no export wrote (hostile pass, issue 21: export replaced or
+/// removed it) is refused before anything is written, and left as it was.
+#[test]
+fn export_leaves_a_file_named_like_a_shard_that_is_not_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    hand_sample(&data, 0, serde_json::json!({}), 600);
+    let out = dir.path().join("wds");
+    std::fs::create_dir_all(&out).unwrap();
+    for name in ["clevr-train-000000.tar", "clevr-val-000007.tar"] {
+        let mine = out.join(name);
+        std::fs::write(&mine, b"my notes, not a tar file").unwrap();
+        let (code, t) = export(&data, &out, &[]);
+        assert_eq!(code, Some(1), "{t}");
+        assert!(
+            t.contains(&format!(
+                "{name}` is named like a shard but is not a tar file"
+            )),
+            "{t}"
+        );
+        assert_eq!(std::fs::read(&mine).unwrap(), b"my notes, not a tar file");
+        assert!(!out.join("index.json").exists(), "{t}");
+        std::fs::remove_file(&mine).unwrap();
+    }
+    // A shard an export wrote is replaced as before.
+    let (code, t) = export(&data, &out, &[]);
+    assert_eq!(code, Some(0), "{t}");
+    let (code, t) = export(&data, &out, &[]);
+    assert_eq!(code, Some(0), "{t}");
 }
 
 /// Hostile pass (issue 21, minor): an OUT inside the dataset (`export DIR DIR/clevrtex_clevr/x`)

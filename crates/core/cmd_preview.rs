@@ -2,7 +2,6 @@
 //! `clevrtex_report::preview` draw and write the contact sheet, and prints what was drawn and
 //! what was left out.
 
-
 use clevrtex_report::output::refuse_output_inside;
 use clevrtex_report::preview::{draw, save, Options, Sheet};
 

@@ -1,6 +1,7 @@
-//! The per-sample metadata `.json`: only what the per-object breakdown needs. Unknown keys are
-//! ignored and values of unexpected types are kept as their JSON text, so any JSON the
-//! published datasets or our generator write parses.
+//! The per-sample metadata `.json`: only what the per-object breakdown needs, after the
+//! dataset reader's check (`clevrtex_scene::dataset::check_metadata`: ours whole, the
+//! downloaded ClevrTex's `objects` a list that `num_objects` counts). Unknown keys are ignored
+//! and names of unexpected types are kept as their JSON text.
 
 use serde::Deserialize;
 use serde_json::Value;
@@ -50,6 +51,10 @@ pub fn parse(bytes: &[u8]) -> Result<SampleMeta, String> {
     if !value.is_object() {
         return Err("metadata must be a JSON object".into());
     }
+    // The check every reader of a dataset applies (preview, report, export, the Python
+    // `Dataset`): ours must be whole, the downloaded ClevrTex's typed where it has keys.
+    clevrtex_scene::dataset::check_metadata(&value, "")
+        .map_err(|e| format!("key `{}` {}", e.key, e.what))?;
     let raw: RawMeta =
         serde_json::from_value(value).map_err(|e| format!("not valid metadata JSON ({e})"))?;
     let objects = match raw.objects {
@@ -88,5 +93,17 @@ mod tests {
     fn rejects_non_object() {
         assert!(parse(b"[1]").is_err());
         assert!(parse(br#"{"objects": 3}"#).is_err());
+    }
+
+    #[test]
+    fn rejects_what_the_dataset_reader_rejects() {
+        let e = parse(br#"{"num_objects": 2, "objects": [{}]}"#).unwrap_err();
+        assert!(
+            e.contains("key `objects` has 1 entries but `num_objects` is 2"),
+            "{e}"
+        );
+        // Ours (with `render`) must be whole.
+        let e = parse(br#"{"render": {}, "objects": []}"#).unwrap_err();
+        assert!(e.starts_with("key `"), "{e}");
     }
 }

@@ -132,6 +132,11 @@ fn samples(
             ),
             cause,
         })?;
+        dataset::check_metadata(&meta, &meta_path.display().to_string()).map_err(|e| {
+            ExportError::Message(format!(
+                "{e}\nhint: check the dataset with `clevrtex verify`"
+            ))
+        })?;
         let bad = |e: dataset::MetadataError| {
             ExportError::Message(format!(
                 "{e}\nhint: check the dataset with `clevrtex verify`; export takes file names from the layout, not from the metadata"
@@ -242,6 +247,7 @@ pub fn export(
         )));
     }
     std::fs::create_dir_all(out).map_err(io_err(format!("cannot create `{}`", out.display())))?;
+    refuse_foreign_shards(out)?;
     let mut index = Vec::new();
     let mut total_bytes = 0u64;
     let mut total_samples = 0u64;
@@ -316,6 +322,38 @@ pub fn export(
         stale,
         skipped,
     })
+}
+
+/// Files in `out` named like shards that no export wrote (not a tar file, or not a regular
+/// file): refused before anything is written, since export replaces and removes files of
+/// those names. Links named like shards are replaced or removed themselves, never followed.
+fn refuse_foreign_shards(out: &Path) -> Result<(), ExportError> {
+    for e in std::fs::read_dir(out)
+        .map_err(io_err(format!("cannot read `{}`", out.display())))?
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if !is_shard_name(&name) || e.file_type().is_ok_and(|t| t.is_symlink()) {
+            continue;
+        }
+        if !e.file_type().is_ok_and(|t| t.is_file()) || !is_tar(&e.path()) {
+            return Err(ExportError::Message(format!(
+                "`{}` is named like a shard but is not a tar file an export wrote: export would replace or remove it\nhint: move it out of `{}`, or export into an empty folder",
+                e.path().display(),
+                out.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Whether `path` starts with a POSIX tar header (`ustar` at byte 257), as shards do.
+fn is_tar(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = [0u8; 262];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .is_ok_and(|()| &head[257..262] == b"ustar")
 }
 
 /// Shards of an earlier export into `out` that this one did not write (fewer samples, another
