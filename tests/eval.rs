@@ -171,6 +171,43 @@ fn eval_npz_soft_masks_and_no_background() {
     assert_eq!(rb["provenance"]["no_background"], true);
 }
 
+/// A ground-truth mask of another size than its own image: the ground truth is named, not the
+/// prediction of the image's size (third hostile pass, issue 21).
+#[test]
+fn eval_names_a_ground_truth_mask_that_disagrees_with_its_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gt");
+    copy_dir(&gt(), &g);
+    let preds = dir.path().join("preds");
+    std::fs::create_dir_all(&preds).unwrap();
+    for e in std::fs::read_dir(g.join("clevrtex_vbg/0")).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap().to_string();
+        if let Some(stem) = name.strip_suffix("_flat.png") {
+            std::fs::copy(&p, preds.join(format!("{stem}_mask.png"))).unwrap();
+        }
+    }
+    let mask = g.join("clevrtex_vbg/0/CLEVRTEX_vbg_000003_flat.png");
+    image::GrayImage::new(20, 15).save(&mask).unwrap();
+    let out = run(&[
+        "eval",
+        s(&preds),
+        s(&g),
+        "--protocol",
+        "native",
+        "--split",
+        "all",
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("CLEVRTEX_vbg_000003_flat.png")
+            && err.contains("the mask is 20x15 but its image is 40x30"),
+        "{err}"
+    );
+    assert!(!err.contains("shape mismatch"), "{err}");
+}
+
 #[test]
 fn eval_default_split_is_test() {
     let dir = tempfile::tempdir().unwrap();
@@ -1015,6 +1052,9 @@ fn eval_follows_no_link_out_of_its_folders_and_opens_no_fifo() {
         .to_string_lossy()
         .replace("_mask.png", "");
     assert!(t.contains(&stem), "the missing prediction is named: {t}");
+    // ... and the file that was found but not read, with why (third hostile pass, issue 21).
+    let file = format!("{stem}_mask.png` ");
+    assert!(t.contains("not read: `") && t.contains(&file), "{t}");
     // A FIFO in its place: missing too, and no hang.
     std::fs::remove_file(&masks[0]).unwrap();
     let st = std::process::Command::new("mkfifo")
@@ -1026,6 +1066,7 @@ fn eval_follows_no_link_out_of_its_folders_and_opens_no_fifo() {
     let t = text(&o);
     assert_eq!(o.status.code(), Some(1), "{t}");
     assert!(t.contains(&stem), "{t}");
+    assert!(t.contains(&file) && t.contains("FIFO"), "{t}");
 }
 
 /// A ground-truth sample's mask (or metadata) beside its image is read only if the walk of

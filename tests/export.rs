@@ -255,6 +255,15 @@ fn export_refuses_metadata_the_dataset_reader_rejects() {
         "{t}"
     );
     assert!(t.contains("clevrtex verify"), "{t}");
+    // Metadata that lists no pass at all: nothing but the JSON would be packed.
+    let data = dir.path().join("data2");
+    hand_sample(&data, 0, serde_json::json!({"image_filename": null}), 0);
+    let (code, t) = export(&data, &out, &[]);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000000.json` lists no pass"),
+        "{t}"
+    );
 }
 
 #[test]

@@ -78,15 +78,24 @@ impl Split {
 /// untrusted folders (`clevrtex_scene::dataset`): links are followed only inside `dir`, and
 /// FIFOs, sockets and devices are left out.
 pub fn walk(dir: &Path) -> Result<Vec<PathBuf>, EvalError> {
+    Ok(walk_noting_skipped(dir)?.0)
+}
+
+/// Entries a walk left out, each with the reason (`is a FIFO ...`).
+pub type Skipped = Vec<(PathBuf, String)>;
+
+/// [`walk`], and the entries it left out.
+pub fn walk_noting_skipped(dir: &Path) -> Result<(Vec<PathBuf>, Skipped), EvalError> {
     let root = clevrtex_scene::dataset::root(dir).map_err(|cause| EvalError::Io {
         path: dir.to_path_buf(),
         cause,
     })?;
     let mut out = Vec::new();
+    let mut skipped = Vec::new();
     let mut seen = std::collections::HashSet::new();
-    walk_into(&root, dir, 0, &mut out, &mut seen)?;
+    walk_into(&root, dir, 0, &mut out, &mut skipped, &mut seen)?;
     out.sort();
-    Ok(out)
+    Ok((out, skipped))
 }
 
 fn walk_into(
@@ -94,6 +103,7 @@ fn walk_into(
     dir: &Path,
     depth: usize,
     out: &mut Vec<PathBuf>,
+    skipped: &mut Skipped,
     seen: &mut std::collections::HashSet<PathBuf>,
 ) -> Result<(), EvalError> {
     use clevrtex_scene::dataset::{list, Kind};
@@ -107,8 +117,9 @@ fn walk_into(
     })?;
     for (_, path, kind) in entries {
         match kind {
-            Kind::Dir if depth < 32 => walk_into(root, &path, depth + 1, out, seen)?,
+            Kind::Dir if depth < 32 => walk_into(root, &path, depth + 1, out, skipped, seen)?,
             Kind::File => out.push(path),
+            Kind::Skipped(why) => skipped.push((path, why)),
             _ => {}
         }
     }
@@ -275,6 +286,9 @@ pub struct PredFiles {
     pub segmentation: Option<PathBuf>,
     /// `<stem>_recon.png`.
     pub recon: Option<PathBuf>,
+    /// A segmentation file of this stem that was not read, and why (a link out of the
+    /// folder, a FIFO): named when the stem has no prediction.
+    pub skipped: Option<String>,
 }
 
 /// Index the prediction files under `dir` by stem, for the stems of `variant`. Two
@@ -285,7 +299,22 @@ pub fn index_preds(dir: &Path, variant: &str) -> Result<HashMap<String, PredFile
         return Err(EvalError::not_a_dir(dir));
     }
     let mut out: HashMap<String, PredFiles> = HashMap::new();
-    for f in walk(dir)? {
+    let (files, skipped) = walk_noting_skipped(dir)?;
+    for (f, why) in skipped {
+        let name = file_name(&f);
+        let stem = ["_mask.png", ".npy", ".npz"]
+            .iter()
+            .find_map(|s| parse_stem(name, s))
+            .map(|(stem, _, _)| stem.to_string());
+        if let Some(stem) = stem.filter(|s| s.starts_with(&format!("CLEVRTEX_{variant}_"))) {
+            let note = format!(
+                "`{}` {why}",
+                clevrtex_scene::text::printable(&f.display().to_string())
+            );
+            out.entry(stem).or_default().skipped = Some(note);
+        }
+    }
+    for f in files {
         let name = file_name(&f);
         let (stem, is_recon) = if let Some((stem, _, _)) = parse_stem(name, "_recon.png") {
             (stem, true)

@@ -44,7 +44,7 @@ pub enum EvalError {
         hint: String,
     },
     /// Predictions are missing for some ground-truth samples.
-    #[error("{}", missing_message(*count, *total, first))]
+    #[error("{}", missing_message(*count, *total, first, skipped))]
     MissingPredictions {
         /// How many are missing.
         count: usize,
@@ -52,6 +52,8 @@ pub enum EvalError {
         total: usize,
         /// The first few missing stems.
         first: Vec<String>,
+        /// Files of those stems that were found but not read, with the reason.
+        skipped: Vec<String>,
     },
     /// The ground-truth directory has no samples.
     #[error("no ground-truth samples `{pattern}` under `{}`\nhint: pass the dataset directory (the one holding `clevrtex_<variant>/` or the numbered folders), and `--variant` if the files use another variant name", dir.display())]
@@ -147,13 +149,19 @@ impl EvalError {
     }
 }
 
-fn missing_message(count: usize, total: usize, first: &[String]) -> String {
+fn missing_message(count: usize, total: usize, first: &[String], skipped: &[String]) -> String {
     let mut s = format!("no prediction for {count} of {total} ground-truth samples, e.g. ");
     for (i, stem) in first.iter().enumerate() {
         if i > 0 {
             s.push_str(", ");
         }
         let _ = write!(s, "`{stem}`");
+    }
+    for note in skipped {
+        let _ = write!(s, "\nnot read: {note}");
+    }
+    if !skipped.is_empty() {
+        s.push_str("\nhint: a prediction must be a regular file (a link only to a file inside the predictions directory)");
     }
     s.push_str("\nhint: name predictions `<stem>_mask.png`, `<stem>.npy` or `<stem>.npz` anywhere under the predictions directory, or pass `--allow-missing` to score them as all-background");
     s

@@ -343,6 +343,11 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
             count: missing.len(),
             total: samples.len(),
             first: missing.iter().take(5).map(|s| s.to_string()).collect(),
+            skipped: missing
+                .iter()
+                .filter_map(|s| pred_index.get(*s).and_then(|p| p.skipped.clone()))
+                .take(5)
+                .collect(),
         });
     }
 
@@ -492,6 +497,18 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 /// The size a ground-truth PNG declares in its header, checked before it is decoded: each side
 /// at most the 4096 pixels any clevrtex image has (a 1 MB mask declaring 30000x30000 decoded
 /// to 4.5 GB of labels).
+/// The (width, height) in a ground-truth image's PNG header, if it can be read.
+fn image_size(path: &Path) -> Option<(usize, usize)> {
+    use std::io::Read;
+    let mut head = Vec::with_capacity(64);
+    std::fs::File::open(path)
+        .ok()?
+        .take(64)
+        .read_to_end(&mut head)
+        .ok()?;
+    read::png_size_of_dataset_image(&head).ok()
+}
+
 fn gt_png_size(bytes: &[u8], path: &Path) -> Result<(usize, usize), EvalError> {
     read::png_size_of_dataset_image(bytes).map_err(|r| corrupt(path, r, GT_HINT))
 }
@@ -535,7 +552,18 @@ fn score_sample(
     gt_hasher_input.push(xxh3_64(&meta_bytes));
 
     let (pred, pred_hash, missing) = if files.segmentation.is_some() {
-        let (p, bytes) = predict::load(files, hw, opts.no_background)?;
+        let (p, bytes) = predict::load(files, hw, opts.no_background).map_err(|e| {
+            // A prediction of the image's size against a mask of another: the ground truth
+            // is what disagrees with itself.
+            match (&e, image_size(&s.image)) {
+                (EvalError::ShapeMismatch { .. }, Some((w, h))) if (w, h) != (gw, gh) => corrupt(
+                    &s.mask,
+                    format!("the mask is {gw}x{gh} but its image is {w}x{h}"),
+                    GT_HINT,
+                ),
+                _ => e,
+            }
+        })?;
         let hs: Vec<u8> = bytes
             .iter()
             .flat_map(|b| xxh3_64(b).to_le_bytes())

@@ -148,6 +148,11 @@ fn samples(
             .into_iter()
             .map(|pass| (pass.spec().webdataset_key.to_string(), s.pass_path(pass)))
             .collect();
+        if files.is_empty() {
+            return Err(ExportError::Message(format!(
+                "`{file}` lists no pass (no `*_filename` key names a file): the sample has nothing to export\nhint: check the dataset with `clevrtex verify`"
+            )));
+        }
         let split = dataset::split_of(&meta, &file).map_err(bad)?;
         files.push(("json".into(), meta_path));
         let mut bytes = 0;
