@@ -151,6 +151,24 @@ fn verify_finds_an_index_duplicated_across_shards() {
     assert_eq!(out.status.code(), Some(3), "{t}");
     assert!(t.contains("duplicated indices (1):"), "{t}");
     assert!(t.contains("    0 in `"), "{t}");
+    // One index under two stems in one folder (7 digits): each place is named by its stem
+    // (third hostile pass, issue 21: "2 in `DIR` and `DIR`").
+    let six = sample(&a, 2, ".json");
+    let seven = six.with_file_name(
+        six.file_name()
+            .unwrap()
+            .to_string_lossy()
+            .replace("_000002.json", "_0000002.json"),
+    );
+    std::fs::copy(&six, &seven).unwrap();
+    let (out, t) = verify(&[&a, &b]);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    let stem = |p: &std::path::Path| p.to_string_lossy().trim_end_matches(".json").to_string();
+    assert!(
+        t.contains(&format!("    2 in `{}` and `{}`", stem(&six), stem(&seven)))
+            || t.contains(&format!("    2 in `{}` and `{}`", stem(&seven), stem(&six))),
+        "{t}"
+    );
 }
 
 #[test]
@@ -473,6 +491,9 @@ fn verify_counts_a_folder_given_twice_once_and_fails_an_empty_dataset() {
     let (out, t) = verify(&[&b]);
     assert_eq!(out.status.code(), Some(3), "{t}");
     assert!(t.contains("is not a variant folder"), "{t}");
+    // ... and its repair hint is no `--variant ` (empty) command (third hostile pass).
+    assert!(!t.contains("--variant  --remove-broken"), "{t}");
+    assert!(t.contains("move or rename the folder named above"), "{t}");
 }
 
 /// Hostile pass (issue 21, repro-02): the missing list is capped at `MAX_LISTED` indices and

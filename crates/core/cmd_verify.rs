@@ -124,7 +124,10 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
                 .collect::<Vec<_>>()
                 .join("\n    "),
         };
-        if remove {
+        if clevrtex_scene::layout::variant_name_problem(&r.variant).is_some() {
+            // A `clevrtex_<x>` folder no run could have written: no command repairs it.
+            println!("  to repair: move or rename the folder named above; it is not a variant's folder and nothing in it was checked");
+        } else if remove {
             println!("  to repair, rerun:\n    {rerun}");
         } else {
             println!(

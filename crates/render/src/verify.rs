@@ -75,7 +75,8 @@ pub struct VariantReport {
     pub missing: Vec<u64>,
     /// How many expected indices have no sample.
     pub missing_count: u64,
-    /// Indices found more than once, with every folder they are in.
+    /// Indices found more than once, with each place (folder and stem: `0000001` and
+    /// `000001` are both index 1).
     pub duplicates: BTreeMap<u64, Vec<PathBuf>>,
     /// Samples found but broken.
     pub broken: Vec<Broken>,
@@ -386,8 +387,10 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
     let mut singles = Vec::new();
     for (index, places) in &found {
         if places.len() > 1 {
-            rep.duplicates
-                .insert(*index, places.iter().map(|(_, f)| f.dir.clone()).collect());
+            rep.duplicates.insert(
+                *index,
+                places.iter().map(|(stem, f)| f.dir.join(stem)).collect(),
+            );
         } else {
             singles.push((*index, places[0].clone(), covered_by_finished(*index)));
         }
