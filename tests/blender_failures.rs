@@ -217,6 +217,59 @@ fn doctor_reports_a_blender_that_never_answers() {
     assert!(t.elapsed() < Duration::from_secs(20), "{:?}", t.elapsed());
 }
 
+/// SIGTERM while `doctor` waits for `BLENDER --version` kills the probe's process group: it
+/// was left running, orphaned (third hostile pass, issue 21).
+#[test]
+fn doctor_leaves_no_version_probe_behind_on_sigterm() {
+    let dir = tempfile::tempdir().unwrap();
+    let marker = format!("clevrtex-doctor-probe-{}", std::process::id());
+    let script = dir.path().join("blender");
+    std::fs::write(
+        &script,
+        format!("#!/bin/bash\nexec -a {marker} sleep 300\n"),
+    )
+    .unwrap();
+    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    let probe_running = || {
+        std::process::Command::new("pgrep")
+            .args(["-f", &marker])
+            .output()
+            .map(|o| o.status.success())
+            .unwrap_or(false)
+    };
+    let child = clevrtex()
+        .args(["doctor", "--timeout", "60", "--blender"])
+        .arg(&script)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while !probe_running() && t.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(probe_running(), "the probe never started");
+    let st = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(143), "{}", text(&out));
+    std::thread::sleep(Duration::from_millis(500));
+    let left = probe_running();
+    if left {
+        let _ = std::process::Command::new("pkill")
+            .args(["-f", &marker])
+            .status();
+    }
+    assert!(
+        !left,
+        "the `--version` probe outlived doctor: {}",
+        text(&out)
+    );
+}
+
 /// A worker that never starts is given up on after `--startup-timeout` (not a fixed 120 s),
 /// and the hint names that flag, not `--timeout`.
 #[test]

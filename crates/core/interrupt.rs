@@ -122,11 +122,14 @@ fn on_signal() {
             } else {
                 "interrupted"
             };
+            // A probe of Blender's version may be running: it is killed, not orphaned.
+            clevrtex_render::group::kill_tracked();
             eprintln!("\n{what}: nothing was under way; exiting");
             std::process::exit(i32::from(exit_code()));
         }
         OnInterrupt::Stop { message } => {
             if handler.flag.swap(true, Ordering::SeqCst) {
+                clevrtex_render::group::kill_tracked();
                 std::process::exit(i32::from(exit_code()));
             }
             let what = if LAST_SIGNAL.load(Ordering::SeqCst) == SIGTERM {

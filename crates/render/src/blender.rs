@@ -243,6 +243,7 @@ fn run_capturing(program: &Path, args: &[&str], timeout: Duration) -> Result<Str
         program: blender.to_path_buf(),
         cause: source,
     })?;
+    crate::group::track(&child);
     let stdout = child.stdout.take().expect("piped");
     let reader = std::thread::spawn(move || {
         let mut kept = Vec::new();

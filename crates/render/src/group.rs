@@ -3,6 +3,11 @@
 //! ours, and killing only the direct child would leave it rendering.
 
 use std::process::{Child, Command};
+use std::sync::Mutex;
+
+/// Groups started with [`track`] and not yet killed by [`kill_group`]: what [`kill_tracked`]
+/// kills when the process exits at once on a signal.
+static TRACKED: Mutex<Vec<u32>> = Mutex::new(Vec::new());
 
 /// Start `cmd` as the leader of a new process group (whose id is then its pid). Also keeps a
 /// Ctrl-C in the terminal from reaching Blender: we stop the workers ourselves, so no
@@ -17,6 +22,10 @@ pub fn own_group(cmd: &mut Command) {
 /// group whose leader already exited (a wrapper that left its Blender running) is still
 /// signalled, since a group's id is not reused while any member lives.
 pub fn kill_group(child: &mut Child) {
+    TRACKED
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .retain(|&id| id != child.id());
     if let Some(pgid) = i32::try_from(child.id())
         .ok()
         .and_then(rustix::process::Pid::from_raw)
@@ -25,4 +34,28 @@ pub fn kill_group(child: &mut Child) {
     }
     let _ = child.kill();
     let _ = child.wait();
+}
+
+/// Note that `child` (a group leader, [`own_group`]) is to be killed by [`kill_tracked`] if
+/// the process exits before [`kill_group`] kills it. Only for children that always end in
+/// [`kill_group`] (a group id is reused once its members are gone).
+pub fn track(child: &Child) {
+    TRACKED
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .push(child.id());
+}
+
+/// SIGKILL every group [`track`]ed and not yet killed: for a process about to exit at once
+/// (a signal before a command has said what it means to it), which would leave them running.
+pub fn kill_tracked() {
+    let ids = std::mem::take(&mut *TRACKED.lock().unwrap_or_else(|p| p.into_inner()));
+    for id in ids {
+        if let Some(pgid) = i32::try_from(id)
+            .ok()
+            .and_then(rustix::process::Pid::from_raw)
+        {
+            let _ = rustix::process::kill_process_group(pgid, rustix::process::Signal::KILL);
+        }
+    }
 }

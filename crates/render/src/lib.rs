@@ -42,7 +42,7 @@ pub mod device;
 mod error;
 pub mod exr_io;
 pub mod gpu_probe;
-mod group;
+pub mod group;
 mod job;
 mod ledger;
 pub mod manifest;
