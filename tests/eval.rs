@@ -318,6 +318,12 @@ fn eval_corrupt_and_unsupported_predictions() {
         err.contains("CLEVRTEX_vbg_000001.npy") && err.contains("cannot decode"),
         "{err}"
     );
+    // The hint says what a prediction must hold, not only which function writes it (third
+    // hostile pass: an object-dtype array from `numpy.save` was told to use `numpy.save`).
+    assert!(
+        err.contains("segment ids (H, W)") && err.contains("no object dtype"),
+        "{err}"
+    );
 
     // Negative ids are refused with the value.
     std::fs::write(&bad, npy_i32(&[128, 128], &vec![-1; 128 * 128])).unwrap();

@@ -52,6 +52,11 @@ fn shape_str(dims: &[usize]) -> String {
     )
 }
 
+/// What a `.npy` prediction must be: the dtypes and shapes read, not only the writer.
+const NPY_HINT: &str = "save segment ids (H, W) of an integer or bool dtype, or soft masks (K, H, W) of float16/32/64, with `numpy.save` (no object dtype; integers below 2^63)";
+/// What a `.npz` prediction must hold.
+const NPZ_HINT: &str = "save `labels` (H, W) integer ids or `masks` (K, H, W) floats, and optionally `recon` floats in [0, 1] (3, H, W) or (H, W, 3), with `numpy.savez` or `numpy.savez_compressed` (no object dtype)";
+
 const SHAPE_HINT: &str = "predictions must have the ground truth's evaluation shape: 128x128 (crop then resize; every protocol but `native`), the dataset's own size under `--protocol native` or `--native-size`; they are never reshaped";
 
 fn mismatch(path: &Path, pred: &[usize], truth: &[usize]) -> EvalError {
@@ -326,7 +331,7 @@ pub fn load(
         }
         labels_from_ids(seg, img.labels.iter().map(|&v| v as i64), n)?
     } else if name.ends_with(".npy") {
-        let arr = read::npy(&bytes).map_err(|r| corrupt(seg, r, "write it with `numpy.save`"))?;
+        let arr = read::npy(&bytes).map_err(|r| corrupt(seg, r, NPY_HINT))?;
         let kind = if arr.shape.len() == 2 {
             "labels"
         } else {
@@ -343,14 +348,8 @@ pub fn load(
             };
             per.saturating_mul(w).saturating_mul(h)
         };
-        let mut arrays =
-            read::npz(&bytes, &["labels", "masks", "recon"], &max_elements).map_err(|r| {
-                corrupt(
-                    seg,
-                    r,
-                    "write it with `numpy.savez` or `numpy.savez_compressed`",
-                )
-            })?;
+        let mut arrays = read::npz(&bytes, &["labels", "masks", "recon"], &max_elements)
+            .map_err(|r| corrupt(seg, r, NPZ_HINT))?;
         if let Some(r) = arrays.remove("recon") {
             recon = Some(ReconImage::Unit(recon_from_array(seg, &r, hw)?));
         }
