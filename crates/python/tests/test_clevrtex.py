@@ -98,6 +98,20 @@ def test_evaluator_takes_one_hot_truth():
         assert abs(a.statistic(name) - b.statistic(name)) <= 1e-6, name
 
 
+def test_evaluator_names_an_unknown_statistic():
+    """A misspelt statistic is an error naming the known ones (it was NaN, as if nothing had
+    been added); a known one before any update is NaN, an added one its mean."""
+    ev = clevrtex.Evaluator()
+    with pytest.raises(ValueError, match="unknown statistic `nope`; known: .*mIoU"):
+        ev.statistic("nope")
+    with pytest.raises(ValueError, match="unknown statistic"):
+        ev.statistic("nope", "shape")
+    assert np.isnan(ev.statistic("ARI_FG"))
+    assert ev.statistic("obj_iou", "shape") == []
+    ev.add_statistic("mine", 2.0)
+    assert ev.statistic("mine") == 2.0
+
+
 def layouts(a):
     """`a` as C order, Fortran order, a strided view and big-endian: the Rust half reads C-order
     arrays of native dtypes in place, the Python half copies the others once."""
@@ -268,8 +282,12 @@ def test_dataset_equals_the_public_loader():
     assert native[0][1].shape == (3, 30, 40)
     with pytest.raises(ValueError, match="no ground-truth samples"):
         clevrtex.Dataset(GT, "camo")
-    with pytest.raises(IndexError):
+    with pytest.raises(IndexError, match="index 10 is out of range for a Dataset of 10 samples"):
         ds[10]
+    with pytest.raises(IndexError, match="out of range"):
+        ds[10**18]
+    with pytest.raises(TypeError, match="indexed by an int"):
+        ds["0"]
 
 
 def test_colours_follow_the_variant_config(tmp_path):

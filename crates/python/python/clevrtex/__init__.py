@@ -26,6 +26,8 @@ METRICS: Tuple[str, ...] = tuple(_native.metric_names())
 _INDEX = {name: i for i, name in enumerate(METRICS)}
 # The public evaluator's statistic names that differ from ours.
 _PUBLIC_NAMES = {"DICE_FG": "DICE_fg"}
+# Per-region statistics `update` adds, tagged by the metadata.
+_OBJECT_STATS = ("ground_mse", "ground_iou", "obj_mse", "obj_iou")
 MAX_SLOTS = 1024
 
 
@@ -177,9 +179,14 @@ class Evaluator:
         """The running mean of `name` (NaN if nothing was added), or with `tag` the
         `(value, mean)` pairs of that tag sorted by mean, as the public evaluator returns them."""
         name = _PUBLIC_NAMES.get(name, name)
+        if name not in self.stats and name not in METRICS and name not in _OBJECT_STATS:
+            known = ", ".join(list(METRICS) + list(_OBJECT_STATS) + sorted(set(self.stats) - set(METRICS)))
+            raise ValueError(f"unknown statistic `{name}`; known: {known}")
         if tag is None:
-            return self.stats[name].value()
-        return sorted(((k, rm.value()) for k, rm in self.tags[name][tag].items()), key=lambda x: x[1])
+            rm = self.stats.get(name)
+            return rm.value() if rm is not None else _RunningMean().value()
+        by_tag = self.tags.get(name, {}).get(tag, {})
+        return sorted(((k, rm.value()) for k, rm in by_tag.items()), key=lambda x: x[1])
 
     def update(self, pred_image: Any, pred_masks: Any, true_image: Any, true_masks: Any, true_metadata: Optional[Sequence[dict]] = None) -> None:
         """Score a batch: images `(B, 3, H, W)` in [0, 1]; predicted masks `(B, K, 1, H, W)` or
@@ -384,8 +391,10 @@ class Dataset:
 
     def __getitem__(self, ind: int):
         n = len(self._samples)
+        if not isinstance(ind, (int, np.integer)):
+            raise TypeError(f"a Dataset is indexed by an int, not {type(ind).__name__}")
         if ind < -n or ind >= n:
-            raise IndexError(ind)
+            raise IndexError(f"index {ind} is out of range for a Dataset of {n} samples")
         index, image, mask, meta = self._samples[ind]
         rgb, labels, h, w = _native.load_sample(image, mask, self.crop, self.side, self._root)
         img = np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).transpose(2, 0, 1).astype(np.float32) / np.float32(255)
