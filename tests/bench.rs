@@ -4,7 +4,7 @@ use std::path::Path;
 
 use serde_json::Value;
 
-use crate::util::{blender_or_skip, clevrtex, crash_once_then, fake_blender, text};
+use crate::util::{blender_or_skip, bpy_or_skip, clevrtex, crash_once_then, fake_blender, text};
 
 fn bench(out: &Path, extra: &[&str]) -> std::process::Output {
     clevrtex()
@@ -103,6 +103,75 @@ fn bench_render_writes_table_csv_plot_and_caches_references() {
     assert_eq!(rows2.len(), 1);
     // Same scene, same settings, same seed: the same error, bit for bit.
     assert_eq!(rows2[0]["rmse_linear"], rows[0]["rmse_linear"]);
+}
+
+/// `--blender` given more than once: each Blender against its own reference, one CSV with a
+/// `blender` column, the versions side by side (Debian's 3.4 and bpy 4.5 in CI), and a runs
+/// folder per place in the list.
+#[test]
+fn bench_render_puts_several_blenders_side_by_side() {
+    let test = "bench_render_puts_several_blenders_side_by_side";
+    let (Some(b34), Some(bpy)) = (blender_or_skip(test), bpy_or_skip(test)) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = bench(
+        dir.path(),
+        &[
+            "--only",
+            "fixed-4",
+            "--blender",
+            b34.to_str().unwrap(),
+            "--blender",
+            bpy.to_str().unwrap(),
+        ],
+    );
+    let t = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    let rows = read_csv(&dir.path().join("bench-render.csv"));
+    let versions: Vec<&str> = rows.iter().map(|r| r["blender"].as_str()).collect();
+    assert_eq!(versions.len(), 2, "{rows:?}");
+    assert!(versions[0].starts_with("3.4"), "{versions:?}");
+    assert!(versions[1].starts_with("4.5"), "{versions:?}");
+    for r in &rows {
+        let m: f64 = r["reference_mean"].parse().unwrap();
+        assert!(m.is_finite() && m > 0.0, "{r:?}");
+        assert_eq!(r["mask_equal"], "true", "{r:?}");
+    }
+    // Each version rendered its own reference (the cache is keyed by the version).
+    assert_eq!(t.matches("rendering the reference").count(), 2, "{t}");
+    let side = t
+        .split("Blenders side by side")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no side-by-side table: {t}"));
+    assert!(
+        side.contains(&format!("ratios against {}", versions[0])),
+        "{t}"
+    );
+    let line = side
+        .lines()
+        .find(|l| l.contains(versions[1]))
+        .unwrap_or_else(|| panic!("{t}"));
+    assert!(
+        line.contains("fixed-4") && line.trim_end().ends_with('x'),
+        "{line}"
+    );
+    let runs: Vec<String> = std::fs::read_dir(dir.path().join("runs"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(runs.len(), 2, "{runs:?}");
+    assert!(runs.iter().any(|r| r.starts_with("0-3.4")), "{runs:?}");
+
+    // --plot-only redraws the side-by-side table from the CSV alone.
+    let again = clevrtex()
+        .args(["bench", "render", "--plot-only", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let t2 = text(&again);
+    assert_eq!(again.status.code(), Some(0), "{t2}");
+    assert!(t2.contains("Blenders side by side"), "{t2}");
 }
 
 /// A Blender that dies on its first request is restarted and the render retried, as in

@@ -77,9 +77,11 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
     startup_timeout: f64,
     /// Blender: an executable, or a Python that imports `bpy` (default: `blender` on PATH, else
-    /// `./.venv-bpy/bin/python`).
+    /// `./.venv-bpy/bin/python`). Give it more than once to put Blenders side by side (each
+    /// against its own reference, one after the other; the same one twice, e.g. `A B B A`,
+    /// alternates runs against load drift and averages them).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
-    blender: Option<PathBuf>,
+    blender: Vec<PathBuf>,
 }
 
 /// Run `clevrtex bench`.
@@ -132,48 +134,81 @@ fn run_render(args: RenderArgs) -> CmdResult {
         )
     })?;
 
-    let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
+    // Every Blender is found before anything renders: a typo in the last one must not cost
+    // the first one's hours.
+    let blenders = if args.blender.is_empty() {
+        vec![clevrtex_render::blender::locate(None)?]
+    } else {
+        args.blender
+            .iter()
+            .map(|b| clevrtex_render::blender::locate(Some(b)))
+            .collect::<Result<Vec<_>, _>>()?
+    };
     let catalogue = clevrtex_materials::Catalogue::builtin()
         .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
+    let startup_timeout = crate::run_args::seconds("--startup-timeout", args.startup_timeout)?;
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping Blender",
     });
-    let mut session = BlenderSession::new(Settings {
-        blender,
-        materials_json: catalogue.resolved_json(),
-        threads: args.threads,
-        retries: args.retries,
-        idle_timeout: None,
-        interrupt,
-        startup_timeout: crate::run_args::seconds("--startup-timeout", args.startup_timeout)?,
-    })?;
-    let ready = session.ready()?;
-    let blender_version = ready.blender_version;
-    if args.levers && !ready.features.light_tree {
-        anyhow::bail!(
-            "`--levers` needs Cycles 4.x levers, but Blender {blender_version} has none\nhint: pass a Blender 4.x or 5.x with `--blender` (e.g. `.venv-bpy/bin/python` from `./scripts/setup.sh --bpy 4.5`)"
-        );
-    }
-
-    println!(
-        "bench render: {n} scene(s) at {width}x{height}, {} setting(s), references at {ref_samples} fixed samples; Blender {blender_version}, {} Cycles thread(s){}",
-        settings.len(),
-        if args.threads == 0 { "auto".to_string() } else { args.threads.to_string() },
-        if quick {
-            "\nquick mode: small frames, 2 scenes and fewer rungs; compare settings with it, take per-image costs from a full run"
-        } else {
-            ""
+    let mut rows = Vec::new();
+    for (i, blender) in blenders.into_iter().enumerate() {
+        let mut session = BlenderSession::new(Settings {
+            blender,
+            materials_json: catalogue.resolved_json(),
+            threads: args.threads,
+            retries: args.retries,
+            idle_timeout: None,
+            interrupt: interrupt.clone(),
+            startup_timeout,
+        })?;
+        let ready = session.ready()?;
+        let blender_version = ready.blender_version;
+        if args.levers && !ready.features.light_tree {
+            anyhow::bail!(
+                "`--levers` needs Cycles 4.x levers, but Blender {blender_version} has none\nhint: pass only Blenders 4.x or 5.x with `--blender` (e.g. `.venv-bpy/bin/python` from `./scripts/setup.sh --bpy 4.5`)"
+            );
         }
-    );
-    let rows = Bench {
-        blender: &mut session,
-        catalogue: &catalogue,
-        blender_version: &blender_version,
-        out: &args.out,
-        on_event: &mut print_event,
+
+        println!(
+            "bench render: {n} scene(s) at {width}x{height}, {} setting(s), references at {ref_samples} fixed samples; Blender {blender_version}, {} Cycles thread(s){}",
+            settings.len(),
+            if args.threads == 0 { "auto".to_string() } else { args.threads.to_string() },
+            if quick && i == 0 {
+                "\nquick mode: small frames, 2 scenes and fewer rungs; compare settings with it, take per-image costs from a full run"
+            } else {
+                ""
+            }
+        );
+        // One Blender: `OUT/runs` as always; several: one folder per place in the list (the
+        // version is Blender's word: only its plain characters make the name).
+        let runs = if args.blender.len() > 1 {
+            let v: String = blender_version
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '.' {
+                        c
+                    } else {
+                        '_'
+                    }
+                })
+                .collect();
+            args.out.join("runs").join(format!("{i}-{v}"))
+        } else {
+            args.out.join("runs")
+        };
+        rows.extend(
+            Bench {
+                blender: &mut session,
+                catalogue: &catalogue,
+                blender_version: &blender_version,
+                out: &args.out,
+                runs: &runs,
+                on_event: &mut print_event,
+            }
+            .measure(&plan, &scenes, &settings)?,
+        );
+        session.close();
     }
-    .measure(&plan, &scenes, &settings)?;
-    session.close();
 
     csv::save(&rows, &args.out)?;
     report(&rows, n, width, height, &args.out)
@@ -212,6 +247,7 @@ fn report(rows: &[Row], n: usize, width: u32, height: u32, out: &Path) -> CmdRes
     let agg = summary::aggregate(rows);
     print!("{}", summary::table(&agg));
     print!("{}", summary::summary(&agg));
+    print!("{}", summary::side_by_side(rows));
     let text = summary::write_plot(&agg, n, width, height, out, crate::font::available())?;
     let stem = summary::plot_stem(out);
     println!("csv: {}", csv::path(out).display());

@@ -10,7 +10,10 @@ use crate::ladder::{self, Setting};
 use crate::measure::Row;
 use crate::metrics::Errors;
 
-const CSV_HEADER: &str = "scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal";
+/// The columns before `blender` was added: CSVs of older versions still load (their rows'
+/// Blender is unknown, empty).
+const CSV_HEADER_V1: &str = "scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal";
+const CSV_HEADER: &str = "scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal,blender,reference_mean";
 
 /// The CSV of a bench run with output folder `out`.
 pub fn path(out: &Path) -> PathBuf {
@@ -43,7 +46,7 @@ pub fn to_csv(rows: &[Row]) -> String {
         let p = &r.setting.sampling;
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.6},{:.6},{:.6},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.6},{:.6},{:.6},{},{},{},{},{:.6}",
             r.scene,
             r.variant,
             r.setting.label,
@@ -71,6 +74,8 @@ pub fn to_csv(rows: &[Row]) -> String {
             },
             r.errors.mask_equal,
             r.errors.depth_equal,
+            r.blender.replace(',', " "),
+            r.reference_mean,
         );
     }
     s
@@ -79,15 +84,17 @@ pub fn to_csv(rows: &[Row]) -> String {
 /// Rows back from [`to_csv`]'s output.
 pub fn from_csv(text: &str) -> anyhow::Result<Vec<Row>> {
     let mut lines = text.lines();
-    if lines.next() != Some(CSV_HEADER) {
-        bail!("unexpected header\nhint: the CSV must come from this version's `clevrtex bench render`");
-    }
+    let cells = match lines.next() {
+        Some(CSV_HEADER) => 24,
+        Some(CSV_HEADER_V1) => 22,
+        _ => bail!("unexpected header\nhint: the CSV must come from `clevrtex bench render`"),
+    };
     lines
         .enumerate()
         .map(|(i, line)| {
             let c: Vec<&str> = line.split(',').collect();
-            if c.len() != 22 {
-                bail!("line {}: {} cells, expected 22", i + 2, c.len());
+            if c.len() != cells {
+                bail!("line {}: {} cells, expected {cells}", i + 2, c.len());
             }
             let f = |k: usize| -> anyhow::Result<f64> {
                 if c[k] == "inf" {
@@ -113,6 +120,7 @@ pub fn from_csv(text: &str) -> anyhow::Result<Vec<Row>> {
             .find(|m| *m == c[3])
             .unwrap_or("other");
             Ok(Row {
+                blender: c.get(22).map_or(String::new(), |v| v.to_string()),
                 scene: c[0].to_string(),
                 variant: c[1].to_string(),
                 width: u(4)?,
@@ -151,6 +159,7 @@ pub fn from_csv(text: &str) -> anyhow::Result<Vec<Row>> {
                     mask_equal: c[20] == "true",
                     depth_equal: c[21] == "true",
                 },
+                reference_mean: if cells == 24 { f(23)? } else { f64::NAN },
             })
         })
         .collect()
@@ -164,6 +173,7 @@ mod tests {
     fn csv_round_trips() {
         let s = ladder::ladder(true).remove(5);
         let row = Row {
+            blender: "4.5.15".into(),
             scene: "full#0".into(),
             variant: "full".into(),
             width: 160,
@@ -179,6 +189,7 @@ mod tests {
                 mask_equal: true,
                 depth_equal: false,
             },
+            reference_mean: 0.375,
         };
         let text = to_csv(std::slice::from_ref(&row));
         let back = from_csv(&text).unwrap();
@@ -190,7 +201,18 @@ mod tests {
             (160, 120, 1.5, 1.25)
         );
         assert_eq!(b.errors, row.errors);
+        assert_eq!((b.blender.as_str(), b.reference_mean), ("4.5.15", 0.375));
         assert_eq!(to_csv(&back), text);
+        // A CSV of the version before the Blender column still loads, Blender unknown.
+        let old: String = text
+            .lines()
+            .map(|l| l.rsplitn(3, ',').nth(2).unwrap().to_string() + "\n")
+            .collect();
+        assert!(old.starts_with(CSV_HEADER_V1), "{old}");
+        let back = from_csv(&old).unwrap();
+        assert_eq!(back[0].blender, "");
+        assert!(back[0].reference_mean.is_nan());
+        assert_eq!(back[0].errors, row.errors);
         assert!(from_csv("nope\n")
             .unwrap_err()
             .to_string()

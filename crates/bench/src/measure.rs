@@ -70,6 +70,8 @@ pub enum Event<'a> {
 /// One measured (setting, scene) pair.
 #[derive(Debug)]
 pub struct Row {
+    /// The Blender version that rendered it (empty in CSVs of older versions).
+    pub blender: String,
     /// The scene's label.
     pub scene: String,
     /// The scene's variant.
@@ -86,6 +88,9 @@ pub struct Row {
     pub cycles_s: f64,
     /// Its error against the reference.
     pub errors: Errors,
+    /// Mean linear value of the scene's reference (its Blender's own; NaN in CSVs of older
+    /// versions): brightness compared across Blenders.
+    pub reference_mean: f64,
 }
 
 /// The sizes of a bench run, defaults resolved (`--quick` or not).
@@ -209,8 +214,10 @@ pub struct Bench<'a> {
     pub catalogue: &'a Catalogue,
     /// The Blender's version (keys the references).
     pub blender_version: &'a str,
-    /// Output folder: `references/` and `runs/` go here.
+    /// Output folder: `references/` goes here (shared: keyed by the Blender version).
     pub out: &'a Path,
+    /// Where each rung's render goes (`OUT/runs`, or one folder per Blender when several).
+    pub runs: &'a Path,
     /// Told what is going on.
     pub on_event: &'a mut dyn FnMut(Event),
 }
@@ -239,6 +246,7 @@ impl Bench<'_> {
                     rel_error: errors.rel_error,
                 });
                 rows.push(Row {
+                    blender: self.blender_version.to_string(),
                     scene: bs.label.clone(),
                     variant: bs.scene.variant.clone(),
                     width: plan.width,
@@ -247,6 +255,7 @@ impl Bench<'_> {
                     wall_s,
                     cycles_s,
                     errors,
+                    reference_mean: reference.mean,
                 });
             }
         }
@@ -330,7 +339,7 @@ impl Bench<'_> {
         }
     }
 
-    /// Render scene `si` at one rung into `OUT/runs/`; its wall and Cycles seconds and errors.
+    /// Render scene `si` at one rung into [`Bench::runs`]; its wall and Cycles seconds and errors.
     fn rung(
         &mut self,
         si: usize,
@@ -340,10 +349,7 @@ impl Bench<'_> {
         geometry: &Outputs,
     ) -> anyhow::Result<(f64, f64, Errors)> {
         let scene = with_sampling(&bs.scene, &setting.sampling);
-        let dir = self
-            .out
-            .join("runs")
-            .join(format!("{si:02}-{}", setting.label));
+        let dir = self.runs.join(format!("{si:02}-{}", setting.label));
         let label = format!("{} {}", bs.label, setting.label);
         let (wall_s, cycles_s) = render_into(self.blender, &label, &scene, &dir)?;
         let errors = compare(&read_outputs(&dir)?, reference, geometry);

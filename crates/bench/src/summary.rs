@@ -11,8 +11,9 @@ use crate::ladder::Setting;
 use crate::measure::Row;
 use crate::plot;
 
-/// Means over scenes of one setting.
+/// Means over scenes of one setting on one Blender.
 pub struct Agg {
+    blender: String,
     setting: Setting,
     scenes: usize,
     wall_s: f64,
@@ -25,23 +26,26 @@ pub struct Agg {
     depth_equal: usize,
 }
 
-/// One [`Agg`] per rung, in the rows' order.
+/// One [`Agg`] per (Blender, rung), in the rows' order; a Blender given twice (runs
+/// alternated against load drift) is one, its runs averaged.
 pub fn aggregate(rows: &[Row]) -> Vec<Agg> {
-    let mut order: Vec<String> = Vec::new();
-    let mut by: BTreeMap<String, Vec<&Row>> = BTreeMap::new();
+    let mut order: Vec<(String, String)> = Vec::new();
+    let mut by: BTreeMap<(String, String), Vec<&Row>> = BTreeMap::new();
     for r in rows {
-        if !by.contains_key(&r.setting.label) {
-            order.push(r.setting.label.clone());
+        let key = (r.blender.clone(), r.setting.label.clone());
+        if !by.contains_key(&key) {
+            order.push(key.clone());
         }
-        by.entry(r.setting.label.clone()).or_default().push(r);
+        by.entry(key).or_default().push(r);
     }
     order
         .into_iter()
-        .map(|label| {
-            let rs = &by[&label];
+        .map(|key| {
+            let rs = &by[&key];
             let k = rs.len() as f64;
             let m = |f: &dyn Fn(&Row) -> f64| rs.iter().map(|r| f(r)).sum::<f64>() / k;
             Agg {
+                blender: key.0.clone(),
                 setting: rs[0].setting.clone(),
                 scenes: rs.len(),
                 wall_s: m(&|r| r.wall_s),
@@ -64,12 +68,29 @@ fn threshold_text(s: &Sampling) -> String {
         .map_or_else(|| "-".to_string(), |t| t.to_string())
 }
 
-/// The table of means, one line per rung, with a legend.
+/// The Blenders of `agg`, in order of appearance.
+fn blenders(agg: &[Agg]) -> Vec<&str> {
+    let mut v: Vec<&str> = Vec::new();
+    for a in agg {
+        if !v.contains(&a.blender.as_str()) {
+            v.push(&a.blender);
+        }
+    }
+    v
+}
+
+/// The table of means, one line per rung (per Blender, when several), with a legend.
 pub fn table(agg: &[Agg]) -> String {
     let mut s = String::new();
+    let several = blenders(agg).len() > 1;
     let _ = writeln!(
         s,
-        "\n{:<30} {:>5} {:>6} {:>7} {:>5} {:>8} {:>8} {:>9} {:>8} {:>7} {:>6} {:>5} {:>5}",
+        "\n{}{:<30} {:>5} {:>6} {:>7} {:>5} {:>8} {:>8} {:>9} {:>8} {:>7} {:>6} {:>5} {:>5}",
+        if several {
+            format!("{:<10} ", "blender")
+        } else {
+            String::new()
+        },
         "setting",
         "spp",
         "thresh",
@@ -88,7 +109,8 @@ pub fn table(agg: &[Agg]) -> String {
         let p = &a.setting.sampling;
         let _ = writeln!(
             s,
-            "{:<30} {:>5} {:>6} {:>7} {:>5} {:>8.2} {:>8.2} {:>9.5} {:>8.4} {:>+7.4} {:>6.2} {:>5} {:>5}",
+            "{}{:<30} {:>5} {:>6} {:>7} {:>5} {:>8.2} {:>8.2} {:>9.5} {:>8.4} {:>+7.4} {:>6.2} {:>5} {:>5}",
+            if several { format!("{:<10} ", a.blender) } else { String::new() },
             a.setting.label,
             p.samples,
             threshold_text(p),
@@ -108,9 +130,25 @@ pub fn table(agg: &[Agg]) -> String {
     s
 }
 
-/// The rungs at most as noisy as the original settings, by wall time, and the presets against
-/// the original (empty without the `original-512` rung).
+/// Per Blender: the rungs at most as noisy as the original settings, by wall time, and the
+/// presets against the original (nothing without the `original-512` rung). Each Blender's
+/// presets are measured against its own original and reference, so with several Blenders
+/// this is the presets per version.
 pub fn summary(agg: &[Agg]) -> String {
+    let versions = blenders(agg);
+    let mut s = String::new();
+    for v in &versions {
+        let mine: Vec<&Agg> = agg.iter().filter(|a| a.blender == *v).collect();
+        let one = summary_of(&mine);
+        if versions.len() > 1 && !one.is_empty() {
+            let _ = write!(s, "\nBlender {v}:");
+        }
+        s.push_str(&one);
+    }
+    s
+}
+
+fn summary_of(agg: &[&Agg]) -> String {
     let mut s = String::new();
     let Some(orig) = agg.iter().find(|a| a.setting.label == "original-512") else {
         return s;
@@ -126,6 +164,7 @@ pub fn summary(agg: &[Agg]) -> String {
     );
     let mut better: Vec<&Agg> = agg
         .iter()
+        .copied()
         .filter(|a| a.setting.label != orig.setting.label && a.rel_error <= orig.rel_error)
         .collect();
     better.sort_by(|a, b| a.wall_s.total_cmp(&b.wall_s));
@@ -166,13 +205,91 @@ pub fn summary(agg: &[Agg]) -> String {
 }
 
 fn curves(agg: &[Agg]) -> Vec<plot::Curve> {
-    let mut by: BTreeMap<&str, Vec<(f64, f64)>> = BTreeMap::new();
+    let several = blenders(agg).len() > 1;
+    let mut by: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
     for a in agg {
-        by.entry(a.setting.mode)
-            .or_default()
-            .push((a.cycles_s, a.rel_error));
+        let key = if several {
+            format!("{} {}", a.blender, a.setting.mode)
+        } else {
+            a.setting.mode.to_string()
+        };
+        by.entry(key).or_default().push((a.cycles_s, a.rel_error));
     }
-    by.into_iter().map(|(k, v)| (k.to_string(), v)).collect()
+    by.into_iter().collect()
+}
+
+/// One Blender's sums (then means) over its runs of one (rung, scene).
+#[derive(Default, Clone, Copy)]
+struct Cell {
+    rel_error: f64,
+    cycles_s: f64,
+    reference_mean: f64,
+    runs: f64,
+}
+
+/// Several Blenders side by side (empty with one): for each rung and scene, each Blender's
+/// error against its own reference, its Cycles time, the CPU time it needs to reach the first
+/// Blender's error (`(err / first's err)^2 x cycles / first's cycles`: error falls as
+/// 1/sqrt(samples) and time grows with samples) and its reference's mean linear value over
+/// the first's (brightness). A Blender given more than once (runs alternated against load
+/// drift) is averaged over its runs.
+pub fn side_by_side(rows: &[Row]) -> String {
+    let mut versions: Vec<&str> = Vec::new();
+    let mut keys: Vec<(&str, &str)> = Vec::new();
+    let mut sums: BTreeMap<(&str, &str, &str), Cell> = BTreeMap::new();
+    for r in rows {
+        if !versions.contains(&r.blender.as_str()) {
+            versions.push(&r.blender);
+        }
+        let key = (r.setting.label.as_str(), r.scene.as_str());
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+        let e = sums.entry((key.0, key.1, &r.blender)).or_default();
+        e.rel_error += r.errors.rel_error;
+        e.cycles_s += r.cycles_s;
+        e.reference_mean += r.reference_mean;
+        e.runs += 1.0;
+    }
+    let mut s = String::new();
+    if versions.len() < 2 {
+        return s;
+    }
+    let cell = |rung: &str, scene: &str, v: &str| {
+        sums.get(&(rung, scene, v)).map(|c| Cell {
+            rel_error: c.rel_error / c.runs,
+            cycles_s: c.cycles_s / c.runs,
+            reference_mean: c.reference_mean / c.runs,
+            runs: c.runs,
+        })
+    };
+    let first = versions[0];
+    let _ = writeln!(
+        s,
+        "\nBlenders side by side (each against its own reference; ratios against {first}, the first given):\n{:<30} {:<10} {:<10} {:>8} {:>9} {:>14} {:>10}",
+        "setting", "scene", "blender", "rel err", "cycles s", "CPU to 1st err", "ref mean"
+    );
+    for &(rung, scene) in &keys {
+        let Some(base) = cell(rung, scene, first) else {
+            continue;
+        };
+        for v in &versions {
+            let Some(c) = cell(rung, scene, v) else {
+                continue;
+            };
+            let cpu = (c.rel_error / base.rel_error).powi(2) * c.cycles_s / base.cycles_s;
+            let _ = writeln!(
+                s,
+                "{rung:<30} {scene:<10} {v:<10} {:>8.4} {:>9.2} {:>13.2}x {:>9.3}x",
+                c.rel_error,
+                c.cycles_s,
+                cpu,
+                c.reference_mean / base.reference_mean
+            );
+        }
+    }
+    s.push_str("(CPU to 1st err: Cycles CPU time this Blender needs for the first's error at this rung; ref mean: mean linear value of its reference over the first's, NaN for rows of a CSV without it)\n");
+    s
 }
 
 /// The plot's file stem in output folder `out` (`.png` and `.svg` are written).
@@ -198,4 +315,62 @@ pub fn write_plot(
         &curves(agg),
         text,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::metrics::Errors;
+
+    fn row(blender: &str, scene: &str, rel_error: f64, cycles_s: f64, reference_mean: f64) -> Row {
+        Row {
+            blender: blender.into(),
+            scene: scene.into(),
+            variant: "full".into(),
+            width: 16,
+            height: 12,
+            setting: crate::ladder::ladder(true).remove(0),
+            wall_s: cycles_s + 1.0,
+            cycles_s,
+            errors: Errors {
+                rmse_linear: rel_error / 4.0,
+                rel_error,
+                bias: 0.0,
+                psnr_srgb: 30.0,
+                mask_equal: true,
+                depth_equal: true,
+            },
+            reference_mean,
+        }
+    }
+
+    #[test]
+    fn blenders_are_aggregated_apart_and_put_side_by_side() {
+        // 3.4, 4.5, 4.5, 3.4 alternated on one scene: each version's two runs are averaged.
+        let rows = [
+            row("3.4.1", "full#0", 0.2, 10.0, 0.5),
+            row("4.5.15", "full#0", 0.3, 12.0, 0.49),
+            row("4.5.15", "full#0", 0.5, 14.0, 0.49),
+            row("3.4.1", "full#0", 0.2, 12.0, 0.5),
+        ];
+        let agg = aggregate(&rows);
+        assert_eq!(agg.len(), 2);
+        assert_eq!((agg[0].blender.as_str(), agg[0].scenes), ("3.4.1", 2));
+        assert!((agg[1].rel_error - 0.4).abs() < 1e-12);
+        assert!((agg[1].cycles_s - 13.0).abs() < 1e-12);
+        let t = table(&agg);
+        assert!(t.contains("blender") && t.contains("4.5.15"), "{t}");
+
+        let s = side_by_side(&rows);
+        // CPU time to 3.4's error: (0.4 / 0.2)^2 x 13 / 11 = 4.73; reference 0.49 / 0.5.
+        let line = s
+            .lines()
+            .find(|l| l.contains("4.5.15"))
+            .unwrap_or_else(|| panic!("{s}"));
+        assert!(line.contains("4.73x") && line.contains("0.980x"), "{line}");
+        assert!(s.contains("ratios against 3.4.1"), "{s}");
+        // One Blender: nothing side by side, no Blender column.
+        assert_eq!(side_by_side(&rows[..1]), "");
+        assert!(!table(&aggregate(&rows[..1])).contains("blender"));
+    }
 }
