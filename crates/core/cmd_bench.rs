@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clevrtex_bench::measure::WorkerResult;
 use clevrtex_bench::measure::{Bench, Plan};
-use clevrtex_bench::{csv, ladder, scenes, summary, Event, Render, Row};
+use clevrtex_bench::{csv, ladder, scenes, summary, Render, Row};
 use clevrtex_render::{RenderReply, Worker};
 
 use crate::blender_session::{command_error, BlenderSession, Settings};
@@ -179,23 +179,8 @@ fn run_render(args: RenderArgs) -> CmdResult {
                 ""
             }
         );
-        // One Blender: `OUT/runs` as always; several: one folder per place in the list (the
-        // version is Blender's word: only its plain characters make the name).
-        let runs = if args.blender.len() > 1 {
-            let v: String = blender_version
-                .chars()
-                .map(|c| {
-                    if c.is_ascii_alphanumeric() || c == '.' {
-                        c
-                    } else {
-                        '_'
-                    }
-                })
-                .collect();
-            args.out.join("runs").join(format!("{i}-{v}"))
-        } else {
-            args.out.join("runs")
-        };
+        let place = (args.blender.len() > 1).then_some(i);
+        let runs = clevrtex_bench::measure::runs_dir(&args.out, place, &blender_version);
         rows.extend(
             Bench {
                 blender: &mut session,
@@ -203,7 +188,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
                 blender_version: &blender_version,
                 out: &args.out,
                 runs: &runs,
-                on_event: &mut print_event,
+                on_event: &mut |event| eprintln!("{event}"),
             }
             .measure(&plan, &scenes, &settings)?,
         );
@@ -212,34 +197,6 @@ fn run_render(args: RenderArgs) -> CmdResult {
 
     csv::save(&rows, &args.out)?;
     report(&rows, n, width, height, &args.out)
-}
-
-/// Progress on stderr.
-fn print_event(event: Event) {
-    match event {
-        Event::ReferenceCached { scene, dir } => {
-            eprintln!("[{scene}] reference cached in `{}`", dir.display());
-        }
-        Event::ReferenceRendering { scene, samples } => {
-            eprintln!("[{scene}] rendering the reference ({samples} samples) ...");
-        }
-        Event::ReferenceRendered {
-            scene,
-            wall_s,
-            cycles_s,
-        } => {
-            eprintln!("[{scene}] reference took {wall_s:.1} s (cycles {cycles_s:.1} s)");
-        }
-        Event::Measured {
-            done,
-            total,
-            label,
-            wall_s,
-            rel_error,
-        } => {
-            eprintln!("[{done}/{total}] {label}: {wall_s:.2} s, rel error {rel_error:.4}");
-        }
-    }
 }
 
 /// Table and summary on stdout, plot next to the CSV.

@@ -67,6 +67,41 @@ pub enum Event<'a> {
     },
 }
 
+/// The progress line the command prints for each event (`clevrtex bench render`, on stderr).
+impl std::fmt::Display for Event<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Event::ReferenceCached { scene, dir } => {
+                write!(f, "[{scene}] reference cached in `{}`", dir.display())
+            }
+            Event::ReferenceRendering { scene, samples } => {
+                write!(
+                    f,
+                    "[{scene}] rendering the reference ({samples} samples) ..."
+                )
+            }
+            Event::ReferenceRendered {
+                scene,
+                wall_s,
+                cycles_s,
+            } => write!(
+                f,
+                "[{scene}] reference took {wall_s:.1} s (cycles {cycles_s:.1} s)"
+            ),
+            Event::Measured {
+                done,
+                total,
+                label,
+                wall_s,
+                rel_error,
+            } => write!(
+                f,
+                "[{done}/{total}] {label}: {wall_s:.2} s, rel error {rel_error:.4}"
+            ),
+        }
+    }
+}
+
 /// One measured (setting, scene) pair.
 #[derive(Debug)]
 pub struct Row {
@@ -204,6 +239,27 @@ fn render_into(
         blender.request(&mut |w| w.render_labelled(label, &path, Mode::Final, dir, timeout))?;
     let cycles_s = reply.timings.render_s;
     Ok((started.elapsed().as_secs_f64(), cycles_s))
+}
+
+/// Where the rungs' renders go in output folder `out`: `out/runs` for one Blender; with
+/// several, `out/runs/<place>-<version>` for the one at `place` in the list (the version is
+/// Blender's word: only its ASCII letters, digits and dots make the name, the rest `_`).
+pub fn runs_dir(out: &Path, place: Option<usize>, blender_version: &str) -> PathBuf {
+    let runs = out.join("runs");
+    let Some(i) = place else {
+        return runs;
+    };
+    let v: String = blender_version
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    runs.join(format!("{i}-{v}"))
 }
 
 /// Where everything the measurement needs comes from.
@@ -354,5 +410,25 @@ impl Bench<'_> {
         let (wall_s, cycles_s) = render_into(self.blender, &label, &scene, &dir)?;
         let errors = compare(&read_outputs(&dir)?, reference, geometry);
         Ok((wall_s, cycles_s, errors))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn runs_dir_is_one_plain_folder_per_place() {
+        let out = Path::new("o");
+        assert_eq!(runs_dir(out, None, "3.4.1"), Path::new("o/runs"));
+        assert_eq!(
+            runs_dir(out, Some(1), "4.5.15 LTS"),
+            Path::new("o/runs/1-4.5.15_LTS")
+        );
+        // Blender's answer never leaves the runs folder.
+        assert_eq!(
+            runs_dir(out, Some(0), "../../x/.."),
+            Path::new("o/runs/0-.._.._x_..")
+        );
     }
 }
