@@ -194,8 +194,18 @@ def principled_input(node, name):
 #   left of 4.x's extra noise once the BSDF matches: relative error at 64 spp 0.451 / 0.143
 #   with the tree, 0.262 / 0.093 without, 3.4 0.257 / 0.081 (full / camo). A scene file's
 #   `render.light_tree` still wins.
+# - `coat_gtr1`: v1's clearcoat is evaluated (and its pdf reported for MIS) with Disney's GTR1
+#   distribution of alpha^2 = Clearcoat Roughness^4 (Cycles 3.x bsdf_microfacet.h,
+#   `bsdf_clearcoat_D` / `D_GTR1`, masking with a fixed alpha 0.25), whose peak is
+#   |ln alpha^2| times lower than GGX's and whose tails are long; 4.x has no GTR1. GTR1 is
+#   exactly the mean of GGX distributions whose alpha^2 is log-uniform on [alpha^2, 1]
+#   ([`coat_gtr1_lobes`]), so the coat lobe becomes a mix of three GGX lobes fitted to it,
+#   weights summing to 1 (GTR1's normalisation). Needs `layers` (the coat is an added lobe).
+#   One coat under one light at roughness 0.15-0.3, 4.5 over 3.4: peak 0.80-1.00, energy
+#   0.95-1.01 (one GGX lobe: 3.1-6.7x, 1.19-1.44); bench squared error at 64 samples 1.21x /
+#   0.98x 3.4's (one lobe: 2.31x / 1.46x), for three more lobes' shading time.
 PARITY = {"coat": True, "sheen": True, "ggx": True, "ior": True, "layers": True,
-          "fresnel": True, "light_tree": True}
+          "fresnel": True, "light_tree": True, "coat_gtr1": True}
 
 # Factor of a 3.x input's constant value for its 4.0+ input, per PARITY switch.
 _PRINCIPLED_SCALE = {"Clearcoat": ("coat", 0.25), "Sheen": ("sheen", 0.2)}
@@ -238,6 +248,106 @@ def _ior_from_f0(f0):
     return (1.0 + r) / (1.0 - r)
 
 
+def _solve(a, b):
+    """x with a x = b (Gauss-Jordan, partial pivoting); None if singular."""
+    n = len(b)
+    m = [list(row) + [b[i]] for i, row in enumerate(a)]
+    for c in range(n):
+        p = max(range(c, n), key=lambda r: abs(m[r][c]))
+        m[c], m[p] = m[p], m[c]
+        if abs(m[c][c]) < 1e-300:
+            return None
+        for r in range(n):
+            if r != c:
+                f = m[r][c] / m[c][c]
+                for k in range(c, n + 1):
+                    m[r][k] -= f * m[c][k]
+    return [m[i][n] / m[i][i] for i in range(n)]
+
+
+def _mix_fit(bs, ss, target):
+    """Weights (summing to 1) of GGX lobes of alpha^2 `bs` whose energy within tan^2 = s of
+    the half vector best fits `target` at `ss` (least squares), and the sum of squares
+    (penalised where a weight is negative)."""
+    k = len(bs)
+    cols = [[s / (b + s) for s in ss] for b in bs]
+    a = [[sum(x * y for x, y in zip(cols[i], cols[j])) for j in range(k)] + [1.0]
+         for i in range(k)]
+    a.append([1.0] * k + [0.0])
+    sol = _solve(a, [sum(x * t for x, t in zip(cols[i], target)) for i in range(k)] + [1.0])
+    if sol is None:
+        return None, float("inf")
+    w = sol[:k]
+    err = sum((sum(w[i] * cols[i][j] for i in range(k)) - t) ** 2
+              for j, t in enumerate(target))
+    return w, err + 1e3 * sum(-x for x in w if x < 0)
+
+
+_GTR1_LOBES = {}
+
+
+def coat_gtr1_lobes(roughness, k=3):
+    """[(roughness, weight)] of `k` GGX lobes (4.x roughness: alpha = roughness^2) whose mix
+    approximates v1's clearcoat distribution, GTR1 with alpha^2 = a2 = `roughness`^4.
+
+    With s = tan^2 of the half vector's angle, GGX's energy within s (the integral of
+    D cos over that cone) is s / (b + s) for its alpha^2 b, and GTR1's is
+    ln((a2 + s) / (a2 (1 + s))) / ln(1 / a2): exactly the mean of GGX's over ln b uniform on
+    [ln a2, 0]. The fit: least squares on that energy at 80 values of s log-spaced from
+    a2 / 100 to 1000 (what a light of each angular size collects), weights summing to 1
+    (solved exactly for given lobes), the lobes' ln b by Nelder-Mead from the fractions
+    0.86, 0.5, 0.14 of ln a2. For roughness 0.05-0.3 the three lobes sit at fractions
+    ~0.85-0.88, 0.5, 0.12-0.15 with weights ~0.3, 0.4, 0.3; RMS energy error 0.006 (0.05) to
+    0.0002 (0.3), peak D 0.67-0.99x GTR1's where one GGX lobe's is 4.9-12x. Roughness 0 (a
+    mirror) and 1 (GTR1 flat) keep one lobe."""
+    if not 0.0 < roughness < 1.0 or k < 2:
+        return [(roughness, 1.0)]
+    key = (round(roughness, 6), k)
+    if key in _GTR1_LOBES:
+        return _GTR1_LOBES[key]
+    a2 = roughness ** 4
+    lo, hi = math.log(a2 * 1e-2), math.log(1e3)
+    ss = [math.exp(lo + (hi - lo) * i / 79.0) for i in range(80)]
+    target = [math.log((a2 + s) / (a2 * (1.0 + s))) / -math.log(a2) for s in ss]
+    top = math.log(a2)
+    start = [0.86, 0.5, 0.14] if k == 3 else [1.0 - (i + 0.5) / k for i in range(k)]
+
+    def cost(x):
+        if any(v < top or v > 0.0 for v in x):
+            return float("inf")
+        return _mix_fit([math.exp(v) for v in x], ss, target)[1]
+
+    pts = [[top * f for f in start]]
+    pts += [[v + (0.3 if j == i else 0.0) for j, v in enumerate(pts[0])] for i in range(k)]
+    vals = [cost(p) for p in pts]
+    for _ in range(200):  # Nelder-Mead
+        order = sorted(range(k + 1), key=lambda i: vals[i])
+        pts, vals = [pts[i] for i in order], [vals[i] for i in order]
+        c = [sum(p[j] for p in pts[:-1]) / k for j in range(k)]
+        xr = [2.0 * c[j] - pts[-1][j] for j in range(k)]
+        fr = cost(xr)
+        if fr < vals[0]:
+            xe = [3.0 * c[j] - 2.0 * pts[-1][j] for j in range(k)]
+            fe = cost(xe)
+            pts[-1], vals[-1] = (xe, fe) if fe < fr else (xr, fr)
+        elif fr < vals[-2]:
+            pts[-1], vals[-1] = xr, fr
+        else:
+            xc = [0.5 * (c[j] + pts[-1][j]) for j in range(k)]
+            fc = cost(xc)
+            if fc < vals[-1]:
+                pts[-1], vals[-1] = xc, fc
+            else:
+                for i in range(1, k + 1):
+                    pts[i] = [0.5 * (pts[0][j] + pts[i][j]) for j in range(k)]
+                    vals[i] = cost(pts[i])
+    best = pts[min(range(k + 1), key=lambda i: vals[i])]
+    bs = sorted(math.exp(v) for v in best)
+    w, _ = _mix_fit(bs, ss, target)
+    _GTR1_LOBES[key] = [(b ** 0.25, wi) for b, wi in zip(bs, w)]
+    return _GTR1_LOBES[key]
+
+
 def _lobe(nt, f0, roughness_from, normal_from):
     """A v2 principled node that is one GGX reflection lobe of normal-incidence reflectance
     `f0`, roughness and normal as the given input sockets (None: unbumped normal).
@@ -260,7 +370,10 @@ def _lobe(nt, f0, roughness_from, normal_from):
         n.inputs["Base Color"].default_value = (f0, f0, f0, 1.0)
     if "Specular Tint" in n.inputs and n.inputs["Specular Tint"].type == "RGBA":
         n.inputs["Specular Tint"].default_value = (1.0, 1.0, 1.0, 1.0)
-    _copy_input(nt, roughness_from, n.inputs["Roughness"])
+    if isinstance(roughness_from, (int, float)):
+        n.inputs["Roughness"].default_value = roughness_from
+    else:
+        _copy_input(nt, roughness_from, n.inputs["Roughness"])
     if normal_from is not None and normal_from.is_linked:
         nt.links.new(normal_from.links[0].from_socket, n.inputs["Normal"])
     return n
@@ -300,13 +413,19 @@ def principled_output(nt, bsdf):
         out = add.outputs["Shader"]
     coat = bsdf.inputs["Coat Weight"]
     if not coat.is_linked and coat.default_value > 0.0:
-        lobe = _lobe(nt, 0.04, bsdf.inputs["Coat Roughness"], None)
         weight = coat.default_value
         coat.default_value = 0.0
-        add = nt.nodes.new("ShaderNodeAddShader")
-        nt.links.new(out, add.inputs[0])
-        nt.links.new(_weighted(nt, lobe.outputs["BSDF"], weight=weight), add.inputs[1])
-        out = add.outputs["Shader"]
+        rough = bsdf.inputs["Coat Roughness"]
+        if PARITY["coat_gtr1"] and not rough.is_linked:
+            lobes = coat_gtr1_lobes(rough.default_value)
+        else:
+            lobes = [(rough, 1.0)]
+        for r, w in lobes:
+            lobe = _lobe(nt, 0.04, r, None)
+            add = nt.nodes.new("ShaderNodeAddShader")
+            nt.links.new(out, add.inputs[0])
+            nt.links.new(_weighted(nt, lobe.outputs["BSDF"], weight=weight * w), add.inputs[1])
+            out = add.outputs["Shader"]
     return out
 
 

@@ -105,7 +105,15 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
         );
         // Which parity settings made the sample (compat.parity_settings): every switch on for
         // 4.x and 5.x, none on 3.4.
-        for switch in ["coat", "sheen", "ggx", "ior", "layers", "fresnel"] {
+        for switch in [
+            "coat",
+            "sheen",
+            "ggx",
+            "ior",
+            "layers",
+            "fresnel",
+            "coat_gtr1",
+        ] {
             assert_eq!(
                 meta_b["blender_compat"][switch],
                 serde_json::json!(true),

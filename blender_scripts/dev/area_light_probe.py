@@ -20,7 +20,8 @@ OUT.jsonl as one JSON line with the case, the Blender version and the mean of ev
      "tilt": 0,                          degrees the light's aim turns away from the origin
                                          (about its horizontal axis: larger emission angle)
      "view": 0.2,                        metres the orthographic camera sees across
-     "samples": 256, "seed": 0}
+     "samples": 256, "seed": 0,
+     "parity_off": []}                   compat.PARITY switches off for this case (4.x)
 
 The camera is orthographic, aimed at the origin, 32x32 pixels. At the default `view` every
 pixel sees the plane near the origin (and, on a glossy plane seen from the mirror direction,
@@ -38,7 +39,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 DEFAULTS = {"material": "diffuse", "inputs": {}, "roughness": 0.1, "cam_elev": 90.0,
             "light_elev": 45.0, "distance": 5.0, "size": 0.5, "energy": 100.0, "tilt": 0.0,
-            "view": 0.2, "samples": 256, "seed": 0}
+            "view": 0.2, "samples": 256, "seed": 0, "parity_off": []}
 PASSES = ["Combined", "DiffDir", "DiffInd", "DiffCol", "GlossDir", "GlossInd", "GlossCol"]
 
 
@@ -183,7 +184,14 @@ def render_case(case, tmp):
     import compat
     import exr_dump
 
-    scene = build_case(case)
+    saved = dict(compat.PARITY)
+    for key in case["parity_off"]:
+        if key in compat.PARITY:
+            compat.PARITY[key] = False
+    try:
+        scene = build_case(case)
+    finally:
+        compat.PARITY.update(saved)
     bpy.ops.render.render(write_still=False)
     compat.set_exr_multilayer_output(scene.render.image_settings, "RLE")
     bpy.data.images["Render Result"].save_render(tmp, scene=scene)
