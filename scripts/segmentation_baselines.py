@@ -18,7 +18,8 @@ favours k-means. Higher is easier; a dataset where colour gives the objects away
     .venv-stats/bin/python scripts/segmentation_baselines.py OUT [OUT2 ...] [--limit N]
 
 OUT is the --out of `clevrtex generate` (every `clevrtex_<variant>` under it) or one variant
-folder. Prints one row per variant: images and the mean ARI-FG of each method.
+folder. Prints one row per variant: images and, per method, the mean ARI-FG over the images
+and its standard error (sample standard deviation / sqrt(images)).
 """
 
 import argparse
@@ -60,6 +61,14 @@ def ari_fg(ids, pred):
     return adjusted_rand_score(ids.ravel()[fg], pred.ravel()[fg])
 
 
+def mean_se(xs):
+    """`mean+-se` of the per-image scores: se the sample standard deviation over sqrt(n)."""
+    if not xs:
+        return "nan"
+    se = np.std(xs, ddof=1) / np.sqrt(len(xs)) if len(xs) > 1 else float("nan")
+    return "%.3f+-%.3f" % (np.mean(xs), se)
+
+
 def segment(rgb, k, seed=0):
     out = {}
     x = rgb.reshape(-1, 3).astype(np.float64)
@@ -79,7 +88,7 @@ def main():
     ap.add_argument("--limit", type=int, default=0, help="at most N images per variant")
     a = ap.parse_args()
     methods = ("kmeans_rgb", "kmeans_lab_xy", "felzenszwalb")
-    print("%-28s %-8s %6s %11s %14s %13s" % ("dataset", "variant", "images", *methods))
+    print("%-28s %-8s %6s %15s %15s %15s" % ("dataset", "variant", "images", *methods))
     for root in a.datasets:
         vdirs = [root] if os.path.basename(root.rstrip("/")).startswith("clevrtex_") else \
             sorted(glob.glob(os.path.join(root, "clevrtex_*")))
@@ -97,9 +106,8 @@ def main():
                     if s is not None:
                         scores[m].append(s)
             variant = os.path.basename(vdir.rstrip("/"))[len("clevrtex_"):]
-            print("%-28s %-8s %6d %11.3f %14.3f %13.3f" % (
-                root[-28:], variant, len(pngs), *[np.mean(scores[m]) if scores[m] else
-                                                  float("nan") for m in methods]))
+            print("%-28s %-8s %6d %15s %15s %15s" % (
+                root[-28:], variant, len(pngs), *[mean_se(scores[m]) for m in methods]))
     return 0
 
 
