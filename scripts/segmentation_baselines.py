@@ -19,7 +19,10 @@ favours k-means. Higher is easier; a dataset where colour gives the objects away
 
 OUT is the --out of `clevrtex generate` (every `clevrtex_<variant>` under it) or one variant
 folder. Prints one row per variant: images and, per method, the mean ARI-FG over the images
-and its standard error (sample standard deviation / sqrt(images)).
+and its standard error (sample standard deviation / sqrt(images)). With two OUTs, also the
+paired difference (second minus first) per variant over the image stems both hold, with the
+standard error of the per-image differences: for before/after renders of the same seeds,
+whose layouts are the same, this is far tighter than the two means' errors.
 """
 
 import argparse
@@ -88,6 +91,7 @@ def main():
     ap.add_argument("--limit", type=int, default=0, help="at most N images per variant")
     a = ap.parse_args()
     methods = ("kmeans_rgb", "kmeans_lab_xy", "felzenszwalb")
+    per_image = {}  # (OUT, variant) -> image file name -> method -> ARI-FG
     print("%-28s %-8s %6s %15s %15s %15s" % ("dataset", "variant", "images", *methods))
     for root in a.datasets:
         vdirs = [root] if os.path.basename(root.rstrip("/")).startswith("clevrtex_") else \
@@ -98,6 +102,7 @@ def main():
             if a.limit:
                 pngs = pngs[: a.limit]
             scores = {m: [] for m in methods}
+            variant = os.path.basename(vdir.rstrip("/"))[len("clevrtex_"):]
             for png in pngs:
                 rgb, ids = load(png)
                 k = max(2, len(np.unique(ids)))
@@ -105,9 +110,19 @@ def main():
                     s = ari_fg(ids, pred)
                     if s is not None:
                         scores[m].append(s)
-            variant = os.path.basename(vdir.rstrip("/"))[len("clevrtex_"):]
+                        per_image.setdefault((root, variant), {}).setdefault(
+                            os.path.basename(png), {})[m] = s
             print("%-28s %-8s %6d %15s %15s %15s" % (
                 root[-28:], variant, len(pngs), *[mean_se(scores[m]) for m in methods]))
+    if len(a.datasets) == 2:
+        first, second = a.datasets
+        for variant in sorted(set(v for (_, v) in per_image)):
+            x, y = per_image.get((first, variant), {}), per_image.get((second, variant), {})
+            both = sorted(set(x) & set(y))
+            diffs = [mean_se([y[s][m] - x[s][m] for s in both if m in x[s] and m in y[s]])
+                     for m in methods]
+            print("%-28s %-8s %6d %15s %15s %15s" % (
+                "paired difference", variant, len(both), *diffs))
     return 0
 
 
