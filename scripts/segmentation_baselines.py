@@ -18,7 +18,11 @@ favours k-means. Higher is easier; a dataset where colour gives the objects away
     .venv-stats/bin/python scripts/segmentation_baselines.py OUT [OUT2 ...] [--limit N]
 
 OUT is the --out of `clevrtex generate` (every `clevrtex_<variant>` under it) or one variant
-folder. Prints one row per variant: images and the mean ARI-FG of each method.
+folder. Prints one row per variant: images and, per method, the mean ARI-FG over the images
+and its standard error (sample standard deviation / sqrt(images)). With two OUTs, also the
+paired difference (second minus first) per variant over the image stems both hold, with the
+standard error of the per-image differences: for before/after renders of the same seeds,
+whose layouts are the same, this is far tighter than the two means' errors.
 """
 
 import argparse
@@ -60,6 +64,14 @@ def ari_fg(ids, pred):
     return adjusted_rand_score(ids.ravel()[fg], pred.ravel()[fg])
 
 
+def mean_se(xs):
+    """`mean+-se` of the per-image scores: se the sample standard deviation over sqrt(n)."""
+    if not xs:
+        return "nan"
+    se = np.std(xs, ddof=1) / np.sqrt(len(xs)) if len(xs) > 1 else float("nan")
+    return "%.3f+-%.3f" % (np.mean(xs), se)
+
+
 def segment(rgb, k, seed=0):
     out = {}
     x = rgb.reshape(-1, 3).astype(np.float64)
@@ -79,7 +91,8 @@ def main():
     ap.add_argument("--limit", type=int, default=0, help="at most N images per variant")
     a = ap.parse_args()
     methods = ("kmeans_rgb", "kmeans_lab_xy", "felzenszwalb")
-    print("%-28s %-8s %6s %11s %14s %13s" % ("dataset", "variant", "images", *methods))
+    per_image = {}  # (OUT, variant) -> image file name -> method -> ARI-FG
+    print("%-28s %-8s %6s %15s %15s %15s" % ("dataset", "variant", "images", *methods))
     for root in a.datasets:
         vdirs = [root] if os.path.basename(root.rstrip("/")).startswith("clevrtex_") else \
             sorted(glob.glob(os.path.join(root, "clevrtex_*")))
@@ -89,6 +102,7 @@ def main():
             if a.limit:
                 pngs = pngs[: a.limit]
             scores = {m: [] for m in methods}
+            variant = os.path.basename(vdir.rstrip("/"))[len("clevrtex_"):]
             for png in pngs:
                 rgb, ids = load(png)
                 k = max(2, len(np.unique(ids)))
@@ -96,10 +110,19 @@ def main():
                     s = ari_fg(ids, pred)
                     if s is not None:
                         scores[m].append(s)
-            variant = os.path.basename(vdir.rstrip("/"))[len("clevrtex_"):]
-            print("%-28s %-8s %6d %11.3f %14.3f %13.3f" % (
-                root[-28:], variant, len(pngs), *[np.mean(scores[m]) if scores[m] else
-                                                  float("nan") for m in methods]))
+                        per_image.setdefault((root, variant), {}).setdefault(
+                            os.path.basename(png), {})[m] = s
+            print("%-28s %-8s %6d %15s %15s %15s" % (
+                root[-28:], variant, len(pngs), *[mean_se(scores[m]) for m in methods]))
+    if len(a.datasets) == 2:
+        first, second = a.datasets
+        for variant in sorted(set(v for (_, v) in per_image)):
+            x, y = per_image.get((first, variant), {}), per_image.get((second, variant), {})
+            both = sorted(set(x) & set(y))
+            diffs = [mean_se([y[s][m] - x[s][m] for s in both if m in x[s] and m in y[s]])
+                     for m in methods]
+            print("%-28s %-8s %6d %15s %15s %15s" % (
+                "paired difference", variant, len(both), *diffs))
     return 0
 
 
