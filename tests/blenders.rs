@@ -17,7 +17,7 @@ use std::path::Path;
 use clevrtex_render::post::decode_png;
 use clevrtex_scene::SceneFile;
 
-use crate::util::{blender_or_skip, bpy_or_skip, clevrtex, text};
+use crate::util::{blender_or_skip, bpy_or_skip, clevrtex, repo_root, text};
 
 /// Largest mean absolute depth difference on a truly displaced backdrop, mm.
 const MEAN_ABS_DISPLACED_DEPTH_MM: f64 = 6.0;
@@ -229,4 +229,59 @@ fn denoising_changes_the_rgb_only() {
         read(1, ".png").unwrap(),
         "denoising left the RGB unchanged: was OIDN applied?"
     );
+}
+
+/// `compat.coat_gtr1_lobes` (the `coat_gtr1` parity switch): three GGX lobes whose weights sum
+/// to 1 and whose energy within each half-vector cone follows 3.4's GTR1 clearcoat closely,
+/// for the recipes' coat roughnesses; a mirror and a flat coat keep one lobe. The fit is pure
+/// Python, run in Blender 3.4 (the module imports `bpy`).
+#[test]
+fn coat_gtr1_lobes_fit_the_gtr1_clearcoat() {
+    let Some(blender) = blender_or_skip("coat_gtr1_lobes_fit_the_gtr1_clearcoat") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let script = dir.path().join("fit.py");
+    std::fs::write(
+        &script,
+        format!(
+            r#"import math, sys
+sys.path.insert(0, {root:?})
+import compat
+for r in (0.05, 0.15, 0.3):
+    lobes = compat.coat_gtr1_lobes(r)
+    assert len(lobes) == 3, lobes
+    ws = [w for _, w in lobes]
+    assert abs(sum(ws) - 1.0) < 1e-9 and min(ws) >= 0.0, lobes
+    a2 = r ** 4
+    lo, hi = math.log(a2 * 1e-2), math.log(1e3)
+    worst = 0.0
+    for i in range(60):
+        s = math.exp(lo + (hi - lo) * i / 59)
+        gtr1 = math.log((a2 + s) / (a2 * (1 + s))) / -math.log(a2)
+        mix = sum(w * s / (lr ** 4 + s) for lr, w in lobes)
+        worst = max(worst, abs(mix - gtr1))
+    assert worst < 0.03, (r, worst)
+    print("fit", r, round(worst, 4))
+assert compat.coat_gtr1_lobes(0.0) == [(0.0, 1.0)], compat.coat_gtr1_lobes(0.0)
+assert compat.coat_gtr1_lobes(1.0) == [(1.0, 1.0)], compat.coat_gtr1_lobes(1.0)
+print("FIT-OK")
+"#,
+            root = repo_root().join("blender_scripts").to_string_lossy()
+        ),
+    )
+    .unwrap();
+    let out = std::process::Command::new(blender)
+        .args([
+            "-b",
+            "--factory-startup",
+            "--python-exit-code",
+            "1",
+            "--python",
+        ])
+        .arg(&script)
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert!(out.status.success() && t.contains("FIT-OK"), "{t}");
 }
