@@ -570,6 +570,33 @@ def cycles_gpus():
     return out
 
 
+def cuda_kernels():
+    """The CUDA kernels this build's Cycles ships (`lib/kernel_sm_XY.cubin*` and
+    `lib/kernel_compute_XY.ptx*` beside the Cycles add-on), as compute capabilities
+    10 x major + minor: `{"cubin": [50, ..., 89, 120], "ptx": [75]}`; empty lists where the
+    build has none (Debian's Blender). Cycles loads the cubin made for the GPU's exact compute
+    capability, else has the driver compile the nearest older PTX at the first render, which
+    takes minutes (the `--device` docs)."""
+    out = {"cubin": [], "ptx": []}
+    try:
+        import sys
+
+        cycles = sys.modules.get("cycles")
+        lib = os.path.join(os.path.dirname(cycles.__file__), "lib")
+        for name in sorted(os.listdir(lib)):
+            for kind, prefix, ext in (("cubin", "kernel_sm_", ".cubin"),
+                                      ("ptx", "kernel_compute_", ".ptx")):
+                rest = name[len(prefix):] if name.startswith(prefix) else ""
+                digits = rest.split(".")[0]
+                if digits.isdigit() and rest[len(digits):].startswith(ext):
+                    out[kind].append(int(digits))
+    except Exception:  # informational only: a build without the folder ships none
+        pass
+    for kind in out:
+        out[kind] = sorted(set(out[kind]))
+    return out
+
+
 def features():
     """What this build offers beyond 3.4's Cycles: OpenImageDenoise, path guiding (CPU only),
     the light tree (4.0+) and the sampling patterns (names)."""

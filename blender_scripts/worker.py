@@ -101,6 +101,7 @@ class Worker:
             "blender_version": self.compat.version_string(),
             "cycles_devices": self.compat.cycles_devices(),
             "gpus": self.compat.cycles_gpus(),
+            "cuda_kernels": self.compat.cuda_kernels(),
             "features": self.compat.features(),
             "compat": self.compat.parity_settings(),
         })

@@ -285,3 +285,68 @@ print("FIT-OK")
     let t = text(&out);
     assert!(out.status.success() && t.contains("FIT-OK"), "{t}");
 }
+
+/// The bridge lists the CUDA kernels each Blender's Cycles ships (`compat.cuda_kernels`, sent
+/// in `ready` as `cuda_kernels`), from which `generate` and `doctor` tell whether a GPU's
+/// kernel must first be compiled: Debian's 3.4 ships none; PyPI's bpy 4.5 ships cubins that
+/// include sm_86 and sm_89 but not sm_80 or sm_90 (A100, H100), and PTX compute_75.
+#[test]
+fn bridge_lists_the_cuda_kernels_each_blender_ships() {
+    use clevrtex_render::device::{CudaKernels, KernelLoad};
+    for blender in crate::util::test_blenders("bridge_lists_the_cuda_kernels_each_blender_ships") {
+        let dir = tempfile::tempdir().unwrap();
+        let script = dir.path().join("kernels.py");
+        std::fs::write(
+            &script,
+            format!(
+                "import json, sys\nsys.path.insert(0, {root:?})\nimport bpy\nimport compat\nprint('KERNELS ' + json.dumps(compat.cuda_kernels()))\nprint('VERSION ' + bpy.app.version_string)\n",
+                root = repo_root().join("blender_scripts").to_string_lossy()
+            ),
+        )
+        .unwrap();
+        let python = blender
+            .file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with("python"));
+        let mut cmd = std::process::Command::new(&blender);
+        if !python {
+            cmd.args([
+                "-b",
+                "--factory-startup",
+                "--python-exit-code",
+                "1",
+                "--python",
+            ]);
+        }
+        let out = cmd.arg(&script).output().unwrap();
+        let t = text(&out);
+        assert!(out.status.success(), "{t}");
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let field = |key: &str| {
+            stdout
+                .lines()
+                .find_map(|l| l.strip_prefix(key))
+                .unwrap_or_else(|| panic!("no `{key}` line: {t}"))
+                .to_string()
+        };
+        let kernels: CudaKernels = serde_json::from_str(&field("KERNELS ")).unwrap();
+        let version = field("VERSION ");
+        if version.starts_with("3.") {
+            assert_eq!(kernels, CudaKernels::default(), "{version}: {t}");
+        } else {
+            for cc in [86, 89] {
+                assert_eq!(
+                    kernels.load_for(cc),
+                    KernelLoad::Shipped,
+                    "{version}: {kernels:?}"
+                );
+            }
+            for cc in [80, 90] {
+                assert_eq!(
+                    kernels.load_for(cc),
+                    KernelLoad::Compiled { from: 75 },
+                    "{version}: {kernels:?}"
+                );
+            }
+        }
+    }
+}

@@ -86,6 +86,11 @@ pub fn run(args: Args) -> CmdResult {
                 }
             );
             println!("{}", ready.features_line());
+            let caps = clevrtex_render::device::nvidia_compute_capabilities();
+            ready
+                .cuda_kernel_lines(&caps)
+                .iter()
+                .for_each(|l| println!("{l}"));
             if !ready.cycles_devices.iter().any(|d| d == "CPU") {
                 problems.push("Cycles reports no CPU device".to_string());
             }

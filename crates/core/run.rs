@@ -57,6 +57,9 @@ pub(crate) fn run_jobs(
         let names: Vec<String> = devices.iter().map(|d| d.describe()).collect();
         eprintln!("devices: {}", names.join(", "));
     }
+    if let Some(w) = clevrtex_render::device::kernel_compile_warning(&devices) {
+        eprintln!("{w}");
+    }
     let opts = PoolOptions {
         blender,
         materials_json,

@@ -19,6 +19,164 @@ pub struct Gpu {
     pub id: String,
 }
 
+/// How long a worker may take over its renders, on top of the usual limits, on a GPU whose
+/// CUDA kernel the driver must compile first ([`Placement::compiles_kernel`]): Cycles 4.5's
+/// kernel did not finish compiling for an H100 in 9 minutes (docs/performance.md, "GPUs").
+pub const KERNEL_COMPILE_GRACE: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// The CUDA kernels a Blender's Cycles ships (`cuda_kernels` of the `ready` reply), as compute
+/// capabilities 10 x major + minor (`sm_89` is 89, `sm_120` is 120).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize)]
+pub struct CudaKernels {
+    /// Ready-made kernels (`kernel_sm_XY.cubin`): each runs on exactly that capability.
+    #[serde(default)]
+    pub cubin: Vec<u32>,
+    /// PTX (`kernel_compute_XY.ptx`), which the driver compiles for any later capability.
+    #[serde(default)]
+    pub ptx: Vec<u32>,
+}
+
+/// How Cycles gets its CUDA kernel for a GPU ([`CudaKernels::load_for`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum KernelLoad {
+    /// A cubin made for this compute capability ships: nothing to compile.
+    Shipped,
+    /// The driver compiles the PTX of this (older) capability at the first render.
+    Compiled {
+        /// The PTX's compute capability (10 x major + minor).
+        from: u32,
+    },
+    /// Neither: Cycles cannot render on this GPU.
+    Missing,
+}
+
+impl CudaKernels {
+    /// What Cycles does on a GPU of compute capability `cc` (10 x major + minor), as its CUDA
+    /// device's `compile_kernel` does: the cubin of exactly `cc`, else the newest PTX not newer
+    /// than `cc`, compiled by the driver.
+    pub fn load_for(&self, cc: u32) -> KernelLoad {
+        if self.cubin.contains(&cc) {
+            KernelLoad::Shipped
+        } else if let Some(from) = self.ptx.iter().copied().filter(|p| *p <= cc).max() {
+            KernelLoad::Compiled { from }
+        } else {
+            KernelLoad::Missing
+        }
+    }
+
+    /// `sm_50, sm_52, ...; PTX compute_75`, for messages.
+    pub fn describe(&self) -> String {
+        let list = |v: &[u32], p: &str| -> String {
+            v.iter()
+                .map(|c| format!("{p}{c}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        format!(
+            "cubins {}; PTX {}",
+            if self.cubin.is_empty() {
+                "none".into()
+            } else {
+                list(&self.cubin, "sm_")
+            },
+            if self.ptx.is_empty() {
+                "none".into()
+            } else {
+                list(&self.ptx, "compute_")
+            }
+        )
+    }
+}
+
+/// `major.minor` as 10 x major + minor (`9.0` is 90, `12.0` is 120); `None` if not that form.
+fn capability(text: &str) -> Option<u32> {
+    let (major, minor) = text.trim().split_once('.')?;
+    let (major, minor): (u32, u32) = (major.parse().ok()?, minor.parse().ok()?);
+    (minor < 10 && major < 100).then_some(major * 10 + minor)
+}
+
+/// (name, compute capability) per line of `nvidia-smi --query-gpu=name,compute_cap
+/// --format=csv,noheader` (`NVIDIA H100 80GB HBM3, 9.0`); lines of another form are skipped.
+pub fn parse_compute_capabilities(text: &str) -> Vec<(String, u32)> {
+    text.lines()
+        .filter_map(|l| {
+            let (name, cc) = l.rsplit_once(',')?;
+            Some((name.trim().to_string(), capability(cc)?))
+        })
+        .collect()
+}
+
+/// The NVIDIA GPUs' compute capabilities, by name, as `nvidia-smi` reports them (empty where
+/// it is missing or fails: then nothing is known, and nothing is assumed).
+pub fn nvidia_compute_capabilities() -> Vec<(String, u32)> {
+    std::process::Command::new("nvidia-smi")
+        .args(["--query-gpu=name,compute_cap", "--format=csv,noheader"])
+        .stderr(std::process::Stdio::null())
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| parse_compute_capabilities(&String::from_utf8_lossy(&o.stdout)))
+        .unwrap_or_default()
+}
+
+/// For each CUDA or OptiX GPU of `gpus` whose compute capability `caps` gives (by name), how
+/// Cycles gets its kernel from `kernels`: `(gpu, capability, load)`.
+pub fn kernel_loads<'g>(
+    gpus: &'g [Gpu],
+    kernels: &CudaKernels,
+    caps: &[(String, u32)],
+) -> Vec<(&'g Gpu, u32, KernelLoad)> {
+    gpus.iter()
+        .filter(|g| g.kind == "CUDA" || g.kind == "OPTIX")
+        .filter_map(|g| {
+            let cc = caps.iter().find(|(name, _)| *name == g.name)?.1;
+            Some((g, cc, kernels.load_for(cc)))
+        })
+        .collect()
+}
+
+/// Mark the placements whose GPU needs its kernel compiled ([`Placement::compiles_kernel`]).
+pub fn mark_kernel_compiles(
+    placements: &mut [Placement],
+    kernels: &CudaKernels,
+    caps: &[(String, u32)],
+) {
+    for p in placements.iter_mut().filter(|p| p.is_gpu()) {
+        let gpu = Gpu {
+            kind: p.kind.clone(),
+            name: p.name.clone(),
+            id: String::new(),
+        };
+        if let Some((_, cc, KernelLoad::Compiled { from })) =
+            kernel_loads(std::slice::from_ref(&gpu), kernels, caps).first()
+        {
+            p.compiles_kernel = Some(format!(
+                "compute capability {}.{}: this Blender ships {}, so the driver compiles PTX compute_{from}",
+                cc / 10,
+                cc % 10,
+                kernels.describe()
+            ));
+        }
+    }
+}
+
+/// The warning `generate` and `render` print when a worker's GPU needs its kernel compiled.
+pub fn kernel_compile_warning(placements: &[Placement]) -> Option<String> {
+    let p = placements.iter().find(|p| p.compiles_kernel.is_some())?;
+    Some(format!(
+        "warning: `{}` has no ready-made Cycles kernel in this Blender ({}); each worker's first \
+         render waits while the driver compiles it (many minutes: over 9 on an H100 with bpy \
+         4.5), so its time limits are raised by {} min; CUDA_CACHE_MAXSIZE is set to 4 GiB so the \
+         driver keeps the result for later runs on this machine\nhint: warm the cache once per \
+         node before a large job (`clevrtex generate -n 1 --device {} --out /tmp/warm`), or use \
+         a Blender built with kernels for this GPU",
+        p.name,
+        p.compiles_kernel.as_deref().unwrap_or_default(),
+        KERNEL_COMPILE_GRACE.as_secs() / 60,
+        p.kind.to_ascii_lowercase()
+    ))
+}
+
 /// What `--device` asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum DeviceChoice {
@@ -81,6 +239,11 @@ pub struct Placement {
     pub index: usize,
     /// The GPU's name (empty for the CPU).
     pub name: String,
+    /// Set where Blender ships no CUDA kernel for this NVIDIA GPU, so that Cycles has the
+    /// driver compile one from PTX at a worker's first render (minutes; see
+    /// [`CudaKernels::load_for`]): what is missing, for messages. The pool then allows that
+    /// first render [`KERNEL_COMPILE_GRACE`] more.
+    pub compiles_kernel: Option<String>,
 }
 
 impl Placement {
@@ -90,6 +253,7 @@ impl Placement {
             kind: "CPU".into(),
             index: 0,
             name: String::new(),
+            compiles_kernel: None,
         }
     }
 
@@ -135,6 +299,7 @@ pub fn plan(choice: DeviceChoice, gpus: &[Gpu]) -> Result<Vec<Placement>, String
                 kind: kind.to_string(),
                 index,
                 name: g.name.clone(),
+                compiles_kernel: None,
             })
             .collect()
     };
@@ -261,5 +426,79 @@ mod tests {
         assert_eq!(DeviceChoice::parse("OptiX"), Some(DeviceChoice::Optix));
         assert_eq!(DeviceChoice::parse("metal"), None);
         assert_eq!(DeviceChoice::Hip.name(), "hip");
+    }
+
+    /// bpy 4.5's kernels (`compat.cuda_kernels()` there): cubins up to sm_89 and sm_120, PTX
+    /// compute_75.
+    fn bpy45() -> CudaKernels {
+        CudaKernels {
+            cubin: vec![30, 35, 37, 50, 52, 60, 61, 70, 75, 86, 89, 120],
+            ptx: vec![75],
+        }
+    }
+
+    #[test]
+    fn cycles_compiles_ptx_only_where_no_cubin_matches_exactly() {
+        let k = bpy45();
+        assert_eq!(k.load_for(89), KernelLoad::Shipped);
+        assert_eq!(k.load_for(120), KernelLoad::Shipped);
+        // An A100 (8.0) and an H100 (9.0): no cubin of their own, the sm_75 one does not run.
+        assert_eq!(k.load_for(80), KernelLoad::Compiled { from: 75 });
+        assert_eq!(k.load_for(90), KernelLoad::Compiled { from: 75 });
+        // Older than every PTX, and a build with no kernels (Debian's Blender).
+        assert_eq!(k.load_for(72), KernelLoad::Missing);
+        assert_eq!(CudaKernels::default().load_for(90), KernelLoad::Missing);
+        // The newest PTX not newer than the GPU.
+        let two = CudaKernels {
+            cubin: vec![],
+            ptx: vec![52, 75, 100],
+        };
+        assert_eq!(two.load_for(90), KernelLoad::Compiled { from: 75 });
+        assert_eq!(two.load_for(60), KernelLoad::Compiled { from: 52 });
+    }
+
+    #[test]
+    fn compute_capabilities_parse_from_nvidia_smi() {
+        let out = "NVIDIA H100 80GB HBM3, 9.0\nNVIDIA A100-SXM4-40GB, 8.0\nNVIDIA GeForce RTX 5090, 12.0\n[N/A]\nodd, 9\nbad, x.y\n";
+        assert_eq!(
+            parse_compute_capabilities(out),
+            vec![
+                ("NVIDIA H100 80GB HBM3".to_string(), 90),
+                ("NVIDIA A100-SXM4-40GB".to_string(), 80),
+                ("NVIDIA GeForce RTX 5090".to_string(), 120),
+            ]
+        );
+    }
+
+    #[test]
+    fn gpus_without_a_ready_made_kernel_are_marked_and_warned_about() {
+        let gpus = [
+            gpu("OPTIX", "NVIDIA H100 80GB HBM3"),
+            gpu("OPTIX", "NVIDIA RTX 4090"),
+        ];
+        let caps = vec![
+            ("NVIDIA H100 80GB HBM3".to_string(), 90),
+            ("NVIDIA RTX 4090".to_string(), 89),
+        ];
+        let mut p = plan(DeviceChoice::Optix, &gpus).unwrap();
+        mark_kernel_compiles(&mut p, &bpy45(), &caps);
+        let note = p[0].compiles_kernel.as_deref().unwrap();
+        assert!(
+            note.contains("compute capability 9.0") && note.contains("compute_75"),
+            "{note}"
+        );
+        assert_eq!(p[1].compiles_kernel, None);
+        let w = kernel_compile_warning(&p).unwrap();
+        assert!(
+            w.contains("NVIDIA H100 80GB HBM3") && w.contains("CUDA_CACHE_MAXSIZE"),
+            "{w}"
+        );
+        assert!(w.contains("--device optix") && w.contains("60 min"), "{w}");
+        assert_eq!(kernel_compile_warning(&p[1..]), None);
+        // Unknown capability (no nvidia-smi): nothing is assumed.
+        let mut q = plan(DeviceChoice::Optix, &gpus).unwrap();
+        mark_kernel_compiles(&mut q, &bpy45(), &[]);
+        assert!(q.iter().all(|p| p.compiles_kernel.is_none()));
+        assert_eq!(kernel_compile_warning(&[Placement::cpu()]), None);
     }
 }

@@ -14,7 +14,8 @@ use crate::worker::{Worker, WorkerOptions};
 /// The devices for `choice`: the CPU for `cpu`, and for `auto` on a machine without GPU
 /// device files; otherwise a first worker of `blender` (with `materials_json`, one thread,
 /// `startup_timeout`) is asked which GPUs Cycles sees. For `auto`, a worker that does not
-/// start means the CPU (the pool then reports the start failure itself).
+/// start means the CPU (the pool then reports the start failure itself). A GPU for which the
+/// Blender ships no ready-made CUDA kernel is marked ([`device::mark_kernel_compiles`]).
 pub fn plan_devices(
     choice: DeviceChoice,
     blender: &Path,
@@ -33,14 +34,20 @@ pub fn plan_devices(
             .with_threads(1)
             .with_startup_timeout(startup_timeout),
     );
-    let gpus = match started {
+    let (gpus, kernels) = match started {
         Ok(worker) => {
-            let gpus = worker.ready().gpus.clone();
+            let ready = worker.ready();
+            let found = (ready.gpus.clone(), ready.cuda_kernels.clone());
             worker.quit();
-            gpus
+            found
         }
         Err(_) if choice == DeviceChoice::Auto => return Ok(vec![Placement::cpu()]),
         Err(e) => return Err(e),
     };
-    device::plan(choice, &gpus).map_err(RenderError::DevicePlan)
+    let mut placements = device::plan(choice, &gpus).map_err(RenderError::DevicePlan)?;
+    if placements.iter().any(Placement::is_gpu) {
+        let caps = device::nvidia_compute_capabilities();
+        device::mark_kernel_compiles(&mut placements, &kernels, &caps);
+    }
+    Ok(placements)
 }

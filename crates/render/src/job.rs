@@ -139,6 +139,11 @@ pub(crate) struct JobSettings {
     pub(crate) out: PathBuf,
     /// Keep the float EXRs beside the PNGs.
     pub(crate) keep_exr: bool,
+    /// Added to [`auto_timeout`] (not to an explicit `timeout`): [`KERNEL_COMPILE_GRACE`] on a
+    /// GPU whose kernel the driver compiles first, else zero.
+    ///
+    /// [`KERNEL_COMPILE_GRACE`]: crate::device::KERNEL_COMPILE_GRACE
+    pub(crate) grace: Duration,
 }
 
 /// Turn `job` into a written sample on `slot`: attempts, the visibility check, the final
@@ -185,7 +190,9 @@ pub(crate) fn run_job(
         let scene_path = work.join("scene.json");
         let text = serde_json::to_string_pretty(&scene).expect("scene serialises");
         post::write_file(&scene_path, text.as_bytes())?;
-        let timeout = opts.timeout.unwrap_or_else(|| auto_timeout(&scene));
+        let timeout = opts
+            .timeout
+            .unwrap_or_else(|| auto_timeout(&scene) + opts.grace);
         let n = scene.objects.len();
         let label = match &job.source {
             Some(file) => format!("{} (scene file `{}`)", job.stem, file.display()),

@@ -317,7 +317,14 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
     };
     let opts = shared.opts;
     // With an explicit `--timeout` that limit is the only one; otherwise silence for
-    // IDLE_TIMEOUT also counts as a hang.
+    // IDLE_TIMEOUT also counts as a hang, longer on a GPU whose kernel must be compiled first
+    // (the driver says nothing meanwhile).
+    let placement = crate::device::placement_for(&opts.devices, slot_index);
+    let grace = if placement.compiles_kernel.is_some() {
+        crate::device::KERNEL_COMPILE_GRACE
+    } else {
+        Duration::ZERO
+    };
     let session = Session::new(
         WorkerOptions::new(
             opts.blender.clone(),
@@ -326,9 +333,9 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         )
         .with_threads(shared.threads)
         .with_startup_timeout(opts.startup_timeout)
-        .with_device(crate::device::placement_for(&opts.devices, slot_index)),
+        .with_device(placement),
         opts.retries,
-        opts.timeout.is_none().then_some(IDLE_TIMEOUT),
+        opts.timeout.is_none().then_some(IDLE_TIMEOUT + grace),
     )
     .sharing_start_flag(Arc::clone(&shared.ever_started));
     let mut slot = Slot {
@@ -342,6 +349,7 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         timeout: opts.timeout,
         out: opts.out.clone(),
         keep_exr: opts.keep_exr,
+        grace,
     };
     loop {
         if shared.stopping() {

@@ -109,6 +109,10 @@ pub struct Ready {
     /// The GPUs Cycles can render on, in its order.
     #[serde(default)]
     pub gpus: Vec<crate::device::Gpu>,
+    /// The CUDA kernels this build's Cycles ships (empty from older bridges and from builds
+    /// without CUDA).
+    #[serde(default)]
+    pub cuda_kernels: crate::device::CudaKernels,
     /// What this build offers beyond 3.4's Cycles.
     #[serde(default)]
     pub features: Features,
@@ -123,6 +127,34 @@ pub struct Ready {
 }
 
 impl Ready {
+    /// For `doctor`: one line per NVIDIA GPU (named by `caps`, see
+    /// [`crate::device::nvidia_compute_capabilities`]) on whether this Blender ships its CUDA
+    /// kernel or has the driver compile one at the first render; none without such GPUs.
+    pub fn cuda_kernel_lines(&self, caps: &[(String, u32)]) -> Vec<String> {
+        use crate::device::KernelLoad;
+        let mut seen = std::collections::BTreeSet::new();
+        crate::device::kernel_loads(&self.gpus, &self.cuda_kernels, caps)
+            .into_iter()
+            .filter(|(g, _, _)| seen.insert(g.name.clone()))
+            .map(|(g, cc, load)| {
+                let what = match load {
+                    KernelLoad::Shipped => format!("ready-made (sm_{cc})"),
+                    KernelLoad::Compiled { from } => format!(
+                        "none for sm_{cc}: the driver compiles PTX compute_{from} at each worker's first render unless its cache holds it (many minutes; see `generate`'s warning)"
+                    ),
+                    KernelLoad::Missing => format!("none for sm_{cc} and no PTX: Cycles cannot use it"),
+                };
+                format!(
+                    "cuda kernel for `{}` ({}.{}): {what}; this Blender ships {}",
+                    g.name,
+                    cc / 10,
+                    cc % 10,
+                    self.cuda_kernels.describe()
+                )
+            })
+            .collect()
+    }
+
     /// `gpus: ...; oidn: yes; path guiding: yes; light tree: yes`, for `doctor`.
     pub fn features_line(&self) -> String {
         let gpus: Vec<String> = self
@@ -389,6 +421,12 @@ impl Worker {
         // The bridge asks the kernel to kill it when we die, even by SIGKILL, and checks that
         // we are still its parent (see worker.py).
         cmd.env("CLEVRTEX_PARENT_PID", std::process::id().to_string());
+        // On a GPU, let the driver keep a compiled Cycles kernel (up to CUDA's 4 GiB maximum;
+        // its default is smaller than the kernel), so only a machine's first run compiles it
+        // (`device::kernel_compile_warning`). A value the user set wins.
+        if opts.device.is_gpu() && std::env::var_os("CUDA_CACHE_MAXSIZE").is_none() {
+            cmd.env("CUDA_CACHE_MAXSIZE", "4294967296");
+        }
         // Own process group: a Ctrl-C in the terminal reaches only us, and a kill reaches a
         // wrapper script's Blender too (`group`).
         crate::group::own_group(&mut cmd);
@@ -458,6 +496,7 @@ impl Worker {
                 blender_version: String::new(),
                 cycles_devices: Vec::new(),
                 gpus: Vec::new(),
+                cuda_kernels: Default::default(),
                 features: Features::default(),
                 compat: BTreeMap::new(),
                 extra: BTreeMap::new(),
