@@ -493,7 +493,12 @@ def render_final(built, out_dir, shadow_samples=None):
     view_layer = bpy.context.view_layer
     wanted = list(built.spec["passes"])
     passes.enable(view_layer, passes.final_passes(wanted))
+    cpu0 = time.process_time()
     timings = {"render_s": _render()}
+    # CPU seconds of every thread of this process during the render (Cycles' threads, and any
+    # other thread that ran meanwhile): what `bench render` compares across Blenders, steadier
+    # than the wall time on a loaded machine.
+    timings["render_cpu_s"] = time.process_time() - cpu0
     files = {}
     t0 = time.perf_counter()
     if "rgb" in wanted:

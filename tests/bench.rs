@@ -62,6 +62,7 @@ fn bench_render_writes_table_csv_plot_and_caches_references() {
         for col in [
             "wall_s",
             "cycles_s",
+            "cycles_cpu_s",
             "rmse_linear",
             "rel_error",
             "psnr_srgb",
@@ -137,6 +138,9 @@ fn bench_render_puts_several_blenders_side_by_side() {
         let m: f64 = r["reference_mean"].parse().unwrap();
         assert!(m.is_finite() && m > 0.0, "{r:?}");
         assert_eq!(r["mask_equal"], "true", "{r:?}");
+        // Both bridges (3.4's Blender, bpy's module) report the render's CPU seconds.
+        let cpu: f64 = r["cycles_cpu_s"].parse().unwrap();
+        assert!(cpu.is_finite() && cpu > 0.0, "{r:?}");
     }
     // Each version rendered its own reference (the cache is keyed by the version).
     assert_eq!(t.matches("rendering the reference").count(), 2, "{t}");

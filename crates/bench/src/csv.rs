@@ -13,7 +13,9 @@ use crate::metrics::Errors;
 /// The columns before `blender` was added: CSVs of older versions still load (their rows'
 /// Blender is unknown, empty).
 const CSV_HEADER_V1: &str = "scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal";
-const CSV_HEADER: &str = "scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal,blender,reference_mean";
+/// The columns before `cycles_cpu_s` was added (its rows' CPU time is unknown, NaN).
+const CSV_HEADER_V2: &str = "scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal,blender,reference_mean";
+const CSV_HEADER: &str = "scene,variant,setting,mode,width,height,samples,adaptive_threshold,max_bounces,diffuse_bounces,glossy_bounces,transmission_bounces,transparent_max_bounces,clamp_indirect,wall_s,cycles_s,rmse_linear,rel_error,bias,psnr_srgb,mask_equal,depth_equal,blender,reference_mean,cycles_cpu_s";
 
 /// The CSV of a bench run with output folder `out`.
 pub fn path(out: &Path) -> PathBuf {
@@ -46,7 +48,7 @@ pub fn to_csv(rows: &[Row]) -> String {
         let p = &r.setting.sampling;
         let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.6},{:.6},{:.6},{},{},{},{},{:.6}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.6},{:.6},{:.6},{},{},{},{},{:.6},{:.4}",
             r.scene,
             r.variant,
             r.setting.label,
@@ -76,6 +78,7 @@ pub fn to_csv(rows: &[Row]) -> String {
             r.errors.depth_equal,
             r.blender.replace(',', " "),
             r.reference_mean,
+            r.cycles_cpu_s,
         );
     }
     s
@@ -85,7 +88,8 @@ pub fn to_csv(rows: &[Row]) -> String {
 pub fn from_csv(text: &str) -> anyhow::Result<Vec<Row>> {
     let mut lines = text.lines();
     let cells = match lines.next() {
-        Some(CSV_HEADER) => 24,
+        Some(CSV_HEADER) => 25,
+        Some(CSV_HEADER_V2) => 24,
         Some(CSV_HEADER_V1) => 22,
         _ => bail!("unexpected header\nhint: the CSV must come from `clevrtex bench render`"),
     };
@@ -159,7 +163,8 @@ pub fn from_csv(text: &str) -> anyhow::Result<Vec<Row>> {
                     mask_equal: c[20] == "true",
                     depth_equal: c[21] == "true",
                 },
-                reference_mean: if cells == 24 { f(23)? } else { f64::NAN },
+                reference_mean: if cells >= 24 { f(23)? } else { f64::NAN },
+                cycles_cpu_s: if cells >= 25 { f(24)? } else { f64::NAN },
             })
         })
         .collect()
@@ -181,6 +186,7 @@ mod tests {
             setting: s.clone(),
             wall_s: 1.5,
             cycles_s: 1.25,
+            cycles_cpu_s: 2.5,
             errors: Errors {
                 rmse_linear: 0.125,
                 rel_error: 0.5,
@@ -202,11 +208,24 @@ mod tests {
         );
         assert_eq!(b.errors, row.errors);
         assert_eq!((b.blender.as_str(), b.reference_mean), ("4.5.15", 0.375));
+        assert_eq!(b.cycles_cpu_s, 2.5);
         assert_eq!(to_csv(&back), text);
+        // A CSV of the version before the CPU column still loads, CPU time unknown.
+        let v2: String = text
+            .lines()
+            .map(|l| l.rsplitn(2, ',').nth(1).unwrap().to_string() + "\n")
+            .collect();
+        assert!(v2.starts_with(CSV_HEADER_V2), "{v2}");
+        let back = from_csv(&v2).unwrap();
+        assert_eq!(
+            (back[0].blender.as_str(), back[0].reference_mean),
+            ("4.5.15", 0.375)
+        );
+        assert!(back[0].cycles_cpu_s.is_nan());
         // A CSV of the version before the Blender column still loads, Blender unknown.
         let old: String = text
             .lines()
-            .map(|l| l.rsplitn(3, ',').nth(2).unwrap().to_string() + "\n")
+            .map(|l| l.rsplitn(4, ',').nth(3).unwrap().to_string() + "\n")
             .collect();
         assert!(old.starts_with(CSV_HEADER_V1), "{old}");
         let back = from_csv(&old).unwrap();

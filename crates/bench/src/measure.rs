@@ -103,7 +103,7 @@ impl std::fmt::Display for Event<'_> {
 }
 
 /// One measured (setting, scene) pair.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct Row {
     /// The Blender version that rendered it (empty in CSVs of older versions).
     pub blender: String,
@@ -121,6 +121,10 @@ pub struct Row {
     pub wall_s: f64,
     /// Cycles' render time, seconds.
     pub cycles_s: f64,
+    /// CPU seconds of the Blender process during that render, all threads (NaN in CSVs of
+    /// older versions): the cost compared across Blenders, steadier than `cycles_s` (wall
+    /// time) when other jobs share the machine.
+    pub cycles_cpu_s: f64,
     /// Its error against the reference.
     pub errors: Errors,
     /// Mean linear value of the scene's reference (its Blender's own; NaN in CSVs of older
@@ -213,14 +217,23 @@ fn compare(got: &Outputs, reference: &Outputs, first_sample: &Outputs) -> Errors
     }
 }
 
-/// Render `scene` into `dir` (created, emptied of old outputs); returns wall time and
-/// Cycles' render time.
+/// What one render took, seconds.
+struct Took {
+    /// The request, as this process saw it.
+    wall_s: f64,
+    /// Cycles' render (wall time, as the bridge measured it).
+    cycles_s: f64,
+    /// CPU time of the Blender process during the render (NaN from older bridges).
+    cycles_cpu_s: f64,
+}
+
+/// Render `scene` into `dir` (created, emptied of old outputs); what it took.
 fn render_into(
     blender: &mut dyn Render,
     label: &str,
     scene: &SceneFile,
     dir: &Path,
-) -> anyhow::Result<(f64, f64)> {
+) -> anyhow::Result<Took> {
     std::fs::create_dir_all(dir).with_context(|| {
         format!(
             "cannot create `{}`\nhint: pass a writable `--out`",
@@ -237,8 +250,11 @@ fn render_into(
     let timeout = timeout_for(scene);
     let reply =
         blender.request(&mut |w| w.render_labelled(label, &path, Mode::Final, dir, timeout))?;
-    let cycles_s = reply.timings.render_s;
-    Ok((started.elapsed().as_secs_f64(), cycles_s))
+    Ok(Took {
+        wall_s: started.elapsed().as_secs_f64(),
+        cycles_s: reply.timings.render_s,
+        cycles_cpu_s: reply.timings.render_cpu_s.unwrap_or(f64::NAN),
+    })
 }
 
 /// Where the rungs' renders go in output folder `out`: `out/runs` for one Blender; with
@@ -292,8 +308,8 @@ impl Bench<'_> {
             let (reference, ref_dir) = self.reference(bs, plan.reference_samples)?;
             let geometry = self.first_sample(bs, &ref_dir)?;
             for setting in settings {
-                let (wall_s, cycles_s, errors) =
-                    self.rung(si, bs, setting, &reference, &geometry)?;
+                let (took, errors) = self.rung(si, bs, setting, &reference, &geometry)?;
+                let wall_s = took.wall_s;
                 (self.on_event)(Event::Measured {
                     done: rows.len() + 1,
                     total,
@@ -309,7 +325,8 @@ impl Bench<'_> {
                     height: plan.height,
                     setting: setting.clone(),
                     wall_s,
-                    cycles_s,
+                    cycles_s: took.cycles_s,
+                    cycles_cpu_s: took.cycles_cpu_s,
                     errors,
                     reference_mean: reference.mean,
                 });
@@ -361,11 +378,11 @@ impl Bench<'_> {
                     samples: ref_samples,
                 });
                 let label = format!("{} reference", bs.label);
-                let (wall_s, cycles_s) = render_into(self.blender, &label, &ref_scene, &ref_dir)?;
+                let took = render_into(self.blender, &label, &ref_scene, &ref_dir)?;
                 (self.on_event)(Event::ReferenceRendered {
                     scene: &bs.label,
-                    wall_s,
-                    cycles_s,
+                    wall_s: took.wall_s,
+                    cycles_s: took.cycles_s,
                 });
                 read_outputs(&ref_dir)?
             }
@@ -395,7 +412,7 @@ impl Bench<'_> {
         }
     }
 
-    /// Render scene `si` at one rung into [`Bench::runs`]; its wall and Cycles seconds and errors.
+    /// Render scene `si` at one rung into [`Bench::runs`]; what it took and its errors.
     fn rung(
         &mut self,
         si: usize,
@@ -403,13 +420,13 @@ impl Bench<'_> {
         setting: &Setting,
         reference: &Outputs,
         geometry: &Outputs,
-    ) -> anyhow::Result<(f64, f64, Errors)> {
+    ) -> anyhow::Result<(Took, Errors)> {
         let scene = with_sampling(&bs.scene, &setting.sampling);
         let dir = self.runs.join(format!("{si:02}-{}", setting.label));
         let label = format!("{} {}", bs.label, setting.label);
-        let (wall_s, cycles_s) = render_into(self.blender, &label, &scene, &dir)?;
+        let took = render_into(self.blender, &label, &scene, &dir)?;
         let errors = compare(&read_outputs(&dir)?, reference, geometry);
-        Ok((wall_s, cycles_s, errors))
+        Ok((took, errors))
     }
 }
 

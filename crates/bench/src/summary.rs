@@ -223,6 +223,7 @@ fn curves(agg: &[Agg]) -> Vec<plot::Curve> {
 struct Cell {
     rel_error: f64,
     cycles_s: f64,
+    cycles_cpu_s: f64,
     reference_mean: f64,
     runs: f64,
 }
@@ -248,6 +249,7 @@ pub fn side_by_side(rows: &[Row]) -> String {
         let e = sums.entry((key.0, key.1, &r.blender)).or_default();
         e.rel_error += r.errors.rel_error;
         e.cycles_s += r.cycles_s;
+        e.cycles_cpu_s += r.cycles_cpu_s;
         e.reference_mean += r.reference_mean;
         e.runs += 1.0;
     }
@@ -259,6 +261,7 @@ pub fn side_by_side(rows: &[Row]) -> String {
         sums.get(&(rung, scene, v)).map(|c| Cell {
             rel_error: c.rel_error / c.runs,
             cycles_s: c.cycles_s / c.runs,
+            cycles_cpu_s: c.cycles_cpu_s / c.runs,
             reference_mean: c.reference_mean / c.runs,
             runs: c.runs,
         })
@@ -266,8 +269,8 @@ pub fn side_by_side(rows: &[Row]) -> String {
     let first = versions[0];
     let _ = writeln!(
         s,
-        "\nBlenders side by side (each against its own reference; ratios against {first}, the first given):\n{:<30} {:<10} {:<10} {:>8} {:>9} {:>14} {:>10}",
-        "setting", "scene", "blender", "rel err", "cycles s", "CPU to 1st err", "ref mean"
+        "\nBlenders side by side (each against its own reference; ratios against {first}, the first given):\n{:<30} {:<10} {:<10} {:>8} {:>9} {:>9} {:>14} {:>10}",
+        "setting", "scene", "blender", "rel err", "cycles s", "cpu s", "CPU to 1st err", "ref mean"
     );
     for &(rung, scene) in &keys {
         let Some(base) = cell(rung, scene, first) else {
@@ -277,18 +280,25 @@ pub fn side_by_side(rows: &[Row]) -> String {
             let Some(c) = cell(rung, scene, v) else {
                 continue;
             };
-            let cpu = (c.rel_error / base.rel_error).powi(2) * c.cycles_s / base.cycles_s;
+            // CPU seconds where both have them (this version's bridge), else Cycles' wall time.
+            let cost = if c.cycles_cpu_s > 0.0 && base.cycles_cpu_s > 0.0 {
+                c.cycles_cpu_s / base.cycles_cpu_s
+            } else {
+                c.cycles_s / base.cycles_s
+            };
+            let cpu = (c.rel_error / base.rel_error).powi(2) * cost;
             let _ = writeln!(
                 s,
-                "{rung:<30} {scene:<10} {v:<10} {:>8.4} {:>9.2} {:>13.2}x {:>9.3}x",
+                "{rung:<30} {scene:<10} {v:<10} {:>8.4} {:>9.2} {:>9.2} {:>13.2}x {:>9.3}x",
                 c.rel_error,
                 c.cycles_s,
+                c.cycles_cpu_s,
                 cpu,
                 c.reference_mean / base.reference_mean
             );
         }
     }
-    s.push_str("(CPU to 1st err: Cycles CPU time this Blender needs for the first's error at this rung; ref mean: mean linear value of its reference over the first's, NaN for rows of a CSV without it)\n");
+    s.push_str("(cpu s: CPU seconds of the Blender process during the render, all threads, NaN for rows of a CSV without it; CPU to 1st err: the CPU time this Blender needs for the first's error at this rung, (err / first's)^2 x cpu s / first's, by cycles s where cpu s is missing; ref mean: mean linear value of its reference over the first's, NaN for rows of a CSV without it)\n");
     s
 }
 
@@ -332,6 +342,7 @@ mod tests {
             setting: crate::ladder::ladder(true).remove(0),
             wall_s: cycles_s + 1.0,
             cycles_s,
+            cycles_cpu_s: f64::NAN,
             errors: Errors {
                 rmse_linear: rel_error / 4.0,
                 rel_error,
@@ -369,6 +380,17 @@ mod tests {
             .unwrap_or_else(|| panic!("{s}"));
         assert!(line.contains("4.73x") && line.contains("0.980x"), "{line}");
         assert!(s.contains("ratios against 3.4.1"), "{s}");
+        // With CPU seconds on every row, the ratio is by them: (0.4 / 0.2)^2 x 30 / 20 = 6.00.
+        let with_cpu: Vec<Row> = rows
+            .iter()
+            .map(|r| Row {
+                cycles_cpu_s: if r.blender == "3.4.1" { 20.0 } else { 30.0 },
+                ..r.clone()
+            })
+            .collect();
+        let s = side_by_side(&with_cpu);
+        let line = s.lines().find(|l| l.contains("4.5.15")).unwrap();
+        assert!(line.contains("6.00x") && line.contains("30.00"), "{line}");
         // One Blender: nothing side by side, no Blender column.
         assert_eq!(side_by_side(&rows[..1]), "");
         assert!(!table(&aggregate(&rows[..1])).contains("blender"));

@@ -223,6 +223,10 @@ pub struct BridgeTimings {
     /// Cycles rendering.
     #[serde(default)]
     pub render_s: f64,
+    /// CPU seconds of the whole Blender process (all threads) during the final render (not
+    /// the shadow pass's); `None` from bridges older than this field and for visibility renders.
+    #[serde(default)]
+    pub render_cpu_s: Option<f64>,
     /// Writing the output files.
     #[serde(default)]
     pub write_s: f64,
