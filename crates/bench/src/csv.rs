@@ -213,7 +213,7 @@ mod tests {
         // A CSV of the version before the CPU column still loads, CPU time unknown.
         let v2: String = text
             .lines()
-            .map(|l| l.rsplitn(2, ',').nth(1).unwrap().to_string() + "\n")
+            .map(|l| l.rsplit_once(',').unwrap().0.to_string() + "\n")
             .collect();
         assert!(v2.starts_with(CSV_HEADER_V2), "{v2}");
         let back = from_csv(&v2).unwrap();
