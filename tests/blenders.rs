@@ -304,20 +304,11 @@ fn bridge_lists_the_cuda_kernels_each_blender_ships() {
             ),
         )
         .unwrap();
-        let python = blender
-            .file_name()
-            .is_some_and(|n| n.to_string_lossy().starts_with("python"));
-        let mut cmd = std::process::Command::new(&blender);
-        if !python {
-            cmd.args([
-                "-b",
-                "--factory-startup",
-                "--python-exit-code",
-                "1",
-                "--python",
-            ]);
-        }
-        let out = cmd.arg(&script).output().unwrap();
+        // Started as the bridge is (the script ignores the bridge's arguments).
+        let flavour = clevrtex_render::blender::flavour(&blender);
+        let out = clevrtex_render::blender::worker_command(&blender, flavour, &script, &[])
+            .output()
+            .unwrap();
         let t = text(&out);
         assert!(out.status.success(), "{t}");
         let stdout = String::from_utf8_lossy(&out.stdout);
