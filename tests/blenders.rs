@@ -271,15 +271,9 @@ print("FIT-OK")
         ),
     )
     .unwrap();
-    let out = std::process::Command::new(blender)
-        .args([
-            "-b",
-            "--factory-startup",
-            "--python-exit-code",
-            "1",
-            "--python",
-        ])
-        .arg(&script)
+    // Started as the bridge is (the script ignores the bridge's arguments).
+    let flavour = clevrtex_render::blender::flavour(&blender);
+    let out = clevrtex_render::blender::worker_command(&blender, flavour, &script, &[])
         .output()
         .unwrap();
     let t = text(&out);
