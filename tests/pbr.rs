@@ -7,7 +7,9 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Duration;
 
-use clevrtex_render::{BridgeDir, Mode, Worker, WorkerOptions};
+use clevrtex_render::{
+    BridgeDir, MaterialMode, MaterialSettings, Mode, Session, Worker, WorkerOptions,
+};
 use serde_json::Value;
 
 use crate::util::{pbr_folder, pbr_map, run, test_blenders, text, PbrLayout};
@@ -326,5 +328,87 @@ fn pbr_folders_render_with_their_colour_in_the_albedo_pass() {
         // Antialiased object edges mix the two; every other pixel is one of them.
         assert!(on_objects + on_backdrop >= n * 85 / 100, "{shown}");
         assert!(on_objects >= n / 50 && on_backdrop >= n / 4, "{shown}");
+    }
+}
+
+/// A tangent-space normal (x, y, z) as an 8-bit normal-map pixel.
+fn encoded(n: [f64; 3]) -> [u8; 3] {
+    n.map(|c| ((c * 0.5 + 0.5) * 255.0).round() as u8)
+}
+
+/// The normal-map conventions: an OpenGL map tilting the normals towards +v and a DirectX
+/// map of the same surface (green flipped) render alike; the DirectX map read as OpenGL (the
+/// flip forgotten) and a flat map do not. Renders of a lit sphere (`materials cost` scene).
+#[test]
+fn directx_normal_maps_render_as_their_opengl_twins() {
+    let blenders = test_blenders("directx_normal_maps_render_as_their_opengl_twins");
+    if blenders.is_empty() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mats = dir.path().join("mats");
+    let grey = [128, 128, 128];
+    let up = encoded([0.0, 0.6, 0.8]);
+    let down = encoded([0.0, -0.6, 0.8]);
+    let flat = encoded([0.0, 0.0, 1.0]);
+    let gl = pbr_folder(&mats, "gl_up", PbrLayout::PolyHaven, grey);
+    pbr_map(&gl.join("test_slug_nor_gl_1k.png"), 32, 32, &up);
+    let dx = pbr_folder(&mats, "dx_up", PbrLayout::AmbientCg, grey);
+    pbr_map(&dx.join("Test001_1K-JPG_NormalDX.jpg"), 32, 32, &down);
+    let wrong = pbr_folder(&mats, "dx_as_gl", PbrLayout::AmbientCg, grey);
+    pbr_map(&wrong.join("Test001_1K-JPG_NormalDX.jpg"), 32, 32, &up);
+    let fl = pbr_folder(&mats, "flat", PbrLayout::PolyHaven, grey);
+    pbr_map(&fl.join("test_slug_nor_gl_1k.png"), 32, 32, &flat);
+    let catalogue = run(&["materials", "json", "--materials", mats.to_str().unwrap()]);
+    assert!(catalogue.status.success(), "{}", text(&catalogue));
+    let bridge = BridgeDir::create(&String::from_utf8(catalogue.stdout).unwrap()).unwrap();
+    let settings = MaterialSettings {
+        mode: MaterialMode::Cost,
+        size: 96,
+        samples: 16,
+        displacement: 0.0,
+        random: 0.37,
+    };
+    for blender in blenders {
+        let out = dir
+            .path()
+            .join(format!("out-{}", blender.display()).replace('/', "_"));
+        std::fs::create_dir(&out).unwrap();
+        let mut session = Session::new(
+            WorkerOptions::new(blender.clone(), &bridge, Arc::new(AtomicBool::new(false))),
+            0,
+            None,
+        );
+        let mut px = std::collections::BTreeMap::new();
+        for name in ["gl_up", "dx_up", "dx_as_gl", "flat"] {
+            let reply = session
+                .request(&mut (), |w| {
+                    w.material(&settings, name, &out, Duration::from_secs(600))
+                })
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            px.insert(name, image::open(&reply.file).unwrap().to_rgb8().into_raw());
+        }
+        session.close();
+        let diff = |a: &str, b: &str| {
+            let (a, b) = (&px[a], &px[b]);
+            let sum: f64 = a
+                .iter()
+                .zip(b)
+                .map(|(x, y)| f64::from(x.abs_diff(*y)))
+                .sum();
+            sum / a.len() as f64
+        };
+        let shown = format!(
+            "{}: mean |difference| gl_up vs dx_up {:.2}, vs dx_as_gl {:.2}, vs flat {:.2}",
+            blender.display(),
+            diff("gl_up", "dx_up"),
+            diff("gl_up", "dx_as_gl"),
+            diff("gl_up", "flat")
+        );
+        eprintln!("{shown}");
+        let twins = diff("gl_up", "dx_up");
+        assert!(twins < 1.5, "{shown}");
+        assert!(diff("gl_up", "dx_as_gl") > 4.0 * twins.max(0.5), "{shown}");
+        assert!(diff("gl_up", "flat") > 2.0 * twins.max(0.5), "{shown}");
     }
 }
