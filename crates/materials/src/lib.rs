@@ -314,7 +314,9 @@ impl Catalogue {
                     ErrorKind::BadValue,
                     &shown,
                     "",
-                    format!("the folder of material `{name}` is a link out of the material directory"),
+                    format!(
+                        "the folder of material `{name}` is a link out of the material directory"
+                    ),
                     "copy the texture folder into the material directory instead of linking to it",
                 ));
             }

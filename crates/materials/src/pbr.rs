@@ -51,7 +51,10 @@ enum Kind {
 impl Kind {
     /// Maps that must hold 3 or 4 channels.
     fn needs_rgb(self) -> bool {
-        matches!(self, Kind::Color | Kind::NormalGl | Kind::NormalDx | Kind::Arm)
+        matches!(
+            self,
+            Kind::Color | Kind::NormalGl | Kind::NormalDx | Kind::Arm
+        )
     }
 
     fn what(self) -> &'static str {
@@ -415,9 +418,8 @@ fn read_settings(name: &str, dir: &Path) -> Result<Map<String, Value>, Error> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Map::new()),
         r => r,
     };
-    let err = |kind, field: &str, msg: String, hint: &str| {
-        Error::new(kind, &shown, field, msg, hint)
-    };
+    let err =
+        |kind, field: &str, msg: String, hint: &str| Error::new(kind, &shown, field, msg, hint);
     if !meta.is_ok_and(|m| m.is_file()) {
         return Err(err(
             ErrorKind::Io,
@@ -494,7 +496,10 @@ mod tests {
         let n = classify("red_brick_03_diff_1k.jpg").unwrap();
         assert_eq!((n.kind, n.res), (Kind::Color, 1024));
         let n = classify("red_brick_03_arm.png").unwrap();
-        assert_eq!((n.kind, n.res, n.material.as_str()), (Kind::Arm, 0, "red_brick_03"));
+        assert_eq!(
+            (n.kind, n.res, n.material.as_str()),
+            (Kind::Arm, 0, "red_brick_03")
+        );
         let n = classify("Bricks076C_2K-JPG_Color.jpg").unwrap();
         assert_eq!(
             (n.layout, n.kind, n.material.as_str(), n.res),
