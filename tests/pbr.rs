@@ -412,3 +412,59 @@ fn directx_normal_maps_render_as_their_opengl_twins() {
         assert!(diff("gl_up", "flat") > 2.0 * twins.max(0.5), "{shown}");
     }
 }
+
+/// The maps' world scale is a property of the material, not of the object: a colour map of
+/// two black-and-white stripe periods per image at `tile` 0.2 measures a period of 0.1 world
+/// units on a cube of scale 0.35 and on one of 0.7 (`materials` density scene, as the
+/// built-ins' test in `materials.rs`).
+#[test]
+fn pbr_texture_density_is_invariant_across_object_sizes() {
+    let blenders = test_blenders("pbr_texture_density_is_invariant_across_object_sizes");
+    if blenders.is_empty() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mats = dir.path().join("mats");
+    let stripes = pbr_folder(&mats, "stripes", PbrLayout::PolyHaven, [0, 0, 0]);
+    let img = image::RgbImage::from_fn(64, 64, |x, _| {
+        image::Rgb(if (x / 16) % 2 == 0 { [0; 3] } else { [255; 3] })
+    });
+    img.save(stripes.join("test_slug_diff_1k.png")).unwrap();
+    std::fs::remove_file(stripes.join("test_slug_diff_1k.jpg")).unwrap();
+    std::fs::write(stripes.join("material.json"), r#"{"tile": 0.2}"#).unwrap();
+    let catalogue = run(&["materials", "json", "--materials", mats.to_str().unwrap()]);
+    assert!(catalogue.status.success(), "{}", text(&catalogue));
+    let bridge = BridgeDir::create(&String::from_utf8(catalogue.stdout).unwrap()).unwrap();
+    let settings = MaterialSettings {
+        mode: MaterialMode::Density,
+        size: 400,
+        samples: 4,
+        displacement: 0.0,
+        random: 0.37,
+    };
+    for blender in blenders {
+        let out = dir
+            .path()
+            .join(format!("out-{}", blender.display()).replace('/', "_"));
+        std::fs::create_dir(&out).unwrap();
+        let mut session = Session::new(
+            WorkerOptions::new(blender.clone(), &bridge, Arc::new(AtomicBool::new(false))),
+            0,
+            None,
+        );
+        let reply = session
+            .request(&mut (), |w| {
+                w.material(&settings, "stripes", &out, Duration::from_secs(600))
+            })
+            .unwrap_or_else(|e| panic!("{}: {e}", blender.display()));
+        session.close();
+        let m = &reply.measures;
+        let (small, large) = (m["period_small"], m["period_large"]);
+        eprintln!(
+            "{}: stripe period small cube {small:.4}, large cube {large:.4} (world units)",
+            blender.display()
+        );
+        assert!((small - 0.1).abs() < 0.01, "{m:?}");
+        assert!((large - 0.1).abs() < 0.01, "{m:?}");
+    }
+}
