@@ -38,7 +38,7 @@ use std::sync::OnceLock;
 use serde_json::{Map, Value};
 
 pub use error::{Error, ErrorKind};
-pub use hash::content_hash;
+pub use hash::{content_hash, content_hash_of_parts, file_hash};
 use schema::Schema;
 
 mod embedded {
@@ -414,8 +414,11 @@ impl Material {
     fn from_recipe(name: String, set: Set, file: String, mut recipe: Value) -> Material {
         let obj = recipe.as_object_mut().expect("recipes are objects");
         obj.insert("set".into(), set.name().into());
-        // The recipe and the bytes of the files it references (a `.blend`, an image).
-        let mut parts = vec![serde_json::to_vec(&recipe).expect("json")];
+        // The recipe and the bytes of the files it references (a `.blend`, images, the maps
+        // of a PBR folder), each file hashed as it is read: maps can be gigabytes.
+        let mut parts = vec![xxhash_rust::xxh3::xxh3_64(
+            &serde_json::to_vec(&recipe).expect("json"),
+        )];
         let top = recipe.get("path").and_then(Value::as_str);
         let layers = recipe["layers"].as_array().into_iter().flatten();
         let maps = recipe["maps"].as_object().into_iter().flatten();
@@ -423,8 +426,7 @@ impl Material {
             .into_iter()
             .chain(layers.filter_map(|l| l["path"].as_str()))
             .chain(maps.filter_map(|(_, p)| p.as_str()));
-        parts.extend(paths.filter_map(|p| std::fs::read(p).ok()));
-        let parts: Vec<&[u8]> = parts.iter().map(Vec::as_slice).collect();
+        parts.extend(paths.filter_map(|p| hash::file_hash(Path::new(p)).ok()));
         Material {
             description: recipe["description"].as_str().unwrap_or("").to_string(),
             displaces: recipe["displaces"].as_bool().unwrap_or(false),
@@ -432,7 +434,7 @@ impl Material {
             set,
             file,
             recipe,
-            hash: format!("{:016x}", content_hash(&parts)),
+            hash: format!("{:016x}", hash::content_hash_of_parts(&parts)),
         }
     }
 }
