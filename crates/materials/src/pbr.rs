@@ -511,6 +511,8 @@ mod tests {
         assert_eq!((n.kind, n.res), (Kind::Ao, 1024));
         for other in [
             "Bricks_COL_3K.jpg",
+            "Bricks_AO_3K.jpg",
+            "Bricks_DISP_3K.jpg",
             "readme.txt",
             "_diff_2k.jpg",
             "preview.png",
