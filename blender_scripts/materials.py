@@ -317,7 +317,8 @@ def _build_blend(nt, out, recipe, instance, displace, albedo=False):
 
 # --- PBR texture folders -----------------------------------------------------------------
 
-# Colour maps are sRGB (8/16-bit) or linear (EXR, float); every other map is data.
+# Colour maps are sRGB (JPEG, 8- and 16-bit PNG) or linear (OpenEXR); every other map is
+# data.
 NON_COLOR = "Non-Color"
 
 
@@ -332,7 +333,7 @@ def _pbr_image(name, path, data):
     if data:
         if img.colorspace_settings.name != NON_COLOR:
             img.colorspace_settings.name = NON_COLOR
-    elif not img.is_float and img.colorspace_settings.name != "sRGB":
+    elif img.file_format != "OPEN_EXR" and img.colorspace_settings.name != "sRGB":
         img.colorspace_settings.name = "sRGB"
     img.use_fake_user = True
     return img

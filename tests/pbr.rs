@@ -255,7 +255,15 @@ fn pbr_folders_render_with_their_colour_in_the_albedo_pass() {
     let mats = dir.path().join("mats");
     let (red, blue) = ([200u8, 40, 30], [30u8, 60, 200]);
     pbr_folder(&mats, "objects_ph", PbrLayout::PolyHaven, red);
-    pbr_folder(&mats, "backdrop_acg", PbrLayout::AmbientCg, blue);
+    let acg = pbr_folder(&mats, "backdrop_acg", PbrLayout::AmbientCg, blue);
+    // The backdrop's colour map is a 16-bit PNG (ambientCG's PNG downloads), which Blender
+    // loads as floats: still sRGB. PNG is preferred to the JPEG of the same resolution.
+    let wide = image::ImageBuffer::<image::Rgb<u16>, _>::from_pixel(
+        32,
+        32,
+        image::Rgb(blue.map(|c| u16::from(c) * 257)),
+    );
+    wide.save(acg.join("Test001_1K-PNG_Color.png")).unwrap();
     let catalogue = run(&["materials", "json", "--materials", mats.to_str().unwrap()]);
     assert!(catalogue.status.success(), "{}", text(&catalogue));
     let bridge = BridgeDir::create(&String::from_utf8(catalogue.stdout).unwrap()).unwrap();
