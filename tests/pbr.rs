@@ -346,7 +346,8 @@ fn encoded(n: [f64; 3]) -> [u8; 3] {
 
 /// The normal-map conventions: an OpenGL map tilting the normals towards +v and a DirectX
 /// map of the same surface (green flipped) render alike; the DirectX map read as OpenGL (the
-/// flip forgotten) and a flat map do not. Renders of a lit sphere (`materials cost` scene).
+/// flip forgotten) and a flat map do not; and the tilts point the right way (towards the
+/// light is brighter). Renders of a lit sphere (`materials cost` scene).
 #[test]
 fn directx_normal_maps_render_as_their_opengl_twins() {
     let blenders = test_blenders("directx_normal_maps_render_as_their_opengl_twins");
@@ -367,6 +368,12 @@ fn directx_normal_maps_render_as_their_opengl_twins() {
     pbr_map(&wrong.join("Test001_1K-JPG_NormalDX.jpg"), 32, 32, &up);
     let fl = pbr_folder(&mats, "flat", PbrLayout::PolyHaven, grey);
     pbr_map(&fl.join("test_slug_nor_gl_1k.png"), 32, 32, &flat);
+    // Tilted towards +u and -u: the key light is on the +x side, where u runs on the faces
+    // the camera sees (the sphere's front, projected along y: u = x, v = z).
+    for (name, n) in [("right", [0.6, 0.0, 0.8]), ("left", [-0.6, 0.0, 0.8])] {
+        let f = pbr_folder(&mats, name, PbrLayout::PolyHaven, grey);
+        pbr_map(&f.join("test_slug_nor_gl_1k.png"), 32, 32, &encoded(n));
+    }
     let catalogue = run(&["materials", "json", "--materials", mats.to_str().unwrap()]);
     assert!(catalogue.status.success(), "{}", text(&catalogue));
     let bridge = BridgeDir::create(&String::from_utf8(catalogue.stdout).unwrap()).unwrap();
@@ -388,7 +395,7 @@ fn directx_normal_maps_render_as_their_opengl_twins() {
             None,
         );
         let mut px = std::collections::BTreeMap::new();
-        for name in ["gl_up", "dx_up", "dx_as_gl", "flat"] {
+        for name in ["gl_up", "dx_up", "dx_as_gl", "flat", "right", "left"] {
             let reply = session
                 .request(&mut (), |w| {
                     w.material(&settings, name, &out, Duration::from_secs(600))
@@ -414,6 +421,19 @@ fn directx_normal_maps_render_as_their_opengl_twins() {
             diff("gl_up", "flat")
         );
         eprintln!("{shown}");
+        let mean = |a: &str| px[a].iter().map(|&x| f64::from(x)).sum::<f64>() / px[a].len() as f64;
+        let means = format!(
+            "mean level: up {:.1}, down (dx_as_gl) {:.1}, right {:.1}, left {:.1}",
+            mean("gl_up"),
+            mean("dx_as_gl"),
+            mean("right"),
+            mean("left")
+        );
+        eprintln!("{means}");
+        // The lights are above and to the right: normals turned towards +v (up) and +u
+        // (right) catch more of them than their mirror images.
+        assert!(mean("gl_up") > mean("dx_as_gl") + 2.0, "{means}");
+        assert!(mean("right") > mean("left") + 2.0, "{means}");
         let twins = diff("gl_up", "dx_up");
         assert!(twins < 1.5, "{shown}");
         assert!(diff("gl_up", "dx_as_gl") > 4.0 * twins.max(0.5), "{shown}");
