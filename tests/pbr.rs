@@ -215,6 +215,17 @@ fn bad_pbr_folders_are_refused_by_name_before_rendering() {
         &["`wall`", "mats/wall"],
         "is a link out of the material directory",
     );
+    // A FIFO named as a map is refused without being opened (which would block).
+    refused(
+        |d| {
+            mk(d);
+            let fifo = ph(d).join("w_diff_1k.jpg");
+            let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+            assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        },
+        &["`wall`", "w_diff_1k.jpg"],
+        "is not a regular file",
+    );
     // A name taken by a built-in, two materials' maps in one folder, bad settings.
     refused(
         |d| {
