@@ -17,11 +17,19 @@ cube therefore shows more bricks, not bigger ones; the pattern moves and turns w
 object, and 3D patterns have no UV seams. Then times recipe `scale` times instance `scale`,
 plus an offset drawn from instance `random`.
 
+A recipe of kind `pbr` is a folder of PBR texture maps (Poly Haven or ambientCG names,
+checked by clevrtex-materials `pbr.rs`): the maps are projected from the three axes of the
+same coordinates (one image repeat per recipe `tile` world units) and blended by the object
+normal, normal maps perturb the normal in those projections' tangent frames (DirectX maps:
+green flipped), the displacement map is used only where the scene displaces.
+
 A recipe of kind `layers` is a stack of blocks (material_blocks.BLOCKS) composited into
 colour, roughness, metallic and height; height drives a Bump node and, only when the recipe
 displaces, the instance has a displacement strength and the context allows it, a
 Displacement node. A recipe of kind `blend` uses a user node group from a .blend file.
 """
+
+import os
 
 import bpy
 
@@ -55,6 +63,8 @@ def build_material(name, recipe, instance, context):
     albedo = bool(context.get("albedo", False))
     if kind == "blend":
         _build_blend(nt, out, recipe, instance, displace, albedo)
+    elif kind == "pbr":
+        displace = _build_pbr(nt, out, name, recipe, instance, displace, albedo)
     else:
         displace = _build_layers(nt, out, recipe, instance, displace, albedo)
     compat.set_displacement_method(mat, "BOTH" if displace else "BUMP")
@@ -303,3 +313,123 @@ def _build_blend(nt, out, recipe, instance, displace, albedo=False):
     disp = node.outputs.get("Displacement")
     if displace and disp is not None:
         nt.links.new(disp, out.inputs["Displacement"])
+
+
+# --- PBR texture folders -----------------------------------------------------------------
+
+# Colour maps are sRGB (JPEG, 8- and 16-bit PNG) or linear (OpenEXR); every other map is
+# data.
+NON_COLOR = "Non-Color"
+
+
+def _pbr_image(name, path, data):
+    """A map of a PBR folder, loaded once per worker (kept across scenes by a fake user)."""
+    if not os.path.isfile(path):
+        raise ValueError("material `%s`: texture `%s` does not exist" % (name, path))
+    img = bpy.data.images.load(path, check_existing=True)
+    # An image Blender cannot decode has no pixels and would render pink: refuse it.
+    if img.size[0] == 0 or img.size[1] == 0:
+        raise ValueError("material `%s`: Blender cannot read texture `%s`" % (name, path))
+    if data:
+        if img.colorspace_settings.name != NON_COLOR:
+            img.colorspace_settings.name = NON_COLOR
+    elif img.file_format != "OPEN_EXR" and img.colorspace_settings.name != "sRGB":
+        img.colorspace_settings.name = "sRGB"
+    img.use_fake_user = True
+    return img
+
+
+def _triplanar(g, p, normal, tile):
+    """The three axis projections of `p` (one repeat per `tile`) and their weights
+    (|normal|^4, normalised): u, v along (y, z) for x, (x, z) for y, (x, y) for z."""
+    x, y, z = g.sep(g.vscale(p, 1.0 / tile))
+    uvs = (g.comb(y, z, 0.0), g.comb(x, z, 0.0), g.comb(x, y, 0.0))
+    a = g.vmath("ABSOLUTE", normal)
+    a2 = g.vmath("MULTIPLY", a, a)
+    a4 = g.vmath("MULTIPLY", a2, a2)
+    total = g.vmath("DOT_PRODUCT", a4, (1.0, 1.0, 1.0))
+    w = g.sep(g.vmath("SCALE", a4, scale=g.div(1.0, total)))
+    return uvs, w
+
+
+def _samples(g, img, uvs):
+    out = []
+    for uv in uvs:
+        n = g.node("ShaderNodeTexImage", interpolation="Linear", extension="REPEAT")
+        n.image = img
+        g.set(n.inputs["Vector"], uv)
+        out.append(n.outputs["Color"])
+    return out
+
+
+def _blend3(g, vs, w):
+    acc = g.vmath("SCALE", vs[0], scale=w[0])
+    for v, wi in zip(vs[1:], w[1:]):
+        acc = g.vmath("ADD", acc, g.vmath("SCALE", v, scale=wi))
+    return acc
+
+
+def _pbr_normal(g, samples, w, normal, dx):
+    """Tangent-space normal map samples to a world-space shading normal: per projection
+    t = 2c - 1 (DirectX: green flipped), added along that projection's u and v axes to the
+    object normal (whiteout-style blend), normalised, to world space."""
+    gy = -2.0 if dx else 2.0
+    ds = []
+    for axis, c in enumerate(samples):
+        t = g.vmath("MULTIPLY_ADD", c, (2.0, gy, 2.0))
+        t.node.inputs[2].default_value = (-1.0, -gy / 2.0, -1.0)
+        tx, ty, _ = g.sep(t)
+        ds.append((g.comb(0.0, tx, ty), g.comb(tx, 0.0, ty), g.comb(tx, ty, 0.0))[axis])
+    n = g.vmath("NORMALIZE", g.vmath("ADD", normal, _blend3(g, ds, w)))
+    vt = g.node("ShaderNodeVectorTransform", vector_type="NORMAL",
+                convert_from="OBJECT", convert_to="WORLD")
+    g.set(vt.inputs["Vector"], n)
+    return g.vmath("NORMALIZE", vt.outputs["Vector"])
+
+
+def _build_pbr(nt, out, name, recipe, instance, displace, albedo=False):
+    g = Graph(nt)
+    p, normal = _coords(g, recipe, instance)
+    uvs, w = _triplanar(g, p, normal, float(recipe.get("tile") or 1.0))
+    maps = recipe.get("maps") or {}
+
+    def channels(key, data):
+        if not maps.get(key):
+            return None
+        img = _pbr_image(name, maps[key], data)
+        return g.sep(_blend3(g, _samples(g, img, uvs), w))
+
+    color_img = _pbr_image(name, maps["color"], False)
+    color = _blend3(g, _samples(g, color_img, uvs), w)
+    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"))
+    arm = channels("arm", True)
+    rough = channels("roughness", True)
+    metal = channels("metallic", True)
+    rough = rough[0] if rough else (arm[1] if arm else 0.5)
+    metal = metal[0] if metal else (arm[2] if arm else 0.0)
+
+    bsdf = g.node("ShaderNodeBsdfPrincipled")
+    compat.setup_principled(bsdf)
+    _set_bsdf(g, bsdf, "Base Color", color)
+    if albedo:
+        aov = g.node("ShaderNodeOutputAOV")
+        compat.set_aov_name(aov, ALBEDO_AOV)
+        g.set(aov.inputs["Color"], color)
+    _set_bsdf(g, bsdf, "Roughness", rough)
+    _set_bsdf(g, bsdf, "Metallic", metal)
+    _set_bsdf(g, bsdf, "Specular", 0.5)
+    if maps.get("normal"):
+        img = _pbr_image(name, maps["normal"], True)
+        dx = recipe.get("normal_convention") == "dx"
+        _set_bsdf(g, bsdf, "Normal", _pbr_normal(g, _samples(g, img, uvs), w, normal, dx))
+    nt.links.new(compat.principled_output(nt, bsdf), out.inputs["Surface"])
+    relief = float(recipe.get("relief") or 0.0)
+    if displace and relief > 0 and maps.get("displacement"):
+        height = channels("displacement", True)[0]
+        d = g.node("ShaderNodeDisplacement", space="OBJECT")
+        g.set(d.inputs["Height"], height)
+        g.set(d.inputs["Midlevel"], 0.5)
+        g.set(d.inputs["Scale"], relief * float(instance["displacement"]))
+        nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
+        return True
+    return False

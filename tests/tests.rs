@@ -16,6 +16,7 @@ mod ledger;
 mod many_writers;
 mod materials;
 mod passes;
+mod pbr;
 mod preview;
 mod python_package;
 mod report;

@@ -379,3 +379,59 @@ pub fn run_within(args: &[&std::ffi::OsStr], secs: u64) -> Output {
     }
     child.wait_with_output().unwrap()
 }
+
+/// The two PBR texture-folder layouts `--materials DIR` reads (docs/materials.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PbrLayout {
+    /// `<slug>_diff_1k.jpg`, `_nor_gl_1k.png`, `_arm_1k.jpg`, `_disp_1k.png`.
+    PolyHaven,
+    /// `<Name>_1K-JPG_Color.jpg`, `_NormalDX.jpg`, `_Roughness.jpg`, `_Displacement.jpg`.
+    AmbientCg,
+}
+
+/// Write a `w` x `h` image map of `channels` (1 grey, 3 RGB) filled with `value` (its
+/// format from the extension of `path`: `.jpg` or `.png`).
+pub fn pbr_map(path: &Path, w: u32, h: u32, value: &[u8]) {
+    let img = match value.len() {
+        1 => image::DynamicImage::ImageLuma8(image::GrayImage::from_pixel(
+            w,
+            h,
+            image::Luma([value[0]]),
+        )),
+        3 => image::DynamicImage::ImageRgb8(image::RgbImage::from_pixel(
+            w,
+            h,
+            image::Rgb([value[0], value[1], value[2]]),
+        )),
+        n => panic!("pbr_map: {n} channels"),
+    };
+    img.save(path)
+        .unwrap_or_else(|e| panic!("writing {}: {e}", path.display()));
+}
+
+/// Build the PBR texture folder `parent/folder` in `layout`, 32 x 32 maps at a nominal 1K:
+/// a colour map of the uniform sRGB colour `rgb`, a flat normal map (Poly Haven: OpenGL,
+/// ambientCG: DirectX), roughness (Poly Haven: packed in an ARM map) and a displacement
+/// map. Returns the folder; it is material `<folder lowercased>` of `--materials parent`.
+pub fn pbr_folder(parent: &Path, folder: &str, layout: PbrLayout, rgb: [u8; 3]) -> PathBuf {
+    let dir = parent.join(folder);
+    std::fs::create_dir_all(&dir).unwrap();
+    let flat = [128, 128, 255];
+    match layout {
+        PbrLayout::PolyHaven => {
+            let f = |map: &str, ext: &str| dir.join(format!("test_slug_{map}_1k.{ext}"));
+            pbr_map(&f("diff", "jpg"), 32, 32, &rgb);
+            pbr_map(&f("nor_gl", "png"), 32, 32, &flat);
+            pbr_map(&f("arm", "jpg"), 32, 32, &[255, 140, 0]);
+            pbr_map(&f("disp", "png"), 32, 32, &[128]);
+        }
+        PbrLayout::AmbientCg => {
+            let f = |map: &str| dir.join(format!("Test001_1K-JPG_{map}.jpg"));
+            pbr_map(&f("Color"), 32, 32, &rgb);
+            pbr_map(&f("NormalDX"), 32, 32, &flat);
+            pbr_map(&f("Roughness"), 32, 32, &[150]);
+            pbr_map(&f("Displacement"), 32, 32, &[128]);
+        }
+    }
+    dir
+}

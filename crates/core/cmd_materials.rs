@@ -26,7 +26,8 @@ pub struct Args {
     #[command(subcommand)]
     command: Sub,
     /// Extra materials: `.json` files in our format and `.blend` files with a ClevrTex-style
-    /// node group (inputs Color/Random/Displacement/Scale, outputs Shader and Displacement).
+    /// node group (inputs Color/Random/Displacement/Scale, outputs Shader and Displacement),
+    /// and folders of Poly Haven or ambientCG texture maps (docs/materials.md).
     #[arg(long, global = true, value_name = "DIR")]
     materials: Option<PathBuf>,
 }

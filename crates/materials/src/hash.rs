@@ -2,7 +2,10 @@
 //! reference cache and the dataset manifests all use [`content_hash`]. It lives in this crate
 //! because it is the lowest of the workspace: every other crate depends on it.
 
-use xxhash_rust::xxh3::xxh3_64;
+use std::io::Read;
+use std::path::Path;
+
+use xxhash_rust::xxh3::{xxh3_64, Xxh3};
 
 /// xxh3-64 of `parts`, stable across releases and machines (a cache key, not for security).
 ///
@@ -22,6 +25,33 @@ pub fn content_hash(parts: &[&[u8]]) -> u64 {
     }
 }
 
+/// [`content_hash`] of parts given by their own xxh3-64 hashes (`part_hashes[i]` =
+/// `content_hash(&[part_i])`): the same value, for parts too large to hold in memory.
+pub fn content_hash_of_parts(part_hashes: &[u64]) -> u64 {
+    match part_hashes {
+        [one] => *one,
+        _ => {
+            let bytes: Vec<u8> = part_hashes.iter().flat_map(|h| h.to_le_bytes()).collect();
+            xxh3_64(&bytes)
+        }
+    }
+}
+
+/// xxh3-64 of a file's bytes (`content_hash(&[bytes])`), read in 1 MiB pieces: a texture map
+/// of gigabytes costs no more memory than a small one.
+pub fn file_hash(path: &Path) -> std::io::Result<u64> {
+    let mut f = std::fs::File::open(path)?;
+    let mut h = Xxh3::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = f.read(&mut buf)?;
+        if n == 0 {
+            return Ok(h.digest());
+        }
+        h.update(&buf[..n]);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -35,5 +65,21 @@ mod tests {
         assert_ne!(a, content_hash(&[b"scen", b"emat"]));
         assert_ne!(a, content_hash(&[b"scene", b"mat2"]));
         assert_ne!(a, content_hash(&[b"scenemat"]));
+        let parts = [xxh3_64(b"scene"), xxh3_64(b"mat")];
+        assert_eq!(content_hash_of_parts(&parts), a);
+        assert_eq!(
+            content_hash_of_parts(&parts[..1]),
+            content_hash(&[b"scene"])
+        );
+    }
+
+    #[test]
+    fn a_file_hashes_as_its_bytes() {
+        let dir = std::env::temp_dir().join(format!("clevrtex-hash-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let bytes: Vec<u8> = (0..3_000_000u32).map(|i| (i % 251) as u8).collect();
+        std::fs::write(dir.join("f"), &bytes).unwrap();
+        assert_eq!(file_hash(&dir.join("f")).unwrap(), content_hash(&[&bytes]));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -27,6 +27,7 @@
 
 mod error;
 mod hash;
+pub mod pbr;
 mod schema;
 
 use std::collections::BTreeMap;
@@ -37,7 +38,7 @@ use std::sync::OnceLock;
 use serde_json::{Map, Value};
 
 pub use error::{Error, ErrorKind};
-pub use hash::content_hash;
+pub use hash::{content_hash, content_hash_of_parts, file_hash};
 use schema::Schema;
 
 mod embedded {
@@ -207,7 +208,9 @@ impl Catalogue {
     /// `NAME.json` is a material in our format (relative paths resolve against `DIR`), or
     /// `{"blend": "file.blend", "group": "NodeGroup"}`; a `NAME.blend` that no JSON file
     /// refers to becomes material `NAME` using the first node group with the ClevrTex
-    /// interface. Names are the lowercased file stems; a clash is an error.
+    /// interface. A folder of Poly Haven or ambientCG texture maps becomes material
+    /// `<folder name>` of kind `pbr` (see [`pbr`]; every map it uses is checked here).
+    /// Names are the lowercased file stems (folder names); a clash is an error.
     pub fn add_user_dir(&mut self, dir: &Path) -> Result<(), Error> {
         let shown = dir.display().to_string();
         let rd = std::fs::read_dir(dir).map_err(|e| {
@@ -274,8 +277,52 @@ impl Catalogue {
                 ));
             }
         }
+        self.add_pbr_folders(dir, &files, &mut added)?;
         for m in added {
             self.insert(m)?;
+        }
+        Ok(())
+    }
+
+    /// The PBR texture folders among `files` (the entries of `dir`): each folder holding Poly
+    /// Haven or ambientCG maps is material `<folder name>`, its maps checked ([`pbr`]).
+    /// Folders without such maps (a `.blend` pack's `textures/`) are left alone.
+    fn add_pbr_folders(
+        &self,
+        dir: &Path,
+        files: &[std::path::PathBuf],
+        added: &mut Vec<Material>,
+    ) -> Result<(), Error> {
+        let root = dir.canonicalize().map_err(|e| {
+            Error::new(
+                ErrorKind::Io,
+                &dir.display().to_string(),
+                "",
+                format!("cannot resolve the material directory: {e}"),
+                "pass an existing directory to `--materials`",
+            )
+        })?;
+        for path in files {
+            if !path.is_dir() {
+                continue;
+            }
+            let shown = path.display().to_string();
+            let name = user_name(path);
+            let inside = path.canonicalize().is_ok_and(|p| p.starts_with(&root));
+            if !inside {
+                return Err(Error::new(
+                    ErrorKind::BadValue,
+                    &shown,
+                    "",
+                    format!(
+                        "the folder of material `{name}` is a link out of the material directory"
+                    ),
+                    "copy the texture folder into the material directory instead of linking to it",
+                ));
+            }
+            if let Some(recipe) = pbr::recipe(&name, path, &root)? {
+                added.push(Material::from_recipe(name, Set::User, shown, recipe));
+            }
         }
         Ok(())
     }
@@ -367,15 +414,19 @@ impl Material {
     fn from_recipe(name: String, set: Set, file: String, mut recipe: Value) -> Material {
         let obj = recipe.as_object_mut().expect("recipes are objects");
         obj.insert("set".into(), set.name().into());
-        // The recipe and the bytes of the files it references (a `.blend`, an image).
-        let mut parts = vec![serde_json::to_vec(&recipe).expect("json")];
+        // The recipe and the bytes of the files it references (a `.blend`, images, the maps
+        // of a PBR folder), each file hashed as it is read: maps can be gigabytes.
+        let mut parts = vec![xxhash_rust::xxh3::xxh3_64(
+            &serde_json::to_vec(&recipe).expect("json"),
+        )];
         let top = recipe.get("path").and_then(Value::as_str);
         let layers = recipe["layers"].as_array().into_iter().flatten();
+        let maps = recipe["maps"].as_object().into_iter().flatten();
         let paths = top
             .into_iter()
-            .chain(layers.filter_map(|l| l["path"].as_str()));
-        parts.extend(paths.filter_map(|p| std::fs::read(p).ok()));
-        let parts: Vec<&[u8]> = parts.iter().map(Vec::as_slice).collect();
+            .chain(layers.filter_map(|l| l["path"].as_str()))
+            .chain(maps.filter_map(|(_, p)| p.as_str()));
+        parts.extend(paths.filter_map(|p| hash::file_hash(Path::new(p)).ok()));
         Material {
             description: recipe["description"].as_str().unwrap_or("").to_string(),
             displaces: recipe["displaces"].as_bool().unwrap_or(false),
@@ -383,7 +434,7 @@ impl Material {
             set,
             file,
             recipe,
-            hash: format!("{:016x}", content_hash(&parts)),
+            hash: format!("{:016x}", hash::content_hash_of_parts(&parts)),
         }
     }
 }
