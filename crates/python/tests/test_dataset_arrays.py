@@ -35,9 +35,9 @@ def _png(path, a, bits):
         f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, bits, colour, 0, 0, 0)) + chunk(b"IDAT", zlib.compress(data)) + chunk(b"IEND", b""))
 
 
-def _sample(d, i, passes=("depth", "normal", "albedo", "shadow")):
-    """Sample `i`: objects 1 and 2 are rectangles, object 3 (when i is odd) lies outside the
-    centre crop."""
+def _sample(d, i, passes=("depth", "normal", "albedo", "shadow"), total=N):
+    """Sample `i` of `total`: objects 1 and 2 are rectangles, object 3 (when i is odd) lies
+    outside the centre crop. Its recorded split is the position rule's for `total`."""
     stem = os.path.join(d, STEM.format(i))
     rng = np.random.default_rng(i)
     mask = np.zeros((H, W), np.uint8)
@@ -67,7 +67,7 @@ def _sample(d, i, passes=("depth", "normal", "albedo", "shadow")):
             "3d_coords": [k, -k, 0.5], "pixel_coords": [15.0 + k, 12.0, 9.0], "visible_pixels": int((mask == k + 1).sum()),
         })
     meta = {
-        "num_objects": n, "split": "test" if i == 0 else ("val" if i == 1 else "train"), "image_index": i,
+        "num_objects": n, "split": "test" if i < int(0.1 * total) else ("val" if i < int(0.2 * total) else "train"), "image_index": i,
         "ground_material": "plain", "objects": objects,
         "render": {"width": W, "height": H},
         "camera": {"intrinsics": [[70.0, 0, 20.0], [0, 70.0, 15.0], [0, 0, 1]], "extrinsics": np.eye(4).tolist()},
@@ -196,6 +196,6 @@ def test_bad_input_is_named(data, tmp_path):
     small = tmp_path / "small" / "clevrtex_clevr" / "0"
     small.mkdir(parents=True)
     for i in range(4):
-        _sample(str(small), i)
+        _sample(str(small), i, total=4)
     with pytest.raises(ValueError, match=r"split `test` of `clevr` .* is empty \(splits found: test 0, val 0, train 4\)"):
         clevrtex.Dataset(str(tmp_path / "small"), "clevr", split="test")
