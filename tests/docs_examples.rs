@@ -1,8 +1,9 @@
 //! Docs that run (issue 32): every ```` ```sh ````, ```` ```bash ```` and ```` ```python ````
 //! block of README.md and docs/*.md runs as written, in one temporary folder holding `data/`
-//! (a 10-image `camo` dataset rendered tiny by this build) and `preds/` (its masks as
-//! predictions), with this build's `clevrtex` and the test venv's `python` first on PATH. A
-//! block directly under `<!-- not run: REASON -->` is left out, and listed with its reason.
+//! (a 10-image `camo` dataset rendered tiny by this build), `preds/` (its masks as
+//! predictions) and `out/` (its WebDataset export), with this build's `clevrtex` and the test
+//! venv's `python` first on PATH. A block directly under `<!-- not run: REASON -->` is left
+//! out, and listed with its reason.
 //! Needs Blender and the test venv with the package and torch; skipped visibly without them,
 //! required in CI.
 
@@ -114,8 +115,9 @@ fn docs_blocks_are_found_and_every_skip_says_why() {
         .any(|b| b.place.starts_with("README.md") && b.lang == "python" && b.not_run.is_none()));
 }
 
-/// The shared folder: `data/` (10 `camo` images at 64x48, 4 samples, every pass) and `preds/`
-/// (each sample's mask, cropped and resized to the evaluation's 128x128, as `<stem>_mask.png`).
+/// The shared folder: `data/` (10 `camo` images at 64x48, 4 samples, every pass), `preds/`
+/// (each sample's mask, cropped and resized to the evaluation's 128x128, as `<stem>_mask.png`)
+/// and `out/` (`data/` exported as WebDataset shards: `out/camo-<split>-000000.tar`).
 fn workspace(dir: &Path, python: &Path) {
     let out = Command::new(env!("CARGO_BIN_EXE_clevrtex"))
         .args([
@@ -144,6 +146,12 @@ fn workspace(dir: &Path, python: &Path) {
         .output()
         .unwrap();
     assert!(out.status.success(), "preds/:\n{}", text(&out));
+    let out = Command::new(env!("CARGO_BIN_EXE_clevrtex"))
+        .args(["export", "--format", "webdataset", "data", "out"])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "export failed:\n{}", text(&out));
 }
 
 #[test]
