@@ -653,14 +653,25 @@ fn decode_pass(
 /// A decoded optional pass: its name, float32 bytes (native order) and channels.
 type PassOut<'py> = (String, Bound<'py, PyBytes>, usize);
 
+/// What [`load_item`] returns: `(rgb, labels, h, w, (W, H), passes)`, `(W, H)` the files' own
+/// size.
+type Item<'py> = (
+    Bound<'py, PyBytes>,
+    Bound<'py, PyBytes>,
+    usize,
+    usize,
+    (usize, usize),
+    Vec<PassOut<'py>>,
+);
+
 /// [`load_sample`] and the sample's optional passes `passes` (`(name, path)`: `depth`,
 /// `normal`, `albedo`, `shadow`), each decoded by [`decode_pass`] to `(C, H, W)` float32 of
-/// the image's output size: `(rgb, labels, h, w, [(name, bytes, channels)])`. Every file is
+/// the image's output size: `(rgb, labels, h, w, (W, H), [(name, bytes, channels)])` (`W`, `H`:
+/// the files' own size). Every file is
 /// read by the dataset reader (checked against `root`, capped, never a FIFO); a missing file
 /// is `FileNotFoundError` naming it.
 #[pyfunction]
 #[pyo3(signature = (image, mask, passes, crop=true, side=Some(128), root=None))]
-#[allow(clippy::type_complexity)]
 fn load_item<'py>(
     py: Python<'py>,
     image: &str,
@@ -669,13 +680,7 @@ fn load_item<'py>(
     crop: bool,
     side: Option<usize>,
     root: Option<&str>,
-) -> PyResult<(
-    Bound<'py, PyBytes>,
-    Bound<'py, PyBytes>,
-    usize,
-    usize,
-    Vec<PassOut<'py>>,
-)> {
+) -> PyResult<Item<'py>> {
     check_side(side)?;
     let mut wanted = Vec::with_capacity(passes.len());
     for (name, path) in &passes {
@@ -690,7 +695,7 @@ fn load_item<'py>(
             }
         }
     }
-    let (rgb, labels, h, w, decoded) = py.allow_threads(|| -> PyResult<_> {
+    let (rgb, labels, h, w, size, decoded) = py.allow_threads(|| -> PyResult<_> {
         let root = canonical_root(root)?;
         let (rgb, labels, h, w, fw, fh) = load_pair(root.as_deref(), image, mask, crop, side)?;
         let mut decoded = Vec::with_capacity(wanted.len());
@@ -698,7 +703,7 @@ fn load_item<'py>(
             let bytes = dataset_png(root.as_deref(), p)?;
             decoded.push((pass, decode_pass(pass, p, &bytes, (fw, fh), crop, side)?));
         }
-        Ok((rgb, labels, h, w, decoded))
+        Ok((rgb, labels, h, w, (fw, fh), decoded))
     })?;
     let lb: Vec<u8> = labels.iter().flat_map(|v| v.to_le_bytes()).collect();
     let out = decoded
@@ -708,7 +713,14 @@ fn load_item<'py>(
             (pass.name().to_string(), PyBytes::new(py, &bytes), c)
         })
         .collect();
-    Ok((PyBytes::new(py, &rgb), PyBytes::new(py, &lb), h, w, out))
+    Ok((
+        PyBytes::new(py, &rgb),
+        PyBytes::new(py, &lb),
+        h,
+        w,
+        size,
+        out,
+    ))
 }
 
 /// Every pass's file suffix after the stem (`<stem><suffix>.png`) and metadata key, from the

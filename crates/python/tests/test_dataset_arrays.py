@@ -192,6 +192,13 @@ def test_bad_input_is_named(data, tmp_path):
     with pytest.raises(ValueError, match=r"`objects\[1\].shape` is 'torus', not in the `shape` name table"):
         ds[5]
     assert _ds(data, passes=("depth",), names={"shape": ["cube", "sphere", "cylinder", "torus"]})[5]["shape"][1] == 3
+    # A render size that is not the image's (the crop's frame would be wrong), or not a number.
+    meta["objects"][1]["shape"] = "cube"
+    for bad in ({"width": 64, "height": H}, {"width": "40", "height": H}):
+        meta["render"] = bad
+        json.dump(meta, open(path, "w"))
+        with pytest.raises(ValueError, match=r"000005.json` key `render` gives a .* image, but the image file is 40 x 30"):
+            ds[5]
     # An empty split names the sizes found.
     small = tmp_path / "small" / "clevrtex_clevr" / "0"
     small.mkdir(parents=True)

@@ -182,7 +182,7 @@ class Dataset:
         index, image, mask, meta = self._samples[ind]
         stem_path = image[: -len(".png")]
         wanted = [(p, stem_path + self._suffix[p] + ".png") for p in self.passes]
-        rgb, labels, h, w, decoded = _native.load_item(image, mask, wanted, self.crop, self.side, self._root)
+        rgb, labels, h, w, size, decoded = _native.load_item(image, mask, wanted, self.crop, self.side, self._root)
         img = np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).transpose(2, 0, 1).astype(np.float32) / np.float32(255)
         msk = np.frombuffer(labels, dtype="<u4").reshape(1, h, w)
         msk = msk.astype(np.uint8) if (msk.size == 0 or msk.max() < 256) else msk.astype(np.int64)
@@ -195,13 +195,14 @@ class Dataset:
         for name, buf, c in decoded:
             item[name] = np.frombuffer(buf, dtype=np.float32).reshape(c, h, w).copy()
         data = _read_json(meta, self._root)
-        item.update(self._arrays(data, meta, msk[0], (h, w)))
+        item.update(self._arrays(data, meta, msk[0], (h, w), size))
         if self.return_metadata:
             item["metadata"] = self._format_metadata(data, meta)
         return item
 
-    def _arrays(self, meta: dict, path: str, mask: np.ndarray, out_hw: Tuple[int, int]) -> Dict[str, np.ndarray]:
-        """The per-object arrays (padded to K) and the camera of one sample."""
+    def _arrays(self, meta: dict, path: str, mask: np.ndarray, out_hw: Tuple[int, int], file_wh: Tuple[int, int]) -> Dict[str, np.ndarray]:
+        """The per-object arrays (padded to K) and the camera of one sample (`file_wh`: the image
+        file's width and height, which the metadata's `render` size must equal)."""
         k = int(self.max_objects or 0)
         objects = _field(meta, path, "objects")
         if not isinstance(objects, list):
@@ -242,6 +243,8 @@ class Dataset:
         extr = _floats(_field(meta, path, "camera", "extrinsics"), (4, 4), path, "camera.extrinsics")
         width = _field(meta, path, "render", "width")
         height = _field(meta, path, "render", "height")
+        if isinstance(width, bool) or isinstance(height, bool) or (width, height) != tuple(file_wh):
+            raise ValueError(f"`{path}` key `render` gives a {width!r} x {height!r} image, but the image file is {file_wh[0]} x {file_wh[1]}")
         # The pixel frame of the returned image: the crop's offset, then its scale.
         if self.crop:
             c = int(0.8 * min(width, height))
