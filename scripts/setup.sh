@@ -11,17 +11,22 @@
 #                                    (or `--bpy 5.0`), a second Blender: pass
 #                                    `--blender .venv-bpy/bin/python` to clevrtex
 #   ./scripts/setup.sh --browser     also Debian's `chromium`, for the report's browser test
+#   ./scripts/setup.sh --torch       also PyTorch (PyPI's wheel) in `.venv-test/` (implies
+#                                    --test-venv), for the training example
+#                                    (examples/train_toy.py) and the DataLoader tests
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 test_venv=0
 browser=0
+torch=0
 bpy=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --test-venv) test_venv=1 ;;
     --browser) browser=1 ;;
+    --torch) torch=1; test_venv=1 ;;
     --bpy)
       bpy="${2:-}"
       shift
@@ -30,7 +35,7 @@ while [ $# -gt 0 ]; do
         *) echo "setup.sh: \`--bpy ${bpy}\` is not a supported bpy version (known: 4.5, 5.0)" >&2; exit 2 ;;
       esac
       ;;
-    *) echo "setup.sh: unknown option \`$1\` (known: --test-venv, --bpy 4.5|5.0, --browser)" >&2; exit 2 ;;
+    *) echo "setup.sh: unknown option \`$1\` (known: --test-venv, --torch, --bpy 4.5|5.0, --browser)" >&2; exit 2 ;;
   esac
   shift
 done
@@ -77,7 +82,12 @@ if [ "$test_venv" = 1 ]; then
   # The Python package (crates/python, PyO3 + maturin) and pytest for its tests; rebuilt each
   # time so it follows the sources (cargo reuses crates/python/target).
   .venv-test/bin/pip install --quiet --disable-pip-version-check pytest ./crates/python
-  echo "test venv: $(.venv-test/bin/python -c 'import webdataset, sys; print(sys.version.split()[0], "webdataset", getattr(webdataset, "__version__", "?"))')"
+  if [ "$torch" = 1 ] && ! .venv-test/bin/python -c 'import torch' >/dev/null 2>&1; then
+    # PyPI's wheel (no CPU-only index is reachable from CI); pip keeps its download cache, so
+    # a rerun does not fetch it again.
+    .venv-test/bin/pip install --quiet --disable-pip-version-check torch
+  fi
+  echo "test venv: $(.venv-test/bin/python -c 'import webdataset, sys; print(sys.version.split()[0], "webdataset", getattr(webdataset, "__version__", "?"))')$(.venv-test/bin/python -c 'import torch; print(" torch", torch.__version__)' 2>/dev/null || true)"
 fi
 if [ -n "$bpy" ]; then
   # PyPI's bpy wheels need the Python minor version Blender was built with (3.11 for 4.5 and

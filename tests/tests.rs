@@ -6,6 +6,7 @@ mod util;
 mod bench;
 mod blender_failures;
 mod blenders;
+mod docs_examples;
 mod eval;
 mod eval_protocols;
 mod export;

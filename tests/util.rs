@@ -163,7 +163,11 @@ pub fn test_python_or_skip(test: &str, module: &str) -> Option<PathBuf> {
             "no Python with `{module}` (`{}` cannot import it)",
             candidate.display()
         ),
-        "run `./scripts/setup.sh --test-venv` or set CLEVRTEX_TEST_PYTHON",
+        if module.contains("torch") {
+            "run `./scripts/setup.sh --torch` or set CLEVRTEX_TEST_PYTHON"
+        } else {
+            "run `./scripts/setup.sh --test-venv` or set CLEVRTEX_TEST_PYTHON"
+        },
     );
     None
 }

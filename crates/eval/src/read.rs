@@ -146,6 +146,71 @@ pub fn png_labels(bytes: &[u8]) -> Result<LabelImage, String> {
     })
 }
 
+/// A decoded greyscale or RGB PNG of 8 or 16 bits, its samples as they are (an optional
+/// pass of a dataset: depth, normal, albedo, shadow).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampleImage {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// 1 (grey) or 3 (RGB).
+    pub channels: usize,
+    /// 8 or 16.
+    pub bits: u8,
+    /// Row-major, interleaved samples (8-bit ones widened, not scaled).
+    pub samples: Vec<u16>,
+}
+
+/// Read an 8- or 16-bit greyscale or RGB PNG without converting its samples (a palette,
+/// alpha or fewer bits is refused: no pass of the layout is written so).
+pub fn png_samples(bytes: &[u8]) -> Result<SampleImage, String> {
+    use png::{BitDepth, ColorType};
+    let mut reader = png_reader(bytes)?;
+    let (buf, info) = png_frame(&mut reader)?;
+    let (w, h) = (info.width as usize, info.height as usize);
+    let channels = match info.color_type {
+        ColorType::Grayscale => 1,
+        ColorType::Rgb => 3,
+        other => return Err(format!("is a {other:?} PNG, not greyscale or RGB")),
+    };
+    let bits = match info.bit_depth {
+        BitDepth::Eight => 8,
+        BitDepth::Sixteen => 16,
+        other => return Err(format!("has {} bits per sample, not 8 or 16", other as u8)),
+    };
+    let n = w
+        .checked_mul(h)
+        .and_then(|n| n.checked_mul(channels))
+        .ok_or("image too large")?;
+    let line = info.line_size;
+    let mut samples = Vec::with_capacity(n);
+    for y in 0..h {
+        let row = buf
+            .get(y * line..(y + 1) * line)
+            .ok_or("truncated image data")?;
+        if bits == 8 {
+            samples.extend(row[..w * channels].iter().map(|&v| u16::from(v)));
+        } else {
+            samples.extend(
+                row.chunks_exact(2)
+                    .take(w * channels)
+                    .map(|c| u16::from_be_bytes([c[0], c[1]])),
+            );
+        }
+    }
+    if samples.len() != n {
+        return Err("truncated image data".into());
+    }
+    Ok(SampleImage {
+        width: w,
+        height: h,
+        channels,
+        bits,
+        samples,
+    })
+}
+
 /// Read a PNG as 8-bit RGB: palette and greyscale are expanded, alpha is dropped and 16-bit
 /// samples keep their high byte.
 pub fn png_rgb(bytes: &[u8]) -> Result<RgbImage, String> {

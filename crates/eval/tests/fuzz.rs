@@ -65,6 +65,7 @@ fn fix_png_crcs(b: &mut [u8]) {
 fn run_all(bytes: &[u8]) {
     let _ = read::png_labels(bytes);
     let _ = read::png_rgb(bytes);
+    let _ = read::png_samples(bytes);
     let _ = read::npy(bytes);
     let _ = read::npz(bytes, &["labels", "masks", "recon"], &|_| usize::MAX);
     let _ = read::npz_names(bytes);
@@ -169,6 +170,18 @@ fn seeds_decode_to_the_same_values() {
         g16.labels,
         palette.labels.iter().map(|&v| v * 300).collect::<Vec<_>>()
     );
+    // The optional passes' reader: 16-bit grey as it is, palette and 1-bit refused.
+    let s16 = read::png_samples(&seed("grey16.png")).unwrap();
+    assert_eq!((s16.channels, s16.bits), (1, 16));
+    assert_eq!(
+        s16.samples
+            .iter()
+            .map(|&v| u32::from(v))
+            .collect::<Vec<_>>(),
+        g16.labels
+    );
+    assert!(read::png_samples(&seed("palette.png")).is_err());
+    assert!(read::png_samples(&seed("bit1.png")).is_err());
     let bit = read::png_labels(&seed("bit1.png")).unwrap();
     assert_eq!(
         bit.labels,

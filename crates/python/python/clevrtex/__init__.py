@@ -4,7 +4,10 @@
   taking numpy arrays or torch tensors (torch is never imported).
 - `evaluate(preds, gt, protocol=...)`: every protocol's metrics on arrays, in one call.
 - `Dataset`: the published layout (ours or the downloaded ClevrTex) read like the public
-  `CLEVRTEX` loader, as numpy arrays.
+  `CLEVRTEX` loader, as numpy arrays; with `as_dict=True` every pass, per-object masks and
+  metadata arrays (docs/python.md).
+- `collate`: batches `Dataset` items for `torch.utils.data.DataLoader` (torch tensors when
+  torch is installed, numpy otherwise).
 
 Scoring runs in Rust with the GIL released, in parallel over the images of a batch. Metric
 definitions and how the protocols differ: docs/eval.md.
@@ -19,7 +22,7 @@ import numpy as np
 
 from . import _native
 
-__all__ = ["Evaluator", "evaluate", "Dataset", "METRICS", "protocol_metrics"]
+__all__ = ["Evaluator", "evaluate", "Dataset", "collate", "PASSES", "METRICS", "protocol_metrics"]
 
 #: Every metric's name, in report order.
 METRICS: Tuple[str, ...] = tuple(_native.metric_names())
@@ -337,75 +340,4 @@ def _read_metadata(path: str, root: str) -> bytes:
     return _native.read_metadata(path, root)
 
 
-class Dataset:
-    """A ClevrTex dataset in the published layout (made by `clevrtex generate` or downloaded),
-    read like the public `CLEVRTEX` loader: `ds[i]` is `(index, image, mask)` or, with
-    `return_metadata`, `(index, image, mask, metadata)`; `image` is `(3, H, W)` float32 in
-    [0, 1], `mask` `(1, H, W)` ids (uint8 when they fit). The crop (centre square of side
-    `int(0.8 min(W, H))`) and the resize (Pillow-exact bilinear, nearest for the mask) equal
-    the public loader's bit for bit. No torch needed."""
-
-    ccrop_frac = 0.8
-    splits = {"test": (0.0, 0.1), "val": (0.1, 0.2), "train": (0.2, 1.0)}
-
-    def __init__(
-        self,
-        path: str,
-        dataset_variant: Optional[str] = "full",
-        split: str = "train",
-        crop: bool = True,
-        resize: Optional[Tuple[int, int]] = (128, 128),
-        return_metadata: bool = True,
-    ) -> None:
-        if split not in self.splits and split != "all":
-            raise ValueError(f"unknown split `{split}`; known: test, val, train, all")
-        if resize is not None and (len(resize) != 2 or resize[0] != resize[1]):
-            raise ValueError(f"`resize` must be square (the benchmark's is (128, 128)), not {resize}")
-        if resize is not None and not 1 <= int(resize[0]) <= 4096:
-            raise ValueError(f"`resize` must be 1 to 4096 a side (the benchmark's is (128, 128)), not {resize}")
-        self.crop = crop
-        self.side = None if resize is None else int(resize[0])
-        self.return_metadata = return_metadata
-        self._root = str(path)
-        self.dataset_variant, self._samples = _native.discover(self._root, dataset_variant, split)
-        # Objects carry their colour where the variant's config gives them one (vbg, clevr).
-        self._by_colour = _native.colour_breakdown(self.dataset_variant)
-        self.split = split
-
-    def __len__(self) -> int:
-        return len(self._samples)
-
-    def _format_metadata(self, meta: dict, path: str) -> dict:
-        objects = meta.get("objects", [])
-        if not isinstance(objects, list):
-            raise ValueError(f"`{path}` key `objects` is a {type(objects).__name__}, not a list")
-        objs = []
-        for i, obj in enumerate(objects):
-            if not isinstance(obj, dict):
-                raise ValueError(f"`{path}` key `objects[{i}]` is a {type(obj).__name__}, not an object")
-            o = {k: obj.get(k) for k in ("material", "shape", "size", "rotation")}
-            if self._by_colour:
-                o["color"] = obj.get("color")
-            objs.append(o)
-        return {"ground_material": meta.get("ground_material"), "objects": objs}
-
-    def __getitem__(self, ind: int):
-        n = len(self._samples)
-        if not isinstance(ind, (int, np.integer)):
-            raise TypeError(f"a Dataset is indexed by an int, not {type(ind).__name__}")
-        if ind < -n or ind >= n:
-            raise IndexError(f"index {ind} is out of range for a Dataset of {n} samples")
-        index, image, mask, meta = self._samples[ind]
-        rgb, labels, h, w = _native.load_sample(image, mask, self.crop, self.side, self._root)
-        img = np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).transpose(2, 0, 1).astype(np.float32) / np.float32(255)
-        msk = np.frombuffer(labels, dtype="<u4").reshape(1, h, w)
-        msk = msk.astype(np.uint8) if (msk.size == 0 or msk.max() < 256) else msk.astype(np.int64)
-        if not self.return_metadata:
-            return index, img, msk
-        try:
-            data = json.loads(_read_metadata(meta, self._root))
-        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
-            raise ValueError(f"`{meta}` is not valid metadata: {e}") from None
-        if not isinstance(data, dict):
-            raise ValueError(f"`{meta}` is not valid metadata: a {type(data).__name__}, not an object")
-        return index, img, msk, self._format_metadata(data, meta)
+from ._dataset import PASSES, Dataset, collate  # noqa: E402
