@@ -22,7 +22,8 @@ pub struct Args {
     blender: Option<PathBuf>,
     /// Seconds each check may take (`blender --version`, the bridge's start-up) before the
     /// program is killed and reported.
-    #[arg(long, default_value_t = 60.0, value_name = "SECS")]
+    /// More than 0, at most 604800 (a week).
+    #[arg(long, default_value_t = 60.0, value_name = "SECS", value_parser = crate::run_args::seconds_value)]
     timeout: f64,
 }
 

@@ -10,7 +10,7 @@ use clevrtex_render::pool::Job;
 use clevrtex_scene::{layout, Config, Pass, SampleRequest};
 
 use crate::exit::CmdResult;
-use crate::run_args::{parse_passes, positive, within, RunArgs};
+use crate::run_args::{index_range, parse_passes, positive, within, RunArgs, MAX_ATTEMPTS};
 
 /// Arguments of `clevrtex generate`.
 #[derive(Debug, clap::Args)]
@@ -22,18 +22,18 @@ pub struct GenerateArgs {
     /// A variant config file (JSON, like those in `configs/`) instead of `--variant`.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// Number of images.
-    #[arg(short = 'n', long = "count", value_name = "N")]
+    /// Number of images, 1 to 100000000 (with `--start`, indices stay below 100000000).
+    #[arg(short = 'n', long = "count", value_name = "N", value_parser = index_range())]
     count: u64,
     /// Run seed: with the image index it fixes every random draw.
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// First image index; images `START..START+N` are made.
-    #[arg(long, default_value_t = 0, value_name = "I")]
+    #[arg(long, default_value_t = 0, value_name = "I", value_parser = index_range())]
     start: u64,
     /// Size of the whole dataset, which fixes the splits (first 10% test, next 10% val, rest
-    /// train) [default: START + N].
-    #[arg(long, value_name = "T")]
+    /// train), at most 100000000 [default: START + N].
+    #[arg(long, value_name = "T", value_parser = index_range())]
     total: Option<u64>,
     /// Make only the images with `index % N == K` (0 <= K < N), as `clevrtex sample` does:
     /// N shards together make every image exactly once.
@@ -42,25 +42,26 @@ pub struct GenerateArgs {
     /// Number of shards when the shard index comes from JOB_COMPLETION_INDEX.
     #[arg(long, value_name = "N", env = "CLEVRTEX_SHARD_COUNT")]
     shard_count: Option<u64>,
-    /// Image width in pixels (default 320).
-    #[arg(long)]
+    /// Image width in pixels, 1 to 4096 (default 320).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
     width: Option<u32>,
-    /// Image height in pixels (default 240).
-    #[arg(long)]
+    /// Image height in pixels, 1 to 4096 (default 240).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
     height: Option<u32>,
-    /// Cycles samples per pixel (default from the config).
-    #[arg(long)]
+    /// Cycles samples per pixel, 1 to 65536 (default from the config).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
     samples: Option<u32>,
     /// Samples of the shadow pass's render (default: three eighths of the samples, at most
-    /// 64; RMSE ~0.018 at 8, ~0.010 at 16, ~0.008 at 24; docs/performance.md, "Shadow pass").
-    #[arg(long, value_name = "N")]
+    /// 64; RMSE ~0.018 at 8, ~0.010 at 16, ~0.008 at 24; docs/performance.md, "Shadow pass"),
+    /// 1 to 65536.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=65536))]
     shadow_samples: Option<u32>,
     /// Quality preset: draft, standard, high or reference (samples, adaptive threshold,
     /// bounces; see docs/performance.md). `--samples` still overrides the sample count.
     #[arg(long, value_name = "PRESET")]
     quality: Option<clevrtex_scene::quality::Quality>,
-    /// Layout attempts per image when objects are hidden, before the image fails.
-    #[arg(long, default_value_t = 20, value_name = "N")]
+    /// Layout attempts per image when objects are hidden, before the image fails (1 to 1000).
+    #[arg(long, default_value_t = 20, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=MAX_ATTEMPTS as i64))]
     max_attempts: u32,
     #[command(flatten)]
     run: RunArgs,
@@ -114,6 +115,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         .start
         .checked_add(args.count)
         .context("`--start` + `-n` overflows\nhint: pass smaller numbers")?;
+    crate::run_args::check_index_end(args.start, end)?;
     let total = args.total.unwrap_or(end);
     if total < end {
         bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset");

@@ -24,27 +24,30 @@ pub struct RunArgs {
     /// `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     pub(crate) blender: Option<PathBuf>,
-    /// Blender processes rendering in parallel (default: 2 on machines with 2+ cores).
-    #[arg(long, value_name = "N")]
+    /// Blender processes rendering in parallel, 1 to 1024 (default: 2 on machines with 2+
+    /// cores).
+    #[arg(long, value_name = "N", value_parser = threads_range::<usize>())]
     pub(crate) workers: Option<usize>,
     /// Cycles device: `auto` (the best GPU kind Blender reports: OptiX, CUDA, HIP; else the
     /// CPU), `cpu`, `cuda`, `optix` or `hip`. With N GPUs, one worker per GPU (pinned by its
     /// index) and `--workers` defaults to N.
     #[arg(long, default_value = "auto", value_name = "DEVICE")]
     pub(crate) device: String,
-    /// Cycles threads per Blender process (default: cores / workers).
-    #[arg(long, value_name = "T")]
+    /// Cycles threads per Blender process, 1 to 1024 (default: cores / workers).
+    #[arg(long, value_name = "T", value_parser = threads_range::<u32>())]
     pub(crate) threads: Option<u32>,
     /// Time limit per render request, seconds; a worker over it is killed and the scene
     /// retried. Default: 600 + 8 per sample at 320x240 (doubled with the shadow pass), and
-    /// a worker silent for 300 s counts as hung.
-    #[arg(long, value_name = "SECONDS")]
+    /// a worker silent for 300 s counts as hung. More than 0, at most 604800 (a week).
+    #[arg(long, value_name = "SECONDS", value_parser = seconds_value)]
     pub(crate) timeout: Option<f64>,
-    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds.
-    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
+    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds:
+    /// more than 0, at most 604800.
+    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS", value_parser = seconds_value)]
     pub(crate) startup_timeout: f64,
-    /// Restarts of a crashed or hung worker per scene before it goes to the failure ledger.
-    #[arg(long, default_value_t = 2, value_name = "N")]
+    /// Restarts of a crashed or hung worker per scene before it goes to the failure ledger,
+    /// 0 to 100.
+    #[arg(long, default_value_t = 2, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=MAX_RETRIES as i64))]
     pub(crate) retries: u32,
     /// Also keep the float EXRs (`<stem>_passes.exr`, and with the shadow pass
     /// `<stem>_shadow.exr`).
@@ -56,6 +59,66 @@ pub struct RunArgs {
     /// Stop at the first failed scene instead of recording it in the ledger and going on.
     #[arg(long)]
     pub(crate) fail_fast: bool,
+}
+
+// ---- ranges of numeric flags ---------------------------------------------------------
+//
+// Every numeric flag has a range, refused by clap before anything runs (exit 2, naming the
+// flag and the range); README.md, "Ranges of numeric flags", lists them.
+
+/// Most threads, workers or jobs any flag may ask for: far above any machine's cores, far
+/// below what exhausts a process's threads.
+pub(crate) const MAX_THREADS: u64 = 1024;
+/// Longest time limit any flag may give, seconds: one week.
+pub(crate) const MAX_SECONDS: f64 = 7.0 * 24.0 * 3600.0;
+/// Most restarts of a worker per scene.
+pub(crate) const MAX_RETRIES: u64 = 100;
+/// Most layout attempts per image.
+pub(crate) const MAX_ATTEMPTS: u64 = 1000;
+
+/// `--jobs`, `--workers`, `--threads`: 1 to [`MAX_THREADS`].
+pub(crate) fn threads_range<T>() -> clap::builder::RangedU64ValueParser<T>
+where
+    T: TryFrom<u64> + Clone + Send + Sync + 'static,
+    <T as TryFrom<u64>>::Error: Send + Sync + 'static + std::error::Error + ToString,
+{
+    clap::builder::RangedU64ValueParser::<T>::new().range(1..=MAX_THREADS)
+}
+
+/// `-n`, `--start`, `--total`: 0 to the dataset cap (`MAX_RUN_INDICES`, 100000000 images);
+/// the sum `--start + -n` is checked by the command.
+pub(crate) fn index_range() -> clap::builder::RangedU64ValueParser<u64> {
+    clap::builder::RangedU64ValueParser::<u64>::new()
+        .range(0..=clevrtex_scene::bounds::INDEX_END)
+}
+
+/// `--start + -n` (`end`) within the dataset cap: every index below
+/// [`clevrtex_scene::bounds::INDEX_END`], so `verify` never refuses what a run made.
+pub(crate) fn check_index_end(start: u64, end: u64) -> anyhow::Result<()> {
+    let cap = clevrtex_scene::bounds::INDEX_END;
+    if end > cap {
+        bail!(
+            "`--start {start}` plus `-n {}` reaches index {}, past the dataset cap of {cap} images\nhint: keep `--start + -n` at most {cap}",
+            end - start,
+            end - 1
+        );
+    }
+    Ok(())
+}
+
+/// A time limit in seconds: more than 0 and at most [`MAX_SECONDS`] (a week; `1e300` would
+/// overflow a duration).
+pub(crate) fn seconds_value(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number of seconds"))?;
+    if !(v > 0.0 && v <= MAX_SECONDS) {
+        return Err(format!(
+            "`{s}` is not more than 0 and at most {MAX_SECONDS} seconds (one week)"
+        ));
+    }
+    Ok(v)
 }
 
 /// `v`, which must not be 0 (given as `flag`).
