@@ -522,6 +522,11 @@ fn score_sample(
     let mask_bytes = read_file(&s.mask)?;
     let meta_bytes = crate::dataset::read_metadata(&s.meta)?;
     gt_png_size(&mask_bytes, &s.mask)?;
+    if let Some(problem) =
+        clevrtex_scene::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
+    {
+        return Err(corrupt(&s.mask, problem, GT_HINT));
+    }
     let gt_mask = read::png_labels(&mask_bytes).map_err(|r| corrupt(&s.mask, r, GT_HINT))?;
     if let Some(&bad) = gt_mask.labels.iter().find(|&&l| l as usize >= MAX_SLOTS) {
         return Err(corrupt(

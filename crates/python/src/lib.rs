@@ -453,8 +453,16 @@ fn load_sample<'py>(
                     }
                 }
             }
-            clevrtex_eval::dataset::read_file(Path::new(p))
-                .map_err(|e| PyOSError::new_err(e.to_string()))
+            // OSError(errno, message, filename): a deleted mask is a FileNotFoundError naming
+            // it, as `read_metadata` does.
+            clevrtex_eval::dataset::read_file(Path::new(p)).map_err(|e| match e {
+                EvalError::Io { cause, .. } => PyOSError::new_err((
+                    cause.raw_os_error().unwrap_or(0),
+                    format!("`{p}` cannot be read: {cause}"),
+                    p.to_string(),
+                )),
+                e => PyOSError::new_err(e.to_string()),
+            })
         };
         // Each PNG's size checked from its header before it is decoded (a 1 MB mask can
         // declare 30000x30000: 4.5 GB decoded).
@@ -466,7 +474,13 @@ fn load_sample<'py>(
         };
         let img = read::png_rgb(&decode(image)?)
             .map_err(|r| value_error(format!("cannot decode `{image}`: {r}")))?;
-        let msk = read::png_labels(&decode(mask)?)
+        let mask_bytes = decode(mask)?;
+        if let Some(problem) =
+            clevrtex_scene::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
+        {
+            return Err(value_error(format!("`{mask}` {problem}")));
+        }
+        let msk = read::png_labels(&mask_bytes)
             .map_err(|r| value_error(format!("cannot decode `{mask}`: {r}")))?;
         let (w, h) = (img.width, img.height);
         if (msk.width, msk.height) != (w, h) {

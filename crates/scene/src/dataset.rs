@@ -98,6 +98,58 @@ const O_NONBLOCK: i32 = 0o4000;
 #[cfg(not(target_os = "linux"))]
 const O_NONBLOCK: i32 = 0x0004;
 
+/// Why the PNG `bytes` of a sample's `pass` are not of the mode every reader takes for it,
+/// from the header alone (before any decoder allocates), or `None` when they are, or when
+/// they are no PNG at all (the decoder then says so). The mask must be 8-bit object ids, one
+/// channel: a palette index as clevrtex and the public ClevrTex write it, or greyscale (an RGB
+/// `_flat.png` would be read as three ids a pixel, a 16-bit one as ids past 255); the other
+/// passes must have their pass-table mode ([`crate::passes::PngKind`]). Used by `verify`,
+/// `preview`, `report`, `materials measure`, `eval`'s ground truth and the Python `Dataset`.
+pub fn png_mode_problem(bytes: &[u8], pass: Pass) -> Option<String> {
+    use crate::passes::PngKind;
+    if bytes.len() < 26 || &bytes[..8] != b"\x89PNG\r\n\x1a\n" || &bytes[12..16] != b"IHDR" {
+        return None;
+    }
+    let (depth, colour) = (bytes[24], bytes[25]);
+    let mode = |depth: u8, colour: u8| {
+        let c = match colour {
+            0 => "greyscale",
+            2 => "RGB",
+            3 => "palette",
+            4 => "greyscale-alpha",
+            6 => "RGBA",
+            _ => "unknown-colour",
+        };
+        format!("{depth}-bit {c}")
+    };
+    let ok = match pass.spec().png {
+        PngKind::Palette8 | PngKind::Gray8 if pass == Pass::Mask => {
+            depth == 8 && (colour == 0 || colour == 3)
+        }
+        PngKind::Palette8 => (depth, colour) == (8, 3),
+        PngKind::Gray8 => (depth, colour) == (8, 0),
+        PngKind::Rgb8 => (depth, colour) == (8, 2),
+        PngKind::Gray16 => (depth, colour) == (16, 0),
+        PngKind::Rgb16 => (depth, colour) == (16, 2),
+    };
+    if ok {
+        return None;
+    }
+    let want = match pass.spec().png {
+        _ if pass == Pass::Mask => "8-bit palette or greyscale object ids".to_string(),
+        PngKind::Palette8 => mode(8, 3),
+        PngKind::Gray8 => mode(8, 0),
+        PngKind::Rgb8 => mode(8, 2),
+        PngKind::Gray16 => mode(16, 0),
+        PngKind::Rgb16 => mode(16, 2),
+    };
+    Some(format!(
+        "is a {} PNG, but a {} pass must be {want}",
+        mode(depth, colour),
+        pass.name()
+    ))
+}
+
 /// The bytes of the regular file `path` under `root`, at most `cap` bytes; `Err` says why
 /// not, in one line (a link out of the root, not a regular file, too large, unreadable).
 pub fn read(root: &Path, path: &Path, cap: u64) -> Result<Vec<u8>, String> {
