@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context};
 use clevrtex_render::manifest;
-use clevrtex_render::pool::Job;
+use clevrtex_render::pool::{Job, Jobs};
 use clevrtex_scene::{layout, Config, Pass, SampleRequest};
 
 use crate::exit::CmdResult;
@@ -120,11 +120,11 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     if total < end {
         bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset");
     }
-    let range = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?
-        .indices(args.start, end);
+    let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
+    let start = args.start;
     // Draw the first layouts before starting Blender: a config whose objects can never be
     // placed fails here once (exit 1), as in `sample`, not once per image into the ledger.
-    for &index in range.iter().take(PREFLIGHT_LAYOUTS) {
+    for index in shard.iter(start, end).take(PREFLIGHT_LAYOUTS) {
         let req = SampleRequest {
             seed: args.seed,
             index,
@@ -135,11 +135,14 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     }
     let config = Arc::new(config);
     let variant = config.name.clone();
-    let jobs: Vec<Job> = range
-        .into_iter()
-        .map(|index| {
+    // Job `i` is made when a worker takes it: no list of the run's jobs is held, so
+    // `-n 100000000` runs in bounded memory.
+    let seed = args.seed;
+    let make = {
+        let (config, variant, passes) = (Arc::clone(&config), variant.clone(), passes.clone());
+        move |i: u64| {
+            let index = shard.nth(start, end, i);
             let config = Arc::clone(&config);
-            let seed = args.seed;
             Job {
                 index,
                 variant: variant.clone(),
@@ -160,10 +163,18 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
                 resample: true,
                 source: None,
             }
-        })
-        .collect();
+        }
+    };
+    let has_stem = {
+        let variant = variant.clone();
+        move |stem: &str| {
+            layout::parse_stem(stem, "").is_some_and(|(_, v, index)| {
+                v == variant && shard.contains(start, end, index)
+            })
+        }
+    };
+    let jobs = Jobs::lazy(shard.count(start, end), make, has_stem);
     let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
-    let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
     let plan = manifest::Plan {
         run: manifest::Manifest {
             variant: variant.clone(),

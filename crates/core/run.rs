@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use anyhow::bail;
 use clevrtex_render::manifest;
-use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, RunReport};
+use clevrtex_render::pool::{self, Jobs, PoolEvent, PoolOptions, RunReport};
 use clevrtex_render::RenderError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
@@ -22,7 +22,7 @@ use crate::run_args::{self, RunArgs};
 /// range's lock, the plan written first and the manifest last.
 pub(crate) fn run_jobs(
     args: &RunArgs,
-    jobs: Vec<Job>,
+    jobs: Jobs,
     ledger: PathBuf,
     max_attempts: u32,
     manifest: Option<manifest::Plan>,
@@ -80,7 +80,7 @@ pub(crate) fn run_jobs(
         interrupt: Arc::clone(&interrupt),
         devices: devices.clone(),
     };
-    let total = jobs.len() as u64;
+    let total = jobs.len();
     let bar = progress_bar(total);
     let (done, rejects, failures) = (AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0));
     let started = std::time::Instant::now();
