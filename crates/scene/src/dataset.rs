@@ -680,6 +680,9 @@ impl MetadataView {
         let height = meta_int(meta, file, "render.height", 1, side)? as u32;
         let pixels = u64::from(width) * u64::from(height);
         let n = meta_int(meta, file, "num_objects", 0, 255)? as usize;
+        // The split names a folder or shard in `export` and a report row: `../x` is refused by
+        // every reader alike (`verify` passed it while `export` refused it).
+        split_of(meta, file)?;
         let threshold = match meta.get("visibility_threshold_px") {
             None => 0,
             Some(_) => meta_int(meta, file, "visibility_threshold_px", 0, pixels)?,
@@ -753,6 +756,7 @@ pub fn check_metadata(meta: &Value, file: &str) -> Result<(), MetadataError> {
         Some(Value::Array(a)) => Some(a.len()),
         Some(v) => return Err(err("objects", format!("is {}, not a list", short(v)))),
     };
+    split_of(meta, file)?;
     if meta.get("num_objects").is_some() {
         let n = meta_int(meta, file, "num_objects", 0, 255)? as usize;
         if objects.is_some_and(|len| len != n) {
@@ -1022,5 +1026,18 @@ mod tests {
                 .key,
             "split"
         );
+    }
+
+    #[test]
+    fn a_split_that_is_no_split_is_refused_by_every_reader() {
+        let ours = serde_json::json!({
+            "render": {"width": 4, "height": 3}, "num_objects": 0, "objects": [],
+            "split": "../x",
+        });
+        let e = MetadataView::of(&ours, "m.json").unwrap_err().to_string();
+        assert!(e.contains("split") && e.contains("../x"), "{e}");
+        let published = serde_json::json!({"objects": [], "split": "../x"});
+        let e = check_metadata(&published, "m.json").unwrap_err().to_string();
+        assert!(e.contains("split") && e.contains("../x"), "{e}");
     }
 }
