@@ -221,6 +221,12 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
     for (ds, vd) in dirs {
         rep.skipped
             .extend(vd.skipped.iter().map(ToString::to_string));
+        rep.skipped.extend(vd.misplaced.iter().map(|p| {
+            format!(
+                "`{}` is a sample's file outside its sample folder: not read as the dataset's, but the public loader's `**/` glob would read it as a sample (a second time when the sample is also in its folder); move or remove it",
+                p.display()
+            )
+        }));
         rep.temp_files.extend(vd.temp_files.iter().cloned());
         for s in &vd.samples {
             found.entry(s.index).or_default().push((

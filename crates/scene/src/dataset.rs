@@ -361,6 +361,10 @@ pub struct VariantDir {
     pub unreadable: Vec<(PathBuf, String)>,
     /// Regular files and folders that are not the layout's (stray names).
     pub strays: Vec<PathBuf>,
+    /// Files named like a sample's that lie in the variant folder itself, outside every
+    /// sample folder: not a sample of the layout, but the public loader's `**/` glob reads
+    /// them as one (a second copy when the sample is also in its folder). `verify` names them.
+    pub misplaced: Vec<PathBuf>,
 }
 
 impl VariantDir {
@@ -541,6 +545,7 @@ fn walk_variant(root: &Path, variant: &str, dir: &Path, out: PathBuf) -> Variant
             Kind::Dir => walk_sample_dir(root, &p, &mut vd),
             Kind::File if crate::manifest::is_manifest_name(&name) => vd.manifests.push(p),
             Kind::File if name == layout::LEDGER_FILE => vd.ledgers.push(p),
+            Kind::File if layout::parse_file_name(&name).is_some() => vd.misplaced.push(p),
             Kind::File => vd.strays.push(p),
         }
     }
@@ -893,6 +898,9 @@ mod tests {
         std::fs::write(v.join("x.clevrtex-tmp"), b"").unwrap();
         std::fs::write(v.join("README"), b"").unwrap();
         std::os::unix::fs::symlink(outside.path(), out.join("clevrtex_away")).unwrap();
+        // A copy of a sample at the variant root (issue 34: the public loader's `**/` glob
+        // reads it a second time; `verify` ignored it).
+        std::fs::write(v.join(layout::metadata_file(&stem)), b"{}").unwrap();
 
         let ds = Dataset::open(&out).unwrap();
         assert!(!ds.is_variant_dir);
@@ -933,6 +941,7 @@ mod tests {
         assert_eq!(vd.skipped_for_metadata().count(), 1);
         assert_eq!(vd.temp_files.len(), 2);
         assert_eq!(vd.strays, [s0.join("notes.txt"), v.join("README")]);
+        assert_eq!(vd.misplaced, [v.join(layout::metadata_file(&stem))]);
         assert_eq!(vd.manifests, [v.join("MANIFEST-0-8-0of1.json")]);
         assert!(vd.read_manifests()[0].1.is_err());
         let ledger = ds.read_ledger(&vd.ledgers[0]).unwrap();
