@@ -48,7 +48,7 @@ pub struct Args {
     #[arg(long)]
     pub allow_missing: bool,
     /// Bootstrap resamples for the 95% confidence intervals, 0 to 100000 (0 to skip).
-    #[arg(long, default_value_t = 1000, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=100_000))]
+    #[arg(long, default_value_t = 1000)]
     pub bootstrap: usize,
     /// Seed of the bootstrap.
     #[arg(long, default_value_t = 0)]
