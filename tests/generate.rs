@@ -692,23 +692,36 @@ fn counts_and_limits_are_refused_not_aborted() {
     );
     assert_eq!(code, Some(1), "{t}");
     assert!(t.contains("no-blender"), "{t}");
+    // A value outside a flag's fixed range: refused by the parser (exit 2), naming the range.
     let usage = |args: &[&str], says: &str| {
         let o = clevrtex().args(args).output().unwrap();
         let t = text(&o);
         assert_eq!(o.status.code(), Some(2), "{args:?}: {t}");
         assert!(t.contains(says), "{args:?}: {t}");
     };
+    // A limit checked after parsing: exit 1, naming the flag, with a hint.
+    let refused = |args: &[&str], says: &str| {
+        let o = clevrtex().args(args).output().unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {t}");
+        assert!(t.contains(says), "{args:?}: {t}");
+        assert_hint_is_last(&t);
+    };
     let o = out.to_str().unwrap();
+    let nb = missing.to_str().unwrap();
     usage(&["generate", "-n", "100000001", "--out", o], "0..=100000000");
     usage(&["sample", "--variant", "full", "-n", "100000001", "--out", o], "0..=100000000");
     usage(&["sample", "--variant", "full", "-n", "1", "--total", "1e9", "--out", o], "--total");
-    usage(&["generate", "-n", "1", "--timeout", "1e300", "--out", o], "one week");
-    usage(&["generate", "-n", "1", "--timeout=-1", "--out", o], "one week");
-    usage(&["generate", "-n", "1", "--workers", "100000", "--out", o], "1..=1024");
     usage(&["verify", "--jobs", "100000", o], "1..=1024");
     usage(&["sample", "--variant", "full", "-n", "1", "-j", "0", "--out", o], "1..=1024");
-    usage(&["doctor", "--timeout", "1e300"], "one week");
-    usage(&["generate", "-n", "1", "--width", "0", "--out", o], "1..=4096");
+    usage(&["generate", "-n", "1", "--threads", "5000", "--out", o], "1..=1024");
+    usage(&["generate", "-n", "1", "--retries", "1000", "--out", o], "0..=100");
+    refused(&["generate", "-n", "1", "--timeout", "1e300", "--blender", nb, "--out", o], "`--timeout 1e300` must be a positive number of seconds, at most 604800");
+    refused(&["generate", "-n", "1", "--timeout=-1", "--blender", nb, "--out", o], "`--timeout -1` must be a positive");
+    refused(&["generate", "-n", "1", "--startup-timeout", "1e300", "--blender", nb, "--out", o], "`--startup-timeout 1e300`");
+    refused(&["generate", "-n", "1", "--workers", "100000", "--blender", nb, "--out", o], "`--workers 100000` is more than the 1024 allowed");
+    refused(&["generate", "-n", "1", "--max-attempts", "100000", "--out", o], "`--max-attempts 100000` is more than the 1000 allowed");
+    refused(&["doctor", "--timeout", "1e300"], "`--timeout 1e300` must be a positive number of seconds");
     // `--start` + `-n` past the cap: refused by the command, naming both.
     for cmd in [&["generate"][..], &["sample", "--variant", "full"]] {
         let mut args = cmd.to_vec();

@@ -76,7 +76,7 @@ pub struct RenderArgs {
     retries: u32,
     /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds:
     /// more than 0, at most 604800.
-    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS", value_parser = crate::run_args::seconds_value)]
+    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
     startup_timeout: f64,
     /// Blender: an executable, or a Python that imports `bpy` (default: `blender` on PATH, else
     /// `./.venv-bpy/bin/python`). Give it more than once to put Blenders side by side (each

@@ -10,7 +10,7 @@ use clevrtex_render::pool::{Job, Jobs};
 use clevrtex_scene::{layout, Config, Pass, SampleRequest};
 
 use crate::exit::CmdResult;
-use crate::run_args::{index_range, parse_passes, positive, within, RunArgs, MAX_ATTEMPTS};
+use crate::run_args::{index_range, parse_passes, within, RunArgs, MAX_ATTEMPTS};
 
 /// Arguments of `clevrtex generate`.
 #[derive(Debug, clap::Args)]
@@ -43,25 +43,25 @@ pub struct GenerateArgs {
     #[arg(long, value_name = "N", env = "CLEVRTEX_SHARD_COUNT")]
     shard_count: Option<u64>,
     /// Image width in pixels, 1 to 4096 (default 320).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    #[arg(long)]
     width: Option<u32>,
     /// Image height in pixels, 1 to 4096 (default 240).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    #[arg(long)]
     height: Option<u32>,
     /// Cycles samples per pixel, 1 to 65536 (default from the config).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    #[arg(long)]
     samples: Option<u32>,
     /// Samples of the shadow pass's render (default: three eighths of the samples, at most
     /// 64; RMSE ~0.018 at 8, ~0.010 at 16, ~0.008 at 24; docs/performance.md, "Shadow pass"),
     /// 1 to 65536.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=65536))]
+    #[arg(long, value_name = "N")]
     shadow_samples: Option<u32>,
     /// Quality preset: draft, standard, high or reference (samples, adaptive threshold,
     /// bounces; see docs/performance.md). `--samples` still overrides the sample count.
     #[arg(long, value_name = "PRESET")]
     quality: Option<clevrtex_scene::quality::Quality>,
     /// Layout attempts per image when objects are hidden, before the image fails (1 to 1000).
-    #[arg(long, default_value_t = 20, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=MAX_ATTEMPTS as i64))]
+    #[arg(long, default_value_t = 20, value_name = "N")]
     max_attempts: u32,
     #[command(flatten)]
     run: RunArgs,
@@ -100,7 +100,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     if let Some(s) = args.shadow_samples {
         config.base.render.shadow_samples = Some(within("--shadow-samples", s, MAX_SAMPLES)?);
     }
-    positive("--max-attempts", args.max_attempts)?;
+    within("--max-attempts", args.max_attempts, MAX_ATTEMPTS as u32)?;
     // Fail before starting Blender when no layout could ever be drawn, as `sample` does.
     clevrtex_scene::sample::check_feasible(&config)?;
     let passes = match &args.run.passes {

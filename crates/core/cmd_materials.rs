@@ -105,7 +105,7 @@ pub(crate) struct BatchArgs {
     /// Time limit per material render, seconds; a worker over it is killed and the render
     /// retried. Default: 600 + 8 per sample at 320x240, and a worker silent for 300 s counts
     /// as hung. More than 0, at most 604800 (a week).
-    #[arg(long, value_name = "SECONDS", value_parser = crate::run_args::seconds_value)]
+    #[arg(long, value_name = "SECONDS")]
     pub(crate) timeout: Option<f64>,
     /// Restarts of a crashed or hung Blender worker per material before the command stops
     /// (0 to 100).
@@ -113,7 +113,7 @@ pub(crate) struct BatchArgs {
     pub(crate) retries: u32,
     /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds:
     /// more than 0, at most 604800.
-    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS", value_parser = crate::run_args::seconds_value)]
+    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
     pub(crate) startup_timeout: f64,
 }
 

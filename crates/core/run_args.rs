@@ -26,7 +26,7 @@ pub struct RunArgs {
     pub(crate) blender: Option<PathBuf>,
     /// Blender processes rendering in parallel, 1 to 1024 (default: 2 on machines with 2+
     /// cores).
-    #[arg(long, value_name = "N", value_parser = threads_range::<usize>())]
+    #[arg(long, value_name = "N")]
     pub(crate) workers: Option<usize>,
     /// Cycles device: `auto` (the best GPU kind Blender reports: OptiX, CUDA, HIP; else the
     /// CPU), `cpu`, `cuda`, `optix` or `hip`. With N GPUs, one worker per GPU (pinned by its
@@ -39,11 +39,11 @@ pub struct RunArgs {
     /// Time limit per render request, seconds; a worker over it is killed and the scene
     /// retried. Default: 600 + 8 per sample at 320x240 (doubled with the shadow pass), and
     /// a worker silent for 300 s counts as hung. More than 0, at most 604800 (a week).
-    #[arg(long, value_name = "SECONDS", value_parser = seconds_value)]
+    #[arg(long, value_name = "SECONDS")]
     pub(crate) timeout: Option<f64>,
     /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds:
     /// more than 0, at most 604800.
-    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS", value_parser = seconds_value)]
+    #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
     pub(crate) startup_timeout: f64,
     /// Restarts of a crashed or hung worker per scene before it goes to the failure ledger,
     /// 0 to 100.
@@ -106,21 +106,6 @@ pub(crate) fn check_index_end(start: u64, end: u64) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A time limit in seconds: more than 0 and at most [`MAX_SECONDS`] (a week; `1e300` would
-/// overflow a duration).
-pub(crate) fn seconds_value(s: &str) -> Result<f64, String> {
-    let v: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{s}` is not a number of seconds"))?;
-    if !(v > 0.0 && v <= MAX_SECONDS) {
-        return Err(format!(
-            "`{s}` is not more than 0 and at most {MAX_SECONDS} seconds (one week)"
-        ));
-    }
-    Ok(v)
-}
-
 /// `v`, which must not be 0 (given as `flag`).
 pub(crate) fn positive(flag: &str, v: u32) -> anyhow::Result<u32> {
     if v == 0 {
@@ -129,10 +114,17 @@ pub(crate) fn positive(flag: &str, v: u32) -> anyhow::Result<u32> {
     Ok(v)
 }
 
-/// A positive, finite number of seconds given as `flag`.
+/// A number of seconds given as `flag`: more than 0 and at most [`MAX_SECONDS`] (a week;
+/// `1e300` overflowed a duration and panicked).
 pub(crate) fn seconds(flag: &str, v: f64) -> anyhow::Result<Duration> {
-    if !(v > 0.0 && v.is_finite()) {
-        bail!("`{flag} {v}` must be a positive number of seconds\nhint: e.g. `{flag} 120`");
+    if !(v > 0.0 && v <= MAX_SECONDS) {
+        // 1e300 as written, not as 301 digits.
+        let shown = if v.is_finite() && v.abs() < 1e9 {
+            v.to_string()
+        } else {
+            format!("{v:e}")
+        };
+        bail!("`{flag} {shown}` must be a positive number of seconds, at most {MAX_SECONDS} (one week)\nhint: e.g. `{flag} 120`");
     }
     Ok(Duration::from_secs_f64(v))
 }
