@@ -709,19 +709,122 @@ fn counts_and_limits_are_refused_not_aborted() {
     };
     let o = out.to_str().unwrap();
     let nb = missing.to_str().unwrap();
-    usage(&["generate", "-n", "100000001", "--out", o], "0..=100000000");
-    usage(&["sample", "--variant", "full", "-n", "100000001", "--out", o], "0..=100000000");
-    usage(&["sample", "--variant", "full", "-n", "1", "--total", "1e9", "--out", o], "--total");
+    usage(
+        &["generate", "-n", "100000001", "--out", o],
+        "0..=100000000",
+    );
+    usage(
+        &["sample", "--variant", "full", "-n", "100000001", "--out", o],
+        "0..=100000000",
+    );
+    usage(
+        &[
+            "sample",
+            "--variant",
+            "full",
+            "-n",
+            "1",
+            "--total",
+            "1e9",
+            "--out",
+            o,
+        ],
+        "--total",
+    );
     usage(&["verify", "--jobs", "100000", o], "1..=1024");
-    usage(&["sample", "--variant", "full", "-n", "1", "-j", "0", "--out", o], "1..=1024");
-    usage(&["generate", "-n", "1", "--threads", "5000", "--out", o], "1..=1024");
-    usage(&["generate", "-n", "1", "--retries", "1000", "--out", o], "0..=100");
-    refused(&["generate", "-n", "1", "--timeout", "1e300", "--blender", nb, "--out", o], "`--timeout 1e300` must be a positive number of seconds, at most 604800");
-    refused(&["generate", "-n", "1", "--timeout=-1", "--blender", nb, "--out", o], "`--timeout -1` must be a positive");
-    refused(&["generate", "-n", "1", "--startup-timeout", "1e300", "--blender", nb, "--out", o], "`--startup-timeout 1e300`");
-    refused(&["generate", "-n", "1", "--workers", "100000", "--blender", nb, "--out", o], "`--workers 100000` is more than the 1024 allowed");
-    refused(&["generate", "-n", "1", "--max-attempts", "100000", "--out", o], "`--max-attempts 100000` is more than the 1000 allowed");
-    refused(&["doctor", "--timeout", "1e300"], "`--timeout 1e300` must be a positive number of seconds");
+    usage(
+        &[
+            "sample",
+            "--variant",
+            "full",
+            "-n",
+            "1",
+            "-j",
+            "0",
+            "--out",
+            o,
+        ],
+        "1..=1024",
+    );
+    usage(
+        &["generate", "-n", "1", "--threads", "5000", "--out", o],
+        "1..=1024",
+    );
+    usage(
+        &["generate", "-n", "1", "--retries", "1000", "--out", o],
+        "0..=100",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--timeout",
+            "1e300",
+            "--blender",
+            nb,
+            "--out",
+            o,
+        ],
+        "`--timeout 1e300` must be a positive number of seconds, at most 604800",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--timeout=-1",
+            "--blender",
+            nb,
+            "--out",
+            o,
+        ],
+        "`--timeout -1` must be a positive",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--startup-timeout",
+            "1e300",
+            "--blender",
+            nb,
+            "--out",
+            o,
+        ],
+        "`--startup-timeout 1e300`",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--workers",
+            "100000",
+            "--blender",
+            nb,
+            "--out",
+            o,
+        ],
+        "`--workers 100000` is more than the 1024 allowed",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--max-attempts",
+            "100000",
+            "--out",
+            o,
+        ],
+        "`--max-attempts 100000` is more than the 1000 allowed",
+    );
+    refused(
+        &["doctor", "--timeout", "1e300"],
+        "`--timeout 1e300` must be a positive number of seconds",
+    );
     // `--start` + `-n` past the cap: refused by the command, naming both.
     for cmd in [&["generate"][..], &["sample", "--variant", "full"]] {
         let mut args = cmd.to_vec();

@@ -168,9 +168,8 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     let has_stem = {
         let variant = variant.clone();
         move |stem: &str| {
-            layout::parse_stem(stem, "").is_some_and(|(_, v, index)| {
-                v == variant && shard.contains(start, end, index)
-            })
+            layout::parse_stem(stem, "")
+                .is_some_and(|(_, v, index)| v == variant && shard.contains(start, end, index))
         }
     };
     let jobs = Jobs::lazy(shard.count(start, end), make, has_stem);

@@ -88,8 +88,7 @@ where
 /// `-n`, `--start`, `--total`: 0 to the dataset cap (`MAX_RUN_INDICES`, 100000000 images);
 /// the sum `--start + -n` is checked by the command.
 pub(crate) fn index_range() -> clap::builder::RangedU64ValueParser<u64> {
-    clap::builder::RangedU64ValueParser::<u64>::new()
-        .range(0..=clevrtex_scene::bounds::INDEX_END)
+    clap::builder::RangedU64ValueParser::<u64>::new().range(0..=clevrtex_scene::bounds::INDEX_END)
 }
 
 /// `--start + -n` (`end`) within the dataset cap: every index below

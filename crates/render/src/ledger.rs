@@ -174,7 +174,11 @@ impl Ledger {
     /// After a finished run: drop the entries of `ran` (the run's stems) that did not fail
     /// now (a rerun made them), so the ledger lists only what is still missing; the file goes
     /// when nothing is. Entries of other runs (other shards) are kept.
-    pub(crate) fn prune(&self, ran: &dyn Fn(&str) -> bool, failed: &BTreeSet<String>) -> Result<()> {
+    pub(crate) fn prune(
+        &self,
+        ran: &dyn Fn(&str) -> bool,
+        failed: &BTreeSet<String>,
+    ) -> Result<()> {
         if std::fs::symlink_metadata(&self.path).is_err() {
             return Ok(());
         }

@@ -275,12 +275,8 @@ pub const CLAMP_INDIRECT: Bound = closed(
     "Blender's range (0 = off)",
 );
 /// Adaptive-sampling noise threshold.
-pub const ADAPTIVE_THRESHOLD: Bound = closed(
-    "render adaptive_threshold",
-    0.0,
-    1.0,
-    "Blender's range",
-);
+pub const ADAPTIVE_THRESHOLD: Bound =
+    closed("render adaptive_threshold", 0.0, 1.0, "Blender's range");
 /// View exposure.
 pub const EXPOSURE: Bound = closed(
     "render exposure",
@@ -419,8 +415,14 @@ mod tests {
         assert!(OBJECT_SCALE.range().starts_with("more than 0"));
         assert!(!OBJECT_SCALE.contains(0.0));
         assert!(!LIGHT_ENERGY_W.contains(f64::NAN));
-        let e = FOCAL_LENGTH_MM.check("camera.focal_length_mm", 0.0).unwrap_err();
-        assert!(e.to_string().starts_with("`camera.focal_length_mm` = 0: must be 1 to 5000 ("), "{e}");
+        let e = FOCAL_LENGTH_MM
+            .check("camera.focal_length_mm", 0.0)
+            .unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("`camera.focal_length_mm` = 0: must be 1 to 5000 ("),
+            "{e}"
+        );
     }
 
     #[test]
@@ -439,7 +441,10 @@ mod tests {
             .iter()
             .map(|b| format!("| {} | {} | {} |\n", b.what, b.range(), b.reason))
             .collect();
-        assert!(docs.contains(&table), "docs/scene-format.md lacks:\n{table}");
+        assert!(
+            docs.contains(&table),
+            "docs/scene-format.md lacks:\n{table}"
+        );
     }
 
     #[test]
@@ -454,8 +459,11 @@ mod config_tests {
     use crate::{sample, Config, SampleRequest};
 
     fn with_base(over: &str) -> String {
-        include_str!("../../../configs/full.json")
-            .replacen('{', &format!(r#"{{"base_scene": {over},"#), 1)
+        include_str!("../../../configs/full.json").replacen(
+            '{',
+            &format!(r#"{{"base_scene": {over},"#),
+            1,
+        )
     }
 
     /// A config at the edge of every bound the sampler reads still samples scenes that
@@ -489,13 +497,31 @@ mod config_tests {
     #[test]
     fn config_refuses_what_render_would() {
         for (over, key) in [
-            (r#"{"camera": {"jitter": 1e300}}"#, "base_scene.camera.jitter"),
-            (r#"{"camera": {"focal_length_mm": 0.5}}"#, "base_scene.camera.focal_length_mm"),
-            (r#"{"lights": [{"name": "key", "location": [1, 1, 1], "look_at": [0, 0, 0], "jitter": 1, "size": 1, "energy": -5, "color": [1, 1, 1]}]}"#, "base_scene.lights[0].energy"),
-            (r#"{"backdrop": {"profile": [[0, 0], [1e5, 0]]}}"#, "base_scene.backdrop.profile[1][0]"),
-            (r#"{"placement": {"area": [-1e300, 1e300]}}"#, "base_scene.placement.area[0]"),
+            (
+                r#"{"camera": {"jitter": 1e300}}"#,
+                "base_scene.camera.jitter",
+            ),
+            (
+                r#"{"camera": {"focal_length_mm": 0.5}}"#,
+                "base_scene.camera.focal_length_mm",
+            ),
+            (
+                r#"{"lights": [{"name": "key", "location": [1, 1, 1], "look_at": [0, 0, 0], "jitter": 1, "size": 1, "energy": -5, "color": [1, 1, 1]}]}"#,
+                "base_scene.lights[0].energy",
+            ),
+            (
+                r#"{"backdrop": {"profile": [[0, 0], [1e5, 0]]}}"#,
+                "base_scene.backdrop.profile[1][0]",
+            ),
+            (
+                r#"{"placement": {"area": [-1e300, 1e300]}}"#,
+                "base_scene.placement.area[0]",
+            ),
             (r#"{"render": {"gamma": -1}}"#, "base_scene.render.gamma"),
-            (r#"{"sun": {"direction": [0, 0, 0]}}"#, "base_scene.sun.direction"),
+            (
+                r#"{"sun": {"direction": [0, 0, 0]}}"#,
+                "base_scene.sun.direction",
+            ),
         ] {
             let e = Config::from_json_str(&with_base(over), "x.json").unwrap_err();
             assert_eq!(e.key, key, "{over}: {e}");
@@ -503,7 +529,11 @@ mod config_tests {
         }
         let full = include_str!("../../../configs/full.json");
         for (from, to, key) in [
-            ("\"scale\": 0.9", "\"scale\": 1e300", "objects.sizes[0].scale"),
+            (
+                "\"scale\": 0.9",
+                "\"scale\": 1e300",
+                "objects.sizes[0].scale",
+            ),
             ("\"scale\": 2.0", "\"scale\": 1e300", "background.scale"),
         ] {
             let text = full.replacen(from, to, 1);

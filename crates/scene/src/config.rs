@@ -458,12 +458,14 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
         problem: problem.to_string(),
         hint: hint.to_string(),
     };
-    let out_of_bounds = |e: OutOfBounds| ConfigError {
+    let out_of_bounds = |e: OutOfBounds| {
+        ConfigError {
         file: source.to_string(),
         key: e.key,
         value: Some(e.value.to_string()),
         problem: e.problem,
         hint: "keep the value within its range; `docs/scene-format.md`, \"Bounds\", lists every bound and its reason".to_string(),
+    }
     };
     let catalogue = catalogue();
 
@@ -635,7 +637,10 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
     if c.clip_start >= c.clip_end {
         return Err(err(
             "base_scene.camera",
-            Some(format!("clip_start {}, clip_end {}", c.clip_start, c.clip_end)),
+            Some(format!(
+                "clip_start {}, clip_end {}",
+                c.clip_start, c.clip_end
+            )),
             "need clip_start < clip_end",
             "the reference uses 0.1 and 100",
         ));
@@ -703,7 +708,11 @@ fn check_base_bounds(base: &BaseScene) -> Result<(), OutOfBounds> {
     bounds::check_backdrop("base_scene.backdrop", &b.profile, b.y_range)?;
     bounds::ROTATION_RAD.check("base_scene.backdrop.rotation_z", b.rotation_z)?;
     let p = &base.placement;
-    bounds::check_all(&bounds::PLACEMENT_AREA, "base_scene.placement.area", &p.area)?;
+    bounds::check_all(
+        &bounds::PLACEMENT_AREA,
+        "base_scene.placement.area",
+        &p.area,
+    )?;
     bounds::PLACEMENT_GAP.check("base_scene.placement.min_dist", p.min_dist)?;
     bounds::PLACEMENT_GAP.check("base_scene.placement.margin", p.margin)?;
     bounds::PLACEMENT_TRIES.check(

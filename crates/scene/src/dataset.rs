@@ -1046,7 +1046,9 @@ mod tests {
         let e = MetadataView::of(&ours, "m.json").unwrap_err().to_string();
         assert!(e.contains("split") && e.contains("../x"), "{e}");
         let published = serde_json::json!({"objects": [], "split": "../x"});
-        let e = check_metadata(&published, "m.json").unwrap_err().to_string();
+        let e = check_metadata(&published, "m.json")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("split") && e.contains("../x"), "{e}");
     }
 }

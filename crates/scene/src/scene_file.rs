@@ -443,12 +443,28 @@ mod tests {
     /// Each hostile value is refused with its key (issue 34: all of these reached Blender).
     #[test]
     fn extreme_values_are_refused_naming_the_key() {
-        let cases: Vec<(&str, Box<dyn Fn(&mut SceneFile)>)> = vec![
-            ("camera.focal_length_mm", Box::new(|s| s.camera.focal_length_mm = 0.0)),
-            ("camera.focal_length_mm", Box::new(|s| s.camera.focal_length_mm = -35.0)),
-            ("camera.sensor_width_mm", Box::new(|s| s.camera.sensor_width_mm = 0.0)),
-            ("objects[0].shape", Box::new(|s| s.objects[0].shape = "donut".into())),
-            ("lights[1].energy", Box::new(|s| s.lights[1].energy = -200.0)),
+        type Break = Box<dyn Fn(&mut SceneFile)>;
+        let cases: Vec<(&str, Break)> = vec![
+            (
+                "camera.focal_length_mm",
+                Box::new(|s| s.camera.focal_length_mm = 0.0),
+            ),
+            (
+                "camera.focal_length_mm",
+                Box::new(|s| s.camera.focal_length_mm = -35.0),
+            ),
+            (
+                "camera.sensor_width_mm",
+                Box::new(|s| s.camera.sensor_width_mm = 0.0),
+            ),
+            (
+                "objects[0].shape",
+                Box::new(|s| s.objects[0].shape = "donut".into()),
+            ),
+            (
+                "lights[1].energy",
+                Box::new(|s| s.lights[1].energy = -200.0),
+            ),
             ("sun.strength", Box::new(|s| s.sun.strength = -1.0)),
             (
                 "backdrop.profile",
@@ -456,16 +472,26 @@ mod tests {
                     s.backdrop.profile = (0..60_000).map(|i| [i as f64 * 1e-3, 0.0]).collect()
                 }),
             ),
-            ("backdrop.y_range", Box::new(|s| s.backdrop.y_range = [-600.0, 600.0])),
-            ("index", Box::new(|s| {
-                s.index = 100_000_000;
-                s.stem = crate::stem(&s.variant, s.index);
-            })),
-            ("objects[0].material.displacement", Box::new(|s| {
-                s.objects[0].material.displacement = Some(-1.0)
-            })),
+            (
+                "backdrop.y_range",
+                Box::new(|s| s.backdrop.y_range = [-600.0, 600.0]),
+            ),
+            (
+                "index",
+                Box::new(|s| {
+                    s.index = 100_000_000;
+                    s.stem = crate::stem(&s.variant, s.index);
+                }),
+            ),
+            (
+                "objects[0].material.displacement",
+                Box::new(|s| s.objects[0].material.displacement = Some(-1.0)),
+            ),
             ("render.exposure", Box::new(|s| s.render.exposure = 100.0)),
-            ("passes", Box::new(|s| s.passes = vec![Pass::Rgb, Pass::Rgb, Pass::Mask])),
+            (
+                "passes",
+                Box::new(|s| s.passes = vec![Pass::Rgb, Pass::Rgb, Pass::Mask]),
+            ),
         ];
         for (key, break_it) in cases {
             let mut s = scene();

@@ -18,9 +18,8 @@ fn is_bidi_format(c: char) -> bool {
 /// formatting character (U+202E, ...) written as `\u{..}`; with `lines`, newlines and tabs are
 /// kept (a traceback stays readable).
 fn escaped(text: &str, lines: bool) -> Cow<'_, str> {
-    let bad = |c: char| {
-        (c.is_control() || is_bidi_format(c)) && !(lines && (c == '\n' || c == '\t'))
-    };
+    let bad =
+        |c: char| (c.is_control() || is_bidi_format(c)) && !(lines && (c == '\n' || c == '\t'));
     if !text.chars().any(bad) {
         return Cow::Borrowed(text);
     }
