@@ -456,14 +456,16 @@ fn load_sample<'py>(
             // OSError(errno, message, filename): a deleted mask is a FileNotFoundError naming
             // it, as `read_metadata` does.
             use clevrtex_scene::dataset::{read_regular, ReadError};
-            read_regular(Path::new(p), clevrtex_eval::dataset::MAX_FILE_BYTES).map_err(|e| match e {
-                ReadError::Io(e) => PyOSError::new_err((
-                    e.raw_os_error().unwrap_or(0),
-                    format!("`{p}` cannot be read: {e}"),
-                    p.to_string(),
-                )),
-                other => value_error(format!("`{p}` {}; not read", other.into_io())),
-            })
+            read_regular(Path::new(p), clevrtex_eval::dataset::MAX_FILE_BYTES).map_err(
+                |e| match e {
+                    ReadError::Io(e) => PyOSError::new_err((
+                        e.raw_os_error().unwrap_or(0),
+                        format!("`{p}` cannot be read: {e}"),
+                        p.to_string(),
+                    )),
+                    other => value_error(format!("`{p}` {}; not read", other.into_io())),
+                },
+            )
         };
         // Each PNG's size checked from its header before it is decoded (a 1 MB mask can
         // declare 30000x30000: 4.5 GB decoded).
