@@ -556,3 +556,9 @@ def test_the_package_follows_the_cli_limits_and_names_empty_batches(tmp_path):
     with pytest.raises(FileNotFoundError, match="CLEVRTEX_vbg_000002_flat.png") as e:
         ds[2]
     assert e.value.filename == str(mask)
+    # A mask of another PNG mode is named, never read as ids from its colour bytes.
+    from PIL import Image
+
+    Image.new("RGB", (40, 30)).save(root / "clevrtex_vbg" / "0" / "CLEVRTEX_vbg_000003_flat.png")
+    with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000003_flat.png` is a 8-bit RGB PNG, but a mask pass must be"):
+        ds[3]
