@@ -1316,3 +1316,45 @@ fn eval_prints_metadata_names_escaped() {
         "{stdout}"
     );
 }
+
+/// Issue 34: `eval` scored ground truth whose mask holds ids past its metadata's objects
+/// (which `verify` rejects), and treated predictions nested deeper than its walk's limit as
+/// missing without saying why.
+#[test]
+fn eval_refuses_ids_past_the_objects_and_names_predictions_too_deep() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = dir.path().join("gt");
+    copy_dir(&gt(), &g);
+    let meta_path = g.join("clevrtex_vbg/0/CLEVRTEX_vbg_000002.json");
+    let mut meta: Value = serde_json::from_slice(&std::fs::read(&meta_path).unwrap()).unwrap();
+    meta["objects"] = serde_json::json!([]);
+    meta["num_objects"] = 0.into();
+    std::fs::write(&meta_path, meta.to_string()).unwrap();
+    let out = run(&["eval", s(&data("eval/preds/png")), s(&g), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let e = stderr(&out);
+    assert!(
+        e.contains("CLEVRTEX_vbg_000002_flat.png")
+            && e.contains("has id 1 but its metadata")
+            && e.contains("has 0 objects"),
+        "{}",
+        text(&out)
+    );
+    // A prediction 40 folders down is named as too deep, not just missing.
+    let preds = dir.path().join("preds");
+    copy_dir(&data("eval/preds/png"), &preds);
+    let mut deep = preds.clone();
+    for i in 0..40 {
+        deep = deep.join(format!("d{i}"));
+    }
+    std::fs::create_dir_all(&deep).unwrap();
+    let name = "CLEVRTEX_vbg_000000_mask.png";
+    std::fs::rename(preds.join(name), deep.join(name)).unwrap();
+    let out = run(&["eval", s(&preds), s(&gt()), "--split", "all"]);
+    assert_ne!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(
+        text(&out).contains("lies more than 32 folders deep; not read"),
+        "{}",
+        text(&out)
+    );
+}

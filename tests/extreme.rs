@@ -373,7 +373,7 @@ fn rendered() -> Option<&'static Rendered> {
 }
 
 fn render(blender: PathBuf, out: &Path, scenes: &[SceneFile]) -> Vec<SampleStats> {
-    let jobs = scenes
+    let jobs: Vec<Job> = scenes
         .iter()
         .map(|s| {
             let s = Arc::new(s.clone());

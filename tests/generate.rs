@@ -410,7 +410,7 @@ pub(crate) fn render_fixtures(
     out: &Path,
     scenes: Vec<SceneFile>,
 ) -> Vec<SampleStats> {
-    let jobs = scenes
+    let jobs: Vec<Job> = scenes
         .into_iter()
         .map(|s| {
             let s = Arc::new(s);
@@ -665,4 +665,175 @@ fn bad_sizes_attempts_configs_and_scene_files_fail_up_front() {
         );
         assert!(t.contains(want), "{want}: {t}");
     }
+}
+
+/// Issue 34: counts and limits were aborts or panics: `generate -n 100000000` (the dataset
+/// cap) allocated 12.8 GB of jobs up front and aborted, `sample` had no cap, `--timeout 1e300`
+/// panicked, `verify --jobs 100000` started 100,000 threads. Each is a clear refusal now (or,
+/// for `-n 100000000`, a run that reaches Blender within 2 GB of address space).
+#[test]
+fn counts_and_limits_are_refused_not_aborted() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let missing = dir.path().join("no-blender");
+    // The whole cap: jobs are made lazily, so the run gets as far as looking for Blender.
+    let (code, t) = crate::util::run_limited(
+        &[
+            "generate".as_ref(),
+            "-n".as_ref(),
+            "100000000".as_ref(),
+            "--out".as_ref(),
+            out.as_os_str(),
+            "--blender".as_ref(),
+            missing.as_os_str(),
+        ],
+        &[],
+        120,
+    );
+    assert_eq!(code, Some(1), "{t}");
+    assert!(t.contains("no-blender"), "{t}");
+    // A value outside a flag's fixed range: refused by the parser (exit 2), naming the range.
+    let usage = |args: &[&str], says: &str| {
+        let o = clevrtex().args(args).output().unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {t}");
+        assert!(t.contains(says), "{args:?}: {t}");
+    };
+    // A limit checked after parsing: exit 1, naming the flag, with a hint.
+    let refused = |args: &[&str], says: &str| {
+        let o = clevrtex().args(args).output().unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {t}");
+        assert!(t.contains(says), "{args:?}: {t}");
+        assert_hint_is_last(&t);
+    };
+    let o = out.to_str().unwrap();
+    let nb = missing.to_str().unwrap();
+    usage(
+        &["generate", "-n", "100000001", "--out", o],
+        "0..=100000000",
+    );
+    usage(
+        &["sample", "--variant", "full", "-n", "100000001", "--out", o],
+        "0..=100000000",
+    );
+    usage(
+        &[
+            "sample",
+            "--variant",
+            "full",
+            "-n",
+            "1",
+            "--total",
+            "1e9",
+            "--out",
+            o,
+        ],
+        "--total",
+    );
+    usage(&["verify", "--jobs", "100000", o], "1..=1024");
+    usage(
+        &[
+            "sample",
+            "--variant",
+            "full",
+            "-n",
+            "1",
+            "-j",
+            "0",
+            "--out",
+            o,
+        ],
+        "1..=1024",
+    );
+    usage(
+        &["generate", "-n", "1", "--threads", "5000", "--out", o],
+        "1..=1024",
+    );
+    usage(
+        &["generate", "-n", "1", "--retries", "1000", "--out", o],
+        "0..=100",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--timeout",
+            "1e300",
+            "--blender",
+            nb,
+            "--out",
+            o,
+        ],
+        "`--timeout 1e300` must be a positive number of seconds, at most 604800",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--timeout=-1",
+            "--blender",
+            nb,
+            "--out",
+            o,
+        ],
+        "`--timeout -1` must be a positive",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--startup-timeout",
+            "1e300",
+            "--blender",
+            nb,
+            "--out",
+            o,
+        ],
+        "`--startup-timeout 1e300`",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--workers",
+            "100000",
+            "--blender",
+            nb,
+            "--out",
+            o,
+        ],
+        "`--workers 100000` is more than the 1024 allowed",
+    );
+    refused(
+        &[
+            "generate",
+            "-n",
+            "1",
+            "--max-attempts",
+            "100000",
+            "--out",
+            o,
+        ],
+        "`--max-attempts 100000` is more than the 1000 allowed",
+    );
+    refused(
+        &["doctor", "--timeout", "1e300"],
+        "`--timeout 1e300` must be a positive number of seconds",
+    );
+    // `--start` + `-n` past the cap: refused by the command, naming both.
+    for cmd in [&["generate"][..], &["sample", "--variant", "full"]] {
+        let mut args = cmd.to_vec();
+        args.extend(["--start", "99999999", "-n", "2", "--out", o]);
+        let o = clevrtex().args(&args).output().unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {t}");
+        assert!(t.contains("past the dataset cap of 100000000"), "{t}");
+        assert_hint_is_last(&t);
+    }
+    assert!(!out.join("clevrtex_full").exists());
 }

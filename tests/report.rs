@@ -423,3 +423,47 @@ fn report_measures_no_pass_file_behind_a_link_out_of_the_dataset() {
     );
     assert!(page.is_file(), "{t}");
 }
+
+/// Issue 34: a `_flat.png` of another PNG mode (RGB, 16-bit) made `report` panic ("capacity
+/// overflow", exit 101), and `preview` drew an all-black RGB mask as if it were ids. Every
+/// reader now names such a sample and leaves it out (exit 3), by one rule
+/// (`dataset::png_mode_problem`).
+#[test]
+fn report_and_preview_leave_out_masks_of_another_png_mode() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    for i in 0..4 {
+        crate::util::hand_png_sample(&data, "clevr", i, (16, 12), (16, 12));
+    }
+    let sub = data.join("clevrtex_clevr/0");
+    image::RgbImage::new(16, 12)
+        .save(sub.join("CLEVRTEX_clevr_000001_flat.png"))
+        .unwrap();
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(16, 12, image::Luma([300]))
+        .save(sub.join("CLEVRTEX_clevr_000002_flat.png"))
+        .unwrap();
+    let page = dir.path().join("report.html");
+    let sheet = dir.path().join("sheet.png");
+    for (cmd, out) in [("report", &page), ("preview", &sheet)] {
+        let o = crate::util::run_within(
+            &[
+                cmd.as_ref(),
+                "--out".as_ref(),
+                out.as_os_str(),
+                data.as_os_str(),
+            ],
+            120,
+        );
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(3), "{cmd}: {t}");
+        assert!(
+            t.contains("CLEVRTEX_clevr_000001_flat.png` is a 8-bit RGB PNG, but a mask pass must be 8-bit palette or greyscale object ids"),
+            "{cmd}: {t}"
+        );
+        assert!(
+            t.contains("CLEVRTEX_clevr_000002_flat.png` is a 16-bit greyscale PNG"),
+            "{cmd}: {t}"
+        );
+        assert!(out.is_file(), "{cmd}: {t}");
+    }
+}

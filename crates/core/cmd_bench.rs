@@ -35,8 +35,8 @@ pub struct RenderArgs {
     /// references. Numbers are for comparing settings, not for the docs' per-image costs.
     #[arg(long)]
     quick: bool,
-    #[arg(long, value_name = "N", help = format!(
-        "Number of scenes (default 8, 2 with `--quick`); scene i is image i of the variant `{}` (cycling), seed {}",
+    #[arg(long, value_name = "N", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024), help = format!(
+        "Number of scenes, 1 to 1024 (default 8, 2 with `--quick`); scene i is image i of the variant `{}` (cycling), seed {}",
         clevrtex_bench::scenes::VARIANTS.join(", "),
         clevrtex_bench::scenes::SEED
     ))]
@@ -44,15 +44,15 @@ pub struct RenderArgs {
     /// Output folder: CSV, plot, renders and the reference cache.
     #[arg(long, default_value = "bench-out", value_name = "DIR")]
     out: PathBuf,
-    /// Image width (default 320, 160 with `--quick`).
-    #[arg(long)]
+    /// Image width, 1 to 4096 (default 320, 160 with `--quick`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
     width: Option<u32>,
-    /// Image height (default 240, 120 with `--quick`).
-    #[arg(long)]
+    /// Image height, 1 to 4096 (default 240, 120 with `--quick`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
     height: Option<u32>,
     /// Fixed samples of the reference renders (default 4096, 1024 with `--quick`), with the
-    /// original generator's bounces.
-    #[arg(long, value_name = "N")]
+    /// original generator's bounces; 1 to 65536.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=65536))]
     reference_samples: Option<u32>,
     /// Skip rungs with more samples than this (e.g. to try the command quickly).
     #[arg(long, value_name = "N")]
@@ -67,13 +67,15 @@ pub struct RenderArgs {
     /// Render nothing: redraw the table, summary and plot from `OUT/bench-render.csv`.
     #[arg(long)]
     plot_only: bool,
-    /// Cycles threads (default: Blender's choice, all cores).
-    #[arg(long, default_value_t = 0, value_name = "T")]
+    /// Cycles threads, 0 to 1024 (default 0: Blender's choice, all cores).
+    #[arg(long, default_value_t = 0, value_name = "T", value_parser = clap::value_parser!(u32).range(0..=crate::run_args::MAX_THREADS as i64))]
     threads: u32,
-    /// Restarts of a crashed or hung Blender worker per render before the bench stops.
-    #[arg(long, default_value_t = 2, value_name = "N")]
+    /// Restarts of a crashed or hung Blender worker per render before the bench stops (0 to
+    /// 100).
+    #[arg(long, default_value_t = 2, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=crate::run_args::MAX_RETRIES as i64))]
     retries: u32,
-    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds.
+    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds:
+    /// more than 0, at most 604800.
     #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
     startup_timeout: f64,
     /// Blender: an executable, or a Python that imports `bpy` (default: `blender` on PATH, else

@@ -22,6 +22,7 @@ pub struct Args {
     blender: Option<PathBuf>,
     /// Seconds each check may take (`blender --version`, the bridge's start-up) before the
     /// program is killed and reported.
+    /// More than 0, at most 604800 (a week).
     #[arg(long, default_value_t = 60.0, value_name = "SECS")]
     timeout: f64,
 }
@@ -35,13 +36,7 @@ pub fn run(args: Args) -> CmdResult {
         "machine: {cores} core(s); `generate` defaults to {workers} worker(s) x {} Cycles thread(s)",
         (cores / workers).max(1)
     );
-    if !(args.timeout > 0.0 && args.timeout.is_finite()) {
-        anyhow::bail!(
-            "`--timeout {}` must be a positive number of seconds\nhint: e.g. `--timeout 60`",
-            args.timeout
-        );
-    }
-    let deadline = Duration::from_secs_f64(args.timeout);
+    let deadline = crate::run_args::seconds("--timeout", args.timeout)?;
     let path = blender::locate(args.blender.as_deref())?;
     println!("blender: {}", path.display());
     let line = blender::version_line_within(&path, deadline)?;

@@ -47,7 +47,7 @@ pub struct Args {
     /// Score samples without a prediction as all-background (counted in the report).
     #[arg(long)]
     pub allow_missing: bool,
-    /// Bootstrap resamples for the 95% confidence intervals (0 to skip).
+    /// Bootstrap resamples for the 95% confidence intervals, 0 to 100000 (0 to skip).
     #[arg(long, default_value_t = 1000)]
     pub bootstrap: usize,
     /// Seed of the bootstrap.

@@ -31,8 +31,8 @@ pub struct Args {
     /// Export only this variant (default: every variant found).
     #[arg(long)]
     variant: Option<String>,
-    /// Largest shard in bytes (a sample is never split).
-    #[arg(long, default_value_t = 1_000_000_000, value_name = "BYTES")]
+    /// Largest shard in bytes (a sample is never split), 1 to 10^12.
+    #[arg(long, default_value_t = 1_000_000_000, value_name = "BYTES", value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(1..=1_000_000_000_000))]
     shard_size: u64,
 }
 

@@ -6,11 +6,11 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context};
 use clevrtex_render::manifest;
-use clevrtex_render::pool::Job;
+use clevrtex_render::pool::{Job, Jobs};
 use clevrtex_scene::{layout, Config, Pass, SampleRequest};
 
 use crate::exit::CmdResult;
-use crate::run_args::{parse_passes, positive, within, RunArgs};
+use crate::run_args::{index_range, parse_passes, within, RunArgs, MAX_ATTEMPTS};
 
 /// Arguments of `clevrtex generate`.
 #[derive(Debug, clap::Args)]
@@ -22,18 +22,18 @@ pub struct GenerateArgs {
     /// A variant config file (JSON, like those in `configs/`) instead of `--variant`.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// Number of images.
-    #[arg(short = 'n', long = "count", value_name = "N")]
+    /// Number of images, 1 to 100000000 (with `--start`, indices stay below 100000000).
+    #[arg(short = 'n', long = "count", value_name = "N", value_parser = index_range())]
     count: u64,
     /// Run seed: with the image index it fixes every random draw.
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// First image index; images `START..START+N` are made.
-    #[arg(long, default_value_t = 0, value_name = "I")]
+    #[arg(long, default_value_t = 0, value_name = "I", value_parser = index_range())]
     start: u64,
     /// Size of the whole dataset, which fixes the splits (first 10% test, next 10% val, rest
-    /// train) [default: START + N].
-    #[arg(long, value_name = "T")]
+    /// train), at most 100000000 [default: START + N].
+    #[arg(long, value_name = "T", value_parser = index_range())]
     total: Option<u64>,
     /// Make only the images with `index % N == K` (0 <= K < N), as `clevrtex sample` does:
     /// N shards together make every image exactly once.
@@ -42,24 +42,25 @@ pub struct GenerateArgs {
     /// Number of shards when the shard index comes from JOB_COMPLETION_INDEX.
     #[arg(long, value_name = "N", env = "CLEVRTEX_SHARD_COUNT")]
     shard_count: Option<u64>,
-    /// Image width in pixels (default 320).
+    /// Image width in pixels, 1 to 4096 (default 320).
     #[arg(long)]
     width: Option<u32>,
-    /// Image height in pixels (default 240).
+    /// Image height in pixels, 1 to 4096 (default 240).
     #[arg(long)]
     height: Option<u32>,
-    /// Cycles samples per pixel (default from the config).
+    /// Cycles samples per pixel, 1 to 65536 (default from the config).
     #[arg(long)]
     samples: Option<u32>,
     /// Samples of the shadow pass's render (default: three eighths of the samples, at most
-    /// 64; RMSE ~0.018 at 8, ~0.010 at 16, ~0.008 at 24; docs/performance.md, "Shadow pass").
+    /// 64; RMSE ~0.018 at 8, ~0.010 at 16, ~0.008 at 24; docs/performance.md, "Shadow pass"),
+    /// 1 to 65536.
     #[arg(long, value_name = "N")]
     shadow_samples: Option<u32>,
     /// Quality preset: draft, standard, high or reference (samples, adaptive threshold,
     /// bounces; see docs/performance.md). `--samples` still overrides the sample count.
     #[arg(long, value_name = "PRESET")]
     quality: Option<clevrtex_scene::quality::Quality>,
-    /// Layout attempts per image when objects are hidden, before the image fails.
+    /// Layout attempts per image when objects are hidden, before the image fails (1 to 1000).
     #[arg(long, default_value_t = 20, value_name = "N")]
     max_attempts: u32,
     #[command(flatten)]
@@ -99,7 +100,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     if let Some(s) = args.shadow_samples {
         config.base.render.shadow_samples = Some(within("--shadow-samples", s, MAX_SAMPLES)?);
     }
-    positive("--max-attempts", args.max_attempts)?;
+    within("--max-attempts", args.max_attempts, MAX_ATTEMPTS as u32)?;
     // Fail before starting Blender when no layout could ever be drawn, as `sample` does.
     clevrtex_scene::sample::check_feasible(&config)?;
     let passes = match &args.run.passes {
@@ -114,15 +115,16 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         .start
         .checked_add(args.count)
         .context("`--start` + `-n` overflows\nhint: pass smaller numbers")?;
+    crate::run_args::check_index_end(args.start, end)?;
     let total = args.total.unwrap_or(end);
     if total < end {
         bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset");
     }
-    let range = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?
-        .indices(args.start, end);
+    let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
+    let start = args.start;
     // Draw the first layouts before starting Blender: a config whose objects can never be
     // placed fails here once (exit 1), as in `sample`, not once per image into the ledger.
-    for &index in range.iter().take(PREFLIGHT_LAYOUTS) {
+    for index in shard.iter(start, end).take(PREFLIGHT_LAYOUTS) {
         let req = SampleRequest {
             seed: args.seed,
             index,
@@ -133,11 +135,14 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     }
     let config = Arc::new(config);
     let variant = config.name.clone();
-    let jobs: Vec<Job> = range
-        .into_iter()
-        .map(|index| {
+    // Job `i` is made when a worker takes it: no list of the run's jobs is held, so
+    // `-n 100000000` runs in bounded memory.
+    let seed = args.seed;
+    let make = {
+        let (config, variant, passes) = (Arc::clone(&config), variant.clone(), passes.clone());
+        move |i: u64| {
+            let index = shard.nth(start, end, i);
             let config = Arc::clone(&config);
-            let seed = args.seed;
             Job {
                 index,
                 variant: variant.clone(),
@@ -158,10 +163,17 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
                 resample: true,
                 source: None,
             }
-        })
-        .collect();
+        }
+    };
+    let has_stem = {
+        let variant = variant.clone();
+        move |stem: &str| {
+            layout::parse_stem(stem, "")
+                .is_some_and(|(_, v, index)| v == variant && shard.contains(start, end, index))
+        }
+    };
+    let jobs = Jobs::lazy(shard.count(start, end), make, has_stem);
     let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
-    let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
     let plan = manifest::Plan {
         run: manifest::Manifest {
             variant: variant.clone(),

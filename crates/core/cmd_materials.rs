@@ -69,8 +69,8 @@ struct StatsArgs {
     /// Tile size in pixels (16 to 4096).
     #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(16..=4096))]
     size: u32,
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 16)]
+    /// Samples per pixel, 1 to 65536.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=65536))]
     samples: u32,
     /// Keep the tiles here (default: a temporary directory).
     #[arg(long)]
@@ -84,8 +84,8 @@ struct CostArgs {
     /// Image size in pixels (16 to 4096).
     #[arg(long, default_value_t = 160, value_parser = clap::value_parser!(u32).range(16..=4096))]
     size: u32,
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 64)]
+    /// Samples per pixel, 1 to 65536.
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=65536))]
     samples: u32,
 }
 
@@ -100,18 +100,20 @@ pub(crate) struct BatchArgs {
     /// Blender executable (default: `CLEVRTEX_BLENDER`, else `blender` on `PATH`).
     #[arg(long, env = "CLEVRTEX_BLENDER")]
     pub(crate) blender: Option<PathBuf>,
-    /// Cycles threads (0: automatic).
-    #[arg(long, default_value_t = 0)]
+    /// Cycles threads, 0 to 1024 (0: automatic).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=crate::run_args::MAX_THREADS as i64))]
     pub(crate) threads: u32,
     /// Time limit per material render, seconds; a worker over it is killed and the render
     /// retried. Default: 600 + 8 per sample at 320x240, and a worker silent for 300 s counts
-    /// as hung.
+    /// as hung. More than 0, at most 604800 (a week).
     #[arg(long, value_name = "SECONDS")]
     pub(crate) timeout: Option<f64>,
-    /// Restarts of a crashed or hung Blender worker per material before the command stops.
-    #[arg(long, default_value_t = 2, value_name = "N")]
+    /// Restarts of a crashed or hung Blender worker per material before the command stops
+    /// (0 to 100).
+    #[arg(long, default_value_t = 2, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=crate::run_args::MAX_RETRIES as i64))]
     pub(crate) retries: u32,
-    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds.
+    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds:
+    /// more than 0, at most 604800.
     #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
     pub(crate) startup_timeout: f64,
 }
@@ -126,11 +128,11 @@ struct SheetArgs {
     /// Cell width in pixels, 16 to 4096 (height is 3/4 of it).
     #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(16..=4096))]
     size: u32,
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 24)]
+    /// Samples per pixel, 1 to 65536.
+    #[arg(long, default_value_t = 24, value_parser = clap::value_parser!(u32).range(1..=65536))]
     samples: u32,
-    /// Cells per row.
-    #[arg(long, default_value_t = 8)]
+    /// Cells per row, 1 to 256.
+    #[arg(long, default_value_t = 8, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256))]
     cols: usize,
     /// Cell cache (default: `$XDG_CACHE_HOME/clevrtex/sheet` or `~/.cache/clevrtex/sheet`).
     /// Cells are keyed by the material's content hash, the bridge scripts and the settings.

@@ -100,7 +100,7 @@ pub fn run(args: Args) -> CmdResult {
         }
         _ => args.run.out.join("failures.jsonl"),
     };
-    run_jobs(&args.run, jobs, ledger, 1, None)
+    run_jobs(&args.run, jobs.into(), ledger, 1, None)
 }
 
 /// Collect the `*.json` files under `dir` (in the folder given, canonical `root`),

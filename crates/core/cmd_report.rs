@@ -18,8 +18,9 @@ pub struct Args {
     #[arg(long, value_name = "OTHER_DIR")]
     compare: Option<PathBuf>,
     /// Images per variant whose pixels are read (object contrast, depth range), evenly spread
-    /// over the variant's indices; the metadata of every image is read regardless.
-    #[arg(long, default_value_t = 200, value_name = "N")]
+    /// over the variant's indices; the metadata of every image is read regardless. 0 to
+    /// 100000000.
+    #[arg(long, default_value_t = 200, value_name = "N", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=100_000_000))]
     max_texture_samples: usize,
     /// Samples in the preview sheet.
     #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(0..=64))]

@@ -11,6 +11,7 @@ use rayon::prelude::*;
 
 use crate::exit::{CmdResult, Interrupted, OK};
 use crate::interrupt::{self, OnInterrupt};
+use crate::run_args::{index_range, threads_range};
 
 /// Arguments of `clevrtex sample`.
 #[derive(Debug, clap::Args)]
@@ -27,8 +28,9 @@ pub struct Args {
     /// A variant config file (copy one of `configs/`); its `name` names the outputs.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
-    /// Number of images, indices `start .. start + n`.
-    #[arg(short = 'n', long = "count", value_name = "N")]
+    /// Number of images, indices `start .. start + n`, at most 100000000 (indices stay below
+    /// 100000000, the dataset cap).
+    #[arg(short = 'n', long = "count", value_name = "N", value_parser = index_range())]
     pub count: u64,
     /// Run seed; with the image index it fixes every random draw.
     #[arg(long, default_value_t = 0)]
@@ -37,11 +39,11 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// First image index.
-    #[arg(long, default_value_t = 0, value_name = "I")]
+    #[arg(long, default_value_t = 0, value_name = "I", value_parser = index_range())]
     pub start: u64,
     /// Size of the whole dataset, which fixes the splits (first 10% test, next 10% val, rest
-    /// train) [default: start + n].
-    #[arg(long, value_name = "T")]
+    /// train), at most 100000000 [default: start + n].
+    #[arg(long, value_name = "T", value_parser = index_range())]
     pub total: Option<u64>,
     /// Write only the indices with `index % N == K` (0 <= K < N).
     #[arg(long, value_name = "K/N")]
@@ -49,8 +51,8 @@ pub struct Args {
     /// Number of shards when the shard index comes from JOB_COMPLETION_INDEX.
     #[arg(long, value_name = "N", env = "CLEVRTEX_SHARD_COUNT")]
     pub shard_count: Option<u64>,
-    /// Worker threads [default: one per core].
-    #[arg(short = 'j', long, value_name = "N")]
+    /// Worker threads, 1 to 1024 [default: one per core].
+    #[arg(short = 'j', long, value_name = "N", value_parser = threads_range::<usize>())]
     pub jobs: Option<usize>,
 }
 
@@ -84,6 +86,7 @@ pub fn run(args: Args) -> CmdResult {
             args.start, args.count
         )
     })?;
+    crate::run_args::check_index_end(args.start, end)?;
     let total = args.total.unwrap_or(end);
     if total < end {
         bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset, or leave `--total` out");

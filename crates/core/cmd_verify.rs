@@ -25,8 +25,8 @@ pub struct Args {
     /// Write the full report as JSON to FILE.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
-    /// Threads (default: all cores).
-    #[arg(long, value_name = "N")]
+    /// Threads, 1 to 1024 (default: all cores).
+    #[arg(long, value_name = "N", value_parser = crate::run_args::threads_range::<usize>())]
     jobs: Option<usize>,
 }
 

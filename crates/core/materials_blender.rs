@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::time::Duration;
 
-use anyhow::{bail, Context};
+use anyhow::Context;
 use clevrtex_materials::Catalogue;
 use clevrtex_render::{MaterialReply, MaterialSettings, RenderError};
 
@@ -34,11 +34,7 @@ pub(crate) fn session(
     a: &BatchArgs,
 ) -> anyhow::Result<BlenderSession> {
     if let Some(t) = a.timeout {
-        if !(t > 0.0 && t.is_finite()) {
-            bail!(
-                "`--timeout {t}` must be a positive number of seconds\nhint: e.g. `--timeout 600`"
-            );
-        }
+        crate::run_args::seconds("--timeout", t)?;
     }
     let blender = clevrtex_render::blender::locate(a.blender.as_deref())?;
     let interrupt = interrupt::flag(OnInterrupt::Stop {

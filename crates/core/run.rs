@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use anyhow::bail;
 use clevrtex_render::manifest;
-use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, RunReport};
+use clevrtex_render::pool::{self, Jobs, PoolEvent, PoolOptions, RunReport};
 use clevrtex_render::RenderError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
@@ -22,11 +22,24 @@ use crate::run_args::{self, RunArgs};
 /// range's lock, the plan written first and the manifest last.
 pub(crate) fn run_jobs(
     args: &RunArgs,
-    jobs: Vec<Job>,
+    jobs: Jobs,
     ledger: PathBuf,
     max_attempts: u32,
     manifest: Option<manifest::Plan>,
 ) -> CmdResult {
+    // The numbers given as flags first: a refusal never waits on Blender.
+    let timeout = args
+        .timeout
+        .map(|t| run_args::seconds("--timeout", t))
+        .transpose()?;
+    if args.workers == Some(0) {
+        bail!("`--workers 0` cannot render anything\nhint: pass at least 1");
+    }
+    if let Some(w) = args.workers {
+        let w = u32::try_from(w).unwrap_or(u32::MAX);
+        run_args::within("--workers", w, run_args::MAX_THREADS as u32)?;
+    }
+    let startup_timeout = run_args::seconds("--startup-timeout", args.startup_timeout)?;
     let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
     check_output_writable(&args.out)?;
     let materials_json = clevrtex_render::default_materials_json()
@@ -34,18 +47,7 @@ pub(crate) fn run_jobs(
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the workers; finished samples are kept",
     });
-    if let Some(t) = args.timeout {
-        if !(t > 0.0 && t.is_finite()) {
-            bail!(
-                "`--timeout {t}` must be a positive number of seconds\nhint: e.g. `--timeout 600`"
-            );
-        }
-    }
-    if args.workers == Some(0) {
-        bail!("`--workers 0` cannot render anything\nhint: pass at least 1");
-    }
     let choice = run_args::device_choice(&args.device)?;
-    let startup_timeout = run_args::seconds("--startup-timeout", args.startup_timeout)?;
     let devices = clevrtex_render::gpu_probe::plan_devices(
         choice,
         &blender,
@@ -67,7 +69,7 @@ pub(crate) fn run_jobs(
             clevrtex_render::device::default_workers(&devices, pool::default_workers())
         }),
         threads: args.threads.unwrap_or(0),
-        timeout: args.timeout.map(Duration::from_secs_f64),
+        timeout,
         startup_timeout,
         retries: args.retries,
         max_attempts: max_attempts.max(1),
@@ -80,7 +82,7 @@ pub(crate) fn run_jobs(
         interrupt: Arc::clone(&interrupt),
         devices: devices.clone(),
     };
-    let total = jobs.len() as u64;
+    let total = jobs.len();
     let bar = progress_bar(total);
     let (done, rejects, failures) = (AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0));
     let started = std::time::Instant::now();

@@ -24,7 +24,8 @@ pub struct RunArgs {
     /// `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     pub(crate) blender: Option<PathBuf>,
-    /// Blender processes rendering in parallel (default: 2 on machines with 2+ cores).
+    /// Blender processes rendering in parallel, 1 to 1024 (default: 2 on machines with 2+
+    /// cores).
     #[arg(long, value_name = "N")]
     pub(crate) workers: Option<usize>,
     /// Cycles device: `auto` (the best GPU kind Blender reports: OptiX, CUDA, HIP; else the
@@ -32,19 +33,21 @@ pub struct RunArgs {
     /// index) and `--workers` defaults to N.
     #[arg(long, default_value = "auto", value_name = "DEVICE")]
     pub(crate) device: String,
-    /// Cycles threads per Blender process (default: cores / workers).
-    #[arg(long, value_name = "T")]
+    /// Cycles threads per Blender process, 1 to 1024 (default: cores / workers).
+    #[arg(long, value_name = "T", value_parser = threads_range::<u32>())]
     pub(crate) threads: Option<u32>,
     /// Time limit per render request, seconds; a worker over it is killed and the scene
     /// retried. Default: 600 + 8 per sample at 320x240 (doubled with the shadow pass), and
-    /// a worker silent for 300 s counts as hung.
+    /// a worker silent for 300 s counts as hung. More than 0, at most 604800 (a week).
     #[arg(long, value_name = "SECONDS")]
     pub(crate) timeout: Option<f64>,
-    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds.
+    /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds:
+    /// more than 0, at most 604800.
     #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
     pub(crate) startup_timeout: f64,
-    /// Restarts of a crashed or hung worker per scene before it goes to the failure ledger.
-    #[arg(long, default_value_t = 2, value_name = "N")]
+    /// Restarts of a crashed or hung worker per scene before it goes to the failure ledger,
+    /// 0 to 100.
+    #[arg(long, default_value_t = 2, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=MAX_RETRIES as i64))]
     pub(crate) retries: u32,
     /// Also keep the float EXRs (`<stem>_passes.exr`, and with the shadow pass
     /// `<stem>_shadow.exr`).
@@ -58,6 +61,50 @@ pub struct RunArgs {
     pub(crate) fail_fast: bool,
 }
 
+// ---- ranges of numeric flags ---------------------------------------------------------
+//
+// Every numeric flag has a range, refused by clap before anything runs (exit 2, naming the
+// flag and the range); README.md, "Ranges of numeric flags", lists them.
+
+/// Most threads, workers or jobs any flag may ask for: far above any machine's cores, far
+/// below what exhausts a process's threads.
+pub(crate) const MAX_THREADS: u64 = 1024;
+/// Longest time limit any flag may give, seconds: one week.
+pub(crate) const MAX_SECONDS: f64 = 7.0 * 24.0 * 3600.0;
+/// Most restarts of a worker per scene.
+pub(crate) const MAX_RETRIES: u64 = 100;
+/// Most layout attempts per image.
+pub(crate) const MAX_ATTEMPTS: u64 = 1000;
+
+/// `--jobs`, `--workers`, `--threads`: 1 to [`MAX_THREADS`].
+pub(crate) fn threads_range<T>() -> clap::builder::RangedU64ValueParser<T>
+where
+    T: TryFrom<u64> + Clone + Send + Sync + 'static,
+    <T as TryFrom<u64>>::Error: Send + Sync + 'static + std::error::Error + ToString,
+{
+    clap::builder::RangedU64ValueParser::<T>::new().range(1..=MAX_THREADS)
+}
+
+/// `-n`, `--start`, `--total`: 0 to the dataset cap (`MAX_RUN_INDICES`, 100000000 images);
+/// the sum `--start + -n` is checked by the command.
+pub(crate) fn index_range() -> clap::builder::RangedU64ValueParser<u64> {
+    clap::builder::RangedU64ValueParser::<u64>::new().range(0..=clevrtex_scene::bounds::INDEX_END)
+}
+
+/// `--start + -n` (`end`) within the dataset cap: every index below
+/// [`clevrtex_scene::bounds::INDEX_END`], so `verify` never refuses what a run made.
+pub(crate) fn check_index_end(start: u64, end: u64) -> anyhow::Result<()> {
+    let cap = clevrtex_scene::bounds::INDEX_END;
+    if end > cap {
+        bail!(
+            "`--start {start}` plus `-n {}` reaches index {}, past the dataset cap of {cap} images\nhint: keep `--start + -n` at most {cap}",
+            end - start,
+            end - 1
+        );
+    }
+    Ok(())
+}
+
 /// `v`, which must not be 0 (given as `flag`).
 pub(crate) fn positive(flag: &str, v: u32) -> anyhow::Result<u32> {
     if v == 0 {
@@ -66,10 +113,17 @@ pub(crate) fn positive(flag: &str, v: u32) -> anyhow::Result<u32> {
     Ok(v)
 }
 
-/// A positive, finite number of seconds given as `flag`.
+/// A number of seconds given as `flag`: more than 0 and at most [`MAX_SECONDS`] (a week;
+/// `1e300` overflowed a duration and panicked).
 pub(crate) fn seconds(flag: &str, v: f64) -> anyhow::Result<Duration> {
-    if !(v > 0.0 && v.is_finite()) {
-        bail!("`{flag} {v}` must be a positive number of seconds\nhint: e.g. `{flag} 120`");
+    if !(v > 0.0 && v <= MAX_SECONDS) {
+        // 1e300 as written, not as 301 digits.
+        let shown = if v.is_finite() && v.abs() < 1e9 {
+            v.to_string()
+        } else {
+            format!("{v:e}")
+        };
+        bail!("`{flag} {shown}` must be a positive number of seconds, at most {MAX_SECONDS} (one week)\nhint: e.g. `{flag} 120`");
     }
     Ok(Duration::from_secs_f64(v))
 }

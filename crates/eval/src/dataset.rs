@@ -117,7 +117,14 @@ fn walk_into(
     })?;
     for (_, path, kind) in entries {
         match kind {
-            Kind::Dir if depth < 32 => walk_into(root, &path, depth + 1, out, skipped, seen)?,
+            Kind::Dir if depth < NOTED_DEPTH => {
+                walk_into(root, &path, depth + 1, out, skipped, seen)?
+            }
+            // Too deep to read: named, so that a prediction there is not just "missing".
+            Kind::File if depth > MAX_WALK_DEPTH => skipped.push((
+                path,
+                format!("lies more than {MAX_WALK_DEPTH} folders deep; not read (move it up)"),
+            )),
             Kind::File => out.push(path),
             Kind::Skipped(why) => skipped.push((path, why)),
             _ => {}
@@ -125,6 +132,11 @@ fn walk_into(
     }
     Ok(())
 }
+
+/// Folders below the walked one that are read (files deeper are named, not read).
+pub const MAX_WALK_DEPTH: usize = 32;
+/// Folders below the walked one whose files are named as too deep; deeper, nothing is listed.
+const NOTED_DEPTH: usize = 2 * MAX_WALK_DEPTH;
 
 /// Largest input file read (a prediction `.npz` of 1024 soft masks at 1024x1024 fits).
 pub const MAX_FILE_BYTES: u64 = clevrtex_scene::dataset::MAX_FILE_BYTES;

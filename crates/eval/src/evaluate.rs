@@ -522,6 +522,11 @@ fn score_sample(
     let mask_bytes = read_file(&s.mask)?;
     let meta_bytes = crate::dataset::read_metadata(&s.meta)?;
     gt_png_size(&mask_bytes, &s.mask)?;
+    if let Some(problem) =
+        clevrtex_scene::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
+    {
+        return Err(corrupt(&s.mask, problem, GT_HINT));
+    }
     let gt_mask = read::png_labels(&mask_bytes).map_err(|r| corrupt(&s.mask, r, GT_HINT))?;
     if let Some(&bad) = gt_mask.labels.iter().find(|&&l| l as usize >= MAX_SLOTS) {
         return Err(corrupt(
@@ -531,6 +536,20 @@ fn score_sample(
         ));
     }
     let sample_meta = meta::parse(&meta_bytes).map_err(|r| corrupt(&s.meta, r, GT_HINT))?;
+    // Ids past the metadata's objects are no object anyone can name: refused as `verify`
+    // refuses them, not scored.
+    if let Some(n) = sample_meta.num_objects {
+        if let Some(&bad) = gt_mask.labels.iter().find(|&&l| l as usize > n) {
+            return Err(corrupt(
+                &s.mask,
+                format!(
+                    "has id {bad} but its metadata `{}` has {n} objects (ids 0 to {n})",
+                    s.meta.display()
+                ),
+                GT_HINT,
+            ));
+        }
+    }
     let (gw, gh) = (gt_mask.width, gt_mask.height);
     let (truth, hw) = match opts.crops() {
         false => (gt_mask.labels, (gw, gh)),

@@ -26,6 +26,9 @@ pub struct SampleMeta {
     pub ground_material: Option<String>,
     /// Objects in mask-label order (object `i` has label `i + 1`).
     pub objects: Vec<ObjectMeta>,
+    /// How many objects the metadata says the mask holds (its `objects` list, checked
+    /// against `num_objects`), when it says.
+    pub num_objects: Option<usize>,
 }
 
 #[derive(Deserialize)]
@@ -55,6 +58,10 @@ pub fn parse(bytes: &[u8]) -> Result<SampleMeta, String> {
     // `Dataset`): ours must be whole, the downloaded ClevrTex's typed where it has keys.
     clevrtex_scene::dataset::check_metadata(&value, "")
         .map_err(|e| format!("key `{}` {}", e.key, e.what))?;
+    let num_objects = value["objects"]
+        .as_array()
+        .map(Vec::len)
+        .or_else(|| value["num_objects"].as_u64().map(|n| n as usize));
     let raw: RawMeta =
         serde_json::from_value(value).map_err(|e| format!("not valid metadata JSON ({e})"))?;
     let objects = match raw.objects {
@@ -73,6 +80,7 @@ pub fn parse(bytes: &[u8]) -> Result<SampleMeta, String> {
     Ok(SampleMeta {
         ground_material: text(Some(&raw.ground_material)),
         objects,
+        num_objects,
     })
 }
 

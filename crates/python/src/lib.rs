@@ -481,7 +481,13 @@ fn load_pair(
 ) -> PyResult<Pair> {
     let img = read::png_rgb(&dataset_png(root, image)?)
         .map_err(|r| value_error(format!("cannot decode `{image}`: {r}")))?;
-    let msk = read::png_labels(&dataset_png(root, mask)?)
+    let mask_bytes = dataset_png(root, mask)?;
+    if let Some(problem) =
+        clevrtex_scene::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
+    {
+        return Err(value_error(format!("`{mask}` {problem}")));
+    }
+    let msk = read::png_labels(&mask_bytes)
         .map_err(|r| value_error(format!("cannot decode `{mask}`: {r}")))?;
     let (w, h) = (img.width, img.height);
     if (msk.width, msk.height) != (w, h) {

@@ -517,3 +517,48 @@ def test_dataset_follows_no_image_link_swapped_in_and_bounds_resize(tmp_path):
     assert ds[3][0] == 3
     with pytest.raises(ValueError, match=r"`resize` must be 1 to 4096 a side"):
         clevrtex.Dataset(str(gt), "vbg", split="all", resize=(100000, 100000))
+
+
+def test_the_package_follows_the_cli_limits_and_names_empty_batches(tmp_path):
+    """Issue 34: K = 0 or K > 1024 soft masks were scored though `clevrtex eval` refuses them;
+    B = 0 or H = W = 0 raised numpy's "cannot reshape"; a deleted mask a bare OSError."""
+    rng = np.random.default_rng(0)
+    img_p, masks, img_t, truth, _ = batch(rng, b=2, h=4, w=4, k=3)
+    ev = clevrtex.Evaluator()
+    with pytest.raises(ValueError, match=r"`pred_masks` has 0 masks: need 1 to 1024"):
+        ev.update(img_p, masks[:, :0], img_t, truth)
+    with pytest.raises(ValueError, match=r"`pred_masks` has 1024 masks: need 1 to 1023 \(at most 1024 slots with the background added"):
+        clevrtex.Evaluator(masks_have_background=False).update(img_p, np.zeros((2, 1024, 1, 4, 4), np.float32), img_t, truth)
+    with pytest.raises(ValueError, match=r"`pred_masks` has 1025 masks"):
+        ev.update(img_p, np.zeros((2, 1025, 1, 4, 4), np.float32), img_t, truth)
+    with pytest.raises(ValueError, match=r"holds no images \(B = 0\)"):
+        ev.update(img_p[:0], masks[:0], img_t[:0], truth[:0])
+    with pytest.raises(ValueError, match=r"images are 0x0 pixels"):
+        ev.update(img_p[:, :, :0, :0], masks[..., :0, :0], img_t[:, :, :0, :0], truth[..., :0, :0])
+    gt = truth[:, 0]
+    with pytest.raises(ValueError, match=r"`preds` has 0 masks"):
+        clevrtex.evaluate(np.zeros((2, 0, 4, 4), np.float32), gt)
+    with pytest.raises(ValueError, match=r"`preds` has 1025 masks"):
+        clevrtex.evaluate(np.zeros((2, 1025, 4, 4), np.float32), gt)
+    with pytest.raises(ValueError, match=r"`preds` has 1024 masks: need 1 to 1023"):
+        clevrtex.evaluate(np.zeros((2, 1024, 4, 4), np.float32), gt, no_background=True)
+    with pytest.raises(ValueError, match=r"`gt` holds no images"):
+        clevrtex.evaluate(gt[:0], gt[:0])
+    with pytest.raises(ValueError, match=r"`gt` images are 0x0 pixels"):
+        clevrtex.evaluate(gt[:, :0, :0], gt[:, :0, :0])
+    import shutil
+
+    root = tmp_path / "gt"
+    shutil.copytree(GT, root)
+    ds = clevrtex.Dataset(str(root), "vbg", split="all")
+    mask = root / "clevrtex_vbg" / "0" / "CLEVRTEX_vbg_000002_flat.png"
+    os.remove(mask)
+    with pytest.raises(FileNotFoundError, match="CLEVRTEX_vbg_000002_flat.png") as e:
+        ds[2]
+    assert e.value.filename == str(mask)
+    # A mask of another PNG mode is named, never read as ids from its colour bytes.
+    from PIL import Image
+
+    Image.new("RGB", (40, 30)).save(root / "clevrtex_vbg" / "0" / "CLEVRTEX_vbg_000003_flat.png")
+    with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000003_flat.png` is a 8-bit RGB PNG, but a mask pass must be"):
+        ds[3]

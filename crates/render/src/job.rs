@@ -44,6 +44,70 @@ pub struct Job {
     pub source: Option<PathBuf>,
 }
 
+/// Makes job `i` of a run.
+type JobMaker = Arc<dyn Fn(u64) -> Job + Send + Sync>;
+/// Whether a stem is one of a run's.
+type StemTest = Arc<dyn Fn(&str) -> bool + Send + Sync>;
+
+/// The jobs of a run, made one at a time as workers take them: a run of 100 million images
+/// holds no list of them (a list of `generate -n 100000000`'s jobs took 12.8 GB up front).
+/// A list of jobs (`render`'s scene files) converts with `From`.
+#[derive(Clone)]
+pub struct Jobs {
+    len: u64,
+    make: JobMaker,
+    has_stem: StemTest,
+}
+
+impl Jobs {
+    /// `len` jobs, job `i` made by `make(i)`; `has_stem` says whether a stem is one of them
+    /// (the failure ledger keeps other runs' entries).
+    pub fn lazy(
+        len: u64,
+        make: impl Fn(u64) -> Job + Send + Sync + 'static,
+        has_stem: impl Fn(&str) -> bool + Send + Sync + 'static,
+    ) -> Jobs {
+        Jobs {
+            len,
+            make: Arc::new(make),
+            has_stem: Arc::new(has_stem),
+        }
+    }
+
+    /// Number of jobs.
+    pub fn len(&self) -> u64 {
+        self.len
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Job `i` (`i < len`).
+    pub fn get(&self, i: u64) -> Job {
+        (self.make)(i)
+    }
+
+    /// Whether `stem` is one of the run's jobs.
+    pub fn has_stem(&self, stem: &str) -> bool {
+        (self.has_stem)(stem)
+    }
+}
+
+impl From<Vec<Job>> for Jobs {
+    fn from(list: Vec<Job>) -> Jobs {
+        let stems: std::collections::BTreeSet<String> =
+            list.iter().map(|j| j.stem.clone()).collect();
+        let list = Arc::new(list);
+        Jobs::lazy(
+            list.len() as u64,
+            move |i| list[i as usize].clone(),
+            move |s| stems.contains(s),
+        )
+    }
+}
+
 impl std::fmt::Debug for Job {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Job")

@@ -174,13 +174,17 @@ impl Ledger {
     /// After a finished run: drop the entries of `ran` (the run's stems) that did not fail
     /// now (a rerun made them), so the ledger lists only what is still missing; the file goes
     /// when nothing is. Entries of other runs (other shards) are kept.
-    pub(crate) fn prune(&self, ran: &BTreeSet<String>, failed: &BTreeSet<String>) -> Result<()> {
+    pub(crate) fn prune(
+        &self,
+        ran: &dyn Fn(&str) -> bool,
+        failed: &BTreeSet<String>,
+    ) -> Result<()> {
         if std::fs::symlink_metadata(&self.path).is_err() {
             return Ok(());
         }
         self.update(|entries| {
             let before = entries.len();
-            entries.retain(|stem, _| !ran.contains(stem) || failed.contains(stem));
+            entries.retain(|stem, _| !ran(stem) || failed.contains(stem));
             entries.len() != before
         })
         .map_err(|e| match e.kind() {

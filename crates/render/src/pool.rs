@@ -21,7 +21,7 @@ use crate::session::{Hooks, Session};
 use crate::worker::{RenderReply, Worker, WorkerOptions};
 use clevrtex_scene::layout;
 
-pub use crate::job::{auto_timeout, Job, SampleStats, SceneMaker};
+pub use crate::job::{auto_timeout, Job, Jobs, SampleStats, SceneMaker};
 
 /// How a run behaves.
 #[derive(Debug, Clone)]
@@ -187,7 +187,10 @@ impl RunReport {
 struct Shared<'a> {
     opts: &'a PoolOptions,
     bridge: BridgeDir,
-    queue: Mutex<VecDeque<Job>>,
+    jobs: Jobs,
+    /// Runs of indices into `jobs` still to do, in order (one run for a fresh range: a
+    /// resumed run of 100 million images holds a few ranges, not a list).
+    queue: Mutex<VecDeque<std::ops::Range<u64>>>,
     report: Mutex<RunReport>,
     stop: AtomicBool,
     fatal: Mutex<Option<RenderError>>,
@@ -205,21 +208,23 @@ struct Shared<'a> {
 /// an interrupt as [`RenderError::Interrupted`].
 pub fn run(
     opts: &PoolOptions,
-    jobs: Vec<Job>,
+    jobs: impl Into<Jobs>,
     on_event: &(dyn Fn(&PoolEvent) + Sync),
 ) -> Result<RunReport> {
     let started = Instant::now();
-    let stems: BTreeSet<String> = jobs.iter().map(|j| j.stem.clone()).collect();
+    let jobs: Jobs = jobs.into();
     let bridge = BridgeDir::create(&opts.materials_json)?;
     let ledger = Ledger::open(&opts.ledger)?;
-    let mut todo = VecDeque::new();
+    let mut todo: VecDeque<std::ops::Range<u64>> = VecDeque::new();
+    let mut todo_count = 0u64;
     let mut report = RunReport {
         workers: opts.workers.max(1),
         ledger_unreadable: ledger.unreadable(),
         ..RunReport::default()
     };
     let mut cleaned = BTreeSet::new();
-    for job in jobs {
+    for i in 0..jobs.len() {
+        let job = jobs.get(i);
         let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
         if cleaned.insert(dir.clone()) {
             // Before a file in it is read, swept or skipped as complete: a folder of the
@@ -231,13 +236,21 @@ pub fn run(
             report.skipped += 1;
             on_event(&PoolEvent::Skipped { index: job.index });
         } else {
-            todo.push_back(job);
+            todo_count += 1;
+            match todo.back_mut() {
+                Some(r) if r.end == i => r.end += 1,
+                _ => todo.push_back(i..i + 1),
+            }
         }
     }
-    let n_workers = opts.workers.max(1).min(todo.len().max(1));
+    let n_workers = opts
+        .workers
+        .max(1)
+        .min(usize::try_from(todo_count).unwrap_or(usize::MAX).max(1));
     let shared = Shared {
         opts,
         bridge,
+        jobs,
         queue: Mutex::new(todo),
         report: Mutex::new(report),
         stop: AtomicBool::new(false),
@@ -269,7 +282,12 @@ pub fn run(
         return Err(RenderError::Interrupted);
     }
     let failed = shared.failed_stems.into_inner().unwrap();
-    shared.ledger.into_inner().unwrap().prune(&stems, &failed)?;
+    let jobs = shared.jobs;
+    shared
+        .ledger
+        .into_inner()
+        .unwrap()
+        .prune(&|s| jobs.has_stem(s), &failed)?;
     Ok(report)
 }
 
@@ -355,9 +373,21 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         if shared.stopping() {
             break;
         }
-        let Some(job) = shared.queue.lock().unwrap().pop_front() else {
+        let next = {
+            let mut queue = shared.queue.lock().unwrap();
+            let next = queue.front_mut().map(|r| {
+                r.start += 1;
+                (r.start - 1, r.is_empty())
+            });
+            if let Some((_, true)) = next {
+                queue.pop_front();
+            }
+            next.map(|(i, _)| i)
+        };
+        let Some(i) = next else {
             break;
         };
+        let job = shared.jobs.get(i);
         match crate::job::run_job(&mut slot, &settings, &job) {
             Ok(stats) => {
                 shared.report.lock().unwrap().add(&stats);

@@ -15,7 +15,6 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use clevrtex_scene::layout;
-use clevrtex_scene::passes::PngKind;
 use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
 use clevrtex_scene::Pass;
 use rayon::prelude::*;
@@ -222,6 +221,12 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
     for (ds, vd) in dirs {
         rep.skipped
             .extend(vd.skipped.iter().map(ToString::to_string));
+        rep.skipped.extend(vd.misplaced.iter().map(|p| {
+            format!(
+                "`{}` is a sample's file outside its sample folder: not read as the dataset's, but the public loader's `**/` glob would read it as a sample (a second time when the sample is also in its folder); move or remove it",
+                p.display()
+            )
+        }));
         rep.temp_files.extend(vd.temp_files.iter().cloned());
         for s in &vd.samples {
             found.entry(s.index).or_default().push((
@@ -461,17 +466,6 @@ fn read_ledger(
     }
 }
 
-/// The (bits, channels, palette) of a PNG kind.
-fn png_layout(kind: PngKind) -> (u8, usize, bool) {
-    match kind {
-        PngKind::Palette8 => (8, 1, true),
-        PngKind::Gray8 => (8, 1, false),
-        PngKind::Rgb8 => (8, 3, false),
-        PngKind::Gray16 => (16, 1, false),
-        PngKind::Rgb16 => (16, 3, false),
-    }
-}
-
 /// Check one sample; `Err` lists every problem found. `listed`: a finished manifest covers
 /// the index, so every file must be in one.
 /// Pixels of samples being decoded at once, over all threads: four samples of the largest size.
@@ -636,6 +630,11 @@ fn check_sample(
                 continue;
             }
         }
+        // The mode from the header, by the readers' one rule: an RGB or 16-bit mask is named.
+        if let Some(problem) = dataset::png_mode_problem(bytes, pass) {
+            problems.push(format!("`{name}` {problem}"));
+            continue;
+        }
         let png = match crate::post::decode_png_bytes(bytes, &f.dir.join(&name)) {
             Ok(p) => p,
             Err(crate::RenderError::BadOutput { problem, .. }) => {
@@ -654,17 +653,6 @@ fn check_sample(
             problems.push(format!(
                 "`{name}` is {}x{} (the metadata says {w}x{h})",
                 png.width, png.height
-            ));
-            continue;
-        }
-        let (bits, channels, palette) = png_layout(pass.spec().png);
-        if (png.bits, png.channels, png.palette) != (bits, channels, palette) {
-            problems.push(format!(
-                "`{name}` is a {}-bit {}-channel{} PNG, expected {bits}-bit {channels}-channel{}",
-                png.bits,
-                png.channels,
-                if png.palette { " palette" } else { "" },
-                if palette { " palette" } else { "" }
             ));
             continue;
         }

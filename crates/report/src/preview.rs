@@ -284,10 +284,15 @@ fn check_png_size(bytes: &[u8], path: &Path) -> anyhow::Result<()> {
 /// Read and decode a sample's mask or depth PNG under `root` as untrusted data: through the
 /// dataset reader (no link out of `root`, no FIFO, capped read), and its size checked from the
 /// PNG header before the decoder allocates for it.
-pub(crate) fn read_pass_png(root: &Path, path: &Path) -> anyhow::Result<DecodedPng> {
+/// Its mode is checked from the header too (`dataset::png_mode_problem`): an RGB or 16-bit mask
+/// is a named, left-out sample, never ids read from its colour bytes.
+pub(crate) fn read_pass_png(root: &Path, path: &Path, pass: Pass) -> anyhow::Result<DecodedPng> {
     let bytes = dataset::read(root, path, dataset::MAX_FILE_BYTES)
         .map_err(|why| anyhow::anyhow!("`{}` {why}", path.display()))?;
     check_png_size(&bytes, path)?;
+    if let Some(problem) = dataset::png_mode_problem(&bytes, pass) {
+        anyhow::bail!("`{}` {problem}", path.display());
+    }
     Ok(decode_png_bytes(&bytes, path)?)
 }
 
@@ -354,7 +359,7 @@ fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
     Ok(Some(match col {
         Column::Rgb | Column::Normal | Column::Albedo | Column::Shadow => (to_rgb(&path)?, None),
         Column::Mask | Column::Outlines => {
-            let m = read_pass_png(&s.root, &path)?;
+            let m = read_pass_png(&s.root, &path, Pass::Mask)?;
             let (w, h) = (m.width, m.height);
             let id = |x: u32, y: u32| m.data[(y * w + x) as usize];
             let mut img = if col == Column::Mask {
@@ -391,7 +396,7 @@ fn cell(s: &Sample, col: Column) -> anyhow::Result<Option<Cell>> {
             (img, None)
         }
         Column::Depth => {
-            let d = read_pass_png(&s.root, &path)?;
+            let d = read_pass_png(&s.root, &path, Pass::Depth)?;
             let enc = &s.meta["passes"]["depth"];
             let scale = enc["scale"].as_f64().unwrap_or(1.0);
             let background = enc["background"].as_u64().unwrap_or(65535) as u16;

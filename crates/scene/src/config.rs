@@ -15,6 +15,7 @@ use clevrtex_materials::Catalogue;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use crate::bounds::{self, OutOfBounds};
 use crate::scene_file::{Pass, RenderSettings};
 
 /// The built-in base scene (values of the reference's §3).
@@ -457,6 +458,15 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
         problem: problem.to_string(),
         hint: hint.to_string(),
     };
+    let out_of_bounds = |e: OutOfBounds| {
+        ConfigError {
+        file: source.to_string(),
+        key: e.key,
+        value: Some(e.value.to_string()),
+        problem: e.problem,
+        hint: "keep the value within its range; `docs/scene-format.md`, \"Bounds\", lists every bound and its reason".to_string(),
+    }
+    };
     let catalogue = catalogue();
 
     if let Some(problem) = crate::layout::variant_name_problem(&file.name) {
@@ -504,14 +514,9 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
         ));
     }
     for (i, s) in file.objects.sizes.iter().enumerate() {
-        if !(s.scale.is_finite() && s.scale > 0.0) {
-            return Err(err(
-                &format!("objects.sizes[{i}].scale"),
-                Some(s.scale.to_string()),
-                "must be a positive number",
-                "the reference uses 0.4, 0.6 and 0.9",
-            ));
-        }
+        bounds::OBJECT_SCALE
+            .check(&format!("objects.sizes[{i}].scale"), s.scale)
+            .map_err(out_of_bounds)?;
     }
     let colors = match file.objects.colors {
         Some(c) if c.is_empty() => {
@@ -552,20 +557,25 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
         }
         (Some(sel), false) => resolve(sel, "background.materials", catalogue, &err)?,
     };
-    for (key, v) in [
-        ("objects.displacement", file.objects.displacement),
-        ("background.displacement", file.background.displacement),
-        ("background.scale", file.background.scale),
+    for (key, v, bound) in [
+        (
+            "objects.displacement",
+            file.objects.displacement,
+            &bounds::DISPLACEMENT,
+        ),
+        (
+            "background.displacement",
+            file.background.displacement,
+            &bounds::DISPLACEMENT,
+        ),
+        (
+            "background.scale",
+            file.background.scale,
+            &bounds::TEXTURE_SCALE,
+        ),
     ] {
         if let Some(v) = v {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(err(
-                    key,
-                    Some(v.to_string()),
-                    "must be a non-negative number",
-                    "the reference uses displacement 0.35 and scale 2",
-                ));
-            }
+            bound.check(key, v).map_err(out_of_bounds)?;
         }
     }
 
@@ -603,6 +613,7 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
             ));
         }
     }
+    check_base_bounds(&base).map_err(out_of_bounds)?;
     if base.passes.is_empty() {
         return Err(err(
             "base_scene.passes",
@@ -614,48 +625,33 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
     base.passes.sort();
     base.passes.dedup();
     let p = &base.placement;
-    if !p.area.iter().all(|v| v.is_finite())
-        || p.area[0] >= p.area[1]
-        || p.min_dist < 0.0
-        || p.margin < 0.0
-    {
+    if p.area[0] >= p.area[1] {
         return Err(err(
-            "base_scene.placement",
-            Some(format!(
-                "area {:?}, min_dist {}, margin {}",
-                p.area, p.min_dist, p.margin
-            )),
-            "area must be `[lo, hi]` with lo < hi; min_dist and margin must be >= 0",
-            "the reference uses area [-3, 3], min_dist 0.25, margin 0.4",
+            "base_scene.placement.area",
+            Some(format!("{:?}", p.area)),
+            "must be `[lo, hi]` with lo < hi",
+            "the reference uses area [-3, 3]",
         ));
     }
-    if p.tries_per_object == 0 || p.max_restarts == 0 {
-        return Err(err(
-            "base_scene.placement",
-            Some(format!(
-                "tries_per_object {}, max_restarts {}",
-                p.tries_per_object, p.max_restarts
-            )),
-            "must both be at least 1",
-            "the reference uses 50 tries per object",
-        ));
-    }
-    if base.backdrop.profile.len() < 2
-        || base.backdrop.profile.windows(2).any(|w| w[0][0] >= w[1][0])
-    {
-        return Err(err(
-            "base_scene.backdrop.profile",
-            None,
-            "needs at least two points with strictly increasing x",
-            "compare with `configs/base-scene.json`",
-        ));
-    }
-    if base.camera.focal_length_mm <= 0.0 || base.camera.sensor_width_mm <= 0.0 {
+    let c = &base.camera;
+    if c.clip_start >= c.clip_end {
         return Err(err(
             "base_scene.camera",
-            None,
-            "focal length and sensor width must be positive",
-            "the reference uses 35 mm and 32 mm",
+            Some(format!(
+                "clip_start {}, clip_end {}",
+                c.clip_start, c.clip_end
+            )),
+            "need clip_start < clip_end",
+            "the reference uses 0.1 and 100",
+        ));
+    }
+    let d = base.sun.direction;
+    if d.iter().map(|v| v * v).sum::<f64>() < 1e-12 {
+        return Err(err(
+            "base_scene.sun.direction",
+            Some(format!("{d:?}")),
+            "must not be the zero vector (it is normalised)",
+            "the reference uses [-0.414, 0.195, -0.889]",
         ));
     }
 
@@ -680,6 +676,54 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
         },
         base,
     })
+}
+
+/// Every number of the base scene within the one table of bounds ([`crate::bounds`]), so
+/// that every scene sampled from it passes [`crate::SceneFile::validate`].
+fn check_base_bounds(base: &BaseScene) -> Result<(), OutOfBounds> {
+    bounds::check_render("base_scene.render", &base.render)?;
+    let c = &base.camera;
+    let k = |s: &str| format!("base_scene.camera.{s}");
+    bounds::check_all(&bounds::POSITION, &k("location"), &c.location)?;
+    bounds::check_all(&bounds::POSITION, &k("look_at"), &c.look_at)?;
+    bounds::JITTER.check(&k("jitter"), c.jitter)?;
+    bounds::FOCAL_LENGTH_MM.check(&k("focal_length_mm"), c.focal_length_mm)?;
+    bounds::SENSOR_WIDTH_MM.check(&k("sensor_width_mm"), c.sensor_width_mm)?;
+    bounds::CLIP_DISTANCE.check(&k("clip_start"), c.clip_start)?;
+    bounds::CLIP_DISTANCE.check(&k("clip_end"), c.clip_end)?;
+    for (i, l) in base.lights.iter().enumerate() {
+        let k = |s: &str| format!("base_scene.lights[{i}].{s}");
+        bounds::check_all(&bounds::POSITION, &k("location"), &l.location)?;
+        bounds::check_all(&bounds::POSITION, &k("look_at"), &l.look_at)?;
+        bounds::JITTER.check(&k("jitter"), l.jitter)?;
+        bounds::LIGHT_SIZE_M.check(&k("size"), l.size)?;
+        bounds::LIGHT_ENERGY_W.check(&k("energy"), l.energy)?;
+        bounds::check_all(&bounds::COLOR, &k("color"), &l.color)?;
+    }
+    let s = &base.sun;
+    bounds::check_all(&bounds::POSITION, "base_scene.sun.direction", &s.direction)?;
+    bounds::SUN_STRENGTH.check("base_scene.sun.strength", s.strength)?;
+    bounds::SUN_ANGLE.check("base_scene.sun.angle", s.angle)?;
+    let b = &base.backdrop;
+    bounds::check_backdrop("base_scene.backdrop", &b.profile, b.y_range)?;
+    bounds::ROTATION_RAD.check("base_scene.backdrop.rotation_z", b.rotation_z)?;
+    let p = &base.placement;
+    bounds::check_all(
+        &bounds::PLACEMENT_AREA,
+        "base_scene.placement.area",
+        &p.area,
+    )?;
+    bounds::PLACEMENT_GAP.check("base_scene.placement.min_dist", p.min_dist)?;
+    bounds::PLACEMENT_GAP.check("base_scene.placement.margin", p.margin)?;
+    bounds::PLACEMENT_TRIES.check(
+        "base_scene.placement.tries_per_object",
+        f64::from(p.tries_per_object),
+    )?;
+    bounds::PLACEMENT_TRIES.check(
+        "base_scene.placement.max_restarts",
+        f64::from(p.max_restarts),
+    )?;
+    Ok(())
 }
 
 /// Builds a [`ConfigError`] from key, value, problem and hint.

@@ -98,6 +98,58 @@ const O_NONBLOCK: i32 = 0o4000;
 #[cfg(not(target_os = "linux"))]
 const O_NONBLOCK: i32 = 0x0004;
 
+/// Why the PNG `bytes` of a sample's `pass` are not of the mode every reader takes for it,
+/// from the header alone (before any decoder allocates), or `None` when they are, or when
+/// they are no PNG at all (the decoder then says so). The mask must be 8-bit object ids, one
+/// channel: a palette index as clevrtex and the public ClevrTex write it, or greyscale (an RGB
+/// `_flat.png` would be read as three ids a pixel, a 16-bit one as ids past 255); the other
+/// passes must have their pass-table mode ([`crate::passes::PngKind`]). Used by `verify`,
+/// `preview`, `report`, `materials measure`, `eval`'s ground truth and the Python `Dataset`.
+pub fn png_mode_problem(bytes: &[u8], pass: Pass) -> Option<String> {
+    use crate::passes::PngKind;
+    if bytes.len() < 26 || &bytes[..8] != b"\x89PNG\r\n\x1a\n" || &bytes[12..16] != b"IHDR" {
+        return None;
+    }
+    let (depth, colour) = (bytes[24], bytes[25]);
+    let mode = |depth: u8, colour: u8| {
+        let c = match colour {
+            0 => "greyscale",
+            2 => "RGB",
+            3 => "palette",
+            4 => "greyscale-alpha",
+            6 => "RGBA",
+            _ => "unknown-colour",
+        };
+        format!("{depth}-bit {c}")
+    };
+    let ok = match pass.spec().png {
+        PngKind::Palette8 | PngKind::Gray8 if pass == Pass::Mask => {
+            depth == 8 && (colour == 0 || colour == 3)
+        }
+        PngKind::Palette8 => (depth, colour) == (8, 3),
+        PngKind::Gray8 => (depth, colour) == (8, 0),
+        PngKind::Rgb8 => (depth, colour) == (8, 2),
+        PngKind::Gray16 => (depth, colour) == (16, 0),
+        PngKind::Rgb16 => (depth, colour) == (16, 2),
+    };
+    if ok {
+        return None;
+    }
+    let want = match pass.spec().png {
+        _ if pass == Pass::Mask => "8-bit palette or greyscale object ids".to_string(),
+        PngKind::Palette8 => mode(8, 3),
+        PngKind::Gray8 => mode(8, 0),
+        PngKind::Rgb8 => mode(8, 2),
+        PngKind::Gray16 => mode(16, 0),
+        PngKind::Rgb16 => mode(16, 2),
+    };
+    Some(format!(
+        "is a {} PNG, but a {} pass must be {want}",
+        mode(depth, colour),
+        pass.name()
+    ))
+}
+
 /// The bytes of the regular file `path` under `root`, at most `cap` bytes; `Err` says why
 /// not, in one line (a link out of the root, not a regular file, too large, unreadable).
 pub fn read(root: &Path, path: &Path, cap: u64) -> Result<Vec<u8>, String> {
@@ -309,6 +361,10 @@ pub struct VariantDir {
     pub unreadable: Vec<(PathBuf, String)>,
     /// Regular files and folders that are not the layout's (stray names).
     pub strays: Vec<PathBuf>,
+    /// Files named like a sample's that lie in the variant folder itself, outside every
+    /// sample folder: not a sample of the layout, but the public loader's `**/` glob reads
+    /// them as one (a second copy when the sample is also in its folder). `verify` names them.
+    pub misplaced: Vec<PathBuf>,
 }
 
 impl VariantDir {
@@ -489,6 +545,7 @@ fn walk_variant(root: &Path, variant: &str, dir: &Path, out: PathBuf) -> Variant
             Kind::Dir => walk_sample_dir(root, &p, &mut vd),
             Kind::File if crate::manifest::is_manifest_name(&name) => vd.manifests.push(p),
             Kind::File if name == layout::LEDGER_FILE => vd.ledgers.push(p),
+            Kind::File if layout::parse_file_name(&name).is_some() => vd.misplaced.push(p),
             Kind::File => vd.strays.push(p),
         }
     }
@@ -628,6 +685,9 @@ impl MetadataView {
         let height = meta_int(meta, file, "render.height", 1, side)? as u32;
         let pixels = u64::from(width) * u64::from(height);
         let n = meta_int(meta, file, "num_objects", 0, 255)? as usize;
+        // The split names a folder or shard in `export` and a report row: `../x` is refused by
+        // every reader alike (`verify` passed it while `export` refused it).
+        split_of(meta, file)?;
         let threshold = match meta.get("visibility_threshold_px") {
             None => 0,
             Some(_) => meta_int(meta, file, "visibility_threshold_px", 0, pixels)?,
@@ -701,6 +761,7 @@ pub fn check_metadata(meta: &Value, file: &str) -> Result<(), MetadataError> {
         Some(Value::Array(a)) => Some(a.len()),
         Some(v) => return Err(err("objects", format!("is {}, not a list", short(v)))),
     };
+    split_of(meta, file)?;
     if meta.get("num_objects").is_some() {
         let n = meta_int(meta, file, "num_objects", 0, 255)? as usize;
         if objects.is_some_and(|len| len != n) {
@@ -837,6 +898,9 @@ mod tests {
         std::fs::write(v.join("x.clevrtex-tmp"), b"").unwrap();
         std::fs::write(v.join("README"), b"").unwrap();
         std::os::unix::fs::symlink(outside.path(), out.join("clevrtex_away")).unwrap();
+        // A copy of a sample at the variant root (issue 34: the public loader's `**/` glob
+        // reads it a second time; `verify` ignored it).
+        std::fs::write(v.join(layout::metadata_file(&stem)), b"{}").unwrap();
 
         let ds = Dataset::open(&out).unwrap();
         assert!(!ds.is_variant_dir);
@@ -877,6 +941,7 @@ mod tests {
         assert_eq!(vd.skipped_for_metadata().count(), 1);
         assert_eq!(vd.temp_files.len(), 2);
         assert_eq!(vd.strays, [s0.join("notes.txt"), v.join("README")]);
+        assert_eq!(vd.misplaced, [v.join(layout::metadata_file(&stem))]);
         assert_eq!(vd.manifests, [v.join("MANIFEST-0-8-0of1.json")]);
         assert!(vd.read_manifests()[0].1.is_err());
         let ledger = ds.read_ledger(&vd.ledgers[0]).unwrap();
@@ -970,5 +1035,20 @@ mod tests {
                 .key,
             "split"
         );
+    }
+
+    #[test]
+    fn a_split_that_is_no_split_is_refused_by_every_reader() {
+        let ours = serde_json::json!({
+            "render": {"width": 4, "height": 3}, "num_objects": 0, "objects": [],
+            "split": "../x",
+        });
+        let e = MetadataView::of(&ours, "m.json").unwrap_err().to_string();
+        assert!(e.contains("split") && e.contains("../x"), "{e}");
+        let published = serde_json::json!({"objects": [], "split": "../x"});
+        let e = check_metadata(&published, "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("split") && e.contains("../x"), "{e}");
     }
 }

@@ -7,6 +7,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::bounds::{self, OutOfBounds};
+
 pub use crate::passes::Pass;
 
 /// Value of [`SceneFile::format`]: lets tools recognise a scene file.
@@ -300,13 +302,27 @@ impl SceneFile {
         }
         let value = serde_json::to_value(self).map_err(|e| e.to_string())?;
         check_numbers(&value, &mut String::new())?;
-        for (i, o) in self.objects.iter().enumerate() {
-            if o.scale <= 0.0 {
+        self.check_bounds().map_err(|e| e.to_string())?;
+        let mut seen = Vec::with_capacity(self.passes.len());
+        for p in &self.passes {
+            if seen.contains(p) {
                 return Err(format!(
-                    "`objects[{i}].scale` = {}: must be positive",
-                    o.scale
+                    "`passes` names `{}` twice: each pass is one file of the sample",
+                    p.name()
                 ));
             }
+            seen.push(*p);
+        }
+        for (i, o) in self.objects.iter().enumerate() {
+            if !crate::config::KNOWN_SHAPES.contains(&o.shape.as_str()) {
+                return Err(format!(
+                    "`objects[{i}].shape` = {:?}: unknown shape (the bridge builds {})",
+                    o.shape,
+                    crate::config::KNOWN_SHAPES.join(", ")
+                ));
+            }
+        }
+        for (i, o) in self.objects.iter().enumerate() {
             let d = o.location.iter().map(|c| c * c).sum::<f64>().sqrt();
             if d > MAX_OBJECT_DISTANCE_M {
                 return Err(format!(
@@ -320,6 +336,51 @@ impl SceneFile {
                 "`camera.clip_start`/`clip_end` = {}/{}: need 0 < clip_start < clip_end",
                 self.camera.clip_start, self.camera.clip_end
             ));
+        }
+        Ok(())
+    }
+}
+
+impl SceneFile {
+    /// Every value of the scene within the one table of bounds ([`crate::bounds`]).
+    fn check_bounds(&self) -> Result<(), OutOfBounds> {
+        bounds::INDEX.check("index", self.index as f64)?;
+        bounds::check_render("render", &self.render)?;
+        let c = &self.camera;
+        bounds::FOCAL_LENGTH_MM.check("camera.focal_length_mm", c.focal_length_mm)?;
+        bounds::SENSOR_WIDTH_MM.check("camera.sensor_width_mm", c.sensor_width_mm)?;
+        bounds::CLIP_DISTANCE.check("camera.clip_start", c.clip_start)?;
+        bounds::CLIP_DISTANCE.check("camera.clip_end", c.clip_end)?;
+        for (i, l) in self.lights.iter().enumerate() {
+            bounds::LIGHT_ENERGY_W.check(&format!("lights[{i}].energy"), l.energy)?;
+            bounds::LIGHT_SIZE_M.check(&format!("lights[{i}].size"), l.size)?;
+            bounds::check_all(&bounds::COLOR, &format!("lights[{i}].color"), &l.color)?;
+        }
+        bounds::SUN_STRENGTH.check("sun.strength", self.sun.strength)?;
+        bounds::SUN_ANGLE.check("sun.angle", self.sun.angle)?;
+        let b = &self.backdrop;
+        bounds::check_backdrop("backdrop", &b.profile, b.y_range)?;
+        bounds::ROTATION_RAD.check("backdrop.rotation_z", b.rotation_z)?;
+        b.material.check_bounds("backdrop.material")?;
+        for (i, o) in self.objects.iter().enumerate() {
+            bounds::OBJECT_SCALE.check(&format!("objects[{i}].scale"), o.scale)?;
+            o.material.check_bounds(&format!("objects[{i}].material"))?;
+        }
+        Ok(())
+    }
+}
+
+impl MaterialInstance {
+    fn check_bounds(&self, key: &str) -> Result<(), OutOfBounds> {
+        bounds::MATERIAL_RANDOM.check(&format!("{key}.random"), self.random)?;
+        if let Some(c) = &self.color {
+            bounds::check_all(&bounds::COLOR, &format!("{key}.color"), c)?;
+        }
+        if let Some(d) = self.displacement {
+            bounds::DISPLACEMENT.check(&format!("{key}.displacement"), d)?;
+        }
+        if let Some(s) = self.scale {
+            bounds::TEXTURE_SCALE.check(&format!("{key}.scale"), s)?;
         }
         Ok(())
     }
@@ -359,4 +420,84 @@ fn check_numbers(v: &serde_json::Value, path: &mut String) -> Result<(), String>
         _ => {}
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{sample, Config, SampleRequest};
+
+    fn scene() -> SceneFile {
+        let c = Config::builtin("full").unwrap();
+        let req = SampleRequest {
+            seed: 3,
+            index: 4,
+            attempt: 0,
+            total: 10,
+        };
+        let s = sample(&c, &req).unwrap();
+        s.validate().unwrap();
+        s
+    }
+
+    /// Each hostile value is refused with its key (issue 34: all of these reached Blender).
+    #[test]
+    fn extreme_values_are_refused_naming_the_key() {
+        type Break = Box<dyn Fn(&mut SceneFile)>;
+        let cases: Vec<(&str, Break)> = vec![
+            (
+                "camera.focal_length_mm",
+                Box::new(|s| s.camera.focal_length_mm = 0.0),
+            ),
+            (
+                "camera.focal_length_mm",
+                Box::new(|s| s.camera.focal_length_mm = -35.0),
+            ),
+            (
+                "camera.sensor_width_mm",
+                Box::new(|s| s.camera.sensor_width_mm = 0.0),
+            ),
+            (
+                "objects[0].shape",
+                Box::new(|s| s.objects[0].shape = "donut".into()),
+            ),
+            (
+                "lights[1].energy",
+                Box::new(|s| s.lights[1].energy = -200.0),
+            ),
+            ("sun.strength", Box::new(|s| s.sun.strength = -1.0)),
+            (
+                "backdrop.profile",
+                Box::new(|s| {
+                    s.backdrop.profile = (0..60_000).map(|i| [i as f64 * 1e-3, 0.0]).collect()
+                }),
+            ),
+            (
+                "backdrop.y_range",
+                Box::new(|s| s.backdrop.y_range = [-600.0, 600.0]),
+            ),
+            (
+                "index",
+                Box::new(|s| {
+                    s.index = 100_000_000;
+                    s.stem = crate::stem(&s.variant, s.index);
+                }),
+            ),
+            (
+                "objects[0].material.displacement",
+                Box::new(|s| s.objects[0].material.displacement = Some(-1.0)),
+            ),
+            ("render.exposure", Box::new(|s| s.render.exposure = 100.0)),
+            (
+                "passes",
+                Box::new(|s| s.passes = vec![Pass::Rgb, Pass::Rgb, Pass::Mask]),
+            ),
+        ];
+        for (key, break_it) in cases {
+            let mut s = scene();
+            break_it(&mut s);
+            let e = s.validate().unwrap_err();
+            assert!(e.starts_with(&format!("`{key}")), "{key}: {e}");
+        }
+    }
 }

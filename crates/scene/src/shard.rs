@@ -23,6 +23,30 @@ pub struct Shard {
 }
 
 impl Shard {
+    /// The first index of `start..end` in this shard (`end` when there is none).
+    fn first(self, start: u64, end: u64) -> u64 {
+        if start >= end {
+            end
+        } else {
+            start + (self.k + self.n - start % self.n) % self.n
+        }
+    }
+
+    /// How many indices of `start..end` are in this shard (without listing them).
+    pub fn count(self, start: u64, end: u64) -> u64 {
+        (end - self.first(start, end).min(end)).div_ceil(self.n)
+    }
+
+    /// The `i`-th index of `start..end` in this shard (`i < count`), without listing them.
+    pub fn nth(self, start: u64, end: u64, i: u64) -> u64 {
+        self.first(start, end) + i * self.n
+    }
+
+    /// Whether `index` is one of the indices of `start..end` in this shard.
+    pub fn contains(self, start: u64, end: u64, index: u64) -> bool {
+        (start..end).contains(&index) && index % self.n == self.k
+    }
+
     /// The indices of `start..end` in this shard, in order.
     pub fn indices(self, start: u64, end: u64) -> Vec<u64> {
         self.iter(start, end).collect()
@@ -31,12 +55,7 @@ impl Shard {
     /// The indices of `start..end` in this shard, in order, one at a time (a billion of them
     /// cost no memory).
     pub fn iter(self, start: u64, end: u64) -> impl Iterator<Item = u64> {
-        let first = if start >= end {
-            end
-        } else {
-            start + (self.k + self.n - start % self.n) % self.n
-        };
-        (first..end).step_by(self.n as usize)
+        (self.first(start, end)..end).step_by(self.n as usize)
     }
 }
 
@@ -117,10 +136,17 @@ mod tests {
                     "{start}..{end} in {n}"
                 );
                 for k in 0..n {
-                    assert!(Shard { k, n }
-                        .indices(start, end)
-                        .iter()
-                        .all(|i| i % n == k));
+                    let shard = Shard { k, n };
+                    let list = shard.indices(start, end);
+                    assert!(list.iter().all(|i| i % n == k));
+                    // The list's length, members and order without the list.
+                    assert_eq!(shard.count(start, end), list.len() as u64);
+                    for (i, &index) in list.iter().enumerate() {
+                        assert_eq!(shard.nth(start, end, i as u64), index);
+                    }
+                    for index in start.saturating_sub(2)..end + 2 {
+                        assert_eq!(shard.contains(start, end, index), list.contains(&index));
+                    }
                 }
             }
         }

@@ -98,6 +98,23 @@ def _ids(x: np.ndarray, what: str) -> np.ndarray:
     return x
 
 
+def _check_batch(b: int, h: int, w: int, what: str) -> None:
+    """A ValueError unless the batch holds at least one image of at least one pixel (numpy's
+    "cannot reshape" otherwise)."""
+    if b == 0:
+        raise ValueError(f"`{what}` holds no images (B = 0): pass a batch of at least one")
+    if h == 0 or w == 0:
+        raise ValueError(f"`{what}` images are {h}x{w} pixels: each needs at least one pixel")
+
+
+def _check_slots(k: int, background: int, what: str) -> None:
+    """A ValueError unless `k` masks (plus `background` added) are 1 to MAX_SLOTS slots, the
+    limits `clevrtex eval` applies to a prediction file's masks."""
+    if k == 0 or k + background > MAX_SLOTS:
+        most = MAX_SLOTS - background
+        raise ValueError(f"`{what}` has {k} masks: need 1 to {most} (at most {MAX_SLOTS} slots{' with the background added' if background else ''}, as `clevrtex eval` allows)")
+
+
 def _score(truth, pred, masks, no_background, min_slots, true_rgb=None, pred_rgb=None, pad_to_truth=False, names=("true_masks", "pred")):
     """Score a batch in Rust: `truth` `(B, N)` ids; `pred` `(B, N)` ids (`masks` false) or
     `(B, K, N)` soft masks; images `(B, 3, N)`. The arrays are read in place, not copied."""
@@ -204,6 +221,7 @@ class Evaluator:
         if ti.shape != pi.shape:
             raise ValueError(f"`true_image` is {ti.shape} but `pred_image` is {pi.shape}")
         b, _, h, w = pi.shape
+        _check_batch(b, h, w, "pred_image")
         # Every shape and the metadata checked before anything is scored or counted: a wrong
         # shape is never reshaped into another image's pixels, and an error changes nothing.
         if not 4 <= pm.ndim <= 5 or pm.shape[0] != b or pm.shape[-2:] != (h, w) or (pm.ndim == 5 and pm.shape[2] != 1):
@@ -231,6 +249,9 @@ class Evaluator:
                     for k, v in obj.items():
                         if k != "rotation":
                             _taggable(v, f"`true_metadata[{i}]['objects'][{j}][{k!r}]`")
+        _check_slots(pm.shape[1], 0 if self.masks_have_background else 1, "pred_masks")
+        if not (tm.ndim == 4 and tm.shape[1] == 1):
+            _check_slots(tm.shape[1], 0, "true_masks")
         pm = pm.reshape(b, -1, h * w)
         k_pred = pm.shape[1] + (0 if self.masks_have_background else 1)
         if tm.ndim == 4 and tm.shape[1] == 1:
@@ -305,6 +326,7 @@ def evaluate(
     if t.ndim != 3:
         raise ValueError(f"`gt` must be (B, H, W) ids, it is {t.shape}")
     b, h, w = t.shape
+    _check_batch(b, h, w, "gt")
     if p.ndim == 3:
         if p.shape != t.shape:
             raise ValueError(f"`preds` is {p.shape} but `gt` is {t.shape}")
@@ -312,6 +334,7 @@ def evaluate(
     elif p.ndim == 4:
         if (p.shape[0], p.shape[2], p.shape[3]) != (b, h, w):
             raise ValueError(f"`preds` is {p.shape}, expected (B, K, H, W) with (B, H, W) = {t.shape}")
+        _check_slots(p.shape[1], 1 if no_background else 0, "preds")
         out = _score(t.reshape(b, h * w), p.reshape(b, p.shape[1], h * w), True, no_background, 0, names=("gt", "preds"))
     else:
         raise ValueError(f"`preds` must be (B, H, W) ids or (B, K, H, W) masks, it is {p.shape}")

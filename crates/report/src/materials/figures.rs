@@ -68,12 +68,16 @@ fn png_size(bytes: &[u8]) -> Option<(u32, u32)> {
     Some((be(16), be(20)))
 }
 
-fn read_png(root: &Path, path: &Path) -> anyhow::Result<Png> {
+/// With `pass`, the PNG's mode is checked against it first (`dataset::png_mode_problem`).
+fn read_png(root: &Path, path: &Path, pass: Option<Pass>) -> anyhow::Result<Png> {
     let bytes = dataset::read(root, path, dataset::MAX_FILE_BYTES)
         .map_err(|why| anyhow!("`{}` {why}", path.display()))?;
     let Some((w, h)) = png_size(&bytes) else {
         bail!("`{}` is not a PNG", path.display());
     };
+    if let Some(problem) = pass.and_then(|p| dataset::png_mode_problem(&bytes, p)) {
+        bail!("`{}` {problem}", path.display());
+    }
     if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
         bail!(
             "`{}` claims {w}x{h} pixels (at most {MAX_SIDE}x{MAX_SIDE} are measured)",
@@ -99,7 +103,7 @@ fn read_png(root: &Path, path: &Path) -> anyhow::Result<Png> {
 }
 
 fn rgb8(root: &Path, path: &Path) -> anyhow::Result<(usize, usize, Vec<u8>)> {
-    let p = read_png(root, path)?;
+    let p = read_png(root, path, None)?;
     let px = p.width * p.height;
     let data: Vec<u8> = match p.channels {
         3 | 4 => p
@@ -140,14 +144,7 @@ pub fn measure_sample(
         materials.insert(i as u32 + 1, m);
     }
     let mask_path = dir.join(layout::pass_file(stem, Pass::Mask));
-    let mask = read_png(root, &mask_path)?;
-    if mask.channels != 1 {
-        bail!(
-            "`{}` has {} channels, expected a palette or grey mask",
-            mask_path.display(),
-            mask.channels
-        );
-    }
+    let mask = read_png(root, &mask_path, Some(Pass::Mask))?;
     let (w, h) = (mask.width, mask.height);
     let ids: Vec<u32> = mask.data.iter().map(|&v| u32::from(v)).collect();
     if ids.len() != w * h {

@@ -52,7 +52,7 @@ pub fn measure(s: &Sample, root: &Path) -> anyhow::Result<ImageMeasures> {
     };
     if let (Some(rgb), Some(mask)) = (file(Pass::Rgb)?, file(Pass::Mask)?) {
         let img = read_colour_png(root, &rgb)?;
-        let m = read_pass_png(root, &mask)?;
+        let m = read_pass_png(root, &mask, Pass::Mask)?;
         if (m.width, m.height) != img.dimensions() {
             anyhow::bail!(
                 "`{}` is {}x{} but its mask `{}` is {}x{}",
@@ -67,7 +67,7 @@ pub fn measure(s: &Sample, root: &Path) -> anyhow::Result<ImageMeasures> {
         out.contrasts = contrasts(&img, &m.data, s.objects.len());
     }
     if let (Some((scale, background)), Some(depth)) = (s.depth_encoding, file(Pass::Depth)?) {
-        let d = read_pass_png(root, &depth)?;
+        let d = read_pass_png(root, &depth, Pass::Depth)?;
         let (lo, hi) = d
             .data
             .iter()
