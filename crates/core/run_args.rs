@@ -11,7 +11,7 @@ use clevrtex_render::device::DeviceChoice;
 use clevrtex_scene::Pass;
 
 /// Options shared by `generate` and `render`: how to run Blender and write the output.
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct RunArgs {
     /// Output root; samples go to `OUT/clevrtex_<variant>/<index / 1000>/`.
     #[arg(long, value_name = "OUT")]
