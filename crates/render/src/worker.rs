@@ -138,9 +138,12 @@ impl Ready {
             .filter(|(g, _, _)| seen.insert(g.name.clone()))
             .map(|(g, cc, load)| {
                 let what = match load {
-                    KernelLoad::Shipped => format!("ready-made (sm_{cc})"),
+                    KernelLoad::Shipped => format!("shipped (sm_{cc}): nothing to compile"),
+                    KernelLoad::Prepared => format!(
+                        "prepared (sm_{cc}, compiled ahead of time by `scripts/cuda_kernels.py`): nothing to compile"
+                    ),
                     KernelLoad::Compiled { from } => format!(
-                        "none for sm_{cc}: the driver compiles PTX compute_{from} at each worker's first render unless its cache holds it (many minutes; see `generate`'s warning)"
+                        "will be compiled: none for sm_{cc}, so the driver compiles PTX compute_{from} at each worker's first render unless its cache holds it (many minutes; prepare it once with `./scripts/setup.sh --bpy 4.5 --cuda-arch {cc}`)"
                     ),
                     KernelLoad::Missing => format!("none for sm_{cc} and no PTX: Cycles cannot use it"),
                 };
