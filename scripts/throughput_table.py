@@ -59,7 +59,7 @@ def run_cell(exe, blender, variant, preset, size, n, seed):
         "wall_per_image": wall / n,
         "blender_start": float(start.group(1)) if start else float("nan"),
         "rejects": int(rejects.group(1)) if rejects else 0,
-        "command": " ".join(["clevrtex"] + cmd[1:-2] + ["--out", "OUT"]),
+        "command": " ".join(["clevrtex"] + [("OUT" if x == out else x) for x in cmd[1:]]),
     }
 
 

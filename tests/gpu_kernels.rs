@@ -14,7 +14,8 @@ use crate::util::{blender_or_skip, data, repo_root, skip, text, REQUIRE_TOOLS};
 /// `python3 scripts/cuda_kernels.py ARGS`.
 fn prepare(args: &[&std::ffi::OsStr], envs: &[(&str, &std::ffi::OsStr)]) -> Output {
     let mut cmd = Command::new("python3");
-    cmd.arg(repo_root().join("scripts/cuda_kernels.py")).args(args);
+    cmd.arg(repo_root().join("scripts/cuda_kernels.py"))
+        .args(args);
     for (k, v) in envs {
         cmd.env(k, v);
     }
@@ -82,13 +83,20 @@ fn unknown_compute_capabilities_are_refused_up_front() {
     let dir = tempfile::tempdir().unwrap();
     let lib = fake_cycles_lib(dir.path());
     let o = prepare(
-        &["--cuda-arch".as_ref(), "80,99".as_ref(), "--cycles-lib".as_ref(), lib.as_os_str()],
+        &[
+            "--cuda-arch".as_ref(),
+            "80,99".as_ref(),
+            "--cycles-lib".as_ref(),
+            lib.as_os_str(),
+        ],
         &[],
     );
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.starts_with("error: `--cuda-arch 99` is not a CUDA compute capability ptxas can build for\nhint: "),
+        err.starts_with(
+            "error: `--cuda-arch 99` is not a CUDA compute capability ptxas can build for\nhint: "
+        ),
         "{err}"
     );
     assert!(!lib.join("kernel_sm_80.cubin.zst").exists());
@@ -99,7 +107,11 @@ fn unknown_compute_capabilities_are_refused_up_front() {
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    assert!(text(&o).contains("`--cuda-arch 99` is not a CUDA compute capability"), "{}", text(&o));
+    assert!(
+        text(&o).contains("`--cuda-arch 99` is not a CUDA compute capability"),
+        "{}",
+        text(&o)
+    );
 }
 
 #[test]
@@ -170,7 +182,10 @@ fn prepared_kernels_are_built_named_and_found_as_cycles_looks_for_them() {
         let file = lib.join(format!("kernel_sm_{sm}.cubin.zst"));
         assert_eq!(cubin_arch(&file), (EM_CUDA, sm), "{}", file.display());
     }
-    assert_eq!(std::fs::read(lib.join("kernel_sm_86.cubin.zst")).unwrap(), b"shipped");
+    assert_eq!(
+        std::fs::read(lib.join("kernel_sm_86.cubin.zst")).unwrap(),
+        b"shipped"
+    );
     // Run again: nothing to compile.
     let o = run("80,90");
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
@@ -232,7 +247,9 @@ fn gpu_check_refuses_clearly_without_a_gpu() {
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.starts_with("error: no NVIDIA GPU here (`false` lists none), so there is nothing to check\nhint: "),
+        err.starts_with(
+            "error: no NVIDIA GPU here (`false` lists none), so there is nothing to check\nhint: "
+        ),
         "{err}"
     );
     assert!(!dir.path().join("work").exists());
@@ -294,18 +311,32 @@ write("gpu_mask", 4, 3, mask_flip=True)
     };
     let o = compare("gpu");
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    assert!(text(&o).contains("compared 2 image(s): 2 ok, 0 failed"), "{}", text(&o));
+    assert!(
+        text(&o).contains("compared 2 image(s): 2 ok, 0 failed"),
+        "{}",
+        text(&o)
+    );
     let o = compare("gpu_bright");
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("RGB differs by more than the CPU's own noise"), "{}", text(&o));
+    assert!(
+        text(&o).contains("RGB differs by more than the CPU's own noise"),
+        "{}",
+        text(&o)
+    );
     let o = compare("gpu_mask");
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(
-        text(&o).contains("CLEVRTEX_clevr_000001: mask DIFFERENT") && text(&o).contains("1 ok, 1 failed"),
+        text(&o).contains("CLEVRTEX_clevr_000001: mask DIFFERENT")
+            && text(&o).contains("1 ok, 1 failed"),
         "{}",
         text(&o)
     );
     let o = compare("no_such_run");
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-    assert!(text(&o).contains("error: `CLEVRTEX_clevr_000000` is in the CPU run but not in the GPU run"), "{}", text(&o));
+    assert!(
+        text(&o)
+            .contains("error: `CLEVRTEX_clevr_000000` is in the CPU run but not in the GPU run"),
+        "{}",
+        text(&o)
+    );
 }

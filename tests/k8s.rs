@@ -40,12 +40,24 @@ fn gpu_indexed_job_names_the_gpu_image_one_gpu_and_one_worker_per_pod() {
     assert_eq!(after("--workers"), Some("1"), "{args:?}");
     assert_eq!(after("--device"), Some("cuda"), "{args:?}");
     let dockerfile = std::fs::read_to_string(repo_root().join("deploy/k8s/Dockerfile")).unwrap();
-    assert!(dockerfile.contains("FROM debian:bookworm-slim AS gpu"), "{dockerfile}");
-    assert!(dockerfile.contains("--target gpu -t clevrtex:"), "{dockerfile}");
-    assert!(dockerfile.contains("cuda_kernels.py --cuda-arch"), "{dockerfile}");
+    assert!(
+        dockerfile.contains("FROM debian:bookworm-slim AS gpu"),
+        "{dockerfile}"
+    );
+    assert!(
+        dockerfile.contains("--target gpu -t clevrtex:"),
+        "{dockerfile}"
+    );
+    assert!(
+        dockerfile.contains("cuda_kernels.py --cuda-arch"),
+        "{dockerfile}"
+    );
     // The CPU image stays the default target (the last stage).
     let last = dockerfile.rfind("\nFROM ").unwrap();
-    assert!(dockerfile[last..].starts_with("\nFROM debian:bookworm-slim AS cpu"), "{dockerfile}");
+    assert!(
+        dockerfile[last..].starts_with("\nFROM debian:bookworm-slim AS cpu"),
+        "{dockerfile}"
+    );
 }
 
 /// The checks every Job of `yaml` passes: an Indexed Job with a PVC, CLEVRTEX_SHARD_COUNT equal
@@ -99,7 +111,10 @@ fn check_job(name: &str, yaml: &str, tag: &str) -> Option<Value> {
     // The image and user are the Dockerfile's.
     let dockerfile = std::fs::read_to_string(repo_root().join("deploy/k8s/Dockerfile")).unwrap();
     let image = c["image"].as_str().unwrap();
-    assert_eq!(image, format!("clevrtex:{}{tag}", env!("CARGO_PKG_VERSION")));
+    assert_eq!(
+        image,
+        format!("clevrtex:{}{tag}", env!("CARGO_PKG_VERSION"))
+    );
     assert!(dockerfile.contains(&format!("-t {image} ")), "{dockerfile}");
     assert!(dockerfile.contains("ENTRYPOINT [\"/usr/local/bin/clevrtex\"]"));
     let uid = pod["securityContext"]["runAsUser"].as_u64().unwrap();

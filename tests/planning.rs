@@ -10,7 +10,15 @@ use crate::util::{blender_or_skip, clevrtex, text};
 /// `clevrtex generate` of `clevr` at 32x24, 1 sample, rgb and mask, with `blender`.
 fn tiny(blender: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
     clevrtex()
-        .args(["generate", "--variant", "clevr", "--width", "32", "--height", "24"])
+        .args([
+            "generate",
+            "--variant",
+            "clevr",
+            "--width",
+            "32",
+            "--height",
+            "24",
+        ])
         .args(["--samples", "1", "--passes", "rgb,mask", "--out"])
         .arg(out)
         .arg("--blender")
@@ -37,7 +45,12 @@ fn batch_logs_show_rate_eta_and_failures_so_far() {
     let out = crate::generate::generate_fake("crash", tmp.path(), &["-n", "3", "--retries", "0"]);
     assert_eq!(out.status.code(), Some(3), "{}", text(&out));
     let lines = progress_lines(&out);
-    assert_eq!(lines.len(), 1, "one line at the end of 3 images: {}", text(&out));
+    assert_eq!(
+        lines.len(),
+        1,
+        "one line at the end of 3 images: {}",
+        text(&out)
+    );
     assert!(
         lines[0].starts_with("progress: 3/3 images (0 written, 3 failed), 0 img/h, elapsed "),
         "{}",
@@ -48,7 +61,8 @@ fn batch_logs_show_rate_eta_and_failures_so_far() {
 
 #[test]
 fn batch_logs_of_a_real_run_show_progress_and_skips() {
-    let Some(blender) = blender_or_skip("planning::batch_logs_of_a_real_run_show_progress_and_skips")
+    let Some(blender) =
+        blender_or_skip("planning::batch_logs_of_a_real_run_show_progress_and_skips")
     else {
         return;
     };
@@ -57,8 +71,13 @@ fn batch_logs_of_a_real_run_show_progress_and_skips() {
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     // One line at the end (and one a minute before it, on a machine slow enough).
     let lines = progress_lines(&out);
-    let l = lines.last().unwrap_or_else(|| panic!("no progress line: {}", text(&out)));
-    assert!(l.starts_with("progress: 2/2 images (2 written, 0 failed), "), "{l}");
+    let l = lines
+        .last()
+        .unwrap_or_else(|| panic!("no progress line: {}", text(&out)));
+    assert!(
+        l.starts_with("progress: 2/2 images (2 written, 0 failed), "),
+        "{l}"
+    );
     assert!(l.ends_with(", ETA 0s"), "{l}");
     let rate: f64 = l
         .split(", ")
@@ -71,8 +90,10 @@ fn batch_logs_of_a_real_run_show_progress_and_skips() {
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let lines = progress_lines(&out);
     assert!(
-        lines.last().is_some_and(|l| l
-            .starts_with("progress: 3/3 images (1 written, 2 already complete, 0 failed), ")),
+        lines
+            .last()
+            .is_some_and(|l| l
+                .starts_with("progress: 3/3 images (1 written, 2 already complete, 0 failed), ")),
         "{}",
         text(&out)
     );
@@ -90,7 +111,17 @@ fn estimate_predicts_from_calibration_and_writes_nothing_into_out() {
     let out = tiny(
         &blender,
         &out_dir,
-        &["-n", "1000", "--estimate", "--calibrate", "2", "--workers", "1", "--tasks", "10"],
+        &[
+            "-n",
+            "1000",
+            "--estimate",
+            "--calibrate",
+            "2",
+            "--workers",
+            "1",
+            "--tasks",
+            "10",
+        ],
     );
     let t = text(&out);
     assert_eq!(out.status.code(), Some(0), "{t}");
@@ -105,7 +136,10 @@ fn estimate_predicts_from_calibration_and_writes_nothing_into_out() {
         .lines()
         .find(|l| l.starts_with("this machine: wall "))
         .unwrap_or_else(|| panic!("{t}"));
-    assert!(machine.contains("images/hour") && machine.contains("CPU core-hours"), "{machine}");
+    assert!(
+        machine.contains("images/hour") && machine.contains("CPU core-hours"),
+        "{machine}"
+    );
     assert!(
         stdout.contains("array of 10 task(s) (SLURM `--array=0-9`, Kubernetes `completions: 10`), each on a machine like this one with 100 image(s): wall "),
         "{t}"
@@ -130,7 +164,11 @@ fn estimate_refuses_bad_input_before_writing_anything() {
     };
     let o = run(&["-n", "0"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("`-n 0` asks for no images\nhint: "), "{}", text(&o));
+    assert!(
+        text(&o).contains("`-n 0` asks for no images\nhint: "),
+        "{}",
+        text(&o)
+    );
     // A device that is not there: the fake Blender reports no GPU.
     let o = run(&["-n", "10", "--device", "optix"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
@@ -141,12 +179,17 @@ fn estimate_refuses_bad_input_before_writing_anything() {
     );
     let o = run(&["-n", "10", "--tasks", "0"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("`--tasks 0` is no array\nhint: "), "{}", text(&o));
+    assert!(
+        text(&o).contains("`--tasks 0` is no array\nhint: "),
+        "{}",
+        text(&o)
+    );
     // Calibration that cannot render (every worker crashes): a clear error, not a guess.
     let o = run(&["-n", "10", "--calibrate", "1", "--retries", "0"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(
-        text(&o).contains("no calibration image could be made, so there is nothing to estimate from"),
+        text(&o)
+            .contains("no calibration image could be made, so there is nothing to estimate from"),
         "{}",
         text(&o)
     );
@@ -169,7 +212,11 @@ fn estimate_refuses_bad_input_before_writing_anything() {
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("cannot place 100 objects"), "{}", text(&o));
+    assert!(
+        text(&o).contains("cannot place 100 objects"),
+        "{}",
+        text(&o)
+    );
     assert!(!out_dir.exists(), "a refused estimate wrote into `--out`");
     // `--calibrate` and `--tasks` belong to `--estimate`.
     let o = clevrtex()

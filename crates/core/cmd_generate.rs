@@ -186,7 +186,11 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
                 r.adaptive_threshold
                     .map(|t| format!(" (adaptive threshold {t})"))
                     .unwrap_or_default(),
-                passes.iter().map(|p| p.name()).collect::<Vec<_>>().join(",")
+                passes
+                    .iter()
+                    .map(|p| p.name())
+                    .collect::<Vec<_>>()
+                    .join(",")
             ),
             calibrate: args.calibrate,
             tasks: args.tasks,

@@ -190,7 +190,10 @@ pub(crate) fn run(req: Request) -> CmdResult {
     let report = match pool::run(&opts, jobs, &on_event) {
         Ok(r) => r,
         Err(RenderError::Interrupted) => {
-            eprintln!("error: {}\nhint: nothing was written into `--out`", exit::Interrupted);
+            eprintln!(
+                "error: {}\nhint: nothing was written into `--out`",
+                exit::Interrupted
+            );
             return Ok(crate::interrupt::exit_code());
         }
         Err(e) => return Err(e.into()),

@@ -274,10 +274,12 @@ impl BatchProgress {
     /// images ended since the last one, or at the last image.
     fn event(&self, position: u64, done: u64, failed: u64, elapsed: Duration) {
         let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
-        if position >= last.0 + self.every_images || (position == self.total && last.0 < position)
-        {
+        if position >= last.0 + self.every_images || (position == self.total && last.0 < position) {
             *last = (position, elapsed);
-            eprintln!("{}", progress_line(position, self.total, done, failed, elapsed));
+            eprintln!(
+                "{}",
+                progress_line(position, self.total, done, failed, elapsed)
+            );
         }
     }
 
@@ -286,7 +288,10 @@ impl BatchProgress {
         let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
         if elapsed >= last.1 + Self::EVERY && position < self.total {
             *last = (position, elapsed);
-            eprintln!("{}", progress_line(position, self.total, done, failed, elapsed));
+            eprintln!(
+                "{}",
+                progress_line(position, self.total, done, failed, elapsed)
+            );
         }
     }
 }
@@ -434,7 +439,10 @@ mod tests {
             "progress: 40/200 images (38 written, 2 failed), 912 img/h, elapsed 2m 30s, ETA 10m 00s"
         );
         let l = progress_line(12, 20, 2, 0, Duration::from_secs(10));
-        assert!(l.contains("(2 written, 10 already complete, 0 failed)"), "{l}");
+        assert!(
+            l.contains("(2 written, 10 already complete, 0 failed)"),
+            "{l}"
+        );
         assert!(l.ends_with("ETA 40s"), "{l}");
         assert!(progress_line(0, 5, 0, 0, Duration::ZERO).ends_with("ETA unknown"));
         assert!(progress_line(5, 5, 5, 0, Duration::from_secs(7200)).contains("elapsed 2h 00m"));

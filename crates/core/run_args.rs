@@ -24,7 +24,10 @@ pub struct RunArgs {
     /// `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     pub(crate) blender: Option<PathBuf>,
-    /// Blender processes rendering in parallel (default: 2 on machines with 2+ cores).
+    /// Blender processes rendering in parallel. Default: one per GPU with `--device` on GPUs;
+    /// on the CPU 1 with one core, 2 with 2-15 cores (one worker's scene build, visibility pass
+    /// and writing overlap the other's render), cores / 8 from 16 cores (docs/performance.md,
+    /// "Workers x threads").
     #[arg(long, value_name = "N")]
     pub(crate) workers: Option<usize>,
     /// Cycles device: `auto` (the best GPU kind Blender reports: OptiX, CUDA, HIP; else the
@@ -32,7 +35,7 @@ pub struct RunArgs {
     /// index) and `--workers` defaults to N.
     #[arg(long, default_value = "auto", value_name = "DEVICE")]
     pub(crate) device: String,
-    /// Cycles threads per Blender process (default: cores / workers).
+    /// Cycles threads per Blender process (default: cores / workers, at least 1).
     #[arg(long, value_name = "T")]
     pub(crate) threads: Option<u32>,
     /// Time limit per render request, seconds; a worker over it is killed and the scene

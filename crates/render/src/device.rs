@@ -487,7 +487,12 @@ mod tests {
         assert_eq!(k.load_for(90), KernelLoad::Prepared);
         assert_eq!(k.load_for(89), KernelLoad::Shipped);
         assert_eq!(k.load_for(80), KernelLoad::Compiled { from: 75 });
-        assert!(k.describe().contains("sm_120, sm_90 (sm_90 prepared); PTX compute_75"), "{}", k.describe());
+        assert!(
+            k.describe()
+                .contains("sm_120, sm_90 (sm_90 prepared); PTX compute_75"),
+            "{}",
+            k.describe()
+        );
     }
 
     #[test]
@@ -527,7 +532,10 @@ mod tests {
             "{w}"
         );
         assert!(w.contains("--device optix") && w.contains("60 min"), "{w}");
-        assert!(w.contains("`./scripts/setup.sh --bpy 4.5 --cuda-arch 90`"), "{w}");
+        assert!(
+            w.contains("`./scripts/setup.sh --bpy 4.5 --cuda-arch 90`"),
+            "{w}"
+        );
         assert_eq!(kernel_compile_warning(&p[1..]), None);
         // Unknown capability (no nvidia-smi): nothing is assumed.
         let mut q = plan(DeviceChoice::Optix, &gpus).unwrap();
