@@ -570,19 +570,22 @@ def cycles_gpus():
     return out
 
 
-def cuda_kernels():
+def cuda_kernels(lib=None):
     """The CUDA kernels this build's Cycles ships (`lib/kernel_sm_XY.cubin*` and
-    `lib/kernel_compute_XY.ptx*` beside the Cycles add-on), as compute capabilities
-    10 x major + minor: `{"cubin": [50, ..., 89, 120], "ptx": [75]}`; empty lists where the
-    build has none (Debian's Blender). Cycles loads the cubin made for the GPU's exact compute
-    capability, else has the driver compile the nearest older PTX at the first render, which
-    takes minutes (the `--device` docs)."""
-    out = {"cubin": [], "ptx": []}
+    `lib/kernel_compute_XY.ptx*` beside the Cycles add-on, or in `lib`), as compute capabilities
+    10 x major + minor: `{"cubin": [50, ..., 89, 120], "ptx": [75], "prepared": []}`; empty
+    lists where the build has none (Debian's Blender). Cycles loads the cubin made for the GPU's
+    exact compute capability, else has the driver compile the nearest older PTX at the first
+    render, which takes minutes (the `--device` docs). `prepared`: the cubins that
+    `scripts/cuda_kernels.py` compiled ahead of time and listed in `lib/clevrtex-prepared.json`
+    (also in `cubin`: Cycles loads them as its own)."""
+    out = {"cubin": [], "ptx": [], "prepared": []}
     try:
-        import sys
+        if lib is None:
+            import sys
 
-        cycles = sys.modules.get("cycles")
-        lib = os.path.join(os.path.dirname(cycles.__file__), "lib")
+            cycles = sys.modules.get("cycles")
+            lib = os.path.join(os.path.dirname(cycles.__file__), "lib")
         for name in sorted(os.listdir(lib)):
             for kind, prefix, ext in (("cubin", "kernel_sm_", ".cubin"),
                                       ("ptx", "kernel_compute_", ".ptx")):
@@ -591,6 +594,14 @@ def cuda_kernels():
                 if digits.isdigit() and rest[len(digits):].startswith(ext):
                     out[kind].append(int(digits))
     except Exception:  # informational only: a build without the folder ships none
+        pass
+    try:
+        import json
+
+        with open(os.path.join(lib, "clevrtex-prepared.json")) as f:
+            listed = json.load(f).get("kernels", [])
+        out["prepared"] = [int(k["sm"]) for k in listed if int(k["sm"]) in out["cubin"]]
+    except Exception:  # informational only: none prepared
         pass
     for kind in out:
         out[kind] = sorted(set(out[kind]))

@@ -10,6 +10,14 @@
 #   ./scripts/setup.sh --bpy 4.5     also `.venv-bpy/`: a Python venv with PyPI's `bpy` 4.5 LTS
 #                                    (or `--bpy 5.0`), a second Blender: pass
 #                                    `--blender .venv-bpy/bin/python` to clevrtex
+#   ./scripts/setup.sh --bpy 4.5 --cuda-arch 80,90
+#                                    also compile, once and without a GPU, the Cycles CUDA kernels
+#                                    bpy lacks for these compute capabilities (8.0 A100, 9.0 H100/
+#                                    H200) with `ptxas` from PyPI's nvidia-cuda-nvcc-cu12 (in
+#                                    `.venv-cuda/`), into bpy's Cycles add-on where Cycles loads
+#                                    ready-made kernels (scripts/cuda_kernels.py; ~16 CPU-minutes
+#                                    per capability, in parallel), so no worker compiles at run time
+#   ./scripts/setup.sh --ptxas       only `.venv-cuda/` with ptxas (the kernel tests' compiler)
 #   ./scripts/setup.sh --browser     also Debian's `chromium`, for the report's browser test
 #   ./scripts/setup.sh --torch       also PyTorch (PyPI's wheel) in `.venv-test/` (implies
 #                                    --test-venv), for the training example
@@ -22,6 +30,8 @@ test_venv=0
 browser=0
 torch=0
 bpy=""
+cuda_arch=""
+ptxas=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --test-venv) test_venv=1 ;;
@@ -35,7 +45,14 @@ while [ $# -gt 0 ]; do
         *) echo "setup.sh: \`--bpy ${bpy}\` is not a supported bpy version (known: 4.5, 5.0)" >&2; exit 2 ;;
       esac
       ;;
-    *) echo "setup.sh: unknown option \`$1\` (known: --test-venv, --torch, --bpy 4.5|5.0, --browser)" >&2; exit 2 ;;
+    --cuda-arch)
+      cuda_arch="${2:-}"
+      shift
+      # Refused up front (exit 2), before anything is installed.
+      python3 scripts/cuda_kernels.py --check --cuda-arch "$cuda_arch"
+      ;;
+    --ptxas) ptxas=1 ;;
+    *) echo "setup.sh: unknown option \`$1\` (known: --test-venv, --torch, --bpy 4.5|5.0, --cuda-arch LIST, --ptxas, --browser)" >&2; exit 2 ;;
   esac
   shift
 done
@@ -43,6 +60,10 @@ done
 # Every Debian package in one apt run.
 need=()
 command -v blender >/dev/null 2>&1 || need+=(blender)
+if { [ -n "$cuda_arch" ] || [ "$ptxas" = 1 ]; }; then
+  command -v zstd >/dev/null 2>&1 || need+=(zstd)
+  python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || need+=(python3-venv)
+fi
 if { [ "$test_venv" = 1 ] || [ -n "$bpy" ]; } && ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
   need+=(python3-venv)
 fi
@@ -100,6 +121,17 @@ if [ -n "$bpy" ]; then
     .venv-bpy/bin/pip install --quiet --disable-pip-version-check "bpy==${bpy}.*"
   fi
   echo "bpy venv: .venv-bpy/bin/python: Blender $(.venv-bpy/bin/python -c 'import bpy; print(bpy.app.version_string)' 2>/dev/null)"
+fi
+if [ "$ptxas" = 1 ]; then
+  python3 scripts/cuda_kernels.py --install-ptxas --cuda-venv .venv-cuda
+fi
+if [ -n "$cuda_arch" ]; then
+  if [ -z "$bpy" ] && [ ! -x .venv-bpy/bin/python ]; then
+    echo "setup.sh: \`--cuda-arch\` prepares the kernels of PyPI's bpy, and there is none in .venv-bpy" >&2
+    echo "hint: add \`--bpy 4.5\`" >&2
+    exit 1
+  fi
+  python3 scripts/cuda_kernels.py --cuda-arch "$cuda_arch" --bpy-python .venv-bpy/bin/python --cuda-venv .venv-cuda
 fi
 echo "blender: $(blender --version 2>/dev/null | head -n 1)"
 if [ "$browser" = 1 ]; then

@@ -12,10 +12,60 @@ use crate::util::{blender_or_skip, clevrtex, repo_root, test_python_or_skip, tex
 
 #[test]
 fn indexed_job_yaml_names_the_dockerfiles_image_and_a_valid_command() {
-    let Some(python) = test_python_or_skip("indexed_job_yaml", "yaml") else {
+    check_job("indexed_job_yaml", "deploy/k8s/indexed-job.yaml", "");
+}
+
+/// The GPU variant (issue 35) passes the same checks, with the Dockerfile's `gpu` target as its
+/// image; each pod holds one GPU and runs one CUDA worker on it.
+#[test]
+fn gpu_indexed_job_names_the_gpu_image_one_gpu_and_one_worker_per_pod() {
+    let Some(job) = check_job(
+        "gpu_indexed_job_yaml",
+        "deploy/k8s/indexed-job-gpu.yaml",
+        "-gpu",
+    ) else {
         return;
     };
-    let yaml = repo_root().join("deploy/k8s/indexed-job.yaml");
+    let c = &job["spec"]["template"]["spec"]["containers"][0];
+    for side in ["limits", "requests"] {
+        assert_eq!(c["resources"][side]["nvidia.com/gpu"], 1, "{side}: {c}");
+    }
+    let args: Vec<&str> = c["args"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap())
+        .collect();
+    let after = |flag: &str| args.iter().position(|a| *a == flag).map(|i| args[i + 1]);
+    assert_eq!(after("--workers"), Some("1"), "{args:?}");
+    assert_eq!(after("--device"), Some("cuda"), "{args:?}");
+    let dockerfile = std::fs::read_to_string(repo_root().join("deploy/k8s/Dockerfile")).unwrap();
+    assert!(
+        dockerfile.contains("FROM debian:bookworm-slim AS gpu"),
+        "{dockerfile}"
+    );
+    assert!(
+        dockerfile.contains("--target gpu -t clevrtex:"),
+        "{dockerfile}"
+    );
+    assert!(
+        dockerfile.contains("cuda_kernels.py --cuda-arch"),
+        "{dockerfile}"
+    );
+    // The CPU image stays the default target (the last stage).
+    let last = dockerfile.rfind("\nFROM ").unwrap();
+    assert!(
+        dockerfile[last..].starts_with("\nFROM debian:bookworm-slim AS cpu"),
+        "{dockerfile}"
+    );
+}
+
+/// The checks every Job of `yaml` passes: an Indexed Job with a PVC, CLEVRTEX_SHARD_COUNT equal
+/// to `completions`, the Dockerfile's image (`clevrtex:VERSION<tag>`) and user, and arguments the
+/// real `clevrtex` accepts. The Job, or `None` when skipped.
+fn check_job(name: &str, yaml: &str, tag: &str) -> Option<Value> {
+    let python = test_python_or_skip(name, "yaml")?;
+    let yaml = repo_root().join(yaml);
     let o = std::process::Command::new(&python)
         .args([
             "-c",
@@ -61,7 +111,10 @@ fn indexed_job_yaml_names_the_dockerfiles_image_and_a_valid_command() {
     // The image and user are the Dockerfile's.
     let dockerfile = std::fs::read_to_string(repo_root().join("deploy/k8s/Dockerfile")).unwrap();
     let image = c["image"].as_str().unwrap();
-    assert_eq!(image, format!("clevrtex:{}", env!("CARGO_PKG_VERSION")));
+    assert_eq!(
+        image,
+        format!("clevrtex:{}{tag}", env!("CARGO_PKG_VERSION"))
+    );
     assert!(dockerfile.contains(&format!("-t {image} ")), "{dockerfile}");
     assert!(dockerfile.contains("ENTRYPOINT [\"/usr/local/bin/clevrtex\"]"));
     let uid = pod["securityContext"]["runAsUser"].as_u64().unwrap();
@@ -100,6 +153,7 @@ fn indexed_job_yaml_names_the_dockerfiles_image_and_a_valid_command() {
         "{}",
         text(&o)
     );
+    Some(job.clone())
 }
 
 /// Images, masks, depth and metadata of one output folder.

@@ -436,3 +436,53 @@ fn slurm_array_union_equals_one_run_and_a_killed_task_resumes_after_requeue() {
     let v = clevrtex().arg("verify").arg(&out2).output().unwrap();
     assert_eq!(v.status.code(), Some(0), "{}", text(&v));
 }
+
+/// The GPU template (issue 35): no GPU and no GRES-configured SLURM here, so what is checked is
+/// that it asks SLURM for GPUs and an array, and that its command, run as a task of a 4-task
+/// array would run it, is one the real `clevrtex` accepts (it gets as far as looking for its
+/// Blender: not a usage, shard or device-name error).
+#[test]
+fn gpu_template_requests_gpus_and_runs_a_valid_command() {
+    let script = repo_root().join("deploy/slurm/generate-gpu.sbatch");
+    let text_of = std::fs::read_to_string(&script).unwrap();
+    let directives: Vec<&str> = text_of
+        .lines()
+        .filter_map(|l| l.strip_prefix("#SBATCH "))
+        .collect();
+    assert!(
+        directives.iter().any(|d| d.starts_with("--gres=gpu:")),
+        "{directives:?}"
+    );
+    assert!(
+        directives.iter().any(|d| d.starts_with("--array=")),
+        "{directives:?}"
+    );
+    assert!(directives.contains(&"--requeue"), "{directives:?}");
+    let dir = tempfile::tempdir().unwrap();
+    let o = Command::new("bash")
+        .arg(&script)
+        .env("OUT", dir.path().join("out"))
+        .env("SHARDS", "4")
+        .env("SLURM_ARRAY_TASK_ID", "2")
+        .env("CLEVRTEX", env!("CARGO_BIN_EXE_clevrtex"))
+        .env("BLENDER", "/no/such/blender")
+        .env("COUNT", "12")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("blender not found at `/no/such/blender`"),
+        "{}",
+        text(&o)
+    );
+    // Without SHARDS it refuses, as the CPU template does.
+    let o = Command::new("bash")
+        .arg(&script)
+        .env("OUT", dir.path().join("out"))
+        .env_remove("SHARDS")
+        .env("SLURM_ARRAY_TASK_ID", "2")
+        .output()
+        .unwrap();
+    assert_ne!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(text(&o).contains("set SHARDS"), "{}", text(&o));
+}

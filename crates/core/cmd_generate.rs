@@ -63,6 +63,19 @@ pub struct GenerateArgs {
     /// Layout attempts per image when objects are hidden, before the image fails (1 to 1000).
     #[arg(long, default_value_t = 20, value_name = "N")]
     max_attempts: u32,
+    /// Plan instead of make: render a few calibration images of these settings (visibility
+    /// pass and rejects included) in a scratch folder, nothing into `--out`, and print the
+    /// predicted wall time, CPU core-hours or GPU hours and images/hour for `-n` with these
+    /// workers x threads (docs/performance.md, "Planning a run").
+    #[arg(long)]
+    estimate: bool,
+    /// With `--estimate`: calibration images [default: 2 per worker, at least 4].
+    #[arg(long, value_name = "K", requires = "estimate")]
+    calibrate: Option<u32>,
+    /// With `--estimate`: also predict an array of this many tasks (SLURM `--array`, a
+    /// Kubernetes Job's `completions`), each on a machine like this one.
+    #[arg(long, value_name = "TASKS", requires = "estimate")]
+    tasks: Option<u64>,
     #[command(flatten)]
     run: RunArgs,
 }
@@ -173,6 +186,30 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         }
     };
     let jobs = Jobs::lazy(shard.count(start, end), make, has_stem);
+    if args.estimate {
+        let r = &config.base.render;
+        return crate::estimate::run(crate::estimate::Request {
+            run: &args.run,
+            jobs: &jobs,
+            what: format!(
+                "`{variant}` at {}x{}, {} samples{}, passes {}",
+                r.width,
+                r.height,
+                r.samples,
+                r.adaptive_threshold
+                    .map(|t| format!(" (adaptive threshold {t})"))
+                    .unwrap_or_default(),
+                passes
+                    .iter()
+                    .map(|p| p.name())
+                    .collect::<Vec<_>>()
+                    .join(",")
+            ),
+            calibrate: args.calibrate,
+            tasks: args.tasks,
+            max_attempts: args.max_attempts,
+        });
+    }
     let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
     let plan = manifest::Plan {
         run: manifest::Manifest {

@@ -19,6 +19,7 @@ mod cmd_render;
 mod cmd_report;
 mod cmd_sample;
 mod cmd_verify;
+mod estimate;
 mod exit;
 mod interrupt;
 mod materials_blender;

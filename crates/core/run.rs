@@ -17,8 +17,9 @@ use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
 use crate::run_args::{self, RunArgs};
 
-/// Render `jobs` with the pool as `args` say, failures to `ledger`, with a progress bar (or a
-/// line per sample when stderr is not a terminal) and a summary; with `manifest`, under the
+/// Render `jobs` with the pool as `args` say, failures to `ledger`, with a progress bar (or,
+/// when stderr is not a terminal, a line per sample and a progress line with rate and ETA every
+/// few images or minute: [`BatchProgress`]) and a summary; with `manifest`, under the
 /// range's lock, the plan written first and the manifest last.
 pub(crate) fn run_jobs(
     args: &RunArgs,
@@ -28,60 +29,13 @@ pub(crate) fn run_jobs(
     manifest: Option<manifest::Plan>,
 ) -> CmdResult {
     // The numbers given as flags first: a refusal never waits on Blender.
-    let timeout = args
-        .timeout
-        .map(|t| run_args::seconds("--timeout", t))
-        .transpose()?;
-    if args.workers == Some(0) {
-        bail!("`--workers 0` cannot render anything\nhint: pass at least 1");
-    }
-    if let Some(w) = args.workers {
-        let w = u32::try_from(w).unwrap_or(u32::MAX);
-        run_args::within("--workers", w, run_args::MAX_THREADS as u32)?;
-    }
-    let startup_timeout = run_args::seconds("--startup-timeout", args.startup_timeout)?;
+    checked_numbers(args)?;
     let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
     check_output_writable(&args.out)?;
-    let materials_json = clevrtex_render::default_materials_json()
-        .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the workers; finished samples are kept",
     });
-    let choice = run_args::device_choice(&args.device)?;
-    let devices = clevrtex_render::gpu_probe::plan_devices(
-        choice,
-        &blender,
-        &materials_json,
-        startup_timeout,
-        &interrupt,
-    )?;
-    if devices.iter().any(|d| d.is_gpu()) {
-        let names: Vec<String> = devices.iter().map(|d| d.describe()).collect();
-        eprintln!("devices: {}", names.join(", "));
-    }
-    if let Some(w) = clevrtex_render::device::kernel_compile_warning(&devices) {
-        eprintln!("{w}");
-    }
-    let opts = PoolOptions {
-        blender,
-        materials_json,
-        workers: args.workers.unwrap_or_else(|| {
-            clevrtex_render::device::default_workers(&devices, pool::default_workers())
-        }),
-        threads: args.threads.unwrap_or(0),
-        timeout,
-        startup_timeout,
-        retries: args.retries,
-        max_attempts: max_attempts.max(1),
-        visibility_check: true,
-        keep_exr: args.keep_exr,
-        overwrite: args.overwrite,
-        fail_fast: args.fail_fast,
-        out: args.out.clone(),
-        ledger: ledger.clone(),
-        interrupt: Arc::clone(&interrupt),
-        devices: devices.clone(),
-    };
+    let opts = pool_options(args, blender, ledger.clone(), max_attempts, &interrupt)?;
     let total = jobs.len();
     let bar = progress_bar(total);
     let (done, rejects, failures) = (AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0));
@@ -89,6 +43,7 @@ pub(crate) fn run_jobs(
     // Seconds per finished sample, by index, for the manifest (`clevrtex report` plots them).
     let seconds = std::sync::Mutex::new(std::collections::BTreeMap::<u64, f64>::new());
     let plain = bar.is_hidden();
+    let batch = BatchProgress::new(total);
     // A hidden bar swallows `println`: then messages go straight to stderr.
     let say = |msg: String| {
         if plain {
@@ -150,6 +105,14 @@ pub(crate) fn run_jobs(
             }
         }
         let d = done.load(Ordering::Relaxed);
+        if plain {
+            batch.event(
+                bar.position(),
+                d,
+                failures.load(Ordering::Relaxed),
+                started.elapsed(),
+            );
+        }
         let per_hour = d as f64 / started.elapsed().as_secs_f64().max(1e-9) * 3600.0;
         bar.set_message(format!(
             "{per_hour:.0} img/h, {} rejects, {} failed",
@@ -175,7 +138,27 @@ pub(crate) fn run_jobs(
         }
         None => None,
     };
-    let result = pool::run(&opts, jobs, &on_event);
+    // Without a terminal, a progress line also every `BatchProgress::EVERY` while images take
+    // long: a ticker beside the pool, stopped when it returns.
+    let finished = std::sync::atomic::AtomicBool::new(false);
+    let result = std::thread::scope(|s| {
+        if plain {
+            s.spawn(|| {
+                while !finished.load(Ordering::Relaxed) {
+                    std::thread::sleep(Duration::from_millis(250));
+                    batch.tick(
+                        bar.position(),
+                        done.load(Ordering::Relaxed),
+                        failures.load(Ordering::Relaxed),
+                        started.elapsed(),
+                    );
+                }
+            });
+        }
+        let result = pool::run(&opts, jobs, &on_event);
+        finished.store(true, Ordering::Relaxed);
+        result
+    });
     bar.finish_and_clear();
     match result {
         Ok(report) => {
@@ -203,6 +186,160 @@ pub(crate) fn run_jobs(
             Ok(crate::interrupt::exit_code())
         }
         Err(e) => Err(e.into()),
+    }
+}
+
+/// The pool's options for `args`: checks of the numbers, the devices (a first worker asked
+/// for its GPUs where `--device` needs them), the workers and threads; `interrupt` stops it.
+/// The numbers given as flags, checked (before Blender is looked for): `--timeout` and
+/// `--startup-timeout` as durations, `--workers` in range.
+fn checked_numbers(args: &RunArgs) -> anyhow::Result<(Option<Duration>, Duration)> {
+    let timeout = args
+        .timeout
+        .map(|t| run_args::seconds("--timeout", t))
+        .transpose()?;
+    if args.workers == Some(0) {
+        bail!("`--workers 0` cannot render anything\nhint: pass at least 1");
+    }
+    if let Some(w) = args.workers {
+        let w = u32::try_from(w).unwrap_or(u32::MAX);
+        run_args::within("--workers", w, run_args::MAX_THREADS as u32)?;
+    }
+    let startup_timeout = run_args::seconds("--startup-timeout", args.startup_timeout)?;
+    Ok((timeout, startup_timeout))
+}
+
+pub(crate) fn pool_options(
+    args: &RunArgs,
+    blender: PathBuf,
+    ledger: PathBuf,
+    max_attempts: u32,
+    interrupt: &Arc<std::sync::atomic::AtomicBool>,
+) -> anyhow::Result<PoolOptions> {
+    let (timeout, startup_timeout) = checked_numbers(args)?;
+    let materials_json = clevrtex_render::default_materials_json()
+        .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
+    let choice = run_args::device_choice(&args.device)?;
+    let devices = clevrtex_render::gpu_probe::plan_devices(
+        choice,
+        &blender,
+        &materials_json,
+        startup_timeout,
+        interrupt,
+    )?;
+    if devices.iter().any(|d| d.is_gpu()) {
+        let names: Vec<String> = devices.iter().map(|d| d.describe()).collect();
+        eprintln!("devices: {}", names.join(", "));
+    }
+    if let Some(w) = clevrtex_render::device::kernel_compile_warning(&devices) {
+        eprintln!("{w}");
+    }
+    Ok(PoolOptions {
+        blender,
+        materials_json,
+        workers: args.workers.unwrap_or_else(|| {
+            clevrtex_render::device::default_workers(&devices, pool::default_workers())
+        }),
+        threads: args.threads.unwrap_or(0),
+        timeout,
+        startup_timeout,
+        retries: args.retries,
+        max_attempts: max_attempts.max(1),
+        visibility_check: true,
+        keep_exr: args.keep_exr,
+        overwrite: args.overwrite,
+        fail_fast: args.fail_fast,
+        out: args.out.clone(),
+        ledger,
+        interrupt: Arc::clone(interrupt),
+        devices,
+    })
+}
+
+/// The progress lines of a batch log (stderr not a terminal): `progress: 40/200 images (38
+/// written, 2 failed), 912 img/h, ETA 10m 31s`, at most every [`Self::EVERY_IMAGES`]
+/// images or 5% of the run (whichever is more), and every [`Self::EVERY`] while nothing ends.
+struct BatchProgress {
+    total: u64,
+    every_images: u64,
+    /// (position, when) of the last line.
+    last: std::sync::Mutex<(u64, Duration)>,
+}
+
+impl BatchProgress {
+    /// Images between two lines, at least (more on large runs: 5% of them).
+    const EVERY_IMAGES: u64 = 10;
+    /// The longest time between two lines while images are still being made.
+    const EVERY: Duration = Duration::from_secs(60);
+
+    fn new(total: u64) -> Self {
+        BatchProgress {
+            total,
+            every_images: (total / 20).max(Self::EVERY_IMAGES.min(total.max(1))),
+            last: std::sync::Mutex::new((0, Duration::ZERO)),
+        }
+    }
+
+    /// After an image ended (`position` counted, skipped ones included): a line when enough
+    /// images ended since the last one, or at the last image.
+    fn event(&self, position: u64, done: u64, failed: u64, elapsed: Duration) {
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        if position >= last.0 + self.every_images || (position == self.total && last.0 < position) {
+            *last = (position, elapsed);
+            eprintln!(
+                "{}",
+                progress_line(position, self.total, done, failed, elapsed)
+            );
+        }
+    }
+
+    /// Every so often: a line when [`Self::EVERY`] passed since the last one.
+    fn tick(&self, position: u64, done: u64, failed: u64, elapsed: Duration) {
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        if elapsed >= last.1 + Self::EVERY && position < self.total {
+            *last = (position, elapsed);
+            eprintln!(
+                "{}",
+                progress_line(position, self.total, done, failed, elapsed)
+            );
+        }
+    }
+}
+
+/// One progress line: `position` of `total` images ended (written, already complete or
+/// failed), `done` written and `failed` failed by this run in `elapsed`; the rate counts the
+/// images this run ended, the ETA is the images left at that rate.
+fn progress_line(position: u64, total: u64, done: u64, failed: u64, elapsed: Duration) -> String {
+    let secs = elapsed.as_secs_f64().max(1e-9);
+    let per_hour = done as f64 / secs * 3600.0;
+    let ended = done + failed;
+    let left = total.saturating_sub(position);
+    let eta = if left == 0 {
+        "0s".to_string()
+    } else if ended == 0 {
+        "unknown".to_string()
+    } else {
+        format_duration(secs / ended as f64 * left as f64)
+    };
+    let skipped = position.saturating_sub(ended);
+    format!(
+        "progress: {position}/{total} images ({done} written{}, {failed} failed), {per_hour:.0} img/h, elapsed {}, ETA {eta}",
+        if skipped > 0 {
+            format!(", {skipped} already complete")
+        } else {
+            String::new()
+        },
+        format_duration(secs)
+    )
+}
+
+/// `3h 05m`, `12m 31s`, `42s`.
+pub(crate) fn format_duration(secs: f64) -> String {
+    let s = secs.max(0.0).round() as u64;
+    match s {
+        0..=59 => format!("{s}s"),
+        60..=3599 => format!("{}m {:02}s", s / 60, s % 60),
+        _ => format!("{}h {:02}m", s / 3600, s % 3600 / 60),
     }
 }
 
@@ -297,5 +434,35 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
             "failures recorded in `{}`; rerun the same command to retry them",
             ledger.display()
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn progress_lines_give_rate_eta_and_failures() {
+        let l = progress_line(40, 200, 38, 2, Duration::from_secs(150));
+        assert_eq!(
+            l,
+            "progress: 40/200 images (38 written, 2 failed), 912 img/h, elapsed 2m 30s, ETA 10m 00s"
+        );
+        let l = progress_line(12, 20, 2, 0, Duration::from_secs(10));
+        assert!(
+            l.contains("(2 written, 10 already complete, 0 failed)"),
+            "{l}"
+        );
+        assert!(l.ends_with("ETA 40s"), "{l}");
+        assert!(progress_line(0, 5, 0, 0, Duration::ZERO).ends_with("ETA unknown"));
+        assert!(progress_line(5, 5, 5, 0, Duration::from_secs(7200)).contains("elapsed 2h 00m"));
+    }
+
+    #[test]
+    fn batch_lines_come_every_few_images_and_at_the_end() {
+        let b = BatchProgress::new(1000);
+        assert_eq!(b.every_images, 50);
+        assert_eq!(BatchProgress::new(3).every_images, 3);
+        assert_eq!(BatchProgress::new(100).every_images, 10);
     }
 }

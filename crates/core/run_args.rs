@@ -11,7 +11,7 @@ use clevrtex_render::device::DeviceChoice;
 use clevrtex_scene::Pass;
 
 /// Options shared by `generate` and `render`: how to run Blender and write the output.
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct RunArgs {
     /// Output root; samples go to `OUT/clevrtex_<variant>/<index / 1000>/`.
     #[arg(long, value_name = "OUT")]
@@ -24,8 +24,10 @@ pub struct RunArgs {
     /// `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     pub(crate) blender: Option<PathBuf>,
-    /// Blender processes rendering in parallel, 1 to 1024 (default: 2 on machines with 2+
-    /// cores).
+    /// Blender processes rendering in parallel, 1 to 1024. Default: one per GPU with `--device` on GPUs;
+    /// on the CPU 1 with one core, 2 with 2-15 cores (one worker's scene build, visibility pass
+    /// and writing overlap the other's render), cores / 8 from 16 cores (docs/performance.md,
+    /// "Workers x threads").
     #[arg(long, value_name = "N")]
     pub(crate) workers: Option<usize>,
     /// Cycles device: `auto` (the best GPU kind Blender reports: OptiX, CUDA, HIP; else the

@@ -34,6 +34,10 @@ pub struct CudaKernels {
     /// PTX (`kernel_compute_XY.ptx`), which the driver compiles for any later capability.
     #[serde(default)]
     pub ptx: Vec<u32>,
+    /// The cubins of `cubin` that `scripts/cuda_kernels.py` compiled from the PTX ahead of
+    /// time (listed in `lib/clevrtex-prepared.json`): Cycles loads them as its own.
+    #[serde(default)]
+    pub prepared: Vec<u32>,
 }
 
 /// How Cycles gets its CUDA kernel for a GPU ([`CudaKernels::load_for`]).
@@ -41,6 +45,9 @@ pub struct CudaKernels {
 pub enum KernelLoad {
     /// A cubin made for this compute capability ships: nothing to compile.
     Shipped,
+    /// A cubin for this compute capability was compiled ahead of time by
+    /// `scripts/cuda_kernels.py` (`setup.sh --cuda-arch`): nothing to compile at run time.
+    Prepared,
     /// The driver compiles the PTX of this (older) capability at the first render.
     Compiled {
         /// The PTX's compute capability (10 x major + minor).
@@ -55,7 +62,9 @@ impl CudaKernels {
     /// device's `compile_kernel` does: the cubin of exactly `cc`, else the newest PTX not newer
     /// than `cc`, compiled by the driver.
     pub fn load_for(&self, cc: u32) -> KernelLoad {
-        if self.cubin.contains(&cc) {
+        if self.cubin.contains(&cc) && self.prepared.contains(&cc) {
+            KernelLoad::Prepared
+        } else if self.cubin.contains(&cc) {
             KernelLoad::Shipped
         } else if let Some(from) = self.ptx.iter().copied().filter(|p| *p <= cc).max() {
             KernelLoad::Compiled { from }
@@ -73,11 +82,16 @@ impl CudaKernels {
                 .join(", ")
         };
         format!(
-            "cubins {}; PTX {}",
+            "cubins {}{}; PTX {}",
             if self.cubin.is_empty() {
                 "none".into()
             } else {
                 list(&self.cubin, "sm_")
+            },
+            if self.prepared.is_empty() {
+                String::new()
+            } else {
+                format!(" ({} prepared)", list(&self.prepared, "sm_"))
             },
             if self.ptx.is_empty() {
                 "none".into()
@@ -167,12 +181,21 @@ pub fn kernel_compile_warning(placements: &[Placement]) -> Option<String> {
         "warning: `{}` has no ready-made Cycles kernel in this Blender ({}); each worker's first \
          render waits while the driver compiles it (many minutes: over 9 on an H100 with bpy \
          4.5), so its time limits are raised by {} min; CUDA_CACHE_MAXSIZE is set to 4 GiB so the \
-         driver keeps the result for later runs on this machine\nhint: warm the cache once per \
-         node before a large job (`clevrtex generate -n 1 --device {} --out /tmp/warm`), or use \
-         a Blender built with kernels for this GPU",
+         driver keeps the result for later runs on this machine\nhint: compile the kernel once, \
+         ahead of time, with `./scripts/setup.sh --bpy 4.5 --cuda-arch {}` (no GPU needed; \
+         docs/performance.md, \"GPUs\"), or warm the cache once per node before a large job \
+         (`clevrtex generate -n 1 --device {} --out /tmp/warm`)",
         p.name,
         p.compiles_kernel.as_deref().unwrap_or_default(),
         KERNEL_COMPILE_GRACE.as_secs() / 60,
+        // The note starts `compute capability 9.0: ...` (`mark_kernel_compiles`).
+        p.compiles_kernel
+            .as_deref()
+            .and_then(|n| n.strip_prefix("compute capability "))
+            .and_then(|n| n.split(':').next())
+            .and_then(capability)
+            .map(|c| c.to_string())
+            .unwrap_or_else(|| "XY".into()),
         p.kind.to_ascii_lowercase()
     ))
 }
@@ -434,6 +457,7 @@ mod tests {
         CudaKernels {
             cubin: vec![30, 35, 37, 50, 52, 60, 61, 70, 75, 86, 89, 120],
             ptx: vec![75],
+            prepared: vec![],
         }
     }
 
@@ -452,9 +476,23 @@ mod tests {
         let two = CudaKernels {
             cubin: vec![],
             ptx: vec![52, 75, 100],
+            prepared: vec![],
         };
         assert_eq!(two.load_for(90), KernelLoad::Compiled { from: 75 });
         assert_eq!(two.load_for(60), KernelLoad::Compiled { from: 52 });
+        // After `scripts/cuda_kernels.py --cuda-arch 90`: a cubin of its own, marked prepared.
+        let mut k = bpy45();
+        k.cubin.push(90);
+        k.prepared.push(90);
+        assert_eq!(k.load_for(90), KernelLoad::Prepared);
+        assert_eq!(k.load_for(89), KernelLoad::Shipped);
+        assert_eq!(k.load_for(80), KernelLoad::Compiled { from: 75 });
+        assert!(
+            k.describe()
+                .contains("sm_120, sm_90 (sm_90 prepared); PTX compute_75"),
+            "{}",
+            k.describe()
+        );
     }
 
     #[test]
@@ -494,6 +532,10 @@ mod tests {
             "{w}"
         );
         assert!(w.contains("--device optix") && w.contains("60 min"), "{w}");
+        assert!(
+            w.contains("`./scripts/setup.sh --bpy 4.5 --cuda-arch 90`"),
+            "{w}"
+        );
         assert_eq!(kernel_compile_warning(&p[1..]), None);
         // Unknown capability (no nvidia-smi): nothing is assumed.
         let mut q = plan(DeviceChoice::Optix, &gpus).unwrap();

@@ -46,6 +46,13 @@ pub(crate) fn private_dir(prefix: &str) -> crate::Result<tempfile::TempDir> {
     })
 }
 
+/// A fresh private scratch folder `$TMPDIR/clevrtex-work-XXXXXX` owned by this process, removed
+/// when dropped (or by a later run's [`remove_stale`] after a `kill -9`): where `generate
+/// --estimate` renders its calibration images, so that nothing is written into `--out`.
+pub fn scratch_dir() -> crate::Result<tempfile::TempDir> {
+    private_dir("clevrtex-work-")
+}
+
 /// Whether the folder's owner (per its `owner` file) is still running. Folders without a
 /// readable owner file count as alive: they may be being created, or be someone else's.
 fn owner_alive(dir: &Path) -> bool {

@@ -138,9 +138,12 @@ impl Ready {
             .filter(|(g, _, _)| seen.insert(g.name.clone()))
             .map(|(g, cc, load)| {
                 let what = match load {
-                    KernelLoad::Shipped => format!("ready-made (sm_{cc})"),
+                    KernelLoad::Shipped => format!("shipped (sm_{cc}): nothing to compile"),
+                    KernelLoad::Prepared => format!(
+                        "prepared (sm_{cc}, compiled ahead of time by `scripts/cuda_kernels.py`): nothing to compile"
+                    ),
                     KernelLoad::Compiled { from } => format!(
-                        "none for sm_{cc}: the driver compiles PTX compute_{from} at each worker's first render unless its cache holds it (many minutes; see `generate`'s warning)"
+                        "will be compiled: none for sm_{cc}, so the driver compiles PTX compute_{from} at each worker's first render unless its cache holds it (many minutes; prepare it once with `./scripts/setup.sh --bpy 4.5 --cuda-arch {cc}`)"
                     ),
                     KernelLoad::Missing => format!("none for sm_{cc} and no PTX: Cycles cannot use it"),
                 };
@@ -916,5 +919,47 @@ fn read_lines(stream: impl Read, mut f: impl FnMut(&str)) {
         if !ended {
             return;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `doctor`'s line per NVIDIA GPU: shipped, prepared (`scripts/cuda_kernels.py`) or will
+    /// be compiled, as the bridge's `ready` reports the kernels.
+    #[test]
+    fn doctor_says_per_gpu_whether_its_kernel_is_shipped_prepared_or_compiled() {
+        let ready: Ready = serde_json::from_str(
+            r#"{"type": "ready", "bridge_version": 1, "blender_version": "4.5.3",
+                "cycles_devices": ["CPU", "CUDA"],
+                "gpus": [{"kind": "CUDA", "name": "H100"}, {"kind": "CUDA", "name": "A100"},
+                         {"kind": "CUDA", "name": "L4"}],
+                "cuda_kernels": {"cubin": [75, 89, 90], "ptx": [75], "prepared": [90]}}"#,
+        )
+        .unwrap();
+        let caps = [
+            ("H100".to_string(), 90),
+            ("A100".to_string(), 80),
+            ("L4".to_string(), 89),
+        ];
+        let lines = ready.cuda_kernel_lines(&caps);
+        assert_eq!(lines.len(), 3, "{lines:?}");
+        assert!(
+            lines[0].contains("`H100` (9.0): prepared (sm_90"),
+            "{}",
+            lines[0]
+        );
+        assert!(
+            lines[1].contains("`A100` (8.0): will be compiled: none for sm_80")
+                && lines[1].contains("--cuda-arch 80"),
+            "{}",
+            lines[1]
+        );
+        assert!(
+            lines[2].contains("`L4` (8.9): shipped (sm_89)"),
+            "{}",
+            lines[2]
+        );
     }
 }
