@@ -52,6 +52,8 @@ pub struct Args {
     /// Worker threads [default: one per core].
     #[arg(short = 'j', long, value_name = "N")]
     pub jobs: Option<usize>,
+    #[command(flatten)]
+    pub materials: crate::user_materials::MaterialsArg,
 }
 
 fn load_config(args: &Args) -> anyhow::Result<Config> {
@@ -64,9 +66,14 @@ fn load_config(args: &Args) -> anyhow::Result<Config> {
                     path.display()
                 )
             })?;
-            Ok(Config::from_json_str(&text, &path.display().to_string())?)
+            let cat = args.materials.catalogue()?;
+            Ok(Config::from_json_str_in(
+                &text,
+                &path.display().to_string(),
+                &cat,
+            )?)
         }
-        (None, Some(variant)) => Ok(Config::builtin(variant)?),
+        (None, Some(variant)) => Ok(Config::builtin_in(variant, &args.materials.catalogue()?)?),
         (None, None) => {
             bail!("no variant given\nhint: pass `--variant camo` or `--config my.json`")
         }

@@ -16,21 +16,27 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
 use crate::run_args::{self, RunArgs};
+use crate::user_materials;
 
 /// Render `jobs` with the pool as `args` say, failures to `ledger`, with a progress bar (or a
 /// line per sample when stderr is not a terminal) and a summary; with `manifest`, under the
-/// range's lock, the plan written first and the manifest last.
+/// range's lock, the plan written first and the manifest last. `catalogue` is the built-in
+/// one plus `--materials`; the user materials of it that `used` names are checked before any
+/// image is rendered ([`user_materials::check_before_run`]) and recorded in the manifest and
+/// each sample's metadata.
 pub(crate) fn run_jobs(
     args: &RunArgs,
     jobs: Vec<Job>,
     ledger: PathBuf,
     max_attempts: u32,
-    manifest: Option<manifest::Plan>,
+    mut manifest: Option<manifest::Plan>,
+    (mut catalogue, used): (
+        clevrtex_materials::Catalogue,
+        std::collections::BTreeSet<String>,
+    ),
 ) -> CmdResult {
     let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
     check_output_writable(&args.out)?;
-    let materials_json = clevrtex_render::default_materials_json()
-        .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the workers; finished samples are kept",
     });
@@ -46,6 +52,17 @@ pub(crate) fn run_jobs(
     }
     let choice = run_args::device_choice(&args.device)?;
     let startup_timeout = run_args::seconds("--startup-timeout", args.startup_timeout)?;
+    let user = user_materials::check_before_run(
+        &mut catalogue,
+        &used,
+        &blender,
+        startup_timeout,
+        Arc::clone(&interrupt),
+    )?;
+    if let Some(plan) = manifest.as_mut() {
+        plan.run.user_materials = user.clone();
+    }
+    let materials_json = catalogue.resolved_json();
     let devices = clevrtex_render::gpu_probe::plan_devices(
         choice,
         &blender,
@@ -63,6 +80,7 @@ pub(crate) fn run_jobs(
     let opts = PoolOptions {
         blender,
         materials_json,
+        user_materials: user_materials::hashes(&user),
         workers: args.workers.unwrap_or_else(|| {
             clevrtex_render::device::default_workers(&devices, pool::default_workers())
         }),
