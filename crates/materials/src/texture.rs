@@ -31,7 +31,7 @@ pub fn resolve_reference(blend: &Path, reference: &str) -> PathBuf {
 
 /// Check the texture `reference` of material `material` (from the `.blend` at `blend`, shown
 /// as `shown`) against the folder `root`: it must resolve to a regular file inside `root`
-/// (no link out), of at most [`MAX_TEXTURE_BYTES`], a PNG or JPEG of at most
+/// (no link out), of at most [`MAX_TEXTURE_BYTES`], a PNG, JPEG or TIFF of at most
 /// [`MAX_TEXTURE_SIDE`] pixels a side that decodes to the end. Returns the canonical path.
 pub fn check_texture(
     material: &str,
@@ -98,23 +98,26 @@ pub fn check_texture(
     let bad = |problem: String| {
         err(
             format!("texture `{}` {problem}", canon.display()),
-            "save the texture again as PNG or JPEG, or use a smaller resolution",
+            "save the texture again as PNG, JPEG or TIFF, or use a smaller resolution",
         )
     };
     let reader = image::ImageReader::open(&canon)
         .and_then(|r| r.with_guessed_format())
-        .map_err(|e| bad(format!("cannot be read: {e}")))?;
+        .map_err(|e| bad(format!("cannot be read: {}", e.to_string().trim_end())))?;
     match reader.format() {
-        Some(image::ImageFormat::Png | image::ImageFormat::Jpeg) => {}
+        Some(image::ImageFormat::Png | image::ImageFormat::Jpeg | image::ImageFormat::Tiff) => {}
         _ => {
             return Err(bad(
-                "is not a PNG or JPEG file (the formats user materials may read)".into(),
+                "is not a PNG, JPEG or TIFF file (the formats user materials may read)".into(),
             ))
         }
     }
-    let (w, h) = reader
-        .into_dimensions()
-        .map_err(|e| bad(format!("has an unreadable header: {e}")))?;
+    let (w, h) = reader.into_dimensions().map_err(|e| {
+        bad(format!(
+            "has an unreadable header: {}",
+            e.to_string().trim_end()
+        ))
+    })?;
     if w.max(h) > MAX_TEXTURE_SIDE || w == 0 || h == 0 {
         return Err(bad(format!(
             "is {w}x{h} pixels; the side allowed is 1 to {MAX_TEXTURE_SIDE}"
@@ -123,7 +126,7 @@ pub fn check_texture(
     // Decode to the end: a truncated or corrupt file fails here, not as pink in Blender.
     let mut reader = image::ImageReader::open(&canon)
         .and_then(|r| r.with_guessed_format())
-        .map_err(|e| bad(format!("cannot be read: {e}")))?;
+        .map_err(|e| bad(format!("cannot be read: {}", e.to_string().trim_end())))?;
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_TEXTURE_SIDE);
     limits.max_image_height = Some(MAX_TEXTURE_SIDE);
@@ -131,7 +134,7 @@ pub fn check_texture(
     reader.limits(limits);
     reader
         .decode()
-        .map_err(|e| bad(format!("does not decode: {e}")))?;
+        .map_err(|e| bad(format!("does not decode: {}", e.to_string().trim_end())))?;
     Ok(canon)
 }
 
