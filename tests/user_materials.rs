@@ -50,11 +50,16 @@ fn library(blender: &Path, dir: &Path) {
     make_blend(blender, dir, "BlueTile", BLUE, "jpg", "ok");
 }
 
+/// `generate` of tiny `full` images (`--variant full` unless `extra` has a `--config`).
 fn generate(out: &Path, blender: &Path, extra: &[&str]) -> std::process::Output {
-    let mut args = vec![
-        "generate",
-        "--variant",
-        "full",
+    let variant: &[&str] = if extra.contains(&"--config") {
+        &[]
+    } else {
+        &["--variant", "full"]
+    };
+    let mut args = vec!["generate"];
+    args.extend_from_slice(variant);
+    args.extend([
         "--seed",
         "3",
         "--width",
@@ -71,7 +76,7 @@ fn generate(out: &Path, blender: &Path, extra: &[&str]) -> std::process::Output 
         blender.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
-    ];
+    ]);
     args.extend_from_slice(extra);
     run(&args)
 }
@@ -156,7 +161,10 @@ fn generate_full_with_user_blend_materials_on_every_blender() {
 }
 
 /// The controlled comparison: the same seed with the built-in catalogue and with the user
-/// library gives the same layouts and byte-identical masks, other materials.
+/// library gives the same layouts and byte-identical masks, other materials. The backdrop's
+/// true displacement is the material's own (as in the public generator) and can move a few
+/// mask pixels at an object's foot (docs/materials.md), so this runs `full` with the backdrop
+/// displacement off: then no geometry depends on the material.
 #[test]
 fn builtin_and_user_library_give_the_same_layouts_and_masks() {
     let Some(blender) = blender_or_skip("builtin_and_user_library_give_the_same_layouts_and_masks")
@@ -166,14 +174,28 @@ fn builtin_and_user_library_give_the_same_layouts_and_masks() {
     let dir = tempfile::tempdir().unwrap();
     let lib = dir.path().join("lib");
     library(&blender, &lib);
+    let full = std::fs::read_to_string(crate::util::repo_root().join("configs/full.json")).unwrap();
+    let mut config: serde_json::Value = serde_json::from_str(&full).unwrap();
+    let background = config["background"].as_object_mut().unwrap();
+    background.remove("displacement");
+    let config_path = dir.path().join("full_flat.json");
+    std::fs::write(&config_path, config.to_string()).unwrap();
+    let c = config_path.to_str().unwrap();
     let (a, b) = (dir.path().join("builtin"), dir.path().join("user"));
-    let o = generate(&a, &blender, &["-n", "2"]);
+    let o = generate(&a, &blender, &["-n", "2", "--config", c]);
     assert!(o.status.success(), "{}", text(&o));
-    let o = generate(
-        &b,
-        &blender,
-        &["-n", "2", "--materials", lib.to_str().unwrap()],
-    );
+    let lib_dir = lib.to_str().unwrap();
+    let user = [
+        "-n",
+        "2",
+        "--config",
+        c,
+        "--materials",
+        lib_dir,
+        "--material-set",
+        "user",
+    ];
+    let o = generate(&b, &blender, &user);
     assert!(o.status.success(), "{}", text(&o));
     for i in 0..2 {
         let f = |root: &Path, suffix: &str| {

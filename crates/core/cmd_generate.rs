@@ -92,26 +92,12 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         }
         None => Config::builtin_in(&args.variant, &catalogue)?,
     };
-    let set = match (
-        &args.material_set,
-        &args.run.materials.materials,
-        &args.config,
-    ) {
-        (Some(set), _, _) => Some(set.as_str()),
-        (None, Some(_), None) => Some("user"),
-        _ => None,
-    };
-    if let Some(set) = set {
-        let changed =
-            config.use_material_set(&catalogue, crate::user_materials::parse_set(set)?)?;
-        if !changed && args.material_set.is_some() {
-            bail!(
-                "variant `{}` draws no textured material for `--material-set {set}` to replace
-hint: use a variant with textured materials (full, camo, vbg, pbg, grassbg, outd), or a config naming the materials (`--config`)",
-                config.name
-            );
-        }
-    }
+    crate::user_materials::apply_material_set(
+        &mut config,
+        &catalogue,
+        args.material_set.as_deref(),
+        args.run.materials.materials.is_some() && args.config.is_none(),
+    )?;
     let used: std::collections::BTreeSet<String> = config
         .objects
         .materials

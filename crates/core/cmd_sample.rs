@@ -54,9 +54,25 @@ pub struct Args {
     pub jobs: Option<usize>,
     #[command(flatten)]
     pub materials: crate::user_materials::MaterialsArg,
+    /// Draw the variant's textured materials from this set, as `generate --material-set`
+    /// (default with `--materials` and a built-in `--variant`: `user`).
+    #[arg(long, value_name = "SET")]
+    pub material_set: Option<String>,
 }
 
 fn load_config(args: &Args) -> anyhow::Result<Config> {
+    let cat = args.materials.catalogue()?;
+    let mut config = read_config(args, &cat)?;
+    crate::user_materials::apply_material_set(
+        &mut config,
+        &cat,
+        args.material_set.as_deref(),
+        args.materials.materials.is_some() && args.config.is_none(),
+    )?;
+    Ok(config)
+}
+
+fn read_config(args: &Args, cat: &clevrtex_materials::Catalogue) -> anyhow::Result<Config> {
     match (&args.config, &args.variant) {
         (Some(path), _) => {
             // The cause goes before the hint, which is the message's last line.
@@ -66,14 +82,13 @@ fn load_config(args: &Args) -> anyhow::Result<Config> {
                     path.display()
                 )
             })?;
-            let cat = args.materials.catalogue()?;
             Ok(Config::from_json_str_in(
                 &text,
                 &path.display().to_string(),
-                &cat,
+                cat,
             )?)
         }
-        (None, Some(variant)) => Ok(Config::builtin_in(variant, &args.materials.catalogue()?)?),
+        (None, Some(variant)) => Ok(Config::builtin_in(variant, cat)?),
         (None, None) => {
             bail!("no variant given\nhint: pass `--variant camo` or `--config my.json`")
         }

@@ -49,6 +49,29 @@ impl MaterialsArg {
     }
 }
 
+/// `--material-set SET` (`explicit`) on `config`, or `user` by default when `default_user`
+/// (`--materials DIR` with a built-in `--variant`): the variant's textured materials drawn
+/// from that set ([`clevrtex_scene::Config::use_material_set`]). An explicit set that
+/// replaces nothing (`clevr`) is an error; the default then changes nothing.
+pub(crate) fn apply_material_set(
+    config: &mut clevrtex_scene::Config,
+    cat: &Catalogue,
+    explicit: Option<&str>,
+    default_user: bool,
+) -> anyhow::Result<()> {
+    let Some(set) = explicit.or(default_user.then_some("user")) else {
+        return Ok(());
+    };
+    let changed = config.use_material_set(cat, parse_set(set)?)?;
+    if !changed && explicit.is_some() {
+        bail!(
+            "variant `{}` draws no textured material for `--material-set {set}` to replace\nhint: use a variant with textured materials (full, camo, vbg, pbg, grassbg, outd), or a config naming the materials (`--config`)",
+            config.name
+        );
+    }
+    Ok(())
+}
+
 /// `--material-set SET`: the set as a [`Set`] (`user`, `main`, `ood`).
 pub(crate) fn parse_set(name: &str) -> anyhow::Result<Set> {
     match Set::from_name(name) {
