@@ -815,6 +815,31 @@ mod tests {
     use super::*;
 
     #[test]
+    fn material_set_replaces_only_textured_lists() {
+        use clevrtex_materials::Set;
+        let cat = Catalogue::builtin().unwrap();
+        let ood = cat.names(Set::Ood);
+        let mut full = Config::builtin("full").unwrap();
+        assert!(full.use_material_set(&cat, Set::Ood).unwrap());
+        assert_eq!(full.objects.materials, ood);
+        assert_eq!(full.background.materials, ood);
+        // vbg: rubber/metal objects stay, the textured backdrop changes.
+        let mut vbg = Config::builtin("vbg").unwrap();
+        let objects = vbg.objects.materials.clone();
+        assert!(vbg.use_material_set(&cat, Set::Ood).unwrap());
+        assert_eq!(vbg.objects.materials, objects);
+        assert_eq!(vbg.background.materials, ood);
+        // clevr and grassbg's grass: nothing textured to replace, or only the objects.
+        let mut clevr = Config::builtin("clevr").unwrap();
+        assert!(!clevr.use_material_set(&cat, Set::Ood).unwrap());
+        let mut grass = Config::builtin("grassbg").unwrap();
+        assert!(grass.use_material_set(&cat, Set::Ood).unwrap());
+        assert_eq!(grass.background.materials, ["mossy_forest_grass"]);
+        // An empty set (no `--materials`) is an error.
+        assert!(full.use_material_set(&cat, Set::User).is_err());
+    }
+
+    #[test]
     fn every_builtin_variant_loads() {
         for name in Config::variant_names() {
             let c = Config::builtin(name).unwrap_or_else(|e| panic!("{name}: {e}"));
