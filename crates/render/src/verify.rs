@@ -99,7 +99,8 @@ pub struct VariantReport {
     pub commands: Vec<Vec<String>>,
     /// The user materials (`--materials DIR`) the runs drew from, by name, as their manifests
     /// record them (file, group, textures, content hash); two runs recording one name with
-    /// different contents is a manifest problem.
+    /// different contents is a manifest problem. Left out of the JSON when empty.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub user_materials: BTreeMap<String, clevrtex_scene::manifest::UserMaterial>,
 }
 
