@@ -157,6 +157,22 @@ fn generate_full_with_user_blend_materials_on_every_blender() {
         assert!(v.status.success(), "{}", text(&v));
         let shown = String::from_utf8_lossy(&v.stdout);
         assert!(shown.contains("user material redstone"), "{}", text(&v));
+        // `report` lists them under "Provenance".
+        let html = dir.path().join("report.html");
+        let r = run(&[
+            "report",
+            out.to_str().unwrap(),
+            "--out",
+            html.to_str().unwrap(),
+        ]);
+        assert!(r.status.success(), "{}", text(&r));
+        let page = std::fs::read_to_string(&html).unwrap();
+        let hash = recorded["redstone"]["xxh3"].as_str().unwrap();
+        assert!(
+            page.contains("User materials") && page.contains(hash),
+            "{}",
+            text(&r)
+        );
     }
 }
 
