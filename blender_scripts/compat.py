@@ -693,3 +693,11 @@ def remove_aov(view_layer, index):
         return
     view_layer.active_aov_index = index
     bpy.ops.scene.view_layer_remove_aov()
+
+
+def add_group_output(ng, name, socket_type):
+    """Add an output socket `name` of `socket_type` (e.g. `NodeSocketColor`) to node group
+    `ng`: `ng.outputs.new` in 3.x, `ng.interface.new_socket` since 4.0."""
+    if hasattr(ng, "interface"):
+        return ng.interface.new_socket(name, in_out="OUTPUT", socket_type=socket_type)
+    return ng.outputs.new(socket_type, name)

@@ -242,11 +242,34 @@ def _tint(g, color, tint, inst_color):
 
 
 # --- user node groups --------------------------------------------------------------------
+#
+# The ClevrTex convention as the public generator (karazijal/clevrtex-generation,
+# `blender_utils.load_material` / `add_material`) uses it: one `.blend` per material holding a
+# node group named after the file; its image textures are referenced relative to the `.blend`
+# (`//textures/...`). The group's inputs `Color`, `Random`, `Scale` and `Displacement` (also
+# spelt `Displacement Strength`) are driven by the instance, any other input keeps the
+# `.blend`'s default, as there; the `Shader` (or `BSDF`, `Surface`) output feeds the surface
+# and the `Displacement` output the material's displacement (true displacement only where the
+# scene displaces, otherwise bump). The Rust side first inspects every user group
+# (`inspect_blend`) and checks every texture it reads before any image is rendered; the recipe
+# then names the group and maps each texture to the checked file (`images`).
 
 _GROUPS = {}
+# Inputs the convention drives; every other input keeps the `.blend`'s default.
+DRIVEN_INPUTS = ("Color", "Random", "Scale", "Displacement", "Displacement Strength")
+# Names of the surface output, in the order tried (the public generator's order).
+SURFACE_OUTPUTS = ("Shader", "BSDF", "Surface")
+# The output added to a group without a base-colour output, for the albedo pass.
+BASE_OUTPUT = "Base Color"
 
 
-def _load_group(path, group):
+def _stem(path):
+    import os
+
+    return os.path.splitext(os.path.basename(path))[0]
+
+
+def _load_group(path, group, images=None):
     key = (path, group)
     if key in _GROUPS:
         try:
@@ -255,22 +278,28 @@ def _load_group(path, group):
         except ReferenceError:
             pass  # removed, e.g. by the factory reset of a `material` request: load again
     with bpy.data.libraries.load(path, link=False) as (src, dst):
-        dst.node_groups = list(src.node_groups)
+        names = list(src.node_groups)
+        # The group named after the file, as the public generator appends it; else all
+        # (the first with a surface output is used).
+        want = group if group is not None else (_stem(path) if _stem(path) in names else None)
+        dst.node_groups = [want] if want in names else names
     candidates = [ng for ng in dst.node_groups if ng is not None]
     chosen = None
     for ng in candidates:
         outs = {s.name for s in _group_outputs(ng)}
-        if group is not None and ng.name != group:
+        if want is not None and ng.name != want:
             continue
-        if outs & {"Shader", "BSDF"}:
+        if outs & set(SURFACE_OUTPUTS):
             chosen = ng
             break
     if chosen is None:
         raise ValueError(
-            "no node group%s with a `Shader` or `BSDF` output in `%s`"
-            % ("" if group is None else " named `%s`" % group, path))
+            "no node group%s with a `Shader`, `BSDF` or `Surface` output in `%s`"
+            % ("" if want is None else " named `%s`" % want, path))
     for ng in candidates:
         ng.use_fake_user = True
+    if images is not None:
+        _pin_images(chosen, images, path)
     _GROUPS[key] = chosen
     return chosen
 
@@ -281,17 +310,123 @@ def _group_outputs(ng):
     return [s for s in ng.interface.items_tree if getattr(s, "in_out", "") == "OUTPUT"]
 
 
+def _group_inputs(ng):
+    if hasattr(ng, "inputs"):
+        return list(ng.inputs)
+    return [s for s in ng.interface.items_tree if getattr(s, "in_out", "") == "INPUT"]
+
+
+def _socket_type(s):
+    return getattr(s, "type", None) or getattr(s, "socket_type", "")
+
+
+def _images(ng, seen=None):
+    """Every image an image-texture node of `ng` (or of a group inside it) reads."""
+    seen = set() if seen is None else seen
+    out = []
+    if ng.name in seen:
+        return out
+    seen.add(ng.name)
+    for node in ng.nodes:
+        img = getattr(node, "image", None)
+        if img is not None and img not in out:
+            out.append(img)
+        sub = getattr(node, "node_tree", None)
+        if node.type == "GROUP" and sub is not None:
+            out.extend(i for i in _images(sub, seen) if i not in out)
+    return out
+
+
+def _image_path(img):
+    return bpy.path.abspath(img.filepath, library=img.library)
+
+
+def _pin_images(ng, images, path):
+    """Point every texture of `ng` at the file the Rust side checked (`images`: path as
+    Blender resolves it -> checked path); a texture it did not check is an error."""
+    for img in _images(ng):
+        if img.packed_file is not None or img.source in ("GENERATED", "VIEWER"):
+            continue
+        p = _image_path(img)
+        if p not in images:
+            raise ValueError("texture `%s` of `%s` was not checked before the run" % (p, path))
+        img.filepath = images[p]
+
+
+def inspect_blend(path, group=None):
+    """What the Rust side checks before a run: the group used, its inputs and outputs, and
+    every image it reads (nothing is loaded but the data blocks: no pixels)."""
+    ng = _load_group(path, group)
+    images = []
+    for img in _images(ng):
+        images.append({
+            "name": img.name,
+            "path": _image_path(img),
+            "source": img.source,
+            "packed": img.packed_file is not None,
+        })
+    return {
+        "group": ng.name,
+        "inputs": [{"name": s.name, "type": _socket_type(s)} for s in _group_inputs(ng)],
+        "outputs": [{"name": s.name, "type": _socket_type(s)} for s in _group_outputs(ng)],
+        "images": images,
+    }
+
+
+def _surface_bsdf(ng, socket):
+    """The Principled BSDF feeding `socket` (a group output input), through mix and add
+    shaders and reroutes; None if there is none."""
+    todo = [socket]
+    while todo:
+        s = todo.pop(0)
+        for link in s.links:
+            n = link.from_node
+            if n.type == "BSDF_PRINCIPLED":
+                return n
+            todo.extend(i for i in n.inputs if i.is_linked)
+    return None
+
+
+def _add_base_output(ng):
+    """Give a group without a base-colour output one (the albedo pass): the base colour of
+    the Principled BSDF behind its surface output. Added once per loaded group."""
+    if BASE_OUTPUT in {s.name for s in _group_outputs(ng)} or "Color" in {
+            s.name for s in _group_outputs(ng)}:
+        return
+    gout = next((n for n in ng.nodes if n.type == "GROUP_OUTPUT" and n.is_active_output),
+                None) or next((n for n in ng.nodes if n.type == "GROUP_OUTPUT"), None)
+    if gout is None:
+        return
+    surface = next((gout.inputs[n] for n in SURFACE_OUTPUTS if n in gout.inputs), None)
+    bsdf = _surface_bsdf(ng, surface) if surface is not None else None
+    if bsdf is None:
+        return
+    base = compat.principled_input(bsdf, "Base Color")
+    compat.add_group_output(ng, BASE_OUTPUT, "NodeSocketColor")
+    target = gout.inputs[BASE_OUTPUT]
+    if base.is_linked:
+        ng.links.new(base.links[0].from_socket, target)
+    else:
+        rgb = ng.nodes.new("ShaderNodeRGB")
+        rgb.outputs[0].default_value = tuple(base.default_value)
+        ng.links.new(rgb.outputs[0], target)
+
+
 def _build_blend(nt, out, recipe, instance, displace, albedo=False):
-    ng = _load_group(recipe["path"], recipe.get("group"))
+    ng = _load_group(recipe["path"], recipe.get("group"), recipe.get("images"))
+    if albedo:
+        _add_base_output(ng)
     node = nt.nodes.new("ShaderNodeGroup")
     node.node_tree = ng
-    c = instance.get("color") or (0.8, 0.8, 0.8)
-    values = {
-        "Color": tuple(c) + (1.0,),
-        "Random": float(instance.get("random") or 0.0),
-        "Displacement": float(instance.get("displacement") or 0.0) if displace else 0.0,
-        "Scale": float(instance.get("scale") or 1.0),
-    }
+    values = {"Random": float(instance.get("random") or 0.0)}
+    if instance.get("color") is not None:
+        values["Color"] = tuple(float(x) for x in instance["color"]) + (1.0,)
+    if instance.get("scale") is not None:
+        values["Scale"] = float(instance["scale"])
+    if displace:
+        d = float(instance.get("displacement") or 0.0)
+        values["Displacement"] = d
+        values["Displacement Strength"] = d
     for sock in node.inputs:
         if sock.name in values:
             v = values[sock.name]
@@ -301,17 +436,20 @@ def _build_blend(nt, out, recipe, instance, displace, albedo=False):
                 sock.default_value = (v, v, v) if not isinstance(v, tuple) else v[:3]
             else:
                 sock.default_value = v if not isinstance(v, tuple) else v[0]
-    shader = node.outputs.get("Shader") or node.outputs.get("BSDF")
+    shader = next((node.outputs[n] for n in SURFACE_OUTPUTS if n in node.outputs), None)
     nt.links.new(shader, out.inputs["Surface"])
-    # A user group's base colour is its `Color` (or `Base Color`) output, if it has one;
-    # without one the albedo pass is 0 on it (docs/output-format.md).
-    base = node.outputs.get("Color") or node.outputs.get("Base Color")
+    # The base colour: the group's `Color` or `Base Color` output (added above when it had
+    # none, from the Principled BSDF behind its surface).
+    base = node.outputs.get("Color") or node.outputs.get(BASE_OUTPUT)
     if albedo and base is not None:
         aov = nt.nodes.new("ShaderNodeOutputAOV")
         compat.set_aov_name(aov, ALBEDO_AOV)
         nt.links.new(base, aov.inputs["Color"])
+    # Linked always, as the public generator does: true displacement where the scene
+    # displaces (method BOTH), bump from the same output otherwise (method BUMP), so the
+    # geometry, and with it mask and depth, depends only on the scene.
     disp = node.outputs.get("Displacement")
-    if displace and disp is not None:
+    if disp is not None:
         nt.links.new(disp, out.inputs["Displacement"])
 
 

@@ -165,10 +165,19 @@ class Worker:
                        "name": name})
         return result
 
+    def inspect(self, req):
+        """A user `.blend` material's node group, inputs, outputs and textures
+        (materials.inspect_blend), checked by the Rust side before a run."""
+        result = self.materials.inspect_blend(req["path"], req.get("group"))
+        result.update({"type": "done", "id": req.get("id")})
+        return result
+
     def handle(self, req):
         kind = req.get("type")
         if kind == "render":
             return self.render(req)
+        if kind == "inspect":
+            return self.inspect(req)
         if kind == "material":
             return self.material(req)
         if kind == "ping":

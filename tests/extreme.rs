@@ -394,6 +394,7 @@ fn render(blender: PathBuf, out: &Path, scenes: &[SceneFile]) -> Vec<SampleStats
     let opts = PoolOptions {
         blender,
         materials_json: clevrtex_render::default_materials_json().unwrap(),
+        user_materials: Default::default(),
         workers: 1,
         threads: 0,
         timeout: Some(Duration::from_secs(900)),

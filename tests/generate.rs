@@ -431,6 +431,7 @@ pub(crate) fn render_fixtures(
     let opts = PoolOptions {
         blender,
         materials_json: clevrtex_render::default_materials_json().unwrap(),
+        user_materials: Default::default(),
         workers: 1,
         threads: 0,
         timeout: None,

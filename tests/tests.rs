@@ -28,5 +28,6 @@ mod sample;
 mod shadow;
 mod slurm;
 mod trust_paths;
+mod user_materials;
 mod verify;
 mod workers;

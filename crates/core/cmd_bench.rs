@@ -84,6 +84,11 @@ pub struct RenderArgs {
     /// alternates runs against load drift and averages them).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     blender: Vec<PathBuf>,
+    /// With `--materials DIR`, the bench scenes draw their textured materials from the
+    /// folder's user materials (same layouts): the per-image cost of a user library against
+    /// the built-in catalogue.
+    #[command(flatten)]
+    materials: crate::user_materials::MaterialsArg,
 }
 
 /// Run `clevrtex bench`.
@@ -128,7 +133,9 @@ fn run_render(args: RenderArgs) -> CmdResult {
         );
     }
     let (n, width, height) = (plan.scenes, plan.width, plan.height);
-    let scenes = scenes::bench_scenes(n, width, height)?;
+    let mut catalogue = args.materials.catalogue()?;
+    let user = args.materials.materials.as_ref().map(|_| &catalogue);
+    let scenes = scenes::bench_scenes_in(n, width, height, user)?;
     std::fs::create_dir_all(&args.out).with_context(|| {
         format!(
             "cannot create output folder `{}`\nhint: pass a writable folder with `--out`",
@@ -146,12 +153,27 @@ fn run_render(args: RenderArgs) -> CmdResult {
             .map(|b| clevrtex_render::blender::locate(Some(b)))
             .collect::<Result<Vec<_>, _>>()?
     };
-    let catalogue = clevrtex_materials::Catalogue::builtin()
-        .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
     let startup_timeout = crate::run_args::seconds("--startup-timeout", args.startup_timeout)?;
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping Blender",
     });
+    // User materials are checked before anything renders (once: the checks do not depend on
+    // the Blender), with the first Blender.
+    let used: BTreeSet<String> = scenes
+        .iter()
+        .flat_map(|s| {
+            std::iter::once(&s.scene.backdrop.material)
+                .chain(s.scene.objects.iter().map(|o| &o.material))
+                .map(|m| m.name.clone())
+        })
+        .collect();
+    crate::user_materials::check_before_run(
+        &mut catalogue,
+        &used,
+        &blenders[0],
+        startup_timeout,
+        interrupt.clone(),
+    )?;
     let mut rows = Vec::new();
     for (i, blender) in blenders.into_iter().enumerate() {
         let mut session = BlenderSession::new(Settings {

@@ -60,6 +60,14 @@ pub struct GenerateArgs {
     /// bounces; see docs/performance.md). `--samples` still overrides the sample count.
     #[arg(long, value_name = "PRESET")]
     quality: Option<clevrtex_scene::quality::Quality>,
+    /// Draw the variant's textured materials (every material list of objects or backdrop
+    /// made only of `main`/`ood` materials) from this set instead: `user` (the materials of
+    /// `--materials DIR`), `main` or `ood`. Default with `--materials` and a built-in
+    /// `--variant`: `user` (the public generator's "replace `data/materials`"); with
+    /// `--config`, the config names its materials. Layouts stay the same: the controlled
+    /// comparison of a user library against the built-in catalogue.
+    #[arg(long, value_name = "SET")]
+    material_set: Option<String>,
     /// Layout attempts per image when objects are hidden, before the image fails (1 to 1000).
     #[arg(long, default_value_t = 20, value_name = "N")]
     max_attempts: u32,
@@ -85,6 +93,7 @@ const PREFLIGHT_LAYOUTS: usize = 20;
 
 /// Run `clevrtex generate`.
 pub fn run_generate(args: GenerateArgs) -> CmdResult {
+    let catalogue = args.run.materials.catalogue()?;
     let mut config = match &args.config {
         Some(path) => {
             let text = std::fs::read_to_string(path).map_err(|e| {
@@ -93,10 +102,23 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
                     path.display()
                 )
             })?;
-            Config::from_json_str(&text, &path.display().to_string())?
+            Config::from_json_str_in(&text, &path.display().to_string(), &catalogue)?
         }
-        None => Config::builtin(&args.variant)?,
+        None => Config::builtin_in(&args.variant, &catalogue)?,
     };
+    crate::user_materials::apply_material_set(
+        &mut config,
+        &catalogue,
+        args.material_set.as_deref(),
+        args.run.materials.materials.is_some() && args.config.is_none(),
+    )?;
+    let used: std::collections::BTreeSet<String> = config
+        .objects
+        .materials
+        .iter()
+        .chain(&config.background.materials)
+        .cloned()
+        .collect();
     use clevrtex_scene::scene_file::{MAX_IMAGE_SIDE, MAX_SAMPLES};
     if let Some(w) = args.width {
         config.base.render.width = within("--width", w, MAX_IMAGE_SIDE)?;
@@ -208,6 +230,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
             calibrate: args.calibrate,
             tasks: args.tasks,
             max_attempts: args.max_attempts,
+            materials: (catalogue, used),
         });
     }
     let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
@@ -227,5 +250,12 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         passes: passes.clone(),
         keep_exr: args.run.keep_exr,
     };
-    crate::run::run_jobs(&args.run, jobs, ledger, args.max_attempts, Some(plan))
+    crate::run::run_jobs(
+        &args.run,
+        jobs,
+        ledger,
+        args.max_attempts,
+        Some(plan),
+        (catalogue, used),
+    )
 }

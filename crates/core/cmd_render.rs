@@ -63,10 +63,17 @@ pub fn run(args: Args) -> CmdResult {
         Some(list) => Some(parse_passes(list)?),
         None => None,
     };
+    let catalogue = args.run.materials.catalogue()?;
     let mut jobs = Vec::new();
     let mut variants = std::collections::BTreeSet::new();
+    let mut used = std::collections::BTreeSet::new();
     for f in files {
         let scene = read_scene(&f)?;
+        // Every material known before anything renders (a user one needs `--materials`).
+        used.extend(crate::user_materials::used_by_scenes(
+            &catalogue,
+            [(f.as_path(), &scene)],
+        )?);
         // The metadata has the scene file's name: rendering into the folder the scenes came
         // from would replace each scene file with its metadata.
         let meta = layout::sample_dir(&args.run.out, &scene.variant, scene.index)
@@ -100,7 +107,7 @@ pub fn run(args: Args) -> CmdResult {
         }
         _ => args.run.out.join("failures.jsonl"),
     };
-    run_jobs(&args.run, jobs.into(), ledger, 1, None)
+    run_jobs(&args.run, jobs.into(), ledger, 1, None, (catalogue, used))
 }
 
 /// Collect the `*.json` files under `dir` (in the folder given, canonical `root`),

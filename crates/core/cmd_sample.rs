@@ -54,9 +54,27 @@ pub struct Args {
     /// Worker threads, 1 to 1024 [default: one per core].
     #[arg(short = 'j', long, value_name = "N", value_parser = threads_range::<usize>())]
     pub jobs: Option<usize>,
+    #[command(flatten)]
+    pub materials: crate::user_materials::MaterialsArg,
+    /// Draw the variant's textured materials from this set, as `generate --material-set`
+    /// (default with `--materials` and a built-in `--variant`: `user`).
+    #[arg(long, value_name = "SET")]
+    pub material_set: Option<String>,
 }
 
 fn load_config(args: &Args) -> anyhow::Result<Config> {
+    let cat = args.materials.catalogue()?;
+    let mut config = read_config(args, &cat)?;
+    crate::user_materials::apply_material_set(
+        &mut config,
+        &cat,
+        args.material_set.as_deref(),
+        args.materials.materials.is_some() && args.config.is_none(),
+    )?;
+    Ok(config)
+}
+
+fn read_config(args: &Args, cat: &clevrtex_materials::Catalogue) -> anyhow::Result<Config> {
     match (&args.config, &args.variant) {
         (Some(path), _) => {
             // The cause goes before the hint, which is the message's last line.
@@ -66,9 +84,13 @@ fn load_config(args: &Args) -> anyhow::Result<Config> {
                     path.display()
                 )
             })?;
-            Ok(Config::from_json_str(&text, &path.display().to_string())?)
+            Ok(Config::from_json_str_in(
+                &text,
+                &path.display().to_string(),
+                cat,
+            )?)
         }
-        (None, Some(variant)) => Ok(Config::builtin(variant)?),
+        (None, Some(variant)) => Ok(Config::builtin_in(variant, cat)?),
         (None, None) => {
             bail!("no variant given\nhint: pass `--variant camo` or `--config my.json`")
         }

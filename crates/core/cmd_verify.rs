@@ -35,6 +35,21 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
         "{}: {} of {} expected samples whole ({})",
         r.variant, r.ok, r.expected, r.expected_from
     );
+    // What the dataset was made from, beyond the built-in catalogue (from the manifests).
+    for (name, m) in &r.user_materials {
+        let p = clevrtex_scene::text::printable;
+        println!(
+            "  user material {}: `{}`{}, {} texture(s), xxh3 {}",
+            p(name),
+            p(&m.file),
+            m.group
+                .as_deref()
+                .map(|g| format!(" group `{}`", p(g)))
+                .unwrap_or_default(),
+            m.textures.len(),
+            p(&m.xxh3)
+        );
+    }
     if r.missing_count > 0 {
         // The list is capped (`verify::MAX_LISTED`); say where it stops.
         let more = match r.missing_count - r.missing.len() as u64 {

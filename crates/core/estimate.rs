@@ -125,10 +125,15 @@ pub(crate) struct Request<'a> {
     pub tasks: Option<u64>,
     /// Layout attempts per image.
     pub max_attempts: u32,
+    /// The catalogue (built-in plus `--materials`) and the materials the run's config names.
+    pub materials: (
+        clevrtex_materials::Catalogue,
+        std::collections::BTreeSet<String>,
+    ),
 }
 
 /// Run the planner: calibrate, then print the predictions.
-pub(crate) fn run(req: Request) -> CmdResult {
+pub(crate) fn run(mut req: Request) -> CmdResult {
     let n = req.jobs.len();
     if req.calibrate == Some(0) {
         bail!("`--calibrate 0` renders nothing to estimate from\nhint: pass at least 1, e.g. `--calibrate 4`");
@@ -144,12 +149,14 @@ pub(crate) fn run(req: Request) -> CmdResult {
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the calibration; nothing was written into `--out`",
     });
-    let opts = pool_options(
+    let (catalogue, used) = &mut req.materials;
+    let (opts, _) = pool_options(
         &args,
         blender,
         scratch.path().join("failures.jsonl"),
         req.max_attempts,
         &interrupt,
+        (catalogue, used),
     )?;
     let k = req
         .calibrate

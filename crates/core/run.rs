@@ -16,17 +16,25 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
 use crate::run_args::{self, RunArgs};
+use crate::user_materials;
 
 /// Render `jobs` with the pool as `args` say, failures to `ledger`, with a progress bar (or,
 /// when stderr is not a terminal, a line per sample and a progress line with rate and ETA every
 /// few images or minute: [`BatchProgress`]) and a summary; with `manifest`, under the
-/// range's lock, the plan written first and the manifest last.
+/// range's lock, the plan written first and the manifest last. `catalogue` is the built-in
+/// one plus `--materials`; the user materials of it that `used` names are checked before any
+/// image is rendered ([`user_materials::check_before_run`]) and recorded in the manifest and
+/// each sample's metadata.
 pub(crate) fn run_jobs(
     args: &RunArgs,
     jobs: Jobs,
     ledger: PathBuf,
     max_attempts: u32,
-    manifest: Option<manifest::Plan>,
+    mut manifest: Option<manifest::Plan>,
+    (mut catalogue, used): (
+        clevrtex_materials::Catalogue,
+        std::collections::BTreeSet<String>,
+    ),
 ) -> CmdResult {
     // The numbers given as flags first: a refusal never waits on Blender.
     checked_numbers(args)?;
@@ -35,7 +43,17 @@ pub(crate) fn run_jobs(
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the workers; finished samples are kept",
     });
-    let opts = pool_options(args, blender, ledger.clone(), max_attempts, &interrupt)?;
+    let (opts, user) = pool_options(
+        args,
+        blender,
+        ledger.clone(),
+        max_attempts,
+        &interrupt,
+        (&mut catalogue, &used),
+    )?;
+    if let Some(plan) = manifest.as_mut() {
+        plan.run.user_materials = user;
+    }
     let total = jobs.len();
     let bar = progress_bar(total);
     let (done, rejects, failures) = (AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0));
@@ -215,11 +233,24 @@ pub(crate) fn pool_options(
     ledger: PathBuf,
     max_attempts: u32,
     interrupt: &Arc<std::sync::atomic::AtomicBool>,
-) -> anyhow::Result<PoolOptions> {
+    (catalogue, used): (
+        &mut clevrtex_materials::Catalogue,
+        &std::collections::BTreeSet<String>,
+    ),
+) -> anyhow::Result<(
+    PoolOptions,
+    std::collections::BTreeMap<String, clevrtex_scene::manifest::UserMaterial>,
+)> {
     let (timeout, startup_timeout) = checked_numbers(args)?;
-    let materials_json = clevrtex_render::default_materials_json()
-        .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
     let choice = run_args::device_choice(&args.device)?;
+    let user = user_materials::check_before_run(
+        catalogue,
+        used,
+        &blender,
+        startup_timeout,
+        Arc::clone(interrupt),
+    )?;
+    let materials_json = catalogue.resolved_json();
     let devices = clevrtex_render::gpu_probe::plan_devices(
         choice,
         &blender,
@@ -234,9 +265,10 @@ pub(crate) fn pool_options(
     if let Some(w) = clevrtex_render::device::kernel_compile_warning(&devices) {
         eprintln!("{w}");
     }
-    Ok(PoolOptions {
+    let opts = PoolOptions {
         blender,
         materials_json,
+        user_materials: user_materials::hashes(&user),
         workers: args.workers.unwrap_or_else(|| {
             clevrtex_render::device::default_workers(&devices, pool::default_workers())
         }),
@@ -253,7 +285,8 @@ pub(crate) fn pool_options(
         ledger,
         interrupt: Arc::clone(interrupt),
         devices,
-    })
+    };
+    Ok((opts, user))
 }
 
 /// The progress lines of a batch log (stderr not a terminal): `progress: 40/200 images (38

@@ -61,6 +61,8 @@ pub struct RunArgs {
     /// Stop at the first failed scene instead of recording it in the ledger and going on.
     #[arg(long)]
     pub(crate) fail_fast: bool,
+    #[command(flatten)]
+    pub(crate) materials: crate::user_materials::MaterialsArg,
 }
 
 // ---- ranges of numeric flags ---------------------------------------------------------

@@ -24,10 +24,28 @@ pub struct BenchScene {
 
 /// The first `n` bench scenes at `width` x `height`.
 pub fn bench_scenes(n: usize, width: u32, height: u32) -> anyhow::Result<Vec<BenchScene>> {
+    bench_scenes_in(n, width, height, None)
+}
+
+/// [`bench_scenes`], the textured materials drawn from the `user` set of `user` when given
+/// (`bench render --materials DIR`: [`Config::use_material_set`]); the layouts are the same.
+pub fn bench_scenes_in(
+    n: usize,
+    width: u32,
+    height: u32,
+    user: Option<&clevrtex_materials::Catalogue>,
+) -> anyhow::Result<Vec<BenchScene>> {
     (0..n)
         .map(|i| {
             let variant = VARIANTS[i % VARIANTS.len()];
-            let mut config = Config::builtin(variant)?;
+            let mut config = match user {
+                Some(cat) => {
+                    let mut c = Config::builtin_in(variant, cat)?;
+                    c.use_material_set(cat, clevrtex_materials::Set::User)?;
+                    c
+                }
+                None => Config::builtin(variant)?,
+            };
             config.base.render.width = width;
             config.base.render.height = height;
             config.base.passes = vec![Pass::Rgb, Pass::Mask, Pass::Depth];

@@ -29,6 +29,7 @@ mod error;
 mod hash;
 pub mod pbr;
 mod schema;
+pub mod texture;
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -117,6 +118,8 @@ pub struct Material {
 #[derive(Debug, Clone)]
 pub struct Catalogue {
     materials: Vec<Material>,
+    /// The user directories added, canonical (the folders their textures must stay in).
+    user_dirs: Vec<std::path::PathBuf>,
 }
 
 impl Catalogue {
@@ -142,6 +145,7 @@ impl Catalogue {
         })?;
         let mut out = Catalogue {
             materials: Vec::new(),
+            user_dirs: Vec::new(),
         };
         for (i, e) in entries.iter().enumerate() {
             let field = |k: &str| format!("materials[{i}].{k}");
@@ -222,8 +226,32 @@ impl Catalogue {
                 "pass an existing directory to `--materials`",
             )
         })?;
+        let root = dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf());
         let mut files: Vec<_> = rd.flatten().map(|e| e.path()).collect();
         files.sort();
+        // A link out of the folder is refused, naming it: the folder is what was given.
+        for path in &files {
+            let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+            let material = path
+                .extension()
+                .is_some_and(|e| e == "json" || e == "blend");
+            if is_link && material {
+                let inside = path.canonicalize().is_ok_and(|c| c.starts_with(&root));
+                if !inside {
+                    return Err(Error::new(
+                        ErrorKind::BadValue,
+                        &path.display().to_string(),
+                        "",
+                        format!(
+                            "material `{}` is a link out of the material folder `{}`",
+                            user_name(path),
+                            root.display()
+                        ),
+                        "copy the file into the folder instead of linking to it",
+                    ));
+                }
+            }
+        }
         let mut referenced = Vec::new();
         let mut added = Vec::new();
         for path in &files {
@@ -253,7 +281,9 @@ impl Catalogue {
                     continue;
                 }
                 let shown = path.display().to_string();
-                if let Some(problem) = blend_file_problem(path) {
+                let problem =
+                    texture::blend_size_problem(path).or_else(|| blend_file_problem(path));
+                if let Some(problem) = problem {
                     return Err(Error::new(
                         ErrorKind::BadValue,
                         &shown,
@@ -281,6 +311,7 @@ impl Catalogue {
         for m in added {
             self.insert(m)?;
         }
+        self.user_dirs.push(root);
         Ok(())
     }
 
@@ -325,6 +356,51 @@ impl Catalogue {
             }
         }
         Ok(())
+    }
+
+    /// Fix user `.blend` material `name` to node group `group` and the image textures it
+    /// reads (`references` as the `.blend` stores them, e.g. `//textures/x_COL_3K.jpg`,
+    /// as the Blender bridge reported them): each is checked ([`texture::check_texture`])
+    /// and recorded in the recipe (`group`, `images`: reference -> checked path) so the
+    /// bridge loads exactly those files; the hash then covers the `.blend` and every image.
+    pub fn resolve_blend(
+        &mut self,
+        name: &str,
+        group: &str,
+        references: &[String],
+    ) -> Result<(), Error> {
+        let m = self.require(name)?.clone();
+        let blend = std::path::PathBuf::from(m.recipe["path"].as_str().unwrap_or(""));
+        let root = self
+            .user_dirs
+            .iter()
+            .find(|d| blend.starts_with(d))
+            .cloned()
+            .unwrap_or_else(|| blend.parent().unwrap_or(Path::new("/")).to_path_buf());
+        let mut images = Map::new();
+        for r in references {
+            let path = texture::check_texture(name, &m.file, &blend, &root, r)?;
+            images.insert(r.clone(), path.to_string_lossy().into_owned().into());
+        }
+        let mut recipe = m.recipe.clone();
+        recipe["group"] = group.into();
+        recipe["images"] = Value::Object(images);
+        let updated = Material::from_recipe(m.name.clone(), m.set, m.file.clone(), recipe);
+        if let Some(slot) = self.materials.iter_mut().find(|x| x.name == name) {
+            *slot = updated;
+        }
+        Ok(())
+    }
+
+    /// The user directory (canonical) material `name` came from; `None` for built-ins.
+    pub fn user_root(&self, name: &str) -> Option<&Path> {
+        let m = self.get(name).filter(|m| m.set == Set::User)?;
+        let path = Path::new(m.recipe["path"].as_str().unwrap_or(&m.file));
+        let path = path.canonicalize().unwrap_or_else(|_| path.to_path_buf());
+        self.user_dirs
+            .iter()
+            .find(|d| path.starts_with(d))
+            .map(|d| d.as_path())
     }
 
     /// A material by name.
@@ -414,18 +490,27 @@ impl Material {
     fn from_recipe(name: String, set: Set, file: String, mut recipe: Value) -> Material {
         let obj = recipe.as_object_mut().expect("recipes are objects");
         obj.insert("set".into(), set.name().into());
-        // The recipe and the bytes of the files it references (a `.blend`, images, the maps
-        // of a PBR folder), each file hashed as it is read: maps can be gigabytes.
-        let mut parts = vec![xxhash_rust::xxh3::xxh3_64(
-            &serde_json::to_vec(&recipe).expect("json"),
-        )];
+        // The recipe (for a `.blend`, its group's name instead, so the hash says what the
+        // material is made of wherever its folder lies: the run manifest's provenance) and the
+        // bytes of the files it references (a `.blend` and the images its group reads, images,
+        // the maps of a PBR folder), each file hashed as it is read: maps can be gigabytes.
+        let mut parts = match (recipe["kind"].as_str(), recipe["group"].as_str()) {
+            (Some("blend"), group) => {
+                vec![xxhash_rust::xxh3::xxh3_64(group.unwrap_or("").as_bytes())]
+            }
+            _ => vec![xxhash_rust::xxh3::xxh3_64(
+                &serde_json::to_vec(&recipe).expect("json"),
+            )],
+        };
         let top = recipe.get("path").and_then(Value::as_str);
         let layers = recipe["layers"].as_array().into_iter().flatten();
         let maps = recipe["maps"].as_object().into_iter().flatten();
+        let images = recipe["images"].as_object().into_iter().flatten();
         let paths = top
             .into_iter()
             .chain(layers.filter_map(|l| l["path"].as_str()))
-            .chain(maps.filter_map(|(_, p)| p.as_str()));
+            .chain(maps.filter_map(|(_, p)| p.as_str()))
+            .chain(images.filter_map(|(_, p)| p.as_str()));
         parts.extend(paths.filter_map(|p| hash::file_hash(Path::new(p)).ok()));
         Material {
             description: recipe["description"].as_str().unwrap_or("").to_string(),

@@ -208,6 +208,8 @@ pub(crate) struct JobSettings {
     ///
     /// [`KERNEL_COMPILE_GRACE`]: crate::device::KERNEL_COMPILE_GRACE
     pub(crate) grace: Duration,
+    /// User material name -> content hash ([`crate::pool::PoolOptions::user_materials`]).
+    pub(crate) user_materials: std::collections::BTreeMap<String, String>,
 }
 
 /// Turn `job` into a written sample on `slot`: attempts, the visibility check, the final
@@ -319,6 +321,7 @@ pub(crate) fn run_job(
                 blender_version: facts_blender,
                 blender_compat: facts_compat,
                 passes: job.passes.clone(),
+                user_materials: &opts.user_materials,
             },
         );
         let meta_name = layout::metadata_file(&job.stem);

@@ -63,8 +63,8 @@ pub use error::{RenderError, Result, Tails};
 pub use pool::{Job, PoolEvent, PoolOptions, RunReport, SampleStats};
 pub use session::{Hooks, Session};
 pub use worker::{
-    BridgeTimings, MaterialMode, MaterialReply, MaterialSettings, Mode, Ready, RenderReply, Worker,
-    WorkerOptions, STARTUP_TIMEOUT,
+    BridgeTimings, GroupImage, GroupSocket, InspectReply, MaterialMode, MaterialReply,
+    MaterialSettings, Mode, Ready, RenderReply, Worker, WorkerOptions, STARTUP_TIMEOUT,
 };
 
 /// The resolved built-in material catalogue for the bridge (`materials.json`, see

@@ -14,7 +14,7 @@ use crate::post::{self, ObjectPixels};
 
 /// Facts about the render that only exist after it ran.
 #[derive(Debug, Clone)]
-pub struct RenderFacts {
+pub struct RenderFacts<'a> {
     /// Visible pixels and 2D box per object, from the final mask.
     pub objects: Vec<ObjectPixels>,
     /// Blender's version string (from the worker's `ready`).
@@ -23,6 +23,8 @@ pub struct RenderFacts {
     pub blender_compat: BTreeMap<String, serde_json::Value>,
     /// Passes actually written (the scene's request).
     pub passes: Vec<Pass>,
+    /// The run's user materials, name -> content hash; those the scene uses are recorded.
+    pub user_materials: &'a BTreeMap<String, String>,
 }
 
 /// Camera intrinsics `K` (pixels, origin at the top-left corner, y down, principal point at
@@ -111,6 +113,10 @@ pub struct SampleMetadata {
     pub blender_compat: BTreeMap<String, serde_json::Value>,
     /// This tool's version.
     pub clevrtex_version: &'static str,
+    /// The user materials (`--materials DIR`) of the scene: name -> content hash of the
+    /// `.blend` (or material file) and every image it reads; absent with built-ins only.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub user_materials: BTreeMap<String, String>,
 }
 
 impl SampleMetadata {
@@ -123,7 +129,7 @@ impl SampleMetadata {
 }
 
 /// The full metadata of a rendered scene.
-pub fn build(scene: &SceneFile, facts: &RenderFacts) -> SampleMetadata {
+pub fn build(scene: &SceneFile, facts: &RenderFacts<'_>) -> SampleMetadata {
     let mut shown = scene.clone();
     shown.passes = facts.passes.clone();
     let mut clevr = clevrtex_scene::metadata(&shown);
@@ -157,5 +163,12 @@ pub fn build(scene: &SceneFile, facts: &RenderFacts) -> SampleMetadata {
         blender_version: facts.blender_version.clone(),
         blender_compat: facts.blender_compat.clone(),
         clevrtex_version: env!("CARGO_PKG_VERSION"),
+        user_materials: std::iter::once(&scene.backdrop.material)
+            .chain(scene.objects.iter().map(|o| &o.material))
+            .filter_map(|m| {
+                let hash = facts.user_materials.get(&m.name)?;
+                Some((m.name.clone(), hash.clone()))
+            })
+            .collect(),
     }
 }

@@ -30,6 +30,9 @@ pub struct PoolOptions {
     pub blender: PathBuf,
     /// Resolved material catalogue for the bridge.
     pub materials_json: String,
+    /// The user materials (`--materials DIR`) a scene may use: name -> content hash of the
+    /// `.blend` or file and every image it reads, recorded in each sample's metadata.
+    pub user_materials: std::collections::BTreeMap<String, String>,
     /// Number of Blender processes.
     pub workers: usize,
     /// Cycles threads per process; 0 = the machine's cores shared evenly by the workers
@@ -368,6 +371,7 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         out: opts.out.clone(),
         keep_exr: opts.keep_exr,
         grace,
+        user_materials: opts.user_materials.clone(),
     };
     loop {
         if shared.stopping() {

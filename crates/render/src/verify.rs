@@ -96,6 +96,11 @@ pub struct VariantReport {
     /// Commands to rerun after repair: those of the runs (from the manifests) whose indices
     /// are missing or broken or that did not finish, with `--out` set to the folder verified.
     pub commands: Vec<Vec<String>>,
+    /// The user materials (`--materials DIR`) the runs drew from, by name, as their manifests
+    /// record them (file, group, textures, content hash); two runs recording one name with
+    /// different contents is a manifest problem. Left out of the JSON when empty.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub user_materials: BTreeMap<String, clevrtex_scene::manifest::UserMaterial>,
 }
 
 impl VariantReport {
@@ -285,6 +290,21 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
         let mut runs: BTreeMap<(u64, u64, u64), Vec<&ReadManifest>> = BTreeMap::new();
         for entry in &manifests {
             let m = &entry.1;
+            for (name, um) in &m.user_materials {
+                match rep.user_materials.get(name) {
+                    Some(old) if old.xxh3 != um.xxh3 => rep.manifest_problems.push(format!(
+                        "user material `{}` has content hash {} in `{}` and {} in another run: the runs drew from different files under one name",
+                        clevrtex_scene::text::printable(name),
+                        clevrtex_scene::text::printable(&um.xxh3),
+                        entry.0.display(),
+                        clevrtex_scene::text::printable(&old.xxh3)
+                    )),
+                    Some(_) => {}
+                    None => {
+                        rep.user_materials.insert(name.clone(), um.clone());
+                    }
+                }
+            }
             runs.entry((m.start, m.end, m.shard[1]))
                 .or_default()
                 .push(entry);

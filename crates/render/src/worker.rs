@@ -348,6 +348,43 @@ pub struct MaterialReply {
     pub measures: BTreeMap<String, f64>,
 }
 
+/// One socket of a user node group (the reply to `inspect`).
+#[derive(Debug, Clone, Deserialize)]
+pub struct GroupSocket {
+    /// Socket name.
+    pub name: String,
+    /// Blender's socket type (`VALUE`, `RGBA`, `SHADER`, ... or `NodeSocket*` in 4.x).
+    #[serde(default)]
+    pub r#type: String,
+}
+
+/// One image a user node group reads (the reply to `inspect`).
+#[derive(Debug, Clone, Deserialize)]
+pub struct GroupImage {
+    /// Blender's image name.
+    pub name: String,
+    /// The file, as Blender resolves it (absolute; relative to the `.blend` before).
+    pub path: String,
+    /// Blender's image source: `FILE`, `GENERATED`, `SEQUENCE`, `TILED`, ...
+    pub source: String,
+    /// Packed into the `.blend` (then no file is read).
+    pub packed: bool,
+}
+
+/// The reply to an `inspect` request: a user `.blend` material's node group as the bridge
+/// loads it, for the checks before a run (nothing rendered, no pixels loaded).
+#[derive(Debug, Clone, Deserialize)]
+pub struct InspectReply {
+    /// The node group used.
+    pub group: String,
+    /// Its inputs.
+    pub inputs: Vec<GroupSocket>,
+    /// Its outputs.
+    pub outputs: Vec<GroupSocket>,
+    /// Every image an image-texture node of it (or of a group inside it) reads.
+    pub images: Vec<GroupImage>,
+}
+
 enum Event {
     Reply(String),
     Eof,
@@ -638,6 +675,20 @@ impl Worker {
             return Err(self.fail_protocol(&doing, line, problem));
         }
         Ok(reply)
+    }
+
+    /// Ask the worker which node group of the `.blend` at `path` it would use (`group`, or
+    /// the file's own as the public generator names it), with its sockets and textures.
+    /// A `.blend` without a usable group is a [`RenderError::Bridge`] error.
+    pub fn inspect(
+        &mut self,
+        path: &Path,
+        group: Option<&str>,
+        timeout: Duration,
+    ) -> Result<InspectReply> {
+        let doing = format!("inspecting the user material `{}`", path.display());
+        let request = serde_json::json!({"type": "inspect", "path": path, "group": group});
+        self.call(request, &doing, timeout)
     }
 
     /// Send `request` (an object; its `id` is added here) and wait at most `timeout` for its

@@ -358,8 +358,16 @@ impl Config {
 
     /// The built-in config of `variant`.
     pub fn builtin(variant: &str) -> Result<Config, ConfigError> {
+        Config::builtin_in(variant, catalogue())
+    }
+
+    /// The built-in config of `variant`, its material names resolved in `catalogue` (the
+    /// built-in one plus a `--materials DIR`).
+    pub fn builtin_in(variant: &str, catalogue: &Catalogue) -> Result<Config, ConfigError> {
         match BUILTIN.iter().find(|(n, _)| *n == variant) {
-            Some((name, text)) => Config::from_json_str(text, &format!("configs/{name}.json")),
+            Some((name, text)) => {
+                Config::from_json_str_in(text, &format!("configs/{name}.json"), catalogue)
+            }
             None => Err(ConfigError {
                 file: "--variant".into(),
                 key: "variant".into(),
@@ -375,6 +383,16 @@ impl Config {
 
     /// Parse and validate a variant config. `source` names the file in error messages.
     pub fn from_json_str(text: &str, source: &str) -> Result<Config, ConfigError> {
+        Config::from_json_str_in(text, source, catalogue())
+    }
+
+    /// Like [`Config::from_json_str`], material names and sets resolved in `catalogue` (so
+    /// a config may name user materials, or `"sets": ["user"]`).
+    pub fn from_json_str_in(
+        text: &str,
+        source: &str,
+        catalogue: &Catalogue,
+    ) -> Result<Config, ConfigError> {
         let err = |key: &str, value: Option<String>, problem: String, hint: &str| ConfigError {
             file: source.to_string(),
             key: key.to_string(),
@@ -429,8 +447,61 @@ impl Config {
                 "compare with `configs/base-scene.json`",
             )
         })?;
-        validate(file, base, source)
+        validate(file, base, source, catalogue)
     }
+
+    /// Draw the textured materials of the variant from `set` of `catalogue` instead
+    /// (`generate --material-set`): every material list (objects, background) whose members
+    /// are all in the textured sets `main` and `ood` becomes the whole of `set`; lists with
+    /// a CLEVR material (`rubber`, `metal`, `plain`) or the grass background stay. Layouts do
+    /// not change: the sampler draws materials from their own stream. Returns whether a list
+    /// was replaced (`clevr` has none to replace).
+    pub fn use_material_set(
+        &mut self,
+        catalogue: &Catalogue,
+        set: clevrtex_materials::Set,
+    ) -> Result<bool, ConfigError> {
+        use clevrtex_materials::Set;
+        let names: Vec<String> = catalogue.names(set).into_iter().map(String::from).collect();
+        if names.is_empty() {
+            return Err(ConfigError {
+                file: "--material-set".into(),
+                key: "material-set".into(),
+                value: Some(set.name().into()),
+                problem: "the set has no materials".into(),
+                hint: "pass `--materials DIR` with the user materials, or another set".into(),
+            });
+        }
+        let textured = |list: &[String]| {
+            list.iter().all(|n| {
+                catalogue
+                    .get(n)
+                    .is_some_and(|m| matches!(m.set, Set::Main | Set::Ood))
+            })
+        };
+        let mut changed = false;
+        if textured(&self.objects.materials) {
+            self.objects.materials = names.clone();
+            changed = true;
+        }
+        if textured(&self.background.materials) {
+            self.background.materials = names.clone();
+            changed = true;
+        }
+        if changed && self.objects.displacement.is_some() {
+            self.objects.displacing = displacing(catalogue);
+        }
+        Ok(changed)
+    }
+}
+
+/// The materials of `catalogue` that set up true displacement.
+fn displacing(catalogue: &Catalogue) -> BTreeSet<String> {
+    catalogue
+        .iter()
+        .filter(|m| m.displaces)
+        .map(|m| m.name.clone())
+        .collect()
 }
 
 /// Merge `over` into `base`: objects key by key (recursively), anything else replaces.
@@ -450,7 +521,12 @@ fn merge(base: &mut Value, over: Value) {
     }
 }
 
-fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Config, ConfigError> {
+fn validate(
+    file: VariantFile,
+    mut base: BaseScene,
+    source: &str,
+    catalogue: &Catalogue,
+) -> Result<Config, ConfigError> {
     let err = |key: &str, value: Option<String>, problem: &str, hint: &str| ConfigError {
         file: source.to_string(),
         key: key.to_string(),
@@ -467,8 +543,6 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
         hint: "keep the value within its range; `docs/scene-format.md`, \"Bounds\", lists every bound and its reason".to_string(),
     }
     };
-    let catalogue = catalogue();
-
     if let Some(problem) = crate::layout::variant_name_problem(&file.name) {
         return Err(err(
             "name",
@@ -581,11 +655,7 @@ fn validate(file: VariantFile, mut base: BaseScene, source: &str) -> Result<Conf
 
     let displacing: BTreeSet<String> = match file.objects.displacement {
         None => BTreeSet::new(),
-        Some(_) => catalogue
-            .iter()
-            .filter(|m| m.displaces)
-            .map(|m| m.name.clone())
-            .collect(),
+        Some(_) => displacing(catalogue),
     };
 
     // Base scene checks.
@@ -787,6 +857,31 @@ fn resolve(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn material_set_replaces_only_textured_lists() {
+        use clevrtex_materials::Set;
+        let cat = Catalogue::builtin().unwrap();
+        let ood = cat.names(Set::Ood);
+        let mut full = Config::builtin("full").unwrap();
+        assert!(full.use_material_set(&cat, Set::Ood).unwrap());
+        assert_eq!(full.objects.materials, ood);
+        assert_eq!(full.background.materials, ood);
+        // vbg: rubber/metal objects stay, the textured backdrop changes.
+        let mut vbg = Config::builtin("vbg").unwrap();
+        let objects = vbg.objects.materials.clone();
+        assert!(vbg.use_material_set(&cat, Set::Ood).unwrap());
+        assert_eq!(vbg.objects.materials, objects);
+        assert_eq!(vbg.background.materials, ood);
+        // clevr and grassbg's grass: nothing textured to replace, or only the objects.
+        let mut clevr = Config::builtin("clevr").unwrap();
+        assert!(!clevr.use_material_set(&cat, Set::Ood).unwrap());
+        let mut grass = Config::builtin("grassbg").unwrap();
+        assert!(grass.use_material_set(&cat, Set::Ood).unwrap());
+        assert_eq!(grass.background.materials, ["mossy_forest_grass"]);
+        // An empty set (no `--materials`) is an error.
+        assert!(full.use_material_set(&cat, Set::User).is_err());
+    }
 
     #[test]
     fn every_builtin_variant_loads() {

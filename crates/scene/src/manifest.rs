@@ -35,6 +35,22 @@ pub struct FileEntry {
     pub xxh3: String,
 }
 
+/// A user material (`--materials DIR`) a run could draw, as its manifest records it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct UserMaterial {
+    /// Its file, relative to the material folder (`Bricks01.blend`).
+    pub file: String,
+    /// The node group used, for a `.blend`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub group: Option<String>,
+    /// The image textures it reads, relative to the material folder.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub textures: Vec<String>,
+    /// Content hash of the file and every texture (`clevrtex_materials::content_hash`, 16
+    /// hex digits): the value each sample's metadata records under `user_materials`.
+    pub xxh3: String,
+}
+
 /// What one run (or shard) made.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {
@@ -81,6 +97,10 @@ pub struct Manifest {
     /// the previous manifest for samples an earlier run made; absent in older manifests.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub sample_seconds: BTreeMap<String, f64>,
+    /// The user materials (`--materials DIR`) the run could draw, by name; absent when it
+    /// drew only built-in ones (and in older manifests).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub user_materials: BTreeMap<String, UserMaterial>,
 }
 
 /// xxh3-64 of `bytes` as 16 hex digits ([`clevrtex_materials::content_hash`], the one content
@@ -125,6 +145,7 @@ impl Manifest {
             finished: false,
             files: BTreeMap::new(),
             sample_seconds: BTreeMap::new(),
+            user_materials: BTreeMap::new(),
         }
     }
 

@@ -13,8 +13,11 @@ pub type SceneRng = rand_chacha::ChaCha8Rng;
 pub(crate) enum Purpose {
     /// The object count: kept across visibility retries, so it ignores the attempt number.
     Count = 1,
-    /// Everything else (camera, lights, materials, placement); changes with the attempt.
+    /// Camera, lights, shapes, sizes, placement and rotations; changes with the attempt.
     Layout = 2,
+    /// Materials, their instance values and colours: their own stream, so that the same
+    /// layouts come out whatever catalogue the materials are drawn from.
+    Material = 3,
 }
 
 /// The RNG for one image: the key is (run seed, attempt, purpose), the stream is the image

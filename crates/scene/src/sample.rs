@@ -193,13 +193,15 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
         angle: base.sun.angle,
     };
 
-    // Materials of the scene.
+    // Materials of the scene: drawn from their own stream, so the layout (camera, lights,
+    // shapes, sizes, positions, rotations) is the same whatever catalogue they come from.
+    let mut mrng = scene_rng(req.seed, req.attempt, Purpose::Material, req.index);
     let scene_material = config
         .same_material
-        .then(|| choose(&mut rng, &config.objects.materials).clone());
+        .then(|| choose(&mut mrng, &config.objects.materials).clone());
     let bg_name = match &scene_material {
         Some(m) => m.clone(),
-        None => choose(&mut rng, &config.background.materials).clone(),
+        None => choose(&mut mrng, &config.background.materials).clone(),
     };
     let backdrop = Backdrop {
         profile: base.backdrop.profile.clone(),
@@ -207,7 +209,7 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
         rotation_z: base.backdrop.rotation_z,
         material: MaterialInstance {
             name: bg_name,
-            random: unit(&mut rng),
+            random: unit(&mut mrng),
             color_name: None,
             color: None,
             displacement: config.background.displacement,
@@ -235,12 +237,12 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
             let rotation_deg = uniform(&mut rng, 0.0, 360.0);
             let name = match &scene_material {
                 Some(m) => m.clone(),
-                None => choose(&mut rng, &config.objects.materials).clone(),
+                None => choose(&mut mrng, &config.objects.materials).clone(),
             };
             let (color_name, color) = if config.objects.colors.is_empty() {
                 (None, None)
             } else {
-                let c = choose(&mut rng, &config.objects.colors);
+                let c = choose(&mut mrng, &config.objects.colors);
                 (Some(c.name.clone()), Some(c.linear()))
             };
             let size = &config.objects.sizes[size];
@@ -253,7 +255,7 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
                 material: MaterialInstance {
                     displacement: config.objects.displacement_for(&name),
                     name,
-                    random: unit(&mut rng),
+                    random: unit(&mut mrng),
                     color_name,
                     color,
                     // One material on everything (`camo`): the backdrop's texture scale too,
@@ -421,5 +423,35 @@ mod tests {
         // Variants with their own object materials keep the recipe's scale on objects.
         let s = sample(&Config::builtin("full").unwrap(), &req(3)).unwrap();
         assert!(s.objects.iter().all(|o| o.material.scale.is_none()));
+    }
+
+    #[test]
+    fn layouts_do_not_depend_on_the_material_catalogue() {
+        // The controlled comparison (built-in vs user library): another material list must
+        // leave camera, lights, shapes, sizes, positions and rotations as they were.
+        for variant in ["full", "camo", "vbg"] {
+            let a = Config::builtin(variant).unwrap();
+            let mut b = a.clone();
+            b.objects.materials = vec!["plain".into()];
+            b.background.materials = vec!["plain".into()];
+            for i in 0..10 {
+                let (x, y) = (sample(&a, &req(i)).unwrap(), sample(&b, &req(i)).unwrap());
+                assert_eq!(
+                    (&x.camera, &x.lights),
+                    (&y.camera, &y.lights),
+                    "{variant} {i}"
+                );
+                assert_eq!(x.objects.len(), y.objects.len());
+                for (o, p) in x.objects.iter().zip(&y.objects) {
+                    assert_eq!(
+                        (&o.shape, o.scale, o.location, o.rotation_deg),
+                        (&p.shape, p.scale, p.location, p.rotation_deg)
+                    );
+                    assert_eq!(p.material.name, "plain");
+                    // The instance values stay too: only the name changed.
+                    assert_eq!(o.material.random, p.material.random);
+                }
+            }
+        }
     }
 }

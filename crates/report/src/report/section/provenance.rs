@@ -1,5 +1,6 @@
 //! "Provenance": the run manifests (seed, config hash, indices, shard, versions, command),
-//! the unreadable ones, and the seeds, versions and sizes found in the metadata.
+//! the user materials they drew from (`--materials DIR`: file, group, textures, content
+//! hash), the unreadable ones, and the seeds, versions and sizes found in the metadata.
 
 use std::fmt::Write as _;
 
@@ -38,6 +39,33 @@ pub(in crate::report) fn write(
                 );
             }
             page.html += "</table>";
+            let mut user = std::collections::BTreeMap::new();
+            for m in &s.data.manifests {
+                for (name, u) in &m.user_materials {
+                    user.entry(name.clone())
+                        .or_insert_with(Vec::new)
+                        .push(u.clone());
+                }
+            }
+            if !user.is_empty() {
+                page.html += "<p>User materials (<code>--materials DIR</code>) the runs drew from, with the content hash of each file and its textures:</p><table><tr><th>material</th><th>file</th><th>node group</th><th>textures</th><th>xxh3</th></tr>";
+                for (name, list) in &user {
+                    let mut hashes: Vec<&str> = list.iter().map(|u| u.xxh3.as_str()).collect();
+                    hashes.sort_unstable();
+                    hashes.dedup();
+                    let u = &list[0];
+                    let _ = write!(
+                        page.html,
+                        "<tr><td>{}</td><td><code>{}</code></td><td>{}</td><td>{}</td><td><code>{}</code></td></tr>",
+                        esc(name),
+                        esc(&u.file),
+                        esc(u.group.as_deref().unwrap_or("")),
+                        esc(&u.textures.join(", ")),
+                        esc(&hashes.join(" / ")),
+                    );
+                }
+                page.html += "</table>";
+            }
         }
         for (p, why) in &s.data.bad_manifests {
             let _ = write!(

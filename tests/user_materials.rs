@@ -1,0 +1,399 @@
+//! User materials in scenes (`--materials DIR`, issue 33): ClevrTex-convention `.blend`
+//! node groups (built here in the real Blender by `tests/data/user_materials/make_blend.py`)
+//! rendered by `generate` on Blender 3.4 and bpy 4.5 and seen on the albedo pass; the same
+//! layouts with the built-in catalogue (masks byte-identical); and every bad input refused
+//! before any image is rendered (exit 1, naming the material and the file).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use crate::util::{blender_or_skip, data, run, test_blenders, text};
+
+/// Build `DIR/<name>.blend` (node group `<name>`, texture `textures/<name>_COL_3K.<ext>`
+/// of one sRGB colour) with `blender` (an executable, or a Python with `bpy`).
+fn make_blend(blender: &Path, dir: &Path, name: &str, rgb: [u8; 3], ext: &str, mode: &str) {
+    let script = data("user_materials/make_blend.py");
+    let is_python = blender
+        .file_name()
+        .is_some_and(|n| n.to_string_lossy().starts_with("python"));
+    let mut cmd = Command::new(blender);
+    if !is_python {
+        cmd.args([
+            "-b",
+            "--factory-startup",
+            "--python-exit-code",
+            "1",
+            "--python",
+        ]);
+    }
+    let rgb = rgb.map(|c| c.to_string());
+    let out = cmd
+        .arg(&script)
+        .arg("--")
+        .arg(dir)
+        .args([name, &rgb[0], &rgb[1], &rgb[2], ext, mode])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success() && dir.join(format!("{name}.blend")).is_file(),
+        "{}",
+        text(&out)
+    );
+}
+
+const RED: [u8; 3] = [200, 40, 40];
+const BLUE: [u8; 3] = [40, 60, 200];
+
+/// Two convention materials: `redstone` (PNG texture) and `bluetile` (JPEG texture).
+fn library(blender: &Path, dir: &Path) {
+    make_blend(blender, dir, "RedStone", RED, "png", "ok");
+    make_blend(blender, dir, "BlueTile", BLUE, "jpg", "ok");
+}
+
+/// `generate` of tiny `full` images (`--variant full` unless `extra` has a `--config`).
+fn generate(out: &Path, blender: &Path, extra: &[&str]) -> std::process::Output {
+    let variant: &[&str] = if extra.contains(&"--config") {
+        &[]
+    } else {
+        &["--variant", "full"]
+    };
+    let mut args = vec!["generate"];
+    args.extend_from_slice(variant);
+    args.extend([
+        "--seed",
+        "3",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--samples",
+        "4",
+        "--passes",
+        "rgb,mask,albedo",
+        "--workers",
+        "1",
+        "--blender",
+        blender.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
+fn png(path: &Path) -> image::DynamicImage {
+    image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// `clevrtex generate --variant full --materials DIR -n 4` renders with the `.blend` node
+/// groups: every object and the backdrop show their user material's texture colour on the
+/// albedo pass; metadata and manifest record the materials with one hash each; `verify`
+/// passes and shows them.
+#[test]
+fn generate_full_with_user_blend_materials_on_every_blender() {
+    for blender in test_blenders("generate_full_with_user_blend_materials_on_every_blender") {
+        let dir = tempfile::tempdir().unwrap();
+        let lib = dir.path().join("lib");
+        library(&blender, &lib);
+        let out = dir.path().join("out");
+        let o = generate(
+            &out,
+            &blender,
+            &["-n", "4", "--materials", lib.to_str().unwrap()],
+        );
+        assert!(o.status.success(), "{}", text(&o));
+        let vdir = out.join("clevrtex_full");
+        let manifest: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(vdir.join("MANIFEST-0-4-0of1.json")).unwrap())
+                .unwrap();
+        let recorded = &manifest["user_materials"];
+        assert_eq!(recorded["redstone"]["file"], "RedStone.blend", "{manifest}");
+        assert_eq!(
+            recorded["bluetile"]["textures"][0],
+            "textures/BlueTile_COL_3K.jpg"
+        );
+        for i in 0..4 {
+            let stem = format!("CLEVRTEX_full_{i:06}");
+            let meta: serde_json::Value = serde_json::from_slice(
+                &std::fs::read(vdir.join(format!("0/{stem}.json"))).unwrap(),
+            )
+            .unwrap();
+            let mut names = vec![meta["ground_material"].as_str().unwrap().to_string()];
+            for obj in meta["objects"].as_array().unwrap() {
+                names.push(obj["material"].as_str().unwrap().to_string());
+            }
+            for n in &names {
+                assert_eq!(
+                    meta["user_materials"][n], recorded[n]["xxh3"],
+                    "{n} in {stem}"
+                );
+            }
+            let albedo = png(&vdir.join(format!("0/{stem}_albedo_0001.png"))).to_rgb8();
+            let mask = png(&vdir.join(format!("0/{stem}_flat.png"))).to_luma8();
+            // Id 0 is the backdrop, 1..N the objects in metadata order.
+            for (id, name) in names.iter().enumerate() {
+                let want = if name == "redstone" { RED } else { BLUE };
+                let px: Vec<[u8; 3]> = mask
+                    .enumerate_pixels()
+                    .filter(|(_, _, m)| m.0[0] as usize == id)
+                    .map(|(x, y, _)| albedo.get_pixel(x, y).0)
+                    .collect();
+                if px.is_empty() {
+                    continue; // hidden at 64x48 below the visibility threshold
+                }
+                let close = px
+                    .iter()
+                    .filter(|p| (0..3).all(|c| p[c].abs_diff(want[c]) <= 8))
+                    .count();
+                assert!(
+                    close * 2 > px.len(),
+                    "{stem} id {id} ({name}): {close} of {} albedo pixels show {want:?} on {}",
+                    px.len(),
+                    blender.display()
+                );
+            }
+        }
+        let v = run(&["verify", out.to_str().unwrap()]);
+        assert!(v.status.success(), "{}", text(&v));
+        let shown = String::from_utf8_lossy(&v.stdout);
+        assert!(shown.contains("user material redstone"), "{}", text(&v));
+        // `report` lists them under "Provenance".
+        let html = dir.path().join("report.html");
+        let r = run(&[
+            "report",
+            out.to_str().unwrap(),
+            "--out",
+            html.to_str().unwrap(),
+        ]);
+        assert!(r.status.success(), "{}", text(&r));
+        let page = std::fs::read_to_string(&html).unwrap();
+        let hash = recorded["redstone"]["xxh3"].as_str().unwrap();
+        assert!(
+            page.contains("User materials") && page.contains(hash),
+            "{}",
+            text(&r)
+        );
+    }
+}
+
+/// The controlled comparison: the same seed with the built-in catalogue and with the user
+/// library gives the same layouts and byte-identical masks, other materials. The backdrop's
+/// true displacement is the material's own (as in the public generator) and can move a few
+/// mask pixels at an object's foot (docs/materials.md), so this runs `full` with the backdrop
+/// displacement off: then no geometry depends on the material.
+#[test]
+fn builtin_and_user_library_give_the_same_layouts_and_masks() {
+    let Some(blender) = blender_or_skip("builtin_and_user_library_give_the_same_layouts_and_masks")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("lib");
+    library(&blender, &lib);
+    let full = std::fs::read_to_string(crate::util::repo_root().join("configs/full.json")).unwrap();
+    let mut config: serde_json::Value = serde_json::from_str(&full).unwrap();
+    let background = config["background"].as_object_mut().unwrap();
+    background.remove("displacement");
+    let config_path = dir.path().join("full_flat.json");
+    std::fs::write(&config_path, config.to_string()).unwrap();
+    let c = config_path.to_str().unwrap();
+    let (a, b) = (dir.path().join("builtin"), dir.path().join("user"));
+    let o = generate(&a, &blender, &["-n", "2", "--config", c]);
+    assert!(o.status.success(), "{}", text(&o));
+    let lib_dir = lib.to_str().unwrap();
+    let user = [
+        "-n",
+        "2",
+        "--config",
+        c,
+        "--materials",
+        lib_dir,
+        "--material-set",
+        "user",
+    ];
+    let o = generate(&b, &blender, &user);
+    assert!(o.status.success(), "{}", text(&o));
+    for i in 0..2 {
+        let f = |root: &Path, suffix: &str| {
+            std::fs::read(root.join(format!("clevrtex_full/0/CLEVRTEX_full_{i:06}{suffix}")))
+                .unwrap()
+        };
+        assert!(f(&a, "_flat.png") == f(&b, "_flat.png"), "mask {i} differs");
+        let meta = |root: &Path| -> serde_json::Value {
+            serde_json::from_slice(&f(root, ".json")).unwrap()
+        };
+        let (ma, mb) = (meta(&a), meta(&b));
+        for k in ["camera", "attempt"] {
+            assert_eq!(ma[k], mb[k], "{k} of image {i}");
+        }
+        let objs = |m: &serde_json::Value| -> Vec<(serde_json::Value, serde_json::Value)> {
+            m["objects"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|o| (o["3d_coords"].clone(), o["shape"].clone()))
+                .collect()
+        };
+        assert_eq!(objs(&ma), objs(&mb), "image {i}");
+        assert!(ma.get("user_materials").is_none());
+        assert!(mb["ground_material"] == "redstone" || mb["ground_material"] == "bluetile");
+    }
+}
+
+/// Run `generate` on the folder `lib` and expect exit 1 before any image, with `want` (and
+/// the material's name) in the message.
+fn refused(blender: &Path, lib: &Path, want: &[&str]) {
+    let out = lib.parent().unwrap().join("out");
+    let o = generate(
+        &out,
+        blender,
+        &["-n", "1", "--materials", lib.to_str().unwrap()],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    for w in want {
+        assert!(err.contains(w), "`{w}` not in:\n{}", text(&o));
+    }
+    assert!(err.contains("\nhint: "), "{}", text(&o));
+    let pngs = walk(&out)
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "png"));
+    assert_eq!(pngs.count(), 0, "an image was rendered: {}", text(&o));
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// A PNG claiming `w` x `h` pixels: its header, the start of its pixel data, its end (the
+/// pixels themselves are not there: the claim alone must be refused).
+fn png_header(w: u32, h: u32) -> Vec<u8> {
+    let chunk = |kind: &[u8], data: &[u8]| {
+        let mut body = kind.to_vec();
+        body.extend(data);
+        let mut out = (data.len() as u32).to_be_bytes().to_vec();
+        out.extend(&body);
+        out.extend(crc32(&body).to_be_bytes());
+        out
+    };
+    let mut ihdr = w.to_be_bytes().to_vec();
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, 2, 0, 0, 0]);
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    out.extend(chunk(b"IHDR", &ihdr));
+    out.extend(chunk(b"IDAT", &[0x78, 0x9c, 0x63, 0x60]));
+    out.extend(chunk(b"IEND", &[]));
+    out
+}
+
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xffff_ffffu32;
+    for &b in bytes {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                0xedb8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// Every bad input of the issue is refused before rendering, naming material and file.
+#[test]
+fn bad_user_materials_are_refused_before_rendering() {
+    let Some(blender) = blender_or_skip("bad_user_materials_are_refused_before_rendering") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let fresh = |name: &str| {
+        let d = dir.path().join(name).join("lib");
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    };
+
+    // Checked in Rust before Blender starts: a clash, a link out, a 2 GB `.blend`.
+    let good = fresh("good");
+    make_blend(&blender, &good, "BlueTile", BLUE, "jpg", "ok");
+    let clash = fresh("clash");
+    std::fs::copy(good.join("BlueTile.blend"), clash.join("bricks.blend")).unwrap();
+    refused(&blender, &clash, &["bricks", "already defined"]);
+    let link = fresh("link");
+    std::os::unix::fs::symlink(good.join("BlueTile.blend"), link.join("Linked.blend")).unwrap();
+    refused(
+        &blender,
+        &link,
+        &["`linked`", "link out of the material folder"],
+    );
+    let huge = fresh("huge");
+    let f = std::fs::File::create(huge.join("Huge.blend")).unwrap();
+    std::io::Write::write_all(&mut &f, b"BLENDER-v304").unwrap();
+    f.set_len(2 << 30).unwrap(); // sparse: 2 GB on paper
+    refused(&blender, &huge, &["Huge.blend", "2147483648 bytes"]);
+
+    // Found by inspecting the group in Blender, before any image.
+    let nogroup = fresh("nogroup");
+    make_blend(&blender, &nogroup, "Empty", BLUE, "png", "nogroup");
+    refused(
+        &blender,
+        &nogroup,
+        &["`empty`", "Empty.blend", "node group"],
+    );
+    let input = fresh("input");
+    make_blend(&blender, &input, "Coated", BLUE, "png", "shaderinput");
+    refused(&blender, &input, &["`coated`", "input `Coat`"]);
+    let missing = fresh("missing");
+    make_blend(&blender, &missing, "Gone", BLUE, "png", "ok");
+    std::fs::remove_file(missing.join("textures/Gone_COL_3K.png")).unwrap();
+    refused(
+        &blender,
+        &missing,
+        &["`gone`", "Gone_COL_3K.png", "cannot be read"],
+    );
+    let corrupt = fresh("corrupt");
+    make_blend(&blender, &corrupt, "Broken", BLUE, "jpg", "ok");
+    let jpg = corrupt.join("textures/Broken_COL_3K.jpg");
+    let mut bytes = std::fs::read(&jpg).unwrap();
+    bytes.truncate(bytes.len() / 2);
+    bytes.extend(std::iter::repeat_n(0x55u8, 64));
+    std::fs::write(&jpg, bytes).unwrap();
+    refused(
+        &blender,
+        &corrupt,
+        &["`broken`", "Broken_COL_3K.jpg", "decoding Jpeg"],
+    );
+    let big = fresh("big");
+    make_blend(&blender, &big, "Vast", BLUE, "png", "ok");
+    std::fs::write(
+        big.join("textures/Vast_COL_3K.png"),
+        png_header(30_000, 30_000),
+    )
+    .unwrap();
+    refused(
+        &blender,
+        &big,
+        &["`vast`", "Vast_COL_3K.png", "30000x30000"],
+    );
+    // A texture outside the folder (an absolute path in the `.blend`, or a link out).
+    let outside = fresh("outside");
+    make_blend(&blender, &outside, "Far", BLUE, "png", "ok");
+    let tex = outside.join("textures/Far_COL_3K.png");
+    std::fs::rename(&tex, dir.path().join("Far_COL_3K.png")).unwrap();
+    std::os::unix::fs::symlink(dir.path().join("Far_COL_3K.png"), &tex).unwrap();
+    refused(
+        &blender,
+        &outside,
+        &["`far`", "outside the material folder"],
+    );
+}
