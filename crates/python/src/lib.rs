@@ -443,7 +443,7 @@ fn load_sample<'py>(
         // dataset when its root is known.
         let read_file = |p: &str| {
             if let Some(root) = &root {
-                use clevrtex_scene::dataset::{classify, Kind};
+                use clevrtex_scene::dataset::{classify, read_beneath, Kind, ReadError};
                 if let Kind::Skipped(why) = classify(root, Path::new(p)) {
                     if !why.starts_with("cannot be read") {
                         return Err(value_error(format!(
@@ -452,6 +452,20 @@ fn load_sample<'py>(
                         )));
                     }
                 }
+                // Opened relative to the root's handle: a folder swapped for a link out of
+                // the dataset since `discover` is not read through.
+                return match read_beneath(root, Path::new(p), clevrtex_eval::dataset::MAX_FILE_BYTES) {
+                    Ok(b) => Ok(b),
+                    Err(ReadError::Io(e)) => Err(PyOSError::new_err((
+                        e.raw_os_error().unwrap_or(0),
+                        format!("`{p}` cannot be read: {e}"),
+                        p.to_string(),
+                    ))),
+                    Err(e) => Err(value_error(format!(
+                        "`{p}` {}",
+                        e.to_string().replace("; skipped", "; not read")
+                    ))),
+                };
             }
             clevrtex_eval::dataset::read_file(Path::new(p))
                 .map_err(|e| PyOSError::new_err(e.to_string()))
@@ -503,7 +517,7 @@ fn load_sample<'py>(
 /// (its subclass by errno: `FileNotFoundError`, `PermissionError`) when it cannot be opened.
 #[pyfunction]
 fn read_metadata<'py>(py: Python<'py>, path: &str, root: &str) -> PyResult<Bound<'py, PyBytes>> {
-    use clevrtex_scene::dataset::{classify, read_regular, Kind, ReadError};
+    use clevrtex_scene::dataset::{classify, read_beneath, Kind, ReadError};
     let p = Path::new(path);
     let read = py.allow_threads(|| {
         let root = Path::new(root).canonicalize().map_err(ReadError::Io)?;
@@ -512,7 +526,12 @@ fn read_metadata<'py>(py: Python<'py>, path: &str, root: &str) -> PyResult<Bound
                 return Ok(Err(why.replace("; skipped", "; not read")));
             }
         }
-        read_regular(p, clevrtex_eval::dataset::MAX_METADATA_BYTES).map(Ok)
+        // Opened relative to the root's handle: a folder on the way swapped for a link out of
+        // the dataset is not read through.
+        match read_beneath(&root, p, clevrtex_eval::dataset::MAX_METADATA_BYTES) {
+            Err(ReadError::LeadsOut) => Ok(Err(ReadError::LeadsOut.to_string())),
+            r => r.map(Ok),
+        }
     });
     match read {
         Ok(Ok(bytes)) => Ok(PyBytes::new(py, &bytes)),
@@ -526,6 +545,7 @@ fn read_metadata<'py>(py: Python<'py>, path: &str, root: &str) -> PyResult<Bound
         Err(ReadError::NotRegular) => Err(value_error(format!(
             "`{path}` is not a regular file (a FIFO, socket or device); not read"
         ))),
+        Err(e @ ReadError::LeadsOut) => Err(value_error(format!("`{path}` {e}"))),
         Err(ReadError::TooLarge { len, cap }) => Err(value_error(format!(
             "`{path}` {}, over the {cap} bytes read of a sample's metadata; not read",
             len.map_or("grew".to_string(), |n| format!("is {n} bytes"))
