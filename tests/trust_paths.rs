@@ -568,13 +568,28 @@ fn writers_write_nothing_through_a_link_planted_at_a_temporary_name() {
     plant(dir.path().join("v.json.clevrtex-tmp"));
     let runs: [Vec<&std::ffi::OsStr>; 3] = [
         vec!["export".as_ref(), data.as_os_str(), wds.as_os_str()],
-        vec!["preview".as_ref(), "--out".as_ref(), sheet.as_os_str(), data.as_os_str()],
-        vec!["verify".as_ref(), "--json".as_ref(), json.as_os_str(), data.as_os_str()],
+        vec![
+            "preview".as_ref(),
+            "--out".as_ref(),
+            sheet.as_os_str(),
+            data.as_os_str(),
+        ],
+        vec![
+            "verify".as_ref(),
+            "--json".as_ref(),
+            json.as_os_str(),
+            data.as_os_str(),
+        ],
     ];
     for args in runs {
         let o = clevrtex().args(&args).output().unwrap();
         assert!(o.status.code().is_some(), "{args:?}: {}", text(&o));
-        assert_eq!(std::fs::read(&victim).unwrap(), b"theirs", "{args:?}: {}", text(&o));
+        assert_eq!(
+            std::fs::read(&victim).unwrap(),
+            b"theirs",
+            "{args:?}: {}",
+            text(&o)
+        );
     }
     assert_eq!(std::fs::read_dir(&outside).unwrap().count(), 1);
     for link in &planted {

@@ -179,7 +179,8 @@ pub fn run(args: Args) -> CmdResult {
     );
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&reports)? + "\n";
-        clevrtex_scene::atomic::write(path, text.as_bytes()).with_context(|| format!("cannot write `{}`", path.display()))?;
+        clevrtex_scene::atomic::write(path, text.as_bytes())
+            .with_context(|| format!("cannot write `{}`", path.display()))?;
     }
     if args.remove_broken {
         let mut removed = 0;

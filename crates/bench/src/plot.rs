@@ -41,8 +41,11 @@ pub fn write(
     }
     let img = image::RgbImage::from_raw(W, H, buf).context("plot buffer has the wrong size")?;
     let mut bytes = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
-        .context("cannot encode the PNG plot")?;
+    img.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )
+    .context("cannot encode the PNG plot")?;
     clevrtex_scene::atomic::write(&png, &bytes).with_context(|| {
         format!(
             "cannot write `{}`\nhint: check that the folder is writable",

@@ -454,7 +454,11 @@ fn load_sample<'py>(
                 }
                 // Opened relative to the root's handle: a folder swapped for a link out of
                 // the dataset since `discover` is not read through.
-                return match read_beneath(root, Path::new(p), clevrtex_eval::dataset::MAX_FILE_BYTES) {
+                return match read_beneath(
+                    root,
+                    Path::new(p),
+                    clevrtex_eval::dataset::MAX_FILE_BYTES,
+                ) {
                     Ok(b) => Ok(b),
                     Err(ReadError::Io(e)) => Err(PyOSError::new_err((
                         e.raw_os_error().unwrap_or(0),

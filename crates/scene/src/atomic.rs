@@ -193,7 +193,10 @@ impl AtomicFile {
     /// followed), then sync the folder. On error the temporary is removed and the final path
     /// is as it was.
     pub fn commit(mut self) -> std::io::Result<()> {
-        let file = self.file.take().ok_or_else(|| std::io::Error::other("committed twice"))?;
+        let file = self
+            .file
+            .take()
+            .ok_or_else(|| std::io::Error::other("committed twice"))?;
         file.sync_all()?;
         drop(file);
         std::fs::rename(&self.tmp, &self.path)?;
@@ -280,7 +283,9 @@ mod tests {
         let victim = outside.path().join("victim");
         std::fs::write(&victim, b"theirs").unwrap();
         let out = dir.path().join("a.tar");
-        let planted = dir.path().join(format!("a.tar.{}{TMP_SUFFIX}", owner_tag()));
+        let planted = dir
+            .path()
+            .join(format!("a.tar.{}{TMP_SUFFIX}", owner_tag()));
         std::os::unix::fs::symlink(&victim, &planted).unwrap();
         write(&out, b"ours").unwrap();
         assert_eq!(std::fs::read(&victim).unwrap(), b"theirs");
@@ -296,7 +301,9 @@ mod tests {
     #[test]
     fn errors_and_drops_leave_no_temporary_and_remove_nothing_else() {
         let dir = tempfile::tempdir().unwrap();
-        let theirs = dir.path().join(format!("x.json.{}{TMP_SUFFIX}", owner_tag()));
+        let theirs = dir
+            .path()
+            .join(format!("x.json.{}{TMP_SUFFIX}", owner_tag()));
         std::fs::write(&theirs, b"user data").unwrap();
         // The final path is a folder: the rename fails, the temporary goes, theirs stays.
         std::fs::create_dir(dir.path().join("x.json")).unwrap();
