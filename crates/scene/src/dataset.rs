@@ -1200,7 +1200,10 @@ mod tests {
         let got = read_beneath(&ds.root, &s.metadata_path(), 100);
         assert!(matches!(got, Err(ReadError::LeadsOut)), "{got:?}");
         let dotdot = ds.root.join("..").join("x");
-        assert!(matches!(read_beneath(&ds.root, &dotdot, 100), Err(ReadError::LeadsOut)));
+        assert!(matches!(
+            read_beneath(&ds.root, &dotdot, 100),
+            Err(ReadError::LeadsOut)
+        ));
         // Given through a link to the root (the command line's path), the root is found.
         let alias_dir = tempfile::tempdir().unwrap();
         let alias = alias_dir.path().join("alias");
