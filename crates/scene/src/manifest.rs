@@ -97,9 +97,8 @@ pub fn render_differences(a: &serde_json::Value, b: &serde_json::Value) -> Vec<S
         b.as_object().unwrap_or(&empty),
     );
     let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
-    let show = |v: Option<&serde_json::Value>| {
-        v.map_or("(none)".to_string(), |v| crate::dataset::short(v))
-    };
+    let show =
+        |v: Option<&serde_json::Value>| v.map_or("(none)".to_string(), crate::dataset::short);
     keys.into_iter()
         .filter(|k| a.get(*k) != b.get(*k))
         .take(20)
