@@ -127,7 +127,7 @@ impl Plan {
             let differ = m.settings_differ(&run);
             if !differ.is_empty() {
                 return Err(RenderError::Refused(format!(
-                    "`{}` was written by a run of indices {}..{} with other settings than this one ({}): rendering here would mix two datasets under one manifest\nhint: pass another `--out` for these settings, or rerun with the settings of that manifest (its `command`) to resume or repair it",
+                    "`{}` was written by a run of indices {}..{} with other settings (that run vs this one: {}): rendering here would mix two datasets under one manifest\nhint: pass another `--out` for these settings, or rerun with the settings of that manifest (its `command`) to resume or repair it",
                     path.display(),
                     m.start,
                     m.end,
