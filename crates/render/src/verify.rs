@@ -920,7 +920,7 @@ pub fn remove_broken_with(
         dataset::open_dir_beneath(&report.roots, dir).map_err(|e| {
             if dataset::is_leads_out(&e) {
                 std::io::Error::other(format!(
-                    "`{}` leads out of the dataset through a symbolic link (swapped since it was checked?); nothing removed there",
+                    "`{}` leads out of the dataset through a symbolic link (swapped since it was checked?); nothing removed there\nhint: check what replaced that folder, then run `clevrtex verify --remove-broken` again",
                     dir.display()
                 ))
             } else {
