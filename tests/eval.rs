@@ -1358,3 +1358,53 @@ fn eval_refuses_ids_past_the_objects_and_names_predictions_too_deep() {
         text(&out)
     );
 }
+
+/// Issue 34: `eval --json/--csv` wrote `<FILE>.tmp` (a generic name) through whatever was
+/// there and removed it on a write error, deleting a user's own file of that name, and wrote
+/// through a link planted there. With the one atomic writer, a user's `<FILE>.tmp` and a link
+/// there are left as they are, on success and on error.
+#[test]
+fn eval_leaves_a_users_file_and_a_link_at_the_old_temporary_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let outside = dir.path().join("victim");
+    std::fs::write(&outside, b"theirs").unwrap();
+    let json = dir.path().join("r.json");
+    let csv = dir.path().join("r.csv");
+    let user = dir.path().join("r.json.tmp");
+    std::fs::write(&user, b"user data").unwrap();
+    std::os::unix::fs::symlink(&outside, dir.path().join("r.csv.tmp")).unwrap();
+    let preds = data("eval/preds/png");
+    let eval = |json: &Path| {
+        run(&[
+            "eval",
+            s(&preds),
+            s(&gt()),
+            "--split",
+            "all",
+            "--json",
+            s(json),
+            "--csv",
+            s(&csv),
+        ])
+    };
+    let out = eval(&json);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(json.symlink_metadata().unwrap().is_file());
+    assert!(csv.symlink_metadata().unwrap().is_file());
+    // FILE is a folder: the write fails (exit 1), the user's file of the old name stays.
+    let folder = dir.path().join("d.json");
+    std::fs::create_dir(&folder).unwrap();
+    let user2 = dir.path().join("d.json.tmp");
+    std::fs::write(&user2, b"user data").unwrap();
+    let out = eval(&folder);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert_eq!(std::fs::read(&user).unwrap(), b"user data");
+    assert_eq!(std::fs::read(&user2).unwrap(), b"user data");
+    assert_eq!(std::fs::read(&outside).unwrap(), b"theirs");
+    let left: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".clevrtex-tmp"))
+        .collect();
+    assert!(left.is_empty(), "temporaries left: {left:?}");
+}

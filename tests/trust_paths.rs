@@ -526,3 +526,81 @@ fn generate_escapes_blenders_error_reply() {
     assert!(t.contains(r"\u{1b}]52;c;ZXZpbA==\u{7}"), "{t}");
     assert!(!t.contains('\x1b') && !t.contains('\x07'), "{t:?}");
 }
+
+/// Issue 34: writers other than `generate` followed a link planted at their temporary name
+/// (`export` wrote its tar and `index.json` through it, `preview` and `verify --json` too, and
+/// left the output a link out). Every writer now writes through the one atomic writer: unique
+/// temporary names, created exclusively without following a link; the planted links are
+/// neither written through nor removed, and each output is a regular file.
+#[test]
+fn writers_write_nothing_through_a_link_planted_at_a_temporary_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    for i in 0..2 {
+        hand_png_sample(&data, "clevr", i, (16, 12), (16, 12));
+        // The keys `export` takes the passes from.
+        let stem = format!("CLEVRTEX_clevr_{i:06}");
+        let meta = data.join(format!("clevrtex_clevr/0/{stem}.json"));
+        let mut m: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&meta).unwrap()).unwrap();
+        m["image_filename"] = format!("{stem}.png").into();
+        m["mask_filename"] = format!("{stem}_flat.png").into();
+        std::fs::write(&meta, m.to_string()).unwrap();
+    }
+    let outside = dir.path().join("outside");
+    std::fs::create_dir(&outside).unwrap();
+    let victim = outside.join("victim");
+    std::fs::write(&victim, b"theirs").unwrap();
+    let wds = dir.path().join("wds");
+    std::fs::create_dir(&wds).unwrap();
+    let mut planted = Vec::new();
+    let mut plant = |link: PathBuf| {
+        std::os::unix::fs::symlink(&victim, &link).unwrap();
+        planted.push(link);
+    };
+    for split in ["train", "val", "test"] {
+        plant(wds.join(format!("clevr-{split}-000000.tar.clevrtex-tmp")));
+    }
+    plant(wds.join("index.json.clevrtex-tmp"));
+    let sheet = dir.path().join("sheet.png");
+    plant(dir.path().join("sheet.png.clevrtex-tmp"));
+    let json = dir.path().join("v.json");
+    plant(dir.path().join("v.json.clevrtex-tmp"));
+    let runs: [Vec<&std::ffi::OsStr>; 3] = [
+        vec!["export".as_ref(), data.as_os_str(), wds.as_os_str()],
+        vec![
+            "preview".as_ref(),
+            "--out".as_ref(),
+            sheet.as_os_str(),
+            data.as_os_str(),
+        ],
+        vec![
+            "verify".as_ref(),
+            "--json".as_ref(),
+            json.as_os_str(),
+            data.as_os_str(),
+        ],
+    ];
+    for args in runs {
+        let o = clevrtex().args(&args).output().unwrap();
+        assert!(o.status.code().is_some(), "{args:?}: {}", text(&o));
+        assert_eq!(
+            std::fs::read(&victim).unwrap(),
+            b"theirs",
+            "{args:?}: {}",
+            text(&o)
+        );
+    }
+    assert_eq!(std::fs::read_dir(&outside).unwrap().count(), 1);
+    for link in &planted {
+        assert!(
+            link.symlink_metadata().unwrap().file_type().is_symlink(),
+            "`{}` was removed",
+            link.display()
+        );
+    }
+    for out in [wds.join("index.json"), sheet, json] {
+        let m = out.symlink_metadata().unwrap();
+        assert!(m.is_file(), "`{}` is not a regular file", out.display());
+    }
+}

@@ -106,21 +106,15 @@ fn parse_metric(s: &str) -> Result<MetricSel, String> {
     })
 }
 
-/// Write `text` to `path` through a temporary file, so no partial file is left behind.
+/// Write `text` to `path` with the one atomic writer ([`clevrtex_scene::atomic`]): a unique
+/// temporary, never a link followed, no partial file or temporary left behind.
 fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, text)
-        .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|e| {
-            // A failed rename (e.g. FILE is a directory) must not leave the temporary behind.
-            let _ = std::fs::remove_file(&tmp);
-            anyhow::anyhow!(
-                "cannot write `{}`: {e}\nhint: check that FILE is not a directory and that its directory exists and is writable",
-                path.display()
-            )
-        })
+    clevrtex_scene::atomic::write(path, text.as_bytes()).map_err(|e| {
+        anyhow::anyhow!(
+            "cannot write `{}`: {e}\nhint: check that FILE is not a directory and that its directory exists and is writable",
+            path.display()
+        )
+    })
 }
 
 /// Run `clevrtex eval`.

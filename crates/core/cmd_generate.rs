@@ -239,6 +239,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
             variant: variant.clone(),
             seed: args.seed,
             config_hash: manifest::hash_hex(format!("{config:?}").as_bytes()),
+            render: serde_json::to_value(&config.base.render).ok(),
             start: args.start,
             end,
             total,

@@ -215,8 +215,8 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
     }
     let cells: Vec<PathBuf> = names.iter().map(|n| cache.join(key(n))).collect();
     let img = sheet::stitch(&cells, a.cols).context("cannot assemble the sheet")?;
-    img.save(&a.out)
-        .with_context(|| format!("cannot write `{}`", a.out.display()))?;
+    // The preview sheet's writer: PNG through the one atomic writer.
+    clevrtex_report::preview::save(&img, &a.out)?;
     eprintln!("wrote {}", a.out.display());
     Ok(OK)
 }

@@ -1,6 +1,5 @@
 //! `clevrtex sample`: write one scene file per image, without rendering.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
@@ -191,20 +190,12 @@ pub fn run(args: Args) -> CmdResult {
 /// Indices sampled and written per batch (bounds memory for any `-n`).
 const SAMPLE_CHUNK: usize = 1 << 16;
 
-/// Write one scene file atomically: to a temporary name in the same folder, then rename.
+/// Write one scene file with the one atomic writer ([`clevrtex_scene::atomic`]).
 fn write_scene(out: &Path, variant: &str, scene: &clevrtex_scene::SceneFile) -> anyhow::Result<()> {
     let dir = sample_dir(out, variant, scene.index);
     let path = dir.join(format!("{}.json", scene.stem));
-    let tmp = dir.join(format!(".{}.json.tmp{}", scene.stem, std::process::id()));
     let text = clevrtex_scene::to_pretty_json(scene).context("cannot serialise scene")?;
-    let write = || -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(text.as_bytes())?;
-        drop(f);
-        std::fs::rename(&tmp, &path)
-    };
-    write().map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
+    clevrtex_scene::atomic::write(&path, text.as_bytes()).map_err(|e| {
         anyhow::anyhow!(
             "cannot write `{}`: {e}\nhint: check free space and permissions under `--out`",
             path.display()

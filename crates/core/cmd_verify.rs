@@ -194,9 +194,7 @@ pub fn run(args: Args) -> CmdResult {
     );
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&reports)? + "\n";
-        let tmp = path.with_extension("json.clevrtex-tmp");
-        std::fs::write(&tmp, text)
-            .and_then(|()| std::fs::rename(&tmp, path))
+        clevrtex_scene::atomic::write(path, text.as_bytes())
             .with_context(|| format!("cannot write `{}`", path.display()))?;
     }
     if args.remove_broken {

@@ -151,6 +151,9 @@ pub(crate) fn run_jobs(
             )
             .map_err(|e| anyhow::anyhow!(e))?;
             // The lock made the variant folder (`layout::make_dir`: not a link out of `--out`).
+            // Under the lock, before anything is written: a folder of a run with other
+            // settings is refused.
+            plan.check_settings(&args.out, args.overwrite)?;
             plan.write_plan(&args.out)?;
             Some(lock)
         }
@@ -401,14 +404,14 @@ fn check_output_writable(out: &Path) -> anyhow::Result<()> {
             out.display()
         )
     })?;
-    let probe = out.join(format!(".clevrtex-write-test-{}", std::process::id()));
-    std::fs::write(&probe, b"").map_err(|e| {
+    // A temporary of the one atomic writer, dropped unrenamed: nothing is left, and nothing
+    // planted there is written through or removed.
+    clevrtex_scene::atomic::AtomicFile::create(&out.join(".clevrtex-write-test")).map_err(|e| {
         anyhow::anyhow!(
             "cannot write in output folder `{}`: {e}\n{hint}",
             out.display()
         )
     })?;
-    let _ = std::fs::remove_file(probe);
     Ok(())
 }
 

@@ -25,7 +25,8 @@ pub fn path(out: &Path) -> PathBuf {
 /// Write `rows` to [`path`]`(out)`.
 pub fn save(rows: &[Row], out: &Path) -> anyhow::Result<()> {
     let csv = path(out);
-    std::fs::write(&csv, to_csv(rows)).with_context(|| format!("cannot write `{}`", csv.display()))
+    clevrtex_scene::atomic::write(&csv, to_csv(rows).as_bytes())
+        .with_context(|| format!("cannot write `{}`", csv.display()))
 }
 
 /// The rows of an earlier run with output folder `out`.

@@ -244,7 +244,7 @@ fn render_into(
         let _ = std::fs::remove_file(dir.join(f));
     }
     let path = dir.join("scene.json");
-    std::fs::write(&path, clevrtex_scene::to_pretty_json(scene)?)
+    clevrtex_scene::atomic::write(&path, clevrtex_scene::to_pretty_json(scene)?.as_bytes())
         .with_context(|| format!("cannot write `{}`", path.display()))?;
     let started = Instant::now();
     let timeout = timeout_for(scene);

@@ -40,7 +40,13 @@ pub fn write(
             .map_err(|e| anyhow::anyhow!("cannot draw the PNG plot: {e}"))?;
     }
     let img = image::RgbImage::from_raw(W, H, buf).context("plot buffer has the wrong size")?;
-    img.save(&png).with_context(|| {
+    let mut bytes = Vec::new();
+    img.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )
+    .context("cannot encode the PNG plot")?;
+    clevrtex_scene::atomic::write(&png, &bytes).with_context(|| {
         format!(
             "cannot write `{}`\nhint: check that the folder is writable",
             png.display()

@@ -21,6 +21,20 @@ pub struct GtSample {
     pub mask: PathBuf,
     /// The metadata.
     pub meta: PathBuf,
+    /// The dataset's canonical root: the files above are opened relative to it
+    /// ([`GtSample::read`]), so a folder swapped for a link out of it is not read through.
+    pub root: PathBuf,
+}
+
+impl GtSample {
+    /// The bytes of `path` (one of this sample's files), at most `cap`, opened relative to the
+    /// dataset's root ([`clevrtex_scene::dataset::read_beneath`]).
+    pub fn read(&self, path: &Path, cap: u64) -> Result<Vec<u8>, EvalError> {
+        clevrtex_scene::dataset::read_beneath(&self.root, path, cap).map_err(|why| EvalError::Io {
+            path: path.to_path_buf(),
+            cause: why.into_io(),
+        })
+    }
 }
 
 /// Which samples to evaluate, by position in the index sequence.
@@ -286,6 +300,7 @@ pub fn discover_gt(
             image,
             mask,
             meta,
+            root: ds.root.clone(),
         });
     }
     Ok((variant, samples))

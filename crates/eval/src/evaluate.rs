@@ -291,8 +291,6 @@ impl Report {
     }
 }
 
-use crate::dataset::read_file;
-
 const GT_HINT: &str = "the ground truth is damaged: regenerate or re-download this sample";
 
 /// Most bootstrap resamples (each costs one pass over the images and 80 bytes).
@@ -519,8 +517,8 @@ fn score_sample(
     by_colour: bool,
     opts: &Options,
 ) -> Result<ImageResult, EvalError> {
-    let mask_bytes = read_file(&s.mask)?;
-    let meta_bytes = crate::dataset::read_metadata(&s.meta)?;
+    let mask_bytes = s.read(&s.mask, crate::dataset::MAX_FILE_BYTES)?;
+    let meta_bytes = s.read(&s.meta, crate::dataset::MAX_METADATA_BYTES)?;
     gt_png_size(&mask_bytes, &s.mask)?;
     if let Some(problem) =
         clevrtex_scene::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
@@ -600,7 +598,7 @@ fn score_sample(
     // The true image is needed only for MSE.
     let truth_rgb = match &pred.recon {
         Some(_) => {
-            let img_bytes = read_file(&s.image)?;
+            let img_bytes = s.read(&s.image, crate::dataset::MAX_FILE_BYTES)?;
             gt_hasher_input.push(xxh3_64(&img_bytes));
             gt_png_size(&img_bytes, &s.image)?;
             let img = read::png_rgb(&img_bytes).map_err(|r| corrupt(&s.image, r, GT_HINT))?;

@@ -435,7 +435,7 @@ fn read_error(path: &str, e: clevrtex_scene::dataset::ReadError) -> PyErr {
 /// a regular file only (a FIFO never blocks), at most `cap` bytes, and, with `root` (the
 /// dataset's canonical folder), not a link swapped in that leads out of the dataset.
 fn read_checked(root: Option<&Path>, p: &str, cap: u64) -> PyResult<Vec<u8>> {
-    use clevrtex_scene::dataset::{classify, read_regular, Kind};
+    use clevrtex_scene::dataset::{classify, read_beneath, read_regular, Kind};
     if let Some(root) = root {
         if let Kind::Skipped(why) = classify(root, Path::new(p)) {
             if !why.starts_with("cannot be read") {
@@ -446,7 +446,13 @@ fn read_checked(root: Option<&Path>, p: &str, cap: u64) -> PyResult<Vec<u8>> {
             }
         }
     }
-    read_regular(Path::new(p), cap).map_err(|e| read_error(p, e))
+    match root {
+        // Opened relative to the root's handle: a folder swapped for a link out of the dataset
+        // since `discover` is not read through.
+        Some(root) => read_beneath(root, Path::new(p), cap),
+        None => read_regular(Path::new(p), cap),
+    }
+    .map_err(|e| read_error(p, e))
 }
 
 /// The dataset's folder, resolved (links inside it are followed, none out of it).
@@ -772,7 +778,7 @@ fn variant_names(
 /// (its subclass by errno: `FileNotFoundError`, `PermissionError`) when it cannot be opened.
 #[pyfunction]
 fn read_metadata<'py>(py: Python<'py>, path: &str, root: &str) -> PyResult<Bound<'py, PyBytes>> {
-    use clevrtex_scene::dataset::{classify, read_regular, Kind, ReadError};
+    use clevrtex_scene::dataset::{classify, read_beneath, Kind, ReadError};
     let p = Path::new(path);
     let read = py.allow_threads(|| {
         let root = Path::new(root).canonicalize().map_err(ReadError::Io)?;
@@ -781,7 +787,12 @@ fn read_metadata<'py>(py: Python<'py>, path: &str, root: &str) -> PyResult<Bound
                 return Ok(Err(why.replace("; skipped", "; not read")));
             }
         }
-        read_regular(p, clevrtex_eval::dataset::MAX_METADATA_BYTES).map(Ok)
+        // Opened relative to the root's handle: a folder on the way swapped for a link out of
+        // the dataset is not read through.
+        match read_beneath(&root, p, clevrtex_eval::dataset::MAX_METADATA_BYTES) {
+            Err(ReadError::LeadsOut) => Ok(Err(ReadError::LeadsOut.to_string())),
+            r => r.map(Ok),
+        }
     });
     match read {
         Ok(Ok(bytes)) => Ok(PyBytes::new(py, &bytes)),
@@ -795,6 +806,7 @@ fn read_metadata<'py>(py: Python<'py>, path: &str, root: &str) -> PyResult<Bound
         Err(ReadError::NotRegular) => Err(value_error(format!(
             "`{path}` is not a regular file (a FIFO, socket or device); not read"
         ))),
+        Err(e @ ReadError::LeadsOut) => Err(value_error(format!("`{path}` {e}"))),
         Err(ReadError::TooLarge { len, cap }) => Err(value_error(format!(
             "`{path}` {}, over the {cap} bytes read of a sample's metadata; not read",
             len.map_or("grew".to_string(), |n| format!("is {n} bytes"))

@@ -460,6 +460,26 @@ def test_dataset_reads_untrusted_samples_within_bounds(tmp_path):
     assert ds[3][0] == 3
 
 
+def test_dataset_reads_nothing_through_a_bucket_swapped_for_a_link(tmp_path):
+    """Issue 34: a bucket folder swapped for a link out of the dataset after the `Dataset` was
+    made was read through (only a sample's own file was checked for a link). Files are now
+    opened relative to a handle on the dataset's root, so the canary is never read."""
+    import shutil
+
+    gt = tmp_path / "gt"
+    shutil.copytree(GT, gt)
+    ds = clevrtex.Dataset(str(gt), "vbg", split="all")
+    assert ds[0][0] == 0
+    bucket = gt / "clevrtex_vbg" / "0"
+    canary = tmp_path / "canary"
+    shutil.copytree(bucket, canary)
+    os.rename(bucket, gt / "clevrtex_vbg" / "moved")
+    os.symlink(canary, bucket)
+    for i in range(2):
+        with pytest.raises(ValueError, match=r"through a symbolic link leading out of the dataset; not followed"):
+            ds[i]
+
+
 def test_hostile_arrays_and_metadata_are_named(tmp_path):
     """Issue 21's second hostile pass (repro-06, 07, 08): non-numeric arrays, metadata values
     that cannot tag a statistic, and metadata `objects` of the wrong type raise ValueError

@@ -11,13 +11,10 @@
 //! can say so.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::Write;
-use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 
 use crate::error::{RenderError, Result};
 use crate::job::Job;
-use crate::output;
 
 /// A run's handle on its ledger file.
 #[derive(Debug)]
@@ -115,7 +112,6 @@ impl Ledger {
     ) -> std::io::Result<()> {
         let dir = self.path.parent().unwrap_or(Path::new("."));
         std::fs::create_dir_all(dir)?;
-        let name = self.path.file_name().unwrap_or_default().to_string_lossy();
         let lock =
             crate::run_lock::open_lock_file(&self.lock_path()).map_err(std::io::Error::other)?;
         lock.lock()?;
@@ -129,27 +125,8 @@ impl Ledger {
                 _ => Ok(()),
             };
         }
-        let tmp = dir.join(format!(
-            "{name}.{}{}",
-            crate::tmp::owner_tag(),
-            output::TMP_SUFFIX
-        ));
         let body: String = entries.values().map(|l| format!("{l}\n")).collect();
-        let written = std::fs::OpenOptions::new()
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .custom_flags(crate::post::no_follow_no_block())
-            .open(&tmp)
-            .and_then(|mut f| {
-                f.write_all(body.as_bytes())?;
-                f.sync_all()
-            });
-        let renamed = written.and_then(|()| std::fs::rename(&tmp, &self.path));
-        if renamed.is_err() {
-            let _ = std::fs::remove_file(&tmp);
-        }
-        renamed
+        clevrtex_scene::atomic::write(&self.path, body.as_bytes())
     }
 
     /// Record the failure of `job` (replacing an earlier one of the same stem). On error the

@@ -37,25 +37,16 @@ pub fn hash_files(root: &Path, files: &[String]) -> Result<BTreeMap<String, File
 
 /// Writing a manifest (a trait: the type lives in the `scene` crate).
 pub trait WriteManifest {
-    /// Write to `variant_dir/`[`Manifest::name`] through a temporary file and a rename.
+    /// Write to `variant_dir/`[`Manifest::name`] with the one atomic writer
+    /// ([`clevrtex_scene::atomic`]: no temporary is left on error, a full disk included).
     fn write(&self, variant_dir: &Path) -> Result<PathBuf>;
 }
 
 impl WriteManifest for Manifest {
     fn write(&self, variant_dir: &Path) -> Result<PathBuf> {
         let path = variant_dir.join(self.name());
-        let tmp = variant_dir.join(format!(
-            "{}.{}{}",
-            self.name(),
-            crate::tmp::owner_tag(),
-            crate::output::TMP_SUFFIX
-        ));
         let text = serde_json::to_string_pretty(self).expect("manifest serialises") + "\n";
-        crate::post::write_file(&tmp, text.as_bytes())?;
-        std::fs::rename(&tmp, &path).map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            RenderError::write(&path, e)
-        })?;
+        crate::post::write_file(&path, text.as_bytes())?;
         Ok(path)
     }
 }
@@ -102,6 +93,49 @@ impl Plan {
             sample_seconds,
             ..self.run.clone()
         }
+    }
+
+    /// Refuse a run into a folder whose manifests claim some of its indices with other
+    /// settings (seed, passes, render settings, variant config): its samples would
+    /// be skipped as complete and the folder would mix two datasets under one manifest. The
+    /// error names the manifest and each setting that differs, with a hint. With `overwrite`
+    /// the run re-renders every index of its range and shard, so its own manifest (same range
+    /// and shard) is not compared; others still are.
+    pub fn check_settings(&self, out: &Path, overwrite: bool) -> Result<()> {
+        let vdir = self.variant_dir(out);
+        let Ok(root) = crate::dataset::root(&vdir) else {
+            return Ok(());
+        };
+        let Ok(entries) = crate::dataset::list(&root, &vdir) else {
+            return Ok(());
+        };
+        let run = Manifest {
+            passes: self.passes.iter().map(|p| p.name().to_string()).collect(),
+            ..self.run.clone()
+        };
+        for (name, path, kind) in entries {
+            if kind != crate::dataset::Kind::File || !is_manifest_name(&name) {
+                continue;
+            }
+            // An unreadable manifest is `verify`'s to report; it claims nothing here.
+            let Ok(m) = Manifest::read(&path) else {
+                continue;
+            };
+            if !run.overlaps(&m) || (overwrite && m.name() == run.name()) {
+                continue;
+            }
+            let differ = m.settings_differ(&run);
+            if !differ.is_empty() {
+                return Err(RenderError::Refused(format!(
+                    "`{}` was written by a run of indices {}..{} with other settings (that run vs this one: {}): rendering here would mix two datasets under one manifest\nhint: pass another `--out` for these settings, or rerun with the settings of that manifest (its `command`) to resume or repair it",
+                    path.display(),
+                    m.start,
+                    m.end,
+                    differ.iter().map(|d| clevrtex_scene::text::printable(d).into_owned()).collect::<Vec<_>>().join(", ")
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// Write the run's plan into the (existing) variant folder before the first image: its

@@ -4,7 +4,10 @@
 //! Each file is written under a temporary name and renamed once every file of the sample
 //! is ready, metadata last; a sample is complete only when all its files exist.
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
+
+use clevrtex_scene::atomic::AtomicFile;
 
 use clevrtex_scene::layout::{exr_files, legacy_exr_files, metadata_file, pass_file};
 use clevrtex_scene::Pass;
@@ -60,12 +63,13 @@ pub fn remove_stale_temps(dir: &Path) {
     }
 }
 
-/// Files of one sample being written: each under a temporary name until [`Staged::commit`].
-/// Dropping without committing removes the temporaries, so no partial sample is left.
+/// Files of one sample being written: each an [`AtomicFile`] (a unique temporary) until
+/// [`Staged::commit`]. Dropping without committing removes the temporaries, so no partial
+/// sample is left.
 #[derive(Debug)]
 pub struct Staged {
     dir: PathBuf,
-    files: Vec<(PathBuf, PathBuf)>,
+    files: Vec<AtomicFile>,
 }
 
 impl Staged {
@@ -80,11 +84,15 @@ impl Staged {
         })
     }
 
-    /// Write `bytes` as the future `name`.
+    /// Write `bytes` as the future `name` (synced to disk, so a full disk is reported here).
     pub fn write(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
-        let (tmp, fin) = self.names(name);
-        self.files.push((tmp.clone(), fin));
-        crate::post::write_file(&tmp, bytes)
+        let path = self.dir.join(name);
+        let mut f = AtomicFile::create(&path).map_err(|e| RenderError::write(&path, e))?;
+        f.write_all(bytes)
+            .and_then(|()| f.sync())
+            .map_err(|e| RenderError::write(f.tmp_path(), e))?;
+        self.files.push(f);
+        Ok(())
     }
 
     /// Copy the file `from` as the future `name`.
@@ -100,35 +108,15 @@ impl Staged {
         self.write(name, &bytes)
     }
 
-    fn names(&self, name: &str) -> (PathBuf, PathBuf) {
-        (
-            self.dir
-                .join(format!("{name}.{}{TMP_SUFFIX}", crate::tmp::owner_tag())),
-            self.dir.join(name),
-        )
-    }
-
     /// Rename every temporary to its final name, in the order written (write the metadata
-    /// last: its presence then means everything else is there).
+    /// last: its presence then means everything else is there). On error the temporaries
+    /// not yet renamed are removed.
     pub fn commit(mut self) -> Result<()> {
-        let files = std::mem::take(&mut self.files);
-        for (i, (tmp, fin)) in files.iter().enumerate() {
-            if let Err(e) = std::fs::rename(tmp, fin) {
-                for (t, _) in &files[i..] {
-                    let _ = std::fs::remove_file(t);
-                }
-                return Err(RenderError::write(fin, e));
-            }
+        for f in std::mem::take(&mut self.files) {
+            let path = f.path().to_path_buf();
+            f.commit().map_err(|e| RenderError::write(&path, e))?;
         }
         Ok(())
-    }
-}
-
-impl Drop for Staged {
-    fn drop(&mut self) {
-        for (tmp, _) in &self.files {
-            let _ = std::fs::remove_file(tmp);
-        }
     }
 }
 

@@ -4,7 +4,6 @@
 //! pass table (`clevrtex_scene::passes`), the single source of the numbers written into each
 //! sample's metadata.
 
-use std::io::Write;
 use std::path::Path;
 
 use crate::error::{RenderError, Result};
@@ -370,21 +369,11 @@ pub(crate) fn no_follow_no_block() -> i32 {
     (rustix::fs::OFlags::NOFOLLOW | rustix::fs::OFlags::NONBLOCK).bits() as i32
 }
 
-/// Write bytes to `path` and flush them to disk (so a full disk is reported here, not lost).
-/// A link in the place of `path` is not followed (the open fails), so nothing is written
-/// through a link planted under a temporary's name.
+/// Write bytes as `path` through the one atomic writer ([`clevrtex_scene::atomic::write`]:
+/// a unique temporary, created exclusively without following a link, synced, renamed; no
+/// temporary left on error, a full disk included).
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    use std::os::unix::fs::OpenOptionsExt;
-    let mut f = std::fs::OpenOptions::new()
-        .write(true)
-        .create(true)
-        .truncate(true)
-        .custom_flags(no_follow_no_block())
-        .open(path)
-        .map_err(|e| RenderError::write(path, e))?;
-    f.write_all(bytes)
-        .and_then(|_| f.sync_all())
-        .map_err(|e| RenderError::write(path, e))
+    clevrtex_scene::atomic::write(path, bytes).map_err(|e| RenderError::write(path, e))
 }
 
 /// A decoded PNG: samples as `u16` (8-bit files keep their 0-255 values), row-major,

@@ -232,18 +232,8 @@ impl RunLock {
             command,
         };
         let path = variant_dir.join(&mine);
-        let tmp = variant_dir.join(format!(
-            "{mine}.{}{}",
-            crate::tmp::owner_tag(),
-            crate::output::TMP_SUFFIX
-        ));
         let text = serde_json::to_string_pretty(&holder).expect("lock serialises") + "\n";
-        crate::post::write_file(&tmp, text.as_bytes())
-            .map_err(|e| e.to_string())
-            .and_then(|()| std::fs::rename(&tmp, &path).map_err(|e| io("write", &path, e)))
-            .inspect_err(|_| {
-                let _ = std::fs::remove_file(&tmp);
-            })?;
+        clevrtex_scene::atomic::write(&path, text.as_bytes()).map_err(|e| io("write", &path, e))?;
         drop(guard);
         let (tx, rx) = mpsc::channel::<()>();
         let beat_path = path.clone();

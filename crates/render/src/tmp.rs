@@ -14,14 +14,10 @@ const PREFIXES: [&str; 3] = ["clevrtex-bridge-", "clevrtex-work-", "clevrtex-ble
 /// The ownership file in each folder.
 const OWNER: &str = "owner";
 
-/// Start time of process `pid` (field 22 of `/proc/<pid>/stat`), if it is running.
-fn start_time(pid: u32) -> Option<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    // The command name (field 2) may hold spaces and parentheses: fields resume after the
-    // last `)`, at field 3.
-    let rest = &stat[stat.rfind(')')? + 1..];
-    rest.split_whitespace().nth(19)?.parse().ok()
-}
+use clevrtex_scene::atomic::start_time;
+pub use clevrtex_scene::atomic::{
+    hostname, own_start_time, owner_tag, process_alive, tagged_name_is_stale, HOST_ENV,
+};
 
 /// The `owner` line of this process.
 fn owner_line() -> String {
@@ -99,97 +95,9 @@ fn remove_stale_in(tmp: &Path) -> usize {
     removed
 }
 
-/// Whether process `pid` of this machine, started at `start` (clock ticks since boot, as in
-/// [`owner_tag`]; 0: unknown), is still running.
-pub fn process_alive(pid: u32, start: u64) -> bool {
-    start_time(pid).is_some_and(|s| start == 0 || s == start)
-}
-
-/// Start time of this process (clock ticks since boot; 0 where unknown).
-pub fn own_start_time() -> u64 {
-    start_time(std::process::id()).unwrap_or(0)
-}
-
-/// The variable that names this process's host in owner tags and range locks instead of the
-/// machine's name. The Kubernetes recipe sets it to `<job>-<completion index>`, so that a pod
-/// restarted for the same index (a new pod name, hence a new host name) knows a killed pod's
-/// temporaries and lock in the shared output folder as its own host's, and finds them stale
-/// when their pid and start time are not running.
-pub const HOST_ENV: &str = "CLEVRTEX_HOST";
-
-/// The host name of owner tags and range locks: `$CLEVRTEX_HOST` when set, else this
-/// machine's name (`/proc/sys/kernel/hostname`).
-pub fn hostname() -> String {
-    static HOST: std::sync::OnceLock<String> = std::sync::OnceLock::new();
-    HOST.get_or_init(|| {
-        host_name(
-            std::env::var(HOST_ENV).ok(),
-            std::fs::read_to_string("/proc/sys/kernel/hostname")
-                .or_else(|_| std::fs::read_to_string("/etc/hostname"))
-                .ok(),
-        )
-    })
-    .clone()
-}
-
-/// [`hostname`] from the variable's value and the machine's name: the first non-empty one,
-/// as one tag-safe word (ASCII letters, digits and `-`; anything else becomes `_`, so a value
-/// never adds a `.` to a tag or a `/` to a path).
-fn host_name(var: Option<String>, machine: Option<String>) -> String {
-    [var, machine]
-        .into_iter()
-        .flatten()
-        .map(|h| h.trim().to_string())
-        .find(|h| !h.is_empty())
-        .unwrap_or_else(|| "localhost".into())
-        .replace(|c: char| !(c.is_ascii_alphanumeric() || c == '-'), "_")
-}
-
-/// `<host>.<pid>.<start time>` of this process: put in the names of temporary files in shared
-/// output folders, so a run can tell its own and other live runs' files (SLURM tasks or
-/// Kubernetes pods writing into one folder) from those a killed run left.
-pub fn owner_tag() -> String {
-    static TAG: std::sync::OnceLock<String> = std::sync::OnceLock::new();
-    TAG.get_or_init(|| {
-        let pid = std::process::id();
-        format!("{}.{pid}.{}", hostname(), start_time(pid).unwrap_or(0))
-    })
-    .clone()
-}
-
-/// Whether a file name carrying an [`owner_tag`] (`<anything>.<host>.<pid>.<start>` before
-/// its suffix) belongs to a process that is gone. Files of another machine are never judged
-/// stale (their owner may be running there); names without a tag (older versions) are.
-pub fn tagged_name_is_stale(stem: &str) -> bool {
-    let mut parts = stem.rsplitn(4, '.');
-    let (Some(start), Some(pid), Some(host)) = (parts.next(), parts.next(), parts.next()) else {
-        return true;
-    };
-    let (Ok(start), Ok(pid)) = (start.parse::<u64>(), pid.parse::<u32>()) else {
-        return true;
-    };
-    if host != hostname() {
-        return false;
-    }
-    !start_time(pid).is_some_and(|s| start == 0 || s == start)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_host_variable_names_the_host_as_one_tag_safe_word() {
-        let m = Some("node-7\n".to_string());
-        assert_eq!(host_name(None, m.clone()), "node-7");
-        assert_eq!(
-            host_name(Some("gen-full-3".into()), m.clone()),
-            "gen-full-3"
-        );
-        assert_eq!(host_name(Some("  ".into()), m.clone()), "node-7");
-        assert_eq!(host_name(Some("../a.b/c".into()), m), "___a_b_c");
-        assert_eq!(host_name(None, None), "localhost");
-    }
 
     #[test]
     fn our_own_folder_is_alive_and_a_dead_owners_is_stale() {
@@ -236,15 +144,5 @@ mod tests {
         assert!(!dead.exists());
         assert!(link.symlink_metadata().is_ok() && target.join(OWNER).exists());
         assert_eq!(theirs.exists(), foreign, "another user's folder is kept");
-    }
-
-    #[test]
-    fn owner_tags_tell_live_dead_and_foreign_owners() {
-        let me = format!("x.png.{}", owner_tag());
-        assert!(!tagged_name_is_stale(&me));
-        let dead = format!("x.png.{}.4194303.1", hostname());
-        assert!(tagged_name_is_stale(&dead));
-        assert!(!tagged_name_is_stale("x.png.some-other-host.4194303.1"));
-        assert!(tagged_name_is_stale("x.png"));
     }
 }

@@ -101,6 +101,10 @@ pub struct VariantReport {
     /// different contents is a manifest problem. Left out of the JSON when empty.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub user_materials: BTreeMap<String, clevrtex_scene::manifest::UserMaterial>,
+    /// The canonical roots of the datasets the variant was found in: what every delete of
+    /// [`remove_broken`] is made relative to.
+    #[serde(skip)]
+    pub roots: Vec<PathBuf>,
 }
 
 impl VariantReport {
@@ -214,6 +218,96 @@ fn with_out(command: &[String], out: &Path) -> Vec<String> {
     v
 }
 
+/// Flags of `clevrtex generate` a rerun command offered by `verify` may carry, with whether
+/// each takes a value. None of them names a program (`--blender` is left out: the rerun
+/// uses the user's own Blender); `--out` is set to the folder verified.
+const RERUN_FLAGS: [(&str, bool); 24] = [
+    ("--variant", true),
+    ("--config", true),
+    ("-n", true),
+    ("--count", true),
+    ("--seed", true),
+    ("--start", true),
+    ("--total", true),
+    ("--shard", true),
+    ("--shard-count", true),
+    ("--width", true),
+    ("--height", true),
+    ("--samples", true),
+    ("--shadow-samples", true),
+    ("--quality", true),
+    ("--max-attempts", true),
+    ("--passes", true),
+    ("--workers", true),
+    ("--device", true),
+    ("--threads", true),
+    ("--timeout", true),
+    ("--startup-timeout", true),
+    ("--retries", true),
+    ("--keep-exr", false),
+    ("--out", true),
+];
+
+/// Whether a flag's value from a manifest may be offered: plain characters of numbers,
+/// names, lists and paths, not empty, not a flag.
+fn safe_value(v: &str) -> bool {
+    !v.is_empty()
+        && !v.starts_with('-')
+        && v.chars()
+            .all(|c| c.is_ascii_alphanumeric() || "._,/:+@%=-".contains(c))
+}
+
+/// The rerun command of a manifest's `command` (untrusted): `clevrtex generate` with only the
+/// flags of [`RERUN_FLAGS`] whose values are [`safe_value`]s, `--out` set to `out`; `None`
+/// when it is not a `generate` command.
+fn rerun_command(command: &[String], out: &Path) -> Option<Vec<String>> {
+    if command.get(1).map(String::as_str) != Some("generate") {
+        return None;
+    }
+    let mut v = vec!["clevrtex".to_string(), "generate".to_string()];
+    let mut it = command.iter().skip(2);
+    while let Some(a) = it.next() {
+        let (flag, inline) = match a.split_once('=') {
+            Some((f, val)) if f.starts_with("--") => (f, Some(val)),
+            _ => (a.as_str(), None),
+        };
+        let Some(&(_, takes)) = RERUN_FLAGS.iter().find(|(f, _)| *f == flag) else {
+            continue;
+        };
+        if !takes {
+            if inline.is_none() {
+                v.push(flag.to_string());
+            }
+            continue;
+        }
+        let value = match inline {
+            Some(val) => Some(val.to_string()),
+            None => it.next().cloned(),
+        };
+        if let Some(val) = value.filter(|val| safe_value(val)) {
+            v.push(flag.to_string());
+            v.push(val);
+        }
+    }
+    Some(with_out(&v, out))
+}
+
+/// `command` with `--shard k/n` (replacing its `--shard` and `--shard-count`).
+fn with_shard(command: &[String], k: u64, n: u64) -> Vec<String> {
+    let mut v = Vec::with_capacity(command.len() + 2);
+    let mut it = command.iter();
+    while let Some(a) = it.next() {
+        if a == "--shard" || a == "--shard-count" {
+            it.next();
+        } else if !(a.starts_with("--shard=") || a.starts_with("--shard-count=")) {
+            v.push(a.clone());
+        }
+    }
+    v.push("--shard".into());
+    v.push(format!("{k}/{n}"));
+    v
+}
+
 fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantReport {
     let mut rep = VariantReport {
         variant: variant.to_string(),
@@ -224,6 +318,9 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
     // Manifests, with the folder their run's rerun writes into.
     let mut manifests: Vec<ReadManifest> = Vec::new();
     for (ds, vd) in dirs {
+        if !rep.roots.contains(&ds.root) {
+            rep.roots.push(ds.root.clone());
+        }
         rep.skipped
             .extend(vd.skipped.iter().map(ToString::to_string));
         rep.skipped.extend(vd.misplaced.iter().map(|p| {
@@ -422,7 +519,14 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
     }
     let checked: Vec<Result<(), Broken>> = singles
         .par_iter()
-        .map(|(index, (stem, f), listed)| check_sample(*index, stem, f, &entries, *listed))
+        .map(|(index, (stem, f), listed)| {
+            // The manifests whose run claims the index: the sample must be what they say.
+            let claims: Vec<&ReadManifest> = manifests
+                .iter()
+                .filter(|(_, m, _)| m.variant == variant && m.covers(*index))
+                .collect();
+            check_sample(*index, stem, f, &entries, *listed, &claims)
+        })
         .collect();
     for c in checked {
         match c {
@@ -437,27 +541,53 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
     // verified (not where the run first wrote).
     // By range, not shard: the command of a shard whose sibling left no manifest is the
     // nearest one to adapt (`--shard`).
+    // A run's command is offered when it remakes something: its own indices (its shard's)
+    // missing or broken, or it did not finish. A shard that left no manifest (it never
+    // started, or a range lock refused it) gets its sibling's command with its own `--shard`,
+    // not the sibling's, which would remake nothing of it.
     let needs = |m: &Manifest| {
-        let within = |i: u64| (m.start..m.end).contains(&i);
         !m.finished
-            || rep.missing.iter().any(|&i| within(i))
-            || rep.broken.iter().any(|b| within(b.index))
-            || (rep.missing_count as usize > rep.missing.len())
+            || rep.missing.iter().any(|&i| m.covers(i))
+            || rep.broken.iter().any(|b| m.covers(b.index))
+            || (rep.missing_count as usize > rep.missing.len()
+                && rep.missing.iter().any(|&i| (m.start..m.end).contains(&i)))
     };
     let mut commands: Vec<Vec<String>> = Vec::new();
-    for (_, m, out) in &manifests {
-        if !needs(m) {
-            continue;
-        }
-        // Only a `clevrtex generate` command is offered, run as `clevrtex` (a manifest is
-        // untrusted: its program name could be anything); others get the plain hint.
-        if m.command.get(1).map(String::as_str) != Some("generate") {
-            continue;
-        }
-        let mut c = with_out(&m.command, out);
-        c[0] = "clevrtex".into();
+    let mut push = |c: Vec<String>| {
         if !commands.contains(&c) {
             commands.push(c);
+        }
+    };
+    let mut shards_seen: BTreeMap<(u64, u64, u64), BTreeSet<u64>> = BTreeMap::new();
+    for (_, m, _) in &manifests {
+        shards_seen
+            .entry((m.start, m.end, m.shard[1]))
+            .or_default()
+            .insert(m.shard[0]);
+    }
+    for (_, m, out) in &manifests {
+        // Only a `clevrtex generate` command is offered, run as `clevrtex`, with only the
+        // flags of a fixed list (a manifest is untrusted: its program name, `--blender` or
+        // anything else that could name a program are never offered); others get the
+        // plain hint.
+        let Some(c) = rerun_command(&m.command, out) else {
+            continue;
+        };
+        if needs(m) {
+            push(c.clone());
+        }
+        let [_, n] = m.shard;
+        if n > 1 {
+            let seen = &shards_seen[&(m.start, m.end, n)];
+            for k in (0..n.min(1000)).filter(|k| !seen.contains(k)).take(16) {
+                let sibling = |i: u64| (m.start..m.end).contains(&i) && i % n == k;
+                let remakes = rep.missing.iter().any(|&i| sibling(i))
+                    || rep.broken.iter().any(|b| sibling(b.index))
+                    || rep.missing_count as usize > rep.missing.len();
+                if remakes {
+                    push(with_shard(&c, k, n));
+                }
+            }
         }
     }
     rep.commands = commands;
@@ -527,6 +657,7 @@ fn check_sample(
     f: &Found,
     entries: &Entries,
     listed_run: bool,
+    claims: &[&ReadManifest],
 ) -> Result<(), Broken> {
     let mut problems = Vec::new();
     let variant_from_stem = layout::parse_stem(&format!("{stem}.json"), ".json")
@@ -613,6 +744,16 @@ fn check_sample(
     // samples, at most `PIXEL_BUDGET` pixels are decoded at once (about 0.8 GB), so that
     // samples declaring the largest size cannot add up to gigabytes on a many-core machine.
     let _budget = PixelBudget::take(u64::from(w) * u64::from(h));
+    for (path, m, _) in claims {
+        let differ = differs_from_manifest(&meta, &view, m);
+        if !differ.is_empty() {
+            problems.push(format!(
+                "was not made by the run of the manifest `{}` that claims it (manifest vs metadata: {})",
+                path.display(),
+                differ.join(", ")
+            ));
+        }
+    }
     if meta["image_index"].as_u64() != Some(index) {
         problems.push(format!(
             "metadata `image_index` is {} (the file name says {index})",
@@ -710,6 +851,39 @@ fn check_sample(
     }
 }
 
+/// What of a sample's metadata differs from the run settings of the manifest `m` that claims
+/// it: variant, seed, passes, each render setting (size, samples, ...), one phrase each.
+fn differs_from_manifest(meta: &Value, view: &MetadataView, m: &Manifest) -> Vec<String> {
+    let mut d = Vec::new();
+    if meta["variant"].as_str() != Some(m.variant.as_str()) {
+        d.push(format!(
+            "variant {} vs {}",
+            m.variant,
+            dataset::short(&meta["variant"])
+        ));
+    }
+    if meta["seed"].as_u64() != Some(m.seed) {
+        d.push(format!(
+            "seed {} vs {}",
+            m.seed,
+            dataset::short(&meta["seed"])
+        ));
+    }
+    if !m.passes.is_empty() {
+        let mut want: Vec<&str> = m.passes.iter().map(String::as_str).collect();
+        let mut have: Vec<&str> = view.passes.iter().map(|p| p.name()).collect();
+        want.sort_unstable();
+        have.sort_unstable();
+        if want != have {
+            d.push(format!("passes {} vs {}", want.join(","), have.join(",")));
+        }
+    }
+    if let Some(render) = &m.render {
+        d.extend(manifest::render_differences(render, &meta["render"]));
+    }
+    d
+}
+
 fn broken(index: u64, stem: &str, f: &Found, problems: Vec<String>) -> Broken {
     Broken {
         index,
@@ -734,10 +908,34 @@ pub struct Removal {
 /// ([`Broken::rerun_remakes`]; metadata first, so an interrupted removal still leaves the
 /// sample incomplete), and the temporary files of dead writers. Only names of the layout
 /// (every pass, the metadata, the EXRs) are removed, in the sample's folder found inside the
-/// dataset, and a link is removed as a link (its target is never touched). Duplicates are only
-/// reported.
+/// dataset, and a link is removed as a link (its target is never touched). Each folder is
+/// opened once relative to its dataset's root ([`dataset::open_dir_beneath`]) and every
+/// delete is made relative to that handle (`unlinkat`): a folder swapped for a link leading
+/// out of the dataset while this runs is refused, nothing outside is deleted. Duplicates are
+/// only reported.
 pub fn remove_broken(report: &VariantReport) -> std::io::Result<Removal> {
+    remove_broken_with(report, &mut |_| {})
+}
+
+/// [`remove_broken`], calling `before_open` with each folder before it is opened (tests swap a
+/// folder for a link there).
+pub fn remove_broken_with(
+    report: &VariantReport,
+    before_open: &mut dyn FnMut(&Path),
+) -> std::io::Result<Removal> {
     let mut out = Removal::default();
+    let open = |dir: &Path| {
+        dataset::open_dir_beneath(&report.roots, dir).map_err(|e| {
+            if dataset::is_leads_out(&e) {
+                std::io::Error::other(format!(
+                    "`{}` leads out of the dataset through a symbolic link (swapped since it was checked?); nothing removed there\nhint: check what replaced that folder, then run `clevrtex verify --remove-broken` again",
+                    dir.display()
+                ))
+            } else {
+                e
+            }
+        })
+    };
     for b in &report.broken {
         if !b.rerun_remakes {
             out.kept.push(b.index);
@@ -747,14 +945,11 @@ pub fn remove_broken(report: &VariantReport) -> std::io::Result<Removal> {
         names.extend(crate::output::expected_files(&b.stem, &Pass::ALL, true));
         names.extend(layout::legacy_exr_files(&b.stem));
         names.dedup();
+        before_open(&b.dir);
+        let (_, handle) = open(&b.dir)?;
         for name in names {
-            let p = b.dir.join(&name);
-            match std::fs::symlink_metadata(&p) {
-                Ok(m) if !m.is_dir() => {
-                    std::fs::remove_file(&p)?;
-                    out.files += 1;
-                }
-                _ => {}
+            if dataset::remove_beneath(&handle, &name)? {
+                out.files += 1;
             }
         }
     }
@@ -770,10 +965,12 @@ pub fn remove_broken(report: &VariantReport) -> std::io::Result<Removal> {
         if live {
             continue;
         }
-        if std::fs::symlink_metadata(t).is_ok_and(|m| !m.is_dir())
-            && std::fs::remove_file(t).is_ok()
-        {
-            out.files += 1;
+        let Some(dir) = t.parent() else { continue };
+        before_open(dir);
+        if let Ok((_, handle)) = open(dir) {
+            if dataset::remove_beneath(&handle, &name).unwrap_or(false) {
+                out.files += 1;
+            }
         }
     }
     Ok(out)
@@ -842,6 +1039,70 @@ mod tests {
         assert_eq!(shell_words(&hidden), r"'\u{1b}[2K\u{d}clevrtex'");
     }
 
+    /// A manifest's command is untrusted: the rerun offered keeps only flags of the fixed
+    /// list with plain values (before, `--blender /tmp/evil.sh` was offered as it was).
+    #[test]
+    fn the_rerun_offers_no_program_from_a_manifest() {
+        let c: Vec<String> = [
+            "/tmp/evil",
+            "generate",
+            "--blender",
+            "/tmp/evil.sh",
+            "--seed",
+            "3",
+            "-n",
+            "4",
+            "--blender=/tmp/x.sh",
+            "--config",
+            "$(rm -rf ~)",
+            "--keep-exr",
+            "--out",
+            "/old",
+            "--shard",
+            "0/2",
+            "--exec",
+            "sh",
+        ]
+        .map(String::from)
+        .to_vec();
+        let r = rerun_command(&c, Path::new("/new")).unwrap();
+        assert_eq!(
+            r,
+            [
+                "clevrtex",
+                "generate",
+                "--seed",
+                "3",
+                "-n",
+                "4",
+                "--keep-exr",
+                "--out",
+                "/new",
+                "--shard",
+                "0/2"
+            ]
+        );
+        assert!(!shell_words(&r).contains("evil"));
+        assert_eq!(
+            with_shard(&r, 1, 2)[..],
+            [
+                "clevrtex",
+                "generate",
+                "--seed",
+                "3",
+                "-n",
+                "4",
+                "--keep-exr",
+                "--out",
+                "/new",
+                "--shard",
+                "1/2"
+            ]
+        );
+        let other = ["clevrtex", "render", "x"].map(String::from).to_vec();
+        assert!(rerun_command(&other, Path::new("/new")).is_none());
+    }
+
     #[test]
     fn the_rerun_writes_where_verify_looked() {
         let c: Vec<String> = ["clevrtex", "generate", "--out", "/old", "-n", "4"]
@@ -858,5 +1119,64 @@ mod tests {
             with_out(&c, Path::new("/new")),
             ["clevrtex", "generate", "--out=/new"]
         );
+    }
+
+    /// `--remove-broken` deletes relative to a folder handle opened inside the dataset: a
+    /// bucket swapped for a link to a canary folder while it runs (here between two samples)
+    /// is refused, and nothing in the canary is deleted. Before, the canary's files of the
+    /// layout's names were deleted.
+    #[test]
+    fn remove_broken_deletes_nothing_through_a_swapped_bucket() {
+        let data = tempfile::tempdir().unwrap();
+        let canary = tempfile::tempdir().unwrap();
+        let root = dataset::root(data.path()).unwrap();
+        let v = root.join("clevrtex_full");
+        let mut broken = Vec::new();
+        for index in [0u64, 1000] {
+            let dir = layout::sample_dir(&root, "full", index);
+            std::fs::create_dir_all(&dir).unwrap();
+            let stem = layout::stem("full", index);
+            for f in [
+                layout::metadata_file(&stem),
+                layout::pass_file(&stem, Pass::Rgb),
+            ] {
+                std::fs::write(dir.join(&f), b"x").unwrap();
+                std::fs::write(canary.path().join(&f), b"canary").unwrap();
+            }
+            broken.push(Broken {
+                index,
+                stem,
+                dir,
+                problems: vec!["broken".into()],
+                rerun_remakes: true,
+            });
+        }
+        let report = VariantReport {
+            variant: "full".into(),
+            broken,
+            roots: vec![root.clone()],
+            ..VariantReport::default()
+        };
+        let second = v.join("1");
+        let mut swap = |dir: &Path| {
+            if dir == second {
+                std::fs::rename(&second, v.join("moved")).unwrap();
+                std::os::unix::fs::symlink(canary.path(), &second).unwrap();
+            }
+        };
+        let got = remove_broken_with(&report, &mut swap);
+        let e = got.unwrap_err().to_string();
+        assert!(e.contains("leads out of the dataset"), "{e}");
+        assert_eq!(
+            std::fs::read_dir(canary.path()).unwrap().count(),
+            4,
+            "nothing in the canary is deleted"
+        );
+        assert_eq!(
+            std::fs::read_dir(v.join("0")).unwrap().count(),
+            0,
+            "the first sample went"
+        );
+        assert_eq!(std::fs::read_dir(v.join("moved")).unwrap().count(), 2);
     }
 }

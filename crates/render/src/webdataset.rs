@@ -18,10 +18,10 @@
 //! `OUT/index.json` lists the shards and their sample counts.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use clevrtex_scene::atomic::AtomicFile;
 use clevrtex_scene::dataset::{Dataset, DatasetError, Kind, SampleRef, VariantDir};
 use clevrtex_scene::layout::Split;
 use clevrtex_scene::Pass;
@@ -311,13 +311,8 @@ pub fn export(
             .collect::<Vec<_>>(),
     });
     let index_path = out.join("index.json");
-    let tmp = out.join("index.json.clevrtex-tmp");
-    let mut f = std::fs::File::create(&tmp)
-        .map_err(io_err(format!("cannot create `{}`", tmp.display())))?;
     let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise") + "\n";
-    f.write_all(text.as_bytes())
-        .and_then(|()| f.sync_all())
-        .and_then(|()| std::fs::rename(&tmp, &index_path))
+    clevrtex_scene::atomic::write(&index_path, text.as_bytes())
         .map_err(io_err(format!("cannot write `{}`", index_path.display())))?;
     Ok(ExportReport {
         samples: total_samples,
@@ -431,12 +426,13 @@ pub fn is_shard_name(name: &str) -> bool {
         && digits.bytes().all(|b| b.is_ascii_digit())
 }
 
-/// A tar shard being written under a temporary name (removed if it is never finished).
+/// A tar shard being written under a unique temporary name (an [`AtomicFile`]: removed if it
+/// is never finished).
 pub struct ShardWriter {
     tmp: PathBuf,
     path: PathBuf,
     /// `None` once finished.
-    builder: Option<tar::Builder<std::io::BufWriter<std::fs::File>>>,
+    builder: Option<tar::Builder<std::io::BufWriter<AtomicFile>>>,
     bytes: u64,
     samples: u64,
     first: u64,
@@ -444,10 +440,11 @@ pub struct ShardWriter {
 }
 
 impl ShardWriter {
-    /// Start the shard `path` (written as `<path>.clevrtex-tmp` until [`ShardWriter::finish`]).
+    /// Start the shard `path` (written under a temporary name of
+    /// [`clevrtex_scene::atomic`] until [`ShardWriter::finish`]).
     pub fn create(path: PathBuf) -> Result<ShardWriter, ShardError> {
-        let tmp = path.with_extension("tar.clevrtex-tmp");
-        let f = std::fs::File::create(&tmp).map_err(io("cannot create", &tmp))?;
+        let f = AtomicFile::create(&path).map_err(io("cannot create a temporary for", &path))?;
+        let tmp = f.tmp_path().to_path_buf();
         Ok(ShardWriter {
             tmp,
             path,
@@ -522,8 +519,7 @@ impl ShardWriter {
             .into_inner()
             .map_err(|e| e.into_error())
             .map_err(io("cannot write", &self.tmp))?;
-        f.sync_all().map_err(io("cannot write", &self.tmp))?;
-        std::fs::rename(&self.tmp, &self.path).map_err(io("cannot write", &self.path))?;
+        f.commit().map_err(io("cannot write", &self.path))?;
         let size = std::fs::metadata(&self.path)
             .map_err(ShardError::Stat)?
             .len();
@@ -534,13 +530,6 @@ impl ShardWriter {
             "first_index": self.first,
             "last_index": self.last,
         }))
-    }
-}
-
-impl Drop for ShardWriter {
-    fn drop(&mut self) {
-        // Unfinished (an error): leave no partial shard.
-        let _ = std::fs::remove_file(&self.tmp);
     }
 }
 

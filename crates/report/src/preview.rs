@@ -557,12 +557,12 @@ pub fn draw(args: &Options) -> anyhow::Result<Sheet> {
     })
 }
 
-/// Write a sheet to `out` as PNG, through a temporary file beside it.
+/// Write a sheet to `out` as PNG, with the one atomic writer ([`clevrtex_scene::atomic`]).
 pub fn save(sheet: &RgbImage, out: &Path) -> anyhow::Result<()> {
-    let tmp = out.with_extension("png.clevrtex-tmp");
+    let mut png = Vec::new();
     sheet
-        .save_with_format(&tmp, image::ImageFormat::Png)
-        .with_context(|| format!("cannot write `{}`", tmp.display()))?;
-    std::fs::rename(&tmp, out).with_context(|| format!("cannot write `{}`", out.display()))?;
-    Ok(())
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .context("cannot encode the sheet as PNG")?;
+    clevrtex_scene::atomic::write(out, &png)
+        .with_context(|| format!("cannot write `{}`", out.display()))
 }

@@ -151,12 +151,196 @@ pub fn png_mode_problem(bytes: &[u8], pass: Pass) -> Option<String> {
 }
 
 /// The bytes of the regular file `path` under `root`, at most `cap` bytes; `Err` says why
-/// not, in one line (a link out of the root, not a regular file, too large, unreadable).
+/// not, in one line (a link out of the root, not a regular file, too large, unreadable). The
+/// file is opened relative to the root's folder handle ([`open_beneath`]), so a folder on the
+/// way swapped for a link out of the dataset after it was walked is not read through.
 pub fn read(root: &Path, path: &Path, cap: u64) -> Result<Vec<u8>, String> {
     if let Kind::Skipped(why) = classify(root, path) {
         return Err(why);
     }
-    read_regular(path, cap).map_err(|e| e.to_string())
+    read_beneath(root, path, cap).map_err(|e| e.to_string())
+}
+
+/// The bytes of `path`, a file under the canonical `root`, opened relative to the root's
+/// folder handle ([`open_beneath`]: no link leading out of the root followed, on any
+/// component, whatever was swapped since the walk); a regular file only, at most `cap` bytes.
+pub fn read_beneath(root: &Path, path: &Path, cap: u64) -> Result<Vec<u8>, ReadError> {
+    let rel = relative_to_root(root, path).ok_or(ReadError::LeadsOut)?;
+    let fd = open_beneath(
+        root,
+        &rel,
+        rustix::fs::OFlags::RDONLY | rustix::fs::OFlags::NONBLOCK,
+    )
+    .map_err(|e| {
+        if is_leads_out(&e) {
+            ReadError::LeadsOut
+        } else {
+            ReadError::Io(e)
+        }
+    })?;
+    read_open(std::fs::File::from(fd), cap)
+}
+
+/// `path` relative to the canonical `root`: its part after the deepest ancestor that resolves
+/// to `root` (the folder given, whatever links the trusted command line's path holds). `None`
+/// when no ancestor is the root.
+pub fn relative_to_root(root: &Path, path: &Path) -> Option<PathBuf> {
+    if let Ok(r) = path.strip_prefix(root) {
+        return Some(r.to_path_buf());
+    }
+    for anc in path.ancestors().skip(1) {
+        let a = if anc.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            anc
+        };
+        if a.canonicalize().is_ok_and(|c| c == root) {
+            return path.strip_prefix(anc).ok().map(Path::to_path_buf);
+        }
+    }
+    None
+}
+
+/// The marker of an [`open_beneath`] refusal: the path leads out of the root.
+#[derive(Debug)]
+struct LeadsOut;
+
+impl std::fmt::Display for LeadsOut {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("leads out of the dataset through a symbolic link; not followed")
+    }
+}
+
+impl std::error::Error for LeadsOut {}
+
+/// Whether `e` is [`open_beneath`]'s refusal of a path leading out of the root.
+pub fn is_leads_out(e: &std::io::Error) -> bool {
+    e.get_ref().is_some_and(|i| i.is::<LeadsOut>())
+}
+
+/// Most symbolic links resolved in one path (the kernel's own limit).
+const MAX_LINKS: usize = 40;
+
+/// Open `rel` (a path relative to the canonical, trusted `root`) with `flags`, resolving it
+/// one component at a time from a handle on `root` (`openat` with `O_NOFOLLOW`, `readlinkat`):
+/// a link is followed only while it stays inside the root (`..` never climbs above it, an
+/// absolute target must lie under it); a component swapped for a link between two steps
+/// makes its `O_NOFOLLOW` open fail, it is never followed. Refusals are [`is_leads_out`].
+/// What `openat2(RESOLVE_BENEATH)` does, on every kernel.
+pub fn open_beneath(
+    root: &Path,
+    rel: &Path,
+    flags: rustix::fs::OFlags,
+) -> std::io::Result<std::os::fd::OwnedFd> {
+    use rustix::fs::{openat, readlinkat, statat, AtFlags, FileType, Mode, OFlags, CWD};
+    use std::collections::VecDeque;
+    use std::ffi::OsString;
+    use std::os::unix::ffi::OsStrExt;
+    use std::path::Component;
+    let out = || std::io::Error::other(LeadsOut);
+    let dir_flags = OFlags::RDONLY | OFlags::DIRECTORY | OFlags::NOFOLLOW | OFlags::CLOEXEC;
+    let mut stack = vec![openat(
+        CWD,
+        root,
+        OFlags::RDONLY | OFlags::DIRECTORY | OFlags::CLOEXEC,
+        Mode::empty(),
+    )?];
+    // `None`: `..`; `Some(name)`: a name.
+    let parts = |p: &Path| -> Result<Vec<Option<OsString>>, std::io::Error> {
+        let mut v = Vec::new();
+        for c in p.components() {
+            match c {
+                Component::CurDir => {}
+                Component::ParentDir => v.push(None),
+                Component::Normal(n) => v.push(Some(n.to_os_string())),
+                Component::RootDir | Component::Prefix(_) => return Err(out()),
+            }
+        }
+        Ok(v)
+    };
+    let mut todo: VecDeque<Option<OsString>> = parts(rel)?.into();
+    let mut links = 0;
+    while let Some(part) = todo.pop_front() {
+        let Some(name) = part else {
+            if stack.len() == 1 {
+                return Err(out());
+            }
+            stack.pop();
+            continue;
+        };
+        let cur = stack.last().expect("the root stays");
+        let st = statat(cur, name.as_os_str(), AtFlags::SYMLINK_NOFOLLOW)?;
+        if FileType::from_raw_mode(st.st_mode) == FileType::Symlink {
+            links += 1;
+            if links > MAX_LINKS {
+                return Err(std::io::Error::from_raw_os_error(
+                    rustix::io::Errno::LOOP.raw_os_error(),
+                ));
+            }
+            let target = readlinkat(cur, name.as_os_str(), Vec::new())?;
+            let target = Path::new(std::ffi::OsStr::from_bytes(target.as_bytes())).to_path_buf();
+            let next = if target.is_absolute() {
+                let inside = target.strip_prefix(root).map_err(|_| out())?;
+                stack.truncate(1);
+                parts(inside)?
+            } else {
+                parts(&target)?
+            };
+            for p in next.into_iter().rev() {
+                todo.push_front(p);
+            }
+            continue;
+        }
+        if todo.is_empty() {
+            return Ok(openat(
+                cur,
+                name.as_os_str(),
+                flags | OFlags::NOFOLLOW | OFlags::CLOEXEC,
+                Mode::empty(),
+            )?);
+        }
+        let fd = openat(cur, name.as_os_str(), dir_flags, Mode::empty())?;
+        stack.push(fd);
+    }
+    let cur = stack.last().expect("the root stays");
+    Ok(openat(cur, ".", flags | OFlags::CLOEXEC, Mode::empty())?)
+}
+
+/// Remove the file `name` (a link as a link) from the folder `dir_handle`, opened once
+/// relative to its dataset's root ([`open_dir_beneath`]): a folder swapped for a link leading
+/// out of the dataset after that is not deleted through. Returns whether a file was removed
+/// (`false`: none there, or a folder).
+pub fn remove_beneath(dir_handle: &std::os::fd::OwnedFd, name: &str) -> std::io::Result<bool> {
+    use rustix::fs::{statat, unlinkat, AtFlags, FileType};
+    match statat(dir_handle, name, AtFlags::SYMLINK_NOFOLLOW) {
+        Ok(st) if FileType::from_raw_mode(st.st_mode) != FileType::Directory => {
+            match unlinkat(dir_handle, name, AtFlags::empty()) {
+                Ok(()) => Ok(true),
+                Err(rustix::io::Errno::NOENT) => Ok(false),
+                Err(e) => Err(e.into()),
+            }
+        }
+        Ok(_) | Err(rustix::io::Errno::NOENT) => Ok(false),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// A handle on `dir`, a folder under one of the canonical `roots`, opened relative to that
+/// root ([`open_beneath`]); what deletes in a dataset go through ([`remove_beneath`]).
+pub fn open_dir_beneath(
+    roots: &[PathBuf],
+    dir: &Path,
+) -> std::io::Result<(PathBuf, std::os::fd::OwnedFd)> {
+    let (root, rel) = roots
+        .iter()
+        .find_map(|r| relative_to_root(r, dir).map(|rel| (r.clone(), rel)))
+        .ok_or_else(|| std::io::Error::other(LeadsOut))?;
+    let fd = open_beneath(
+        &root,
+        &rel,
+        rustix::fs::OFlags::RDONLY | rustix::fs::OFlags::DIRECTORY,
+    )?;
+    Ok((root, fd))
 }
 
 /// Why [`read_regular`] read nothing. Shown as one line without the path.
@@ -166,6 +350,8 @@ pub enum ReadError {
     Io(std::io::Error),
     /// Not a regular file (a FIFO, socket or device): never read.
     NotRegular,
+    /// Reached through a symbolic link leading out of the dataset: never opened.
+    LeadsOut,
     /// Larger than the cap (`len` bytes, or more than `cap` read when it grew).
     TooLarge {
         /// Its size when opened, `None` when it grew while read.
@@ -182,6 +368,9 @@ impl std::fmt::Display for ReadError {
             ReadError::NotRegular => {
                 f.write_str("is not a regular file (a FIFO, socket or device); skipped")
             }
+            ReadError::LeadsOut => f.write_str(
+                "is reached through a symbolic link leading out of the dataset; not followed",
+            ),
             ReadError::TooLarge {
                 len: Some(len),
                 cap,
@@ -222,6 +411,11 @@ pub fn read_regular(path: &Path, cap: u64) -> Result<Vec<u8>, ReadError> {
         .custom_flags(O_NONBLOCK)
         .open(path)
         .map_err(ReadError::Io)?;
+    read_open(f, cap)
+}
+
+/// [`read_regular`] of a file already opened.
+fn read_open(f: std::fs::File, cap: u64) -> Result<Vec<u8>, ReadError> {
     let meta = f.metadata().map_err(ReadError::Io)?;
     if !meta.is_file() {
         return Err(ReadError::NotRegular);
@@ -1050,5 +1244,51 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("split") && e.contains("../x"), "{e}");
+    }
+
+    /// A bucket folder swapped for a link out of the dataset after the walk is not read
+    /// through (before, only the last component was checked: the Python `Dataset` and every
+    /// reader read the canary's file); links inside the dataset still are.
+    #[test]
+    fn a_folder_swapped_for_a_link_out_is_not_read_through() {
+        let data = tempfile::tempdir().unwrap();
+        let canary = tempfile::tempdir().unwrap();
+        let v = data.path().join("clevrtex_camo");
+        let bucket = v.join("0");
+        std::fs::create_dir_all(&bucket).unwrap();
+        let stem = layout::stem("camo", 0);
+        let meta = layout::metadata_file(&stem);
+        std::fs::write(bucket.join(&meta), b"{}").unwrap();
+        std::fs::write(canary.path().join(&meta), b"secret").unwrap();
+        let ds = Dataset::open(data.path()).unwrap();
+        let s = &ds.variants[0].samples[0];
+        assert_eq!(ds.read(&s.metadata_path(), 100).unwrap(), b"{}");
+        // A link inside the dataset is followed.
+        std::os::unix::fs::symlink("0", v.join("1")).unwrap();
+        let inside = v.join("1").join(&meta);
+        assert_eq!(read_beneath(&ds.root, &inside, 100).unwrap(), b"{}");
+        // Swap the bucket for a link to the canary, after the walk.
+        std::fs::rename(&bucket, v.join("moved")).unwrap();
+        std::os::unix::fs::symlink(canary.path(), &bucket).unwrap();
+        let got = read_beneath(&ds.root, &s.metadata_path(), 100);
+        assert!(matches!(got, Err(ReadError::LeadsOut)), "{got:?}");
+        assert!(ds.read(&s.metadata_path(), 100).is_err());
+        // Relative links climbing out, and `..` in the path, are refused the same way.
+        std::fs::remove_file(&bucket).unwrap();
+        let up = format!("../../{}", canary.path().display());
+        std::os::unix::fs::symlink(&up, &bucket).unwrap();
+        let got = read_beneath(&ds.root, &s.metadata_path(), 100);
+        assert!(matches!(got, Err(ReadError::LeadsOut)), "{got:?}");
+        let dotdot = ds.root.join("..").join("x");
+        assert!(matches!(
+            read_beneath(&ds.root, &dotdot, 100),
+            Err(ReadError::LeadsOut)
+        ));
+        // Given through a link to the root (the command line's path), the root is found.
+        let alias_dir = tempfile::tempdir().unwrap();
+        let alias = alias_dir.path().join("alias");
+        std::os::unix::fs::symlink(&ds.root, &alias).unwrap();
+        let via = alias.join("clevrtex_camo").join("moved").join(&meta);
+        assert_eq!(read_beneath(&ds.root, &via, 100).unwrap(), b"{}");
     }
 }

@@ -19,6 +19,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod atomic;
 pub mod bounds;
 pub mod camera;
 pub mod config;

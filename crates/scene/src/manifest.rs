@@ -74,6 +74,11 @@ pub struct Manifest {
     pub shard: [u64; 2],
     /// Passes written.
     pub passes: Vec<String>,
+    /// The render settings of every sample of the run (the samples' metadata `render`: size,
+    /// samples, bounces, colour management), so `verify` can tell a sample rendered with
+    /// other settings; absent in older manifests.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub render: Option<serde_json::Value>,
     /// `clevrtex` version.
     pub tool_version: String,
     /// Blender version of the samples (from their metadata).
@@ -101,6 +106,24 @@ pub struct Manifest {
     /// drew only built-in ones (and in older manifests).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub user_materials: BTreeMap<String, UserMaterial>,
+}
+
+/// The render settings that differ between two `render` objects (a manifest's or a sample's
+/// metadata's), as `width 32 vs 40`; keys sorted.
+pub fn render_differences(a: &serde_json::Value, b: &serde_json::Value) -> Vec<String> {
+    let empty = serde_json::Map::new();
+    let (a, b) = (
+        a.as_object().unwrap_or(&empty),
+        b.as_object().unwrap_or(&empty),
+    );
+    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    let show =
+        |v: Option<&serde_json::Value>| v.map_or("(none)".to_string(), crate::dataset::short);
+    keys.into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .take(20)
+        .map(|k| format!("render {k} {} vs {}", show(a.get(k)), show(b.get(k))))
+        .collect()
 }
 
 /// xxh3-64 of `bytes` as 16 hex digits ([`clevrtex_materials::content_hash`], the one content
@@ -138,6 +161,7 @@ impl Manifest {
             total: 0,
             shard: [0, 1],
             passes: Vec::new(),
+            render: None,
             tool_version: String::new(),
             blender_version: String::new(),
             blender_compat: BTreeMap::new(),
@@ -196,6 +220,53 @@ impl Manifest {
     }
 
     /// Whether `index` is one this manifest's run was asked to make.
+    /// What of a run's settings differs between `self` and `other` (seed, passes, each render
+    /// setting, the rest of the variant config), one phrase each, or nothing (`--total` is not
+    /// a setting of the images: a grown dataset keeps each sample's recorded split):
+    /// what `generate` names when it refuses to write into a folder of another run, and what
+    /// `verify` names for a sample.
+    pub fn settings_differ(&self, other: &Manifest) -> Vec<String> {
+        let mut d = Vec::new();
+        if self.variant != other.variant {
+            d.push(format!("variant {} vs {}", self.variant, other.variant));
+        }
+        if self.seed != other.seed {
+            d.push(format!("--seed {} vs {}", self.seed, other.seed));
+        }
+        if !self.passes.is_empty() && !other.passes.is_empty() && self.passes != other.passes {
+            d.push(format!(
+                "--passes {} vs {}",
+                self.passes.join(","),
+                other.passes.join(",")
+            ));
+        }
+        let render_differs = match (&self.render, &other.render) {
+            (Some(a), Some(b)) => {
+                let before = d.len();
+                d.extend(render_differences(a, b));
+                d.len() > before
+            }
+            _ => false,
+        };
+        if self.config_hash != other.config_hash && !render_differs && d.is_empty() {
+            d.push(format!(
+                "the variant config (hash {} vs {})",
+                self.config_hash, other.config_hash
+            ));
+        }
+        d
+    }
+
+    /// Whether this run's indices and `other`'s share one (same range part and shard).
+    pub fn overlaps(&self, other: &Manifest) -> bool {
+        let (a, b) = (self.start.max(other.start), self.end.min(other.end));
+        a < b
+            && (a..b)
+                .take(1_000_000)
+                .any(|i| self.covers(i) && other.covers(i))
+    }
+
+    /// Whether the run's indices include `index` (its range and its shard).
     pub fn covers(&self, index: u64) -> bool {
         let [k, n] = self.shard;
         (self.start..self.end).contains(&index) && index % n.max(1) == k

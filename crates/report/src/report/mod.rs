@@ -68,21 +68,15 @@ pub fn make(dir: &Path, compare: Option<&Path>, options: &Options) -> anyhow::Re
     })
 }
 
-/// Write the page to `out` through a temporary file beside it, so that a failure leaves an
-/// older page whole.
+/// Write the page to `out` with the one atomic writer ([`clevrtex_scene::atomic`]), so that a
+/// failure leaves an older page whole and no temporary behind.
 pub fn write_page(out: &Path, html: &str) -> anyhow::Result<()> {
-    let tmp = out.with_extension("html.clevrtex-tmp");
-    std::fs::write(&tmp, html.as_bytes()).with_context(|| {
+    clevrtex_scene::atomic::write(out, html.as_bytes()).with_context(|| {
         format!(
             "cannot write `{}`\nhint: check that the folder exists and is writable",
-            tmp.display()
+            out.display()
         )
-    })?;
-    std::fs::rename(&tmp, out).with_context(|| {
-        let _ = std::fs::remove_file(&tmp);
-        format!("cannot write `{}`", out.display())
-    })?;
-    Ok(())
+    })
 }
 
 /// The page, and the problems met while drawing it (cells of the preview left empty).
