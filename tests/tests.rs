@@ -23,6 +23,7 @@ mod resume;
 mod sample;
 mod shadow;
 mod slurm;
+mod splits;
 mod trust_paths;
 mod verify;
 mod workers;

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use clevrtex_scene::config::Splits;
 use clevrtex_scene::layout::{self, parse_stem};
+use rayon::prelude::*;
 
 use crate::error::EvalError;
 
@@ -21,9 +22,12 @@ pub struct GtSample {
     pub mask: PathBuf,
     /// The metadata.
     pub meta: PathBuf,
+    /// Its split: the one its metadata records, else (the published ClevrTex) the public
+    /// loader's position rule ([`clevrtex_scene::dataset::splits`]).
+    pub split: layout::Split,
 }
 
-/// Which samples to evaluate, by position in the index sequence.
+/// Which samples to evaluate: a split ([`GtSample::split`]) or all.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Split {
     /// The first `int(0.1 N)`.
@@ -52,15 +56,17 @@ impl Split {
         self.part().map_or("all", layout::Split::name)
     }
 
-    /// The positions `start..end` of this split among `n` samples of `variant`, by the
-    /// dataset layout's rule ([`clevrtex_scene::layout::Split`]); a variant whose config says
-    /// `"splits": "test_only"` (`outd`) has only a test split, all of it.
-    pub fn range(self, n: usize, variant: &str) -> Result<std::ops::Range<usize>, EvalError> {
-        let splits = layout::variant_splits(variant);
+    /// The samples of this split among `samples` (each with its [`GtSample::split`]); a
+    /// variant whose config says `"splits": "test_only"` (`outd`) has only a test split.
+    pub fn select<'a>(
+        self,
+        samples: &'a [GtSample],
+        variant: &str,
+    ) -> Result<Vec<&'a GtSample>, EvalError> {
         let Some(part) = self.part() else {
-            return Ok(0..n);
+            return Ok(samples.iter().collect());
         };
-        if splits == Splits::TestOnly && part != layout::Split::Test {
+        if layout::variant_splits(variant) == Splits::TestOnly && part != layout::Split::Test {
             return Err(EvalError::Usage {
                 message: format!(
                     "`{variant}` is a test-only dataset, it has no `{}` split",
@@ -69,9 +75,14 @@ impl Split {
                 hint: "use `--split test` (the default) or `--split all`".into(),
             });
         }
-        let r = part.range(splits, n as u64);
-        Ok(r.start as usize..r.end as usize)
+        Ok(samples.iter().filter(|s| s.split == part).collect())
     }
+}
+
+/// How many of `samples` are in each split, for messages: `test 0, val 0, train 4`.
+pub fn split_sizes(samples: &[GtSample]) -> String {
+    let splits: Vec<layout::Split> = samples.iter().map(|s| s.split).collect();
+    clevrtex_scene::dataset::split_sizes(&splits)
 }
 
 /// Every regular file under `dir`, recursively and depth-limited, walked with the reader of
@@ -242,7 +253,7 @@ pub fn discover_gt(
     }
     // A sample's image, mask and metadata must be among the files the walk found: a link out
     // of the folder, a FIFO or a device in their place is refused, not read.
-    let mut samples = Vec::with_capacity(found.len());
+    let mut refs = Vec::with_capacity(found.len());
     for (index, stem, image, s) in found {
         let mask = s.pass_path(Pass::Mask);
         let meta = s.metadata_path();
@@ -268,14 +279,33 @@ pub fn discover_gt(
                 path: p.clone(),
             });
         }
-        samples.push(GtSample {
+        refs.push((index, stem, image, mask, meta, s));
+    }
+    // The splits: recorded in each metadata (only that key read, in parallel), else by
+    // position (the one rule of `clevrtex_scene::dataset::splits`).
+    let recorded = refs
+        .par_iter()
+        .map(|(_, _, _, _, meta, s)| {
+            ds.read_recorded_split(s).map_err(|reason| EvalError::Corrupt {
+                path: meta.clone(),
+                reason,
+                hint: "a sample's `split` is `test`, `val` or `train` (absent in the published ClevrTex); check the dataset with `clevrtex verify`".into(),
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let splits = clevrtex_scene::dataset::splits(&variant, &recorded);
+    let samples = refs
+        .into_iter()
+        .zip(splits)
+        .map(|((index, stem, image, mask, meta, _), split)| GtSample {
             index,
             stem,
             image,
             mask,
             meta,
-        });
-    }
+            split,
+        })
+        .collect();
     Ok((variant, samples))
 }
 
@@ -367,11 +397,31 @@ mod tests {
     }
 
     #[test]
-    fn splits() {
-        assert_eq!(Split::Test.range(50, "full").unwrap(), 0..5);
-        assert_eq!(Split::Val.range(50, "full").unwrap(), 5..10);
-        assert_eq!(Split::Train.range(50, "full").unwrap(), 10..50);
-        assert_eq!(Split::Test.range(7, "outd").unwrap(), 0..7);
-        assert!(Split::Val.range(7, "outd").is_err());
+    fn splits_select_by_each_sample_s_split() {
+        let sample = |index: u64, split| GtSample {
+            index,
+            stem: layout::stem("full", index),
+            image: PathBuf::new(),
+            mask: PathBuf::new(),
+            meta: PathBuf::new(),
+            split,
+        };
+        let v = [
+            sample(0, layout::Split::Test),
+            sample(1, layout::Split::Val),
+            sample(2, layout::Split::Train),
+            sample(3, layout::Split::Val),
+        ];
+        let idx = |s: Split| -> Vec<u64> {
+            s.select(&v, "full")
+                .unwrap()
+                .iter()
+                .map(|x| x.index)
+                .collect()
+        };
+        assert_eq!(idx(Split::Val), [1, 3]);
+        assert_eq!(idx(Split::All).len(), 4);
+        assert_eq!(split_sizes(&v), "test 1, val 2, train 1");
+        assert!(Split::Val.select(&v, "outd").is_err());
     }
 }

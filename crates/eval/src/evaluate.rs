@@ -317,14 +317,14 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
             clevrtex_scene::config::Splits::TestOnly => Split::All,
             clevrtex_scene::config::Splits::Standard => Split::Test,
         });
-    let samples_len = samples.len();
-    let range = split.range(samples_len, &variant)?;
-    let samples = &samples[range];
+    let all = &samples;
+    let samples = split.select(all, &variant)?;
     if samples.is_empty() {
         return Err(EvalError::EmptySplit {
             split: split.name(),
             gt: gt.to_path_buf(),
-            total: samples_len,
+            total: all.len(),
+            sizes: crate::dataset::split_sizes(all),
         });
     }
     let pred_index = index_preds(preds, &variant)?;

@@ -5,6 +5,8 @@
 - `evaluate(preds, gt, protocol=...)`: every protocol's metrics on arrays, in one call.
 - `Dataset`: the published layout (ours or the downloaded ClevrTex) read like the public
   `CLEVRTEX` loader, as numpy arrays.
+- `wds.decode`: a sample of the WebDataset shards of `clevrtex export` as arrays (module
+  `clevrtex.wds`).
 
 Scoring runs in Rust with the GIL released, in parallel over the images of a batch. Metric
 definitions and how the protocols differ: docs/eval.md.
@@ -18,8 +20,9 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _native
+from . import wds
 
-__all__ = ["Evaluator", "evaluate", "Dataset", "METRICS", "protocol_metrics"]
+__all__ = ["Evaluator", "evaluate", "Dataset", "METRICS", "protocol_metrics", "wds"]
 
 #: Every metric's name, in report order.
 METRICS: Tuple[str, ...] = tuple(_native.metric_names())
