@@ -148,14 +148,14 @@ fn a_dataset_grown_in_two_runs_has_one_split_per_sample_in_every_tool() {
     assert_eq!(scored, want);
 
     // report: the table of images per split.
-    let page = dir.path().join("report");
+    let page = dir.path().join("report.html");
     ok(&[
         os("report"),
         os("--out"),
         page.as_os_str(),
         data.as_os_str(),
     ]);
-    let html = std::fs::read_to_string(page.join("report.html")).unwrap();
+    let html = std::fs::read_to_string(&page).unwrap();
     let table = html
         .split("Images per variant and split")
         .nth(1)
@@ -167,6 +167,31 @@ fn a_dataset_grown_in_two_runs_has_one_split_per_sample_in_every_tool() {
         table.contains("<th>train</th><th>val</th><th>test</th>")
             && table.contains("<tr><td>clevr</td><td>18</td><td>1</td><td>1</td><td>20</td></tr>"),
         "{table}"
+    );
+
+    // A recorded split that is not its run's is reported, naming the sample (the run of
+    // 10..20 of 20 gives index 12 `train`).
+    let copy = dir.path().join("edited");
+    assert!(std::process::Command::new("cp")
+        .arg("-a")
+        .arg(&data)
+        .arg(&copy)
+        .status()
+        .unwrap()
+        .success());
+    let f = copy.join(format!("clevrtex_clevr/0/{}.json", stem(12)));
+    let mut meta: Value = serde_json::from_slice(&std::fs::read(&f).unwrap()).unwrap();
+    meta["split"] = "val".into();
+    std::fs::write(&f, serde_json::to_vec(&meta).unwrap()).unwrap();
+    let o = clevrtex().arg("verify").arg(&copy).output().unwrap();
+    assert_eq!(o.status.code(), Some(3), "{}", text(&o));
+    assert!(
+        text(&o).contains(&format!("{} (`", stem(12)))
+            && text(&o).contains(
+                "metadata `split` is `val`, but the run of indices 10..20 of 20 (`MANIFEST-10-20-0of1.json`) puts index 12 in `train`"
+            ),
+        "{}",
+        text(&o)
     );
 
     // The Python `Dataset` (its Rust reader): the indices of each split.

@@ -6,6 +6,7 @@ mod util;
 mod bench;
 mod blender_failures;
 mod blenders;
+mod dataset_card;
 mod eval;
 mod eval_protocols;
 mod export;

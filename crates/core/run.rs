@@ -169,6 +169,7 @@ pub(crate) fn run_jobs(
             .map_err(|e| anyhow::anyhow!(e))?;
             // The lock made the variant folder (`layout::make_dir`: not a link out of `--out`).
             plan.write_plan(&args.out)?;
+            write_card(&args.out);
             Some(lock)
         }
         None => None,
@@ -181,6 +182,7 @@ pub(crate) fn run_jobs(
             if let Some(plan) = manifest {
                 let seconds = seconds.into_inner().unwrap_or_else(|e| e.into_inner());
                 let path = plan.write(&args.out, &seconds)?;
+                write_card(&args.out);
                 println!(
                     "manifest: {} (check with `clevrtex verify {}`)",
                     path.display(),
@@ -295,5 +297,13 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
             "failures recorded in `{}`; rerun the same command to retry them",
             ledger.display()
         );
+    }
+}
+
+/// Rewrite the dataset card from every run's manifest (`clevrtex_render::card`); a card that
+/// cannot be written is a warning: the samples and the manifest are what the run made.
+fn write_card(out: &std::path::Path) {
+    if let Err(e) = clevrtex_render::card::write_card(out) {
+        eprintln!("warning: the dataset card was not written: {e}");
     }
 }

@@ -461,6 +461,32 @@ impl Dataset {
     }
 }
 
+/// The run manifests of the dataset at `out` (an output folder of `clevrtex generate`), by
+/// variant folder name order: `(variant, path)`. Lists only `out` and its `clevrtex_<variant>`
+/// folders (never a sample folder: cheap on any dataset), with the same rules as
+/// [`Dataset::open`] (no link out of `out` followed, only regular files).
+pub fn manifests_in(out: &Path) -> std::io::Result<Vec<(String, PathBuf)>> {
+    let root = root(out)?;
+    let mut found = Vec::new();
+    for (name, p, kind) in list(&root, out)? {
+        let Some(v) = name.strip_prefix("clevrtex_") else {
+            continue;
+        };
+        if kind != Kind::Dir || crate::layout::variant_name_problem(v).is_some() {
+            continue;
+        }
+        let Ok(entries) = list(&root, &p) else {
+            continue;
+        };
+        for (name, m, kind) in entries {
+            if kind == Kind::File && crate::manifest::is_manifest_name(&name) {
+                found.push((v.to_string(), m));
+            }
+        }
+    }
+    Ok(found)
+}
+
 /// Walk one variant folder: its sample folders, manifests, ledgers and temporaries.
 fn walk_variant(root: &Path, variant: &str, dir: &Path, out: PathBuf) -> VariantDir {
     let mut vd = VariantDir {
