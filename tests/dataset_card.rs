@@ -28,7 +28,10 @@ fn shards_writing_at_once_leave_a_card_of_every_run() {
         assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     }
     let card = std::fs::read_to_string(out.join("DATASET_CARD.md")).unwrap();
-    for row in ["| `clevr` | 0..4 | 0/2 | 4 |", "| `clevr` | 0..4 | 1/2 | 4 |"] {
+    for row in [
+        "| `clevr` | 0..4 | 0/2 | 4 |",
+        "| `clevr` | 0..4 | 1/2 | 4 |",
+    ] {
         assert!(card.contains(row), "{row}\n{card}");
     }
     assert!(card.contains("| `clevr` | 0 | 0 | 4 | 4 | 4 |"), "{card}");
@@ -38,16 +41,25 @@ fn shards_writing_at_once_leave_a_card_of_every_run() {
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let card = std::fs::read_to_string(out.join("DATASET_CARD.md")).unwrap();
     assert!(card.contains("| `clevr` | 0 | 0 | 6 | 6 | 6 |"), "{card}");
-    assert!(card.contains("--shard 1/2") && card.contains("--start 4"), "{card}");
+    assert!(
+        card.contains("--shard 1/2") && card.contains("--start 4"),
+        "{card}"
+    );
     assert!(!card.contains("| depth |") && card.contains("| mask | `<stem>_flat.png`"));
-    assert!(card.contains("32x24 pixels, 1 Cycles samples per pixel"), "{card}");
+    assert!(
+        card.contains("32x24 pixels, 1 Cycles samples per pixel"),
+        "{card}"
+    );
     // No temporary is left, and the card is no file of the dataset to the readers.
     let names: Vec<String> = std::fs::read_dir(&out)
         .unwrap()
         .flatten()
         .map(|e| e.file_name().to_string_lossy().into_owned())
         .collect();
-    assert!(!names.iter().any(|n| n.contains("clevrtex-tmp")), "{names:?}");
+    assert!(
+        !names.iter().any(|n| n.contains("clevrtex-tmp")),
+        "{names:?}"
+    );
     let o = clevrtex().arg("verify").arg(&out).output().unwrap();
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let o = clevrtex()

@@ -23,8 +23,9 @@ pub struct GtSample {
     /// The metadata.
     pub meta: PathBuf,
     /// Its split: the one its metadata records, else (the published ClevrTex) the public
-    /// loader's position rule ([`clevrtex_scene::dataset::splits`]).
-    pub split: layout::Split,
+    /// loader's position rule ([`clevrtex_scene::dataset::splits`]); `None` until
+    /// [`read_splits`] (a whole dataset needs no split, and reads no metadata to open).
+    pub split: Option<layout::Split>,
 }
 
 /// Which samples to evaluate: a split ([`GtSample::split`]) or all.
@@ -75,13 +76,13 @@ impl Split {
                 hint: "use `--split test` (the default) or `--split all`".into(),
             });
         }
-        Ok(samples.iter().filter(|s| s.split == part).collect())
+        Ok(samples.iter().filter(|s| s.split == Some(part)).collect())
     }
 }
 
 /// How many of `samples` are in each split, for messages: `test 0, val 0, train 4`.
 pub fn split_sizes(samples: &[GtSample]) -> String {
-    let splits: Vec<layout::Split> = samples.iter().map(|s| s.split).collect();
+    let splits: Vec<layout::Split> = samples.iter().filter_map(|s| s.split).collect();
     clevrtex_scene::dataset::split_sizes(&splits)
 }
 
@@ -253,7 +254,7 @@ pub fn discover_gt(
     }
     // A sample's image, mask and metadata must be among the files the walk found: a link out
     // of the folder, a FIFO or a device in their place is refused, not read.
-    let mut refs = Vec::with_capacity(found.len());
+    let mut samples = Vec::with_capacity(found.len());
     for (index, stem, image, s) in found {
         let mask = s.pass_path(Pass::Mask);
         let meta = s.metadata_path();
@@ -279,34 +280,45 @@ pub fn discover_gt(
                 path: p.clone(),
             });
         }
-        refs.push((index, stem, image, mask, meta, s));
-    }
-    // The splits: recorded in each metadata (only that key read, in parallel), else by
-    // position (the one rule of `clevrtex_scene::dataset::splits`).
-    let recorded = refs
-        .par_iter()
-        .map(|(_, _, _, _, meta, s)| {
-            ds.read_recorded_split(s).map_err(|reason| EvalError::Corrupt {
-                path: meta.clone(),
-                reason,
-                hint: "a sample's `split` is `test`, `val` or `train` (absent in the published ClevrTex); check the dataset with `clevrtex verify`".into(),
-            })
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    let splits = clevrtex_scene::dataset::splits(&variant, &recorded);
-    let samples = refs
-        .into_iter()
-        .zip(splits)
-        .map(|((index, stem, image, mask, meta, _), split)| GtSample {
+        samples.push(GtSample {
             index,
             stem,
             image,
             mask,
             meta,
-            split,
-        })
-        .collect();
+            split: None,
+        });
+    }
     Ok((variant, samples))
+}
+
+/// Set each sample's [`GtSample::split`] (the samples of one variant of the dataset `gt`, as
+/// [`discover_gt`] found them, in index order): the split its metadata records, only that key
+/// read (in parallel), else by position (the one rule of `clevrtex_scene::dataset::splits`).
+pub fn read_splits(gt: &Path, variant: &str, samples: &mut [GtSample]) -> Result<(), EvalError> {
+    let root = clevrtex_scene::dataset::root(gt).map_err(|cause| EvalError::Io {
+        path: gt.to_path_buf(),
+        cause,
+    })?;
+    let recorded = samples
+        .par_iter()
+        .map(|s| {
+            clevrtex_scene::dataset::read_recorded_split(&root, &s.meta, variant).map_err(
+                |reason| EvalError::Corrupt {
+                    path: s.meta.clone(),
+                    reason,
+                    hint: "a sample's `split` is `test`, `val` or `train` (absent in the published ClevrTex); check the dataset with `clevrtex verify`".into(),
+                },
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    for (s, split) in samples
+        .iter_mut()
+        .zip(clevrtex_scene::dataset::splits(variant, &recorded))
+    {
+        s.split = Some(split);
+    }
+    Ok(())
 }
 
 /// The prediction files found for one stem.
@@ -404,7 +416,7 @@ mod tests {
             image: PathBuf::new(),
             mask: PathBuf::new(),
             meta: PathBuf::new(),
-            split,
+            split: Some(split),
         };
         let v = [
             sample(0, layout::Split::Test),

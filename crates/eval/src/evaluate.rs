@@ -309,7 +309,7 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
             hint: "1000 (the default) gives stable 95% intervals; use at most 100000".into(),
         });
     }
-    let (variant, samples) = discover_gt(gt, opts.variant.as_deref())?;
+    let (variant, mut samples) = discover_gt(gt, opts.variant.as_deref())?;
     // A test-only variant (its config says `"splits": "test_only"`) is scored whole.
     let split = opts
         .split
@@ -317,6 +317,9 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
             clevrtex_scene::config::Splits::TestOnly => Split::All,
             clevrtex_scene::config::Splits::Standard => Split::Test,
         });
+    if split.part().is_some() {
+        crate::dataset::read_splits(gt, &variant, &mut samples)?;
+    }
     let all = &samples;
     let samples = split.select(all, &variant)?;
     if samples.is_empty() {

@@ -379,7 +379,7 @@ fn discover(
         }
     };
     py.allow_threads(|| {
-        let (variant, samples) = discover_gt(Path::new(path), variant).map_err(eval_error)?;
+        let (variant, mut samples) = discover_gt(Path::new(path), variant).map_err(eval_error)?;
         // As the public loader: a test-only variant is read whole, whatever the split.
         let split = if is_test_only(&variant) {
             Split::All
@@ -388,6 +388,10 @@ fn discover(
         };
         // Each sample's split is the one its metadata records (the one rule of every reader,
         // `clevrtex_scene::dataset::splits`); an empty split is an error naming the sizes.
+        if split.part().is_some() {
+            clevrtex_eval::dataset::read_splits(Path::new(path), &variant, &mut samples)
+                .map_err(eval_error)?;
+        }
         let chosen = split.select(&samples, &variant).map_err(eval_error)?;
         if chosen.is_empty() {
             return Err(value_error(format!(

@@ -278,7 +278,11 @@ fn card_text(title: &str, variants: &BTreeMap<String, VariantRuns>) -> String {
         .values()
         .flat_map(|r| &r.manifests)
         .map(|(_, m)| m.tool_version.as_str())
-        .find(|v| !v.is_empty() && v.chars().all(|c| c.is_ascii_alphanumeric() || ".-+".contains(c)))
+        .find(|v| {
+            !v.is_empty()
+                && v.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || ".-+".contains(c))
+        })
         .unwrap_or(env!("CARGO_PKG_VERSION"));
     let bib = [
         "@inproceedings{karazija2021clevrtex,".to_string(),
@@ -341,10 +345,15 @@ pub fn write_card(out: &Path) -> Result<PathBuf, String> {
                 .keys()
                 .filter(|f| f.ends_with(".json") && !f.contains(".."))
                 .find_map(|rel| {
-                    let bytes = dataset::read(&root, &vdir.join(rel), dataset::MAX_METADATA_BYTES).ok()?;
+                    let bytes =
+                        dataset::read(&root, &vdir.join(rel), dataset::MAX_METADATA_BYTES).ok()?;
                     let meta: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
                     let r = &meta["render"];
-                    Some((r["width"].as_u64()?, r["height"].as_u64()?, r["samples"].as_u64()?))
+                    Some((
+                        r["width"].as_u64()?,
+                        r["height"].as_u64()?,
+                        r["samples"].as_u64()?,
+                    ))
                 });
         }
         let name = path
@@ -390,14 +399,22 @@ mod tests {
         m.finished = finished;
         m.tool_version = "0.1.0".into();
         m.passes = vec!["rgb".into(), "mask".into(), "depth".into()];
-        m.command = vec!["clevrtex".into(), "generate".into(), "--x`|\u{1b}[2J".into()];
+        m.command = vec![
+            "clevrtex".into(),
+            "generate".into(),
+            "--x`|\u{1b}[2J".into(),
+        ];
         (String::new(), m)
     }
 
     #[test]
     fn counts_take_each_index_once_with_its_run_s_split() {
         // Grown: 0..10 of 10, then 10..20 of 20 (all train), and 0..10 run again.
-        let runs = [run(0, 10, 10, true), run(10, 20, 20, false), run(0, 10, 10, true)];
+        let runs = [
+            run(0, 10, 10, true),
+            run(10, 20, 20, false),
+            run(0, 10, 10, true),
+        ];
         let (by, _) = counts("full", &runs);
         assert_eq!(
             (by[&Split::Test], by[&Split::Val], by[&Split::Train]),
@@ -416,11 +433,23 @@ mod tests {
             },
         );
         let card = card_text("data", &variants);
-        assert!(card.starts_with("---\npretty_name: \"data (clevrtex)\""), "{card}");
+        assert!(
+            card.starts_with("---\npretty_name: \"data (clevrtex)\""),
+            "{card}"
+        );
         assert!(card.contains("| `full` | 1 | 1 | 18 | 20 | 0 |"), "{card}");
-        assert!(card.contains("| depth | `<stem>_depth_0001.png` | 16-bit gray PNG"), "{card}");
-        assert!(card.contains("`depth.npy`: float32 (H, W) planar depth in metres"), "{card}");
-        assert!(card.contains("64x48 pixels and 4 samples per pixel here"), "{card}");
+        assert!(
+            card.contains("| depth | `<stem>_depth_0001.png` | 16-bit gray PNG"),
+            "{card}"
+        );
+        assert!(
+            card.contains("`depth.npy`: float32 (H, W) planar depth in metres"),
+            "{card}"
+        );
+        assert!(
+            card.contains("64x48 pixels and 4 samples per pixel here"),
+            "{card}"
+        );
         for section in [
             "## Dataset summary",
             "## Contents",
@@ -433,6 +462,9 @@ mod tests {
         }
         // No raw escape sequence; the command's backtick cannot close its fence.
         assert!(!card.contains('\u{1b}'), "{card}");
-        assert!(card.contains("@inproceedings{karazija2021clevrtex"), "{card}");
+        assert!(
+            card.contains("@inproceedings{karazija2021clevrtex"),
+            "{card}"
+        );
     }
 }

@@ -166,7 +166,11 @@ fn samples(
                     WebdatasetForm::Npy { .. }
                         if pass == Pass::Mask || described.contains(&pass) =>
                     {
-                        (spec.webdataset_key.to_string(), s.pass_path(pass), Some(pass))
+                        (
+                            spec.webdataset_key.to_string(),
+                            s.pass_path(pass),
+                            Some(pass),
+                        )
                     }
                     WebdatasetForm::Npy { .. } => {
                         (format!("{}.png", spec.name), s.pass_path(pass), None)
@@ -508,7 +512,10 @@ pub fn pass_npy(pass: Pass, bytes: &[u8], path: &Path) -> Result<Vec<u8>, String
         other => other.to_string().lines().next().unwrap_or("").to_string(),
     })?;
     let WebdatasetForm::Npy { descr, channels } = pass.spec().webdataset_form else {
-        return Err(format!("the {} pass is not stored as an array", pass.name()));
+        return Err(format!(
+            "the {} pass is not stored as an array",
+            pass.name()
+        ));
     };
     let (w, h) = (png.width as usize, png.height as usize);
     let layout = |bits: u8, ch: usize| -> Result<(), String> {
@@ -523,7 +530,10 @@ pub fn pass_npy(pass: Pass, bytes: &[u8], path: &Path) -> Result<Vec<u8>, String
             ))
         }
     };
-    let mut out = npy_header(descr, &[h, w, usize::from(channels)][..if channels == 1 { 2 } else { 3 }]);
+    let mut out = npy_header(
+        descr,
+        &[h, w, usize::from(channels)][..if channels == 1 { 2 } else { 3 }],
+    );
     match pass {
         Pass::Mask => {
             layout(8, 1)?;
@@ -566,7 +576,10 @@ pub fn pass_npy(pass: Pass, bytes: &[u8], path: &Path) -> Result<Vec<u8>, String
             }
         }
         Pass::Rgb | Pass::Albedo => {
-            return Err(format!("the {} pass is not stored as an array", pass.name()))
+            return Err(format!(
+                "the {} pass is not stored as an array",
+                pass.name()
+            ))
         }
     }
     Ok(out)
@@ -747,8 +760,8 @@ mod tests {
             bytes.push(std::fs::read(&out).unwrap());
         }
         assert_eq!(bytes[0], bytes[1]);
-        let err = sample_entries(&root, &[("png".into(), data.join("missing.png"), None)])
-            .unwrap_err();
+        let err =
+            sample_entries(&root, &[("png".into(), data.join("missing.png"), None)]).unwrap_err();
         assert!(err.to_string().contains("missing.png"), "{err}");
         assert!(err.to_string().contains("hint:"), "{err}");
     }

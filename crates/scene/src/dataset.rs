@@ -827,16 +827,24 @@ struct SplitOnly {
     split: Value,
 }
 
+/// The split the metadata file `path` (of a sample of `variant`, in the dataset whose
+/// canonical root is `root`) records ([`recorded_split`]), reading only that key; `Err` says
+/// why not in one line, without the path (unreadable, not JSON, a bad `split`).
+pub fn read_recorded_split(
+    root: &Path,
+    path: &Path,
+    variant: &str,
+) -> Result<Option<layout::Split>, String> {
+    let bytes = read(root, path, MAX_METADATA_BYTES)?;
+    let only: SplitOnly =
+        serde_json::from_slice(&bytes).map_err(|e| format!("is not valid metadata: {e}"))?;
+    recorded_split(&only.split, variant, "").map_err(|e| format!("key `split` {}", e.what))
+}
+
 impl Dataset {
-    /// The split sample `s`'s metadata records ([`recorded_split`]), reading only that key;
-    /// `Err` says why not in one line, without the path (unreadable, not JSON, a bad `split`).
+    /// The split sample `s`'s metadata records ([`read_recorded_split`]).
     pub fn read_recorded_split(&self, s: &SampleRef) -> Result<Option<layout::Split>, String> {
-        let bytes = self.read(&s.metadata_path(), MAX_METADATA_BYTES)?;
-        let only: SplitOnly = serde_json::from_slice(&bytes)
-            .map_err(|e| format!("is not valid metadata: {e}"))?;
-        recorded_split(&only.split, &s.variant, &s.metadata_name()).map_err(|e| {
-            format!("key `split` {}", e.what)
-        })
+        read_recorded_split(&self.root, &s.metadata_path(), &s.variant)
     }
 }
 
@@ -1080,6 +1088,9 @@ mod tests {
         let s = splits("full", &[None; 20]);
         assert_eq!(split_sizes(&s), "test 2, val 2, train 16");
         assert_eq!((s[1], s[2], s[4]), (Test, Val, Train));
-        assert_eq!(split_sizes(&splits("outd", &[None; 7])), "test 7, val 0, train 0");
+        assert_eq!(
+            split_sizes(&splits("outd", &[None; 7])),
+            "test 7, val 0, train 0"
+        );
     }
 }

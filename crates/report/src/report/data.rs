@@ -158,8 +158,8 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
                     reader::check_metadata(&meta, &file).map_err(|e| {
                         format!("`{file}` is not valid metadata: key `{}` {}", e.key, e.what)
                     })?;
-                    let split = reader::recorded_split(&meta["split"], &variant, &file)
-                        .map_err(|e| {
+                    let split =
+                        reader::recorded_split(&meta["split"], &variant, &file).map_err(|e| {
                             format!("`{file}` is not valid metadata: key `split` {}", e.what)
                         })?;
                     parse(variant, index, stem, dir, &meta)
