@@ -81,13 +81,15 @@ def _array(key: str, stem: Any, value: Any) -> np.ndarray:
             except Exception as e:
                 raise ValueError(f"{where} is not a PNG: {e}") from None
     else:
-        for step in ("detach", "cpu", "numpy"):  # a torch tensor, without importing torch
+        tensor = hasattr(value, "detach")  # a torch tensor, without importing torch
+        for step in ("detach", "cpu", "numpy"):
             if hasattr(value, step):
                 value = getattr(value, step)()
         arr = np.asarray(value)
-        # A colour decoder's image: float in [0, 1] (`rgb`), channels first (`torchrgb`).
+        # A colour decoder's image: float in [0, 1] (`rgb`), a channels-first tensor
+        # (`torchrgb`).
         if key.endswith("png"):
-            if arr.ndim == 3 and arr.shape[0] == 3 and arr.shape[-1] != 3:
+            if arr.ndim == 3 and arr.shape[0] == 3 and (tensor or arr.shape[-1] != 3):
                 arr = arr.transpose(1, 2, 0)
             if arr.dtype.kind == "f":
                 arr = np.clip(np.round(arr * 255.0), 0, 255).astype(np.uint8)
@@ -97,6 +99,8 @@ def _array(key: str, stem: Any, value: Any) -> np.ndarray:
         raise ValueError(f"{where} has shape {arr.shape}, not {shape}")
     if key.endswith(".npy") and arr.dtype.kind not in ("biu" if dtype == "uint8" else "biuf"):
         raise ValueError(f"{where} has dtype {arr.dtype}, not {dtype}")
+    if dtype == "uint8" and arr.dtype != np.uint8 and arr.size and (arr.min() < 0 or arr.max() > 255):
+        raise ValueError(f"{where} holds values outside 0..255, not uint8 {name}")
     return np.ascontiguousarray(arr, dtype=dtype)
 
 
