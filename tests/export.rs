@@ -235,6 +235,25 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
             "{name}"
         );
     }
+
+    // The published layout (metadata without our pass encodings): the mask's ids are still
+    // an array; depth, in an encoding the metadata does not describe, stays its PNG.
+    let published = dir.path().join("published");
+    crate::util::published_copy(&data, "clevr", &published);
+    let out = dir.path().join("wds-published");
+    let (code, t) = export(&published, &out, &[]);
+    assert_eq!(code, Some(0), "{t}");
+    let names = members(&out.join("clevr-test-000000.tar"));
+    assert_eq!(
+        names,
+        [
+            "CLEVRTEX_clevr_000000.png",
+            "CLEVRTEX_clevr_000000.mask.npy",
+            "CLEVRTEX_clevr_000000.depth.png",
+            "CLEVRTEX_clevr_000000.json"
+        ],
+        "{names:?}"
+    );
 }
 
 /// A sample written by hand (no Blender): an 8-byte "PNG" (export does not decode) of
