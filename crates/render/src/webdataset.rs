@@ -5,9 +5,11 @@
 //!
 //! `OUT/<variant>-<split>-%06d.tar`, each at most `shard_size` bytes (one sample is never
 //! split; a sample larger than the limit gets a shard of its own), samples in index order. In a
-//! shard a sample is the files `<stem>.png`, `<stem>.flat.png`, `<stem>.depth.png`,
-//! `<stem>.normal.png`, `<stem>.albedo.png`, `<stem>.shadow.png` (the passes it has) and
-//! `<stem>.json`, so WebDataset's key is the stem. Splits are each sample's recorded `split`
+//! shard a sample is `<stem>.<key>` for each pass it has, the key and form from the pass
+//! table (`webdataset_key`, `webdataset_form`): `png` and `albedo.png` the dataset's PNGs,
+//! `mask.npy` (uint8 ids), `depth.npy` (float32 metres, background +inf), `normal.npy` and
+//! `shadow.npy` arrays decoded from the PNGs ([`pass_npy`], so no colour decoder can take them
+//! for colours), and `<stem>.json`, so WebDataset's key is the stem. Splits are each sample's recorded `split`
 //! (else, for the published ClevrTex, the public loader's position rule:
 //! [`clevrtex_scene::dataset::splits`], the rule of every reader). The files are those of
 //! the layout (`clevrtex_scene::layout`): a metadata `*_filename` only says whether a pass was
@@ -15,8 +17,9 @@
 //! and non-regular files not read (their samples are left out and listed). Shards of an
 //! earlier export into OUT that this one did not write are removed (only names of the form
 //! above). Tar headers carry no time, owner or mode of the machine: the same dataset gives the
-//! same bytes. Each shard is written under a temporary name and renamed when complete;
-//! `OUT/index.json` lists the shards and their sample counts.
+//! same bytes (and the arrays no machine-dependent byte). Each shard is written under a
+//! temporary name and renamed when complete; `OUT/index.json` lists the shards and their
+//! sample counts, and what each key holds.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
