@@ -3,7 +3,8 @@
 Every shape is scaled uniformly so its largest extent is 2, centred in x and y, and shifted
 so it rests on z = -1 (the sampler puts the origin at z = scale, so the object sits on the
 floor). The one exception is the monkey, which the reference places at z in [-0.97, 0.48]
-(reference §1). Hard edges are bevelled before the level-1 subdivision modifier that every
+(the public generator's `clevrtex-gen/data/shapes/Suzanne.blend`, karazijal/clevrtex-generation).
+Hard edges are bevelled before the level-1 subdivision modifier that every
 shape carries, so cubes stay cubes and cylinders keep flat caps, as in CLEVR's smooth shapes.
 
 Meshes are cached for the worker's life and shared by every object of that shape (materials
@@ -20,7 +21,8 @@ import compat
 
 SHAPES = ("cube", "sphere", "cylinder", "monkey", "cone", "torus", "icosahedron", "teapot")
 
-# Subdivision level of the modifier every shape carries (reference §1).
+# Subdivision level of the modifier every shape carries (as the public generator's shape files,
+# karazijal/clevrtex-generation `clevrtex-gen/data/shapes/`).
 SUBDIVISION_LEVEL = 1
 # Bevel width (in the normalised [-1, 1] frame) of the edges that would otherwise be rounded
 # away by the subdivision.

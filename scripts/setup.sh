@@ -4,7 +4,7 @@
 #
 #   ./scripts/setup.sh               Blender (apt) and the Rust components
 #   ./scripts/setup.sh --test-venv   also `.venv-test/`: a Python venv with the libraries the
-#                                    tests read our files with (webdataset, PyYAML) and the
+#                                    tests read our files with (webdataset, Hugging Face datasets, PyYAML) and the
 #                                    eval reference harness's (numpy, scipy, scikit-learn, Pillow),
 #                                    and the Python package `clevrtex` (crates/python) with pytest
 #   ./scripts/setup.sh --bpy 4.5     also `.venv-bpy/`: a Python venv with PyPI's `bpy` 4.5 LTS
@@ -95,6 +95,10 @@ if [ "$test_venv" = 1 ]; then
   if ! .venv-test/bin/python -c 'import webdataset, yaml' >/dev/null 2>&1; then
     python3 -m venv .venv-test
     .venv-test/bin/pip install --quiet --disable-pip-version-check 'webdataset>=0.2,<2' 'pyyaml>=6'
+  fi
+  # Hugging Face `datasets`: tests/export.rs reads exported shards with its `webdataset` builder.
+  if ! .venv-test/bin/python -c 'import datasets' >/dev/null 2>&1; then
+    .venv-test/bin/pip install --quiet --disable-pip-version-check 'datasets>=2.16,<5'
   fi
   # tests/eval_reference/harness.py (the public evaluators in numpy; see docs/eval.md).
   if ! .venv-test/bin/python -c 'import numpy, scipy, sklearn, PIL' >/dev/null 2>&1; then

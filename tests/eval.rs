@@ -842,7 +842,7 @@ fn eval_empty_default_split_is_an_error_not_a_usage_error() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
     assert!(
         stderr(&out).contains("the `test` split of")
-            && stderr(&out).contains("is empty: it has 5 samples in all")
+            && stderr(&out).contains("is empty: it has 5 samples in all (test 0, val 1, train 4)")
             && stderr(&out).contains("--split all"),
         "{}",
         text(&out)

@@ -3,40 +3,104 @@
 
 use crate::util::{blender_or_skip, clevrtex, test_python_or_skip, text};
 
-/// Reads every shard of `index.json` with `webdataset` and checks each sample against the
-/// dataset's own files (found through its metadata); prints `split keys...` per split.
+/// The variable that makes the torch half of the WebDataset test required.
+const REQUIRE_TORCH: &str = "CLEVRTEX_REQUIRE_TORCH";
+
+/// Reads every shard of `index.json` with the real `webdataset` library, raw and through
+/// `.decode("rgb")` (and `"torchrgb"` when torch is there), and with Hugging Face `datasets`'
+/// `webdataset` builder, and checks each sample against the dataset's own files (found
+/// through its metadata): PNGs byte for byte, `mask.npy` equal to the mask PNG's ids,
+/// `depth.npy` to the depth PNG in metres (+inf background), `normal.npy` unit vectors; the
+/// package's `clevrtex.wds.decode` gives the same from every reader. Prints `split keys...`
+/// per split, then `torch: yes|no`.
 const READ_BACK: &str = r#"
-import json, os, sys
+import io, json, os, sys
+import numpy as np
+from PIL import Image
 import webdataset as wds
+import datasets
+import clevrtex
 out, src = sys.argv[1], sys.argv[2]
 index = json.load(open(os.path.join(out, "index.json")))
+try:
+    import torch
+except ImportError:
+    torch = None
+
+def truth(meta, key):
+    folder = os.path.join(src, "clevrtex_" + meta["variant"], str(meta["image_index"] // 1000))
+    path = lambda field: os.path.join(folder, meta[field])
+    if key == "mask":
+        im = Image.open(path("mask_filename"))
+        assert im.mode == "P", im.mode
+        return np.array(im)
+    if key == "depth":
+        v = np.array(Image.open(path("depth_filename"))).astype(np.float64)
+        assert meta["passes"]["depth"]["scale"] == 0.001
+        return np.where(v == 65535, np.inf, v * 0.001).astype(np.float32)
+    return open(path(key), "rb").read()
+
+def same(a, b, what):
+    assert a.dtype == b.dtype and a.shape == b.shape, (what, a.dtype, a.shape, b.dtype, b.shape)
+    assert np.array_equal(a, b), what
+
 seen = {}
 for entry in index["shards"]:
     shard = entry["shard"]
     url = os.path.join(out, shard["file"])
-    n = 0
-    for sample in wds.WebDataset(url, shardshuffle=False):
-        n += 1
-        key = sample["__key__"]
-        meta = json.loads(sample["json"])
-        assert meta["stem"] == key, (key, meta["stem"])
+    raw = list(wds.WebDataset(url, shardshuffle=False))
+    rgb = list(wds.WebDataset(url, shardshuffle=False).decode("rgb"))
+    assert len(raw) == len(rgb) == shard["samples"], (url, len(raw), shard["samples"])
+    hf = datasets.load_dataset("webdataset", data_files={"x": [url]}, split="x")
+    assert len(hf) == len(raw), (len(hf), len(raw))
+    trgb = list(wds.WebDataset(url, shardshuffle=False).decode("torchrgb")) if torch else None
+    for i, (r, d) in enumerate(zip(raw, rgb)):
+        key = r["__key__"]
+        meta = json.loads(r["json"])
+        assert meta["stem"] == key and d["__key__"] == key and hf[i]["__key__"] == key
         assert meta["split"] == entry["split"], (key, meta["split"], entry["split"])
         folder = os.path.join(src, "clevrtex_" + meta["variant"], str(meta["image_index"] // 1000))
-        with open(os.path.join(folder, key + ".json"), "rb") as f:
-            assert f.read() == sample["json"], key
-        names = {"png": "image_filename", "flat.png": "mask_filename", "depth.png": "depth_filename",
-                 "normal.png": "normal_filename", "albedo.png": "albedo_filename",
-                 "shadow.png": "shadow_filename"}
-        for ext, field in names.items():
-            if meta.get(field):
-                with open(os.path.join(folder, meta[field]), "rb") as f:
-                    assert f.read() == sample[ext], (key, ext)
-            else:
-                assert ext not in sample, (key, ext)
+        assert open(os.path.join(folder, key + ".json"), "rb").read() == r["json"], key
+        assert r["png"] == truth(meta, "image_filename"), key
+        assert sorted(k for k in r if not k.startswith("__")) == ["depth.npy", "json", "mask.npy", "normal.npy", "png"], sorted(r)
+        mask, depth = truth(meta, "mask"), truth(meta, "depth")
+        assert mask.max() == meta["num_objects"], (key, mask.max())
+        assert np.isfinite(depth).any() and depth[np.isfinite(depth)].min() > 0, key
+        # `.decode("rgb")`: the image a float colour, the ids and metres as stored.
+        assert d["png"].dtype == np.float32 and d["png"].shape == mask.shape + (3,), key
+        same(d["mask.npy"], mask, (key, "rgb mask"))
+        same(d["depth.npy"], depth, (key, "rgb depth"))
+        n = d["normal.npy"]
+        assert n.dtype == np.float32 and n.shape == mask.shape + (3,), (key, n.shape)
+        length = np.linalg.norm(n, axis=-1)
+        assert np.allclose(length[np.isfinite(depth)], 1, atol=1e-5), key
+        assert (length[np.isinf(depth)] == 0).all(), key
+        # Hugging Face: the same ids and metres.
+        same(np.asarray(hf[i]["mask.npy"], dtype=np.uint8), mask, (key, "hf mask"))
+        same(np.asarray(hf[i]["depth.npy"], dtype=np.float32), depth, (key, "hf depth"))
+        # The package's decoder, from every reader's form of the sample.
+        forms = [("raw", r), ("rgb", d), ("hf", hf[i])]
+        if trgb is not None:
+            forms.append(("torchrgb", trgb[i]))
+            t = trgb[i]
+            tm = t["mask.npy"]
+            tm = tm.numpy() if hasattr(tm, "numpy") else np.asarray(tm)
+            same(tm, mask, (key, "torchrgb mask"))
+            td = t["depth.npy"]
+            td = td.numpy() if hasattr(td, "numpy") else np.asarray(td)
+            same(td, depth, (key, "torchrgb depth"))
+        image = np.asarray(Image.open(io.BytesIO(r["png"])).convert("RGB"))
+        for form, s in forms:
+            a = clevrtex.wds.decode(s)
+            assert a["key"] == key and a["metadata"]["stem"] == key, form
+            same(a["mask"], mask, (key, form, "decode mask"))
+            same(a["depth"], depth, (key, form, "decode depth"))
+            same(a["image"], image, (key, form, "decode image"))
+            assert a["normal"].shape == mask.shape + (3,), form
         seen.setdefault(entry["split"], []).append(key)
-    assert n == shard["samples"], (url, n, shard["samples"])
 for split, keys in sorted(seen.items()):
     print(split, " ".join(keys))
+print("torch:", "yes" if torch else "no")
 "#;
 
 #[test]
@@ -44,7 +108,10 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
     let Some(blender) = blender_or_skip("webdataset_shards_round_trip") else {
         return;
     };
-    let Some(python) = test_python_or_skip("webdataset_shards_round_trip", "webdataset") else {
+    let Some(python) = test_python_or_skip(
+        "webdataset_shards_round_trip",
+        "webdataset, datasets, PIL, clevrtex.wds",
+    ) else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -70,19 +137,32 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let index: serde_json::Value =
         serde_json::from_slice(&std::fs::read(shards.join("index.json")).unwrap()).unwrap();
-    // The keys written by hand before they came from the pass table.
+    // The keys written by hand before they came from the pass table; what each holds.
+    let keys: Vec<&str> = index["keys"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|k| k["key"].as_str().unwrap())
+        .collect();
     assert_eq!(
-        index["keys"],
-        serde_json::json!([
-            "__key__ = stem",
+        keys,
+        [
+            "__key__",
             "png",
-            "flat.png",
-            "depth.png",
-            "normal.png",
+            "mask.npy",
+            "depth.npy",
+            "normal.npy",
             "albedo.png",
-            "shadow.png",
+            "shadow.npy",
             "json"
-        ]),
+        ],
+    );
+    assert!(
+        index["keys"][3]["holds"]
+            .as_str()
+            .unwrap()
+            .starts_with("float32 (H, W) planar depth in metres"),
+        "{index}"
     );
     let train_shards = index["shards"]
         .as_array()
@@ -102,6 +182,9 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
 
     let o = std::process::Command::new(&python)
         .args(["-c", READ_BACK])
+        // Hugging Face's cache in the test's folder, and no network.
+        .env("HF_HOME", dir.path().join("hf"))
+        .env("HF_DATASETS_OFFLINE", "1")
         .arg(&shards)
         .arg(&data)
         .output()
@@ -110,8 +193,9 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
     let stdout = String::from_utf8_lossy(&o.stdout);
     let stem = |i: u64| format!("CLEVRTEX_clevr_{i:06}");
     let train: Vec<String> = (2..12).map(stem).collect();
+    let lines: Vec<&str> = stdout.lines().collect();
     assert_eq!(
-        stdout.lines().collect::<Vec<_>>(),
+        lines[..3],
         [
             format!("test {}", stem(0)),
             format!("train {}", train.join(" ")),
@@ -119,6 +203,14 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
         ],
         "{stdout}"
     );
+    if lines.last() == Some(&"torch: no") {
+        crate::util::skip(
+            "webdataset_shards_round_trip (its `.decode(\"torchrgb\")` half)",
+            REQUIRE_TORCH,
+            "no torch in the test venv",
+            "install torch into `.venv-test`",
+        );
+    }
 
     // The same dataset exports to the same bytes.
     let again = dir.path().join("wds2");
@@ -143,6 +235,25 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
             "{name}"
         );
     }
+
+    // The published layout (metadata without our pass encodings): the mask's ids are still
+    // an array; depth, in an encoding the metadata does not describe, stays its PNG.
+    let published = dir.path().join("published");
+    crate::util::published_copy(&data, "clevr", &published);
+    let out = dir.path().join("wds-published");
+    let (code, t) = export(&published, &out, &[]);
+    assert_eq!(code, Some(0), "{t}");
+    let names = members(&out.join("clevr-test-000000.tar"));
+    assert_eq!(
+        names,
+        [
+            "CLEVRTEX_clevr_000000.png",
+            "CLEVRTEX_clevr_000000.mask.npy",
+            "CLEVRTEX_clevr_000000.depth.png",
+            "CLEVRTEX_clevr_000000.json"
+        ],
+        "{names:?}"
+    );
 }
 
 /// A sample written by hand (no Blender): an 8-byte "PNG" (export does not decode) of

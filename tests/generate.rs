@@ -371,6 +371,9 @@ fn generate_writes_every_pass_with_exact_masks_and_resumes() {
         expected.push("clevrtex_camo/MANIFEST-0-2-0of1.json".to_string());
         // The guard of the run locks (an empty file that stays).
         expected.push("clevrtex_camo/.clevrtex-runs.lock".to_string());
+        // The dataset card, and the guard of its writers (an empty file that stays).
+        expected.push("DATASET_CARD.md".to_string());
+        expected.push(".clevrtex-card.lock".to_string());
         expected.sort();
         assert_eq!(files_under(dir.path()), expected);
 

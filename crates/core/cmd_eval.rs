@@ -25,7 +25,7 @@ pub struct Args {
         clevrtex_scene::config::Config::variant_list()
     ))]
     pub variant: Option<String>,
-    /// Which samples to score, by position in the index sequence [default: test; all for outd].
+    /// Which samples to score: each sample's recorded split (by position where none is recorded) [default: test; all for outd].
     #[arg(long, value_enum)]
     pub split: Option<SplitArg>,
     /// Whose metrics to report by default, and the crop: `clevrtex` (the public ClevrTex

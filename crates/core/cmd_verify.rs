@@ -50,6 +50,20 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
             p(&m.xxh3)
         );
     }
+    if !r.splits.is_empty() {
+        // Each sample's split as every reader takes it (recorded, else by position).
+        let sizes: Vec<String> = ["test", "val", "train"]
+            .iter()
+            .map(|s| {
+                let n: u64 = r
+                    .splits
+                    .get(*s)
+                    .map_or(0, |v| v.iter().map(|[a, b]| b - a + 1).sum());
+                format!("{s} {n}")
+            })
+            .collect();
+        println!("  splits: {}", sizes.join(", "));
+    }
     if r.missing_count > 0 {
         // The list is capped (`verify::MAX_LISTED`); say where it stops.
         let more = match r.missing_count - r.missing.len() as u64 {

@@ -155,6 +155,7 @@ pub(crate) fn run_jobs(
             // settings is refused.
             plan.check_settings(&args.out, args.overwrite)?;
             plan.write_plan(&args.out)?;
+            write_card(&args.out);
             Some(lock)
         }
         None => None,
@@ -187,6 +188,7 @@ pub(crate) fn run_jobs(
             if let Some(plan) = manifest {
                 let seconds = seconds.into_inner().unwrap_or_else(|e| e.into_inner());
                 let path = plan.write(&args.out, &seconds)?;
+                write_card(&args.out);
                 println!(
                     "manifest: {} (check with `clevrtex verify {}`)",
                     path.display(),
@@ -470,6 +472,14 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
             "failures recorded in `{}`; rerun the same command to retry them",
             ledger.display()
         );
+    }
+}
+
+/// Rewrite the dataset card from every run's manifest (`clevrtex_render::card`); a card that
+/// cannot be written is a warning: the samples and the manifest are what the run made.
+fn write_card(out: &std::path::Path) {
+    if let Err(e) = clevrtex_render::card::write_card(out) {
+        eprintln!("warning: the dataset card was not written: {e}");
     }
 }
 

@@ -7,7 +7,7 @@ pub struct Errors {
     /// pixel and channel.
     pub rmse_linear: f64,
     /// `rmse_linear` divided by the reference's mean linear value: the "relative RMSE" of
-    /// the reference §3 measurements.
+    /// this project's render measurements (docs/performance.md).
     pub rel_error: f64,
     /// Mean of the render minus mean of the reference, over the reference's mean: the
     /// systematic part of the error (reduced bounces or clamping darken; noise alone gives

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use clevrtex_scene::config::Splits;
 use clevrtex_scene::layout::{self, parse_stem};
+use rayon::prelude::*;
 
 use crate::error::EvalError;
 
@@ -24,6 +25,10 @@ pub struct GtSample {
     /// The dataset's canonical root: the files above are opened relative to it
     /// ([`GtSample::read`]), so a folder swapped for a link out of it is not read through.
     pub root: PathBuf,
+    /// Its split: the one its metadata records, else (the published ClevrTex) the public
+    /// loader's position rule ([`clevrtex_scene::dataset::splits`]); `None` until
+    /// [`read_splits`] (a whole dataset needs no split, and reads no metadata to open).
+    pub split: Option<layout::Split>,
 }
 
 impl GtSample {
@@ -37,7 +42,7 @@ impl GtSample {
     }
 }
 
-/// Which samples to evaluate, by position in the index sequence.
+/// Which samples to evaluate: a split ([`GtSample::split`]) or all.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Split {
     /// The first `int(0.1 N)`.
@@ -66,15 +71,17 @@ impl Split {
         self.part().map_or("all", layout::Split::name)
     }
 
-    /// The positions `start..end` of this split among `n` samples of `variant`, by the
-    /// dataset layout's rule ([`clevrtex_scene::layout::Split`]); a variant whose config says
-    /// `"splits": "test_only"` (`outd`) has only a test split, all of it.
-    pub fn range(self, n: usize, variant: &str) -> Result<std::ops::Range<usize>, EvalError> {
-        let splits = layout::variant_splits(variant);
+    /// The samples of this split among `samples` (each with its [`GtSample::split`]); a
+    /// variant whose config says `"splits": "test_only"` (`outd`) has only a test split.
+    pub fn select<'a>(
+        self,
+        samples: &'a [GtSample],
+        variant: &str,
+    ) -> Result<Vec<&'a GtSample>, EvalError> {
         let Some(part) = self.part() else {
-            return Ok(0..n);
+            return Ok(samples.iter().collect());
         };
-        if splits == Splits::TestOnly && part != layout::Split::Test {
+        if layout::variant_splits(variant) == Splits::TestOnly && part != layout::Split::Test {
             return Err(EvalError::Usage {
                 message: format!(
                     "`{variant}` is a test-only dataset, it has no `{}` split",
@@ -83,9 +90,14 @@ impl Split {
                 hint: "use `--split test` (the default) or `--split all`".into(),
             });
         }
-        let r = part.range(splits, n as u64);
-        Ok(r.start as usize..r.end as usize)
+        Ok(samples.iter().filter(|s| s.split == Some(part)).collect())
     }
+}
+
+/// How many of `samples` are in each split, for messages: `test 0, val 0, train 4`.
+pub fn split_sizes(samples: &[GtSample]) -> String {
+    let splits: Vec<layout::Split> = samples.iter().filter_map(|s| s.split).collect();
+    clevrtex_scene::dataset::split_sizes(&splits)
 }
 
 /// Every regular file under `dir`, recursively and depth-limited, walked with the reader of
@@ -301,9 +313,39 @@ pub fn discover_gt(
             mask,
             meta,
             root: ds.root.clone(),
+            split: None,
         });
     }
     Ok((variant, samples))
+}
+
+/// Set each sample's [`GtSample::split`] (the samples of one variant of the dataset `gt`, as
+/// [`discover_gt`] found them, in index order): the split its metadata records, only that key
+/// read (in parallel), else by position (the one rule of `clevrtex_scene::dataset::splits`).
+pub fn read_splits(gt: &Path, variant: &str, samples: &mut [GtSample]) -> Result<(), EvalError> {
+    let root = clevrtex_scene::dataset::root(gt).map_err(|cause| EvalError::Io {
+        path: gt.to_path_buf(),
+        cause,
+    })?;
+    let recorded = samples
+        .par_iter()
+        .map(|s| {
+            clevrtex_scene::dataset::read_recorded_split(&root, &s.meta, variant).map_err(
+                |reason| EvalError::Corrupt {
+                    path: s.meta.clone(),
+                    reason,
+                    hint: "a sample's `split` is `test`, `val` or `train` (absent in the published ClevrTex); check the dataset with `clevrtex verify`".into(),
+                },
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    for (s, split) in samples
+        .iter_mut()
+        .zip(clevrtex_scene::dataset::splits(variant, &recorded))
+    {
+        s.split = Some(split);
+    }
+    Ok(())
 }
 
 /// The prediction files found for one stem.
@@ -394,11 +436,32 @@ mod tests {
     }
 
     #[test]
-    fn splits() {
-        assert_eq!(Split::Test.range(50, "full").unwrap(), 0..5);
-        assert_eq!(Split::Val.range(50, "full").unwrap(), 5..10);
-        assert_eq!(Split::Train.range(50, "full").unwrap(), 10..50);
-        assert_eq!(Split::Test.range(7, "outd").unwrap(), 0..7);
-        assert!(Split::Val.range(7, "outd").is_err());
+    fn splits_select_by_each_sample_s_split() {
+        let sample = |index: u64, split| GtSample {
+            index,
+            stem: layout::stem("full", index),
+            image: PathBuf::new(),
+            mask: PathBuf::new(),
+            meta: PathBuf::new(),
+            root: PathBuf::new(),
+            split: Some(split),
+        };
+        let v = [
+            sample(0, layout::Split::Test),
+            sample(1, layout::Split::Val),
+            sample(2, layout::Split::Train),
+            sample(3, layout::Split::Val),
+        ];
+        let idx = |s: Split| -> Vec<u64> {
+            s.select(&v, "full")
+                .unwrap()
+                .iter()
+                .map(|x| x.index)
+                .collect()
+        };
+        assert_eq!(idx(Split::Val), [1, 3]);
+        assert_eq!(idx(Split::All).len(), 4);
+        assert_eq!(split_sizes(&v), "test 1, val 2, train 1");
+        assert!(Split::Val.select(&v, "outd").is_err());
     }
 }

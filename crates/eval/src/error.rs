@@ -72,7 +72,7 @@ pub enum EvalError {
         variants: Vec<String>,
     },
     /// The ground-truth indices are not contiguous.
-    #[error("ground truth has a gap: index `{missing}` is missing (found {first}..={last}, {count} samples)\nhint: the split is taken by position in the index sequence, so every index must be present; restore the missing sample or evaluate a complete dataset")]
+    #[error("ground truth has a gap: index `{missing}` is missing (found {first}..={last}, {count} samples)\nhint: every index must be present (a dataset whose metadata records no split, like the published ClevrTex, is split by position in the index sequence); restore the missing sample or evaluate a complete dataset")]
     GtGap {
         /// The first missing index.
         missing: u64,
@@ -115,7 +115,7 @@ pub enum EvalError {
         why: String,
     },
     /// The chosen split holds no sample.
-    #[error("the `{split}` split of `{}` is empty: it has {total} samples in all\nhint: a split is a share of the samples (test the first int(0.1 N), val up to int(0.2 N), train the rest); use `--split all` for small datasets", gt.display())]
+    #[error("the `{split}` split of `{}` is empty: it has {total} samples in all ({sizes})\nhint: each sample's split is the one its metadata records (`generate` fixes it from `--total`: test the first int(0.1 N), val up to int(0.2 N), train the rest); use `--split all` for small datasets", gt.display())]
     EmptySplit {
         /// The split.
         split: &'static str,
@@ -123,6 +123,8 @@ pub enum EvalError {
         gt: PathBuf,
         /// Samples in all.
         total: usize,
+        /// Samples per split, `test 0, val 0, train 4`.
+        sizes: String,
     },
     /// A bad combination of options.
     #[error("{message}\nhint: {hint}")]

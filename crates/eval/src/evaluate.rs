@@ -307,7 +307,7 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
             hint: "1000 (the default) gives stable 95% intervals; use at most 100000".into(),
         });
     }
-    let (variant, samples) = discover_gt(gt, opts.variant.as_deref())?;
+    let (variant, mut samples) = discover_gt(gt, opts.variant.as_deref())?;
     // A test-only variant (its config says `"splits": "test_only"`) is scored whole.
     let split = opts
         .split
@@ -315,14 +315,17 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
             clevrtex_scene::config::Splits::TestOnly => Split::All,
             clevrtex_scene::config::Splits::Standard => Split::Test,
         });
-    let samples_len = samples.len();
-    let range = split.range(samples_len, &variant)?;
-    let samples = &samples[range];
+    if split.part().is_some() {
+        crate::dataset::read_splits(gt, &variant, &mut samples)?;
+    }
+    let all = &samples;
+    let samples = split.select(all, &variant)?;
     if samples.is_empty() {
         return Err(EvalError::EmptySplit {
             split: split.name(),
             gt: gt.to_path_buf(),
-            total: samples_len,
+            total: all.len(),
+            sizes: crate::dataset::split_sizes(all),
         });
     }
     let pred_index = index_preds(preds, &variant)?;

@@ -380,16 +380,30 @@ fn discover(
         }
     };
     py.allow_threads(|| {
-        let (variant, samples) = discover_gt(Path::new(path), variant).map_err(eval_error)?;
+        let (variant, mut samples) = discover_gt(Path::new(path), variant).map_err(eval_error)?;
         // As the public loader: a test-only variant is read whole, whatever the split.
         let split = if is_test_only(&variant) {
             Split::All
         } else {
             split
         };
-        let range = split.range(samples.len(), &variant).map_err(eval_error)?;
+        // Each sample's split is the one its metadata records (the one rule of every reader,
+        // `clevrtex_scene::dataset::splits`); an empty split is an error naming the sizes.
+        if split.part().is_some() {
+            clevrtex_eval::dataset::read_splits(Path::new(path), &variant, &mut samples)
+                .map_err(eval_error)?;
+        }
+        let chosen = split.select(&samples, &variant).map_err(eval_error)?;
+        if chosen.is_empty() {
+            return Err(value_error(format!(
+                "the `{}` split of `{path}` is empty: it has {} samples in all ({})\nhint: pick a split that has samples, or `split=\"all\"`",
+                split.name(),
+                samples.len(),
+                clevrtex_eval::dataset::split_sizes(&samples)
+            )));
+        }
         let s = |p: &Path| p.display().to_string();
-        let list = samples[range]
+        let list = chosen
             .iter()
             .map(|x| (x.index, s(&x.image), s(&x.mask), s(&x.meta)))
             .collect();
@@ -406,7 +420,7 @@ fn colour_breakdown(variant: &str) -> bool {
 
 /// A variant with only a test split (its config says `"splits": "test_only"`, e.g. `outd`).
 fn is_test_only(variant: &str) -> bool {
-    clevrtex_eval::Split::Val.range(10, variant).is_err()
+    clevrtex_scene::layout::variant_splits(variant) == clevrtex_scene::config::Splits::TestOnly
 }
 
 /// The largest `resize` side (the largest image a dataset has).

@@ -36,6 +36,7 @@
 
 pub mod blender;
 pub mod bridge;
+pub mod card;
 /// The reader of untrusted dataset folders, in the pure `scene` crate so that `eval` shares it.
 pub use clevrtex_scene::dataset;
 pub mod device;

@@ -93,6 +93,9 @@ pub struct VariantReport {
     pub manifest_problems: Vec<String>,
     /// Entries of the failure ledgers: index -> error.
     pub ledger: BTreeMap<u64, String>,
+    /// Each split's samples (of those found once) as index ranges `[first, last]`, by the one
+    /// split rule of every reader ([`dataset::splits`]: the recorded `split`, else by position).
+    pub splits: BTreeMap<String, Vec<[u64; 2]>>,
     /// Commands to rerun after repair: those of the runs (from the manifests) whose indices
     /// are missing or broken or that did not finish, with `--out` set to the folder verified.
     pub commands: Vec<Vec<String>>,
@@ -517,7 +520,28 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
             singles.push((*index, places[0].clone(), covered_by_finished(*index)));
         }
     }
-    let checked: Vec<Result<(), Broken>> = singles
+    // The split each run that covers an index gives it (the layout's position rule over the
+    // run's `total`): what `generate` recorded, so what the sample's metadata must say.
+    let splits_rule = layout::variant_splits(variant);
+    let run_split = |index: u64| -> Vec<(layout::Split, String)> {
+        manifests
+            .iter()
+            .filter(|(_, m, _)| m.covers(index))
+            .map(|(p, m, _)| {
+                (
+                    layout::Split::of(splits_rule, index, m.total),
+                    format!(
+                        "the run of indices {}..{} of {} (`{}`)",
+                        m.start,
+                        m.end,
+                        m.total,
+                        p.file_name().unwrap_or_default().to_string_lossy()
+                    ),
+                )
+            })
+            .collect()
+    };
+    let checked: Vec<(Option<layout::Split>, Result<(), Broken>)> = singles
         .par_iter()
         .map(|(index, (stem, f), listed)| {
             // The manifests whose run claims the index: the sample must be what they say.
@@ -525,10 +549,26 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
                 .iter()
                 .filter(|(_, m, _)| m.variant == variant && m.covers(*index))
                 .collect();
-            check_sample(*index, stem, f, &entries, *listed, &claims)
+            check_sample(
+                *index,
+                stem,
+                f,
+                &entries,
+                *listed,
+                &claims,
+                &run_split(*index),
+            )
         })
         .collect();
-    for c in checked {
+    let recorded: Vec<Option<layout::Split>> = checked.iter().map(|(s, _)| *s).collect();
+    for ((index, _, _), split) in singles.iter().zip(dataset::splits(variant, &recorded)) {
+        let ranges = rep.splits.entry(split.name().to_string()).or_default();
+        match ranges.last_mut() {
+            Some(r) if r[1] + 1 == *index => r[1] = *index,
+            _ => ranges.push([*index, *index]),
+        }
+    }
+    for (_, c) in checked {
         match c {
             Ok(()) => rep.ok += 1,
             Err(mut b) => {
@@ -651,6 +691,8 @@ impl Drop for PixelBudget {
     }
 }
 
+/// Also the split the sample's metadata records (`None`: none, or not read). `runs`: the split
+/// each run that covers the index gives it, with the run named.
 fn check_sample(
     index: u64,
     stem: &str,
@@ -658,6 +700,32 @@ fn check_sample(
     entries: &Entries,
     listed_run: bool,
     claims: &[&ReadManifest],
+    runs: &[(layout::Split, String)],
+) -> (Option<layout::Split>, Result<(), Broken>) {
+    let mut recorded = None;
+    let result = check_sample_files(
+        index,
+        stem,
+        f,
+        entries,
+        listed_run,
+        claims,
+        runs,
+        &mut recorded,
+    );
+    (recorded, result)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn check_sample_files(
+    index: u64,
+    stem: &str,
+    f: &Found,
+    entries: &Entries,
+    listed_run: bool,
+    claims: &[&ReadManifest],
+    runs: &[(layout::Split, String)],
+    recorded: &mut Option<layout::Split>,
 ) -> Result<(), Broken> {
     let mut problems = Vec::new();
     let variant_from_stem = layout::parse_stem(&format!("{stem}.json"), ".json")
@@ -753,6 +821,23 @@ fn check_sample(
                 differ.join(", ")
             ));
         }
+    }
+    // The recorded split (authoritative for every reader) must be the one the run that made
+    // the sample gave it: the position rule over the run's `total`.
+    match dataset::recorded_split(&meta["split"], &variant_from_stem, &meta_name) {
+        Ok(Some(split)) => {
+            *recorded = Some(split);
+            if !runs.is_empty() && !runs.iter().any(|(s, _)| *s == split) {
+                problems.push(format!(
+                    "metadata `split` is `{}`, but {} puts index {index} in `{}`",
+                    split.name(),
+                    runs[0].1,
+                    runs[0].0.name()
+                ));
+            }
+        }
+        Ok(None) => {}
+        Err(e) => problems.push(e.to_string()),
     }
     if meta["image_index"].as_u64() != Some(index) {
         problems.push(format!(

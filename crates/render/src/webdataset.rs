@@ -5,17 +5,21 @@
 //!
 //! `OUT/<variant>-<split>-%06d.tar`, each at most `shard_size` bytes (one sample is never
 //! split; a sample larger than the limit gets a shard of its own), samples in index order. In a
-//! shard a sample is the files `<stem>.png`, `<stem>.flat.png`, `<stem>.depth.png`,
-//! `<stem>.normal.png`, `<stem>.albedo.png`, `<stem>.shadow.png` (the passes it has) and
-//! `<stem>.json`, so WebDataset's key is the stem. Splits come from each sample's metadata
-//! (`split`, the public loader's rule; only `test`, `val` or `train`). The files are those of
+//! shard a sample is `<stem>.<key>` for each pass it has, the key and form from the pass
+//! table (`webdataset_key`, `webdataset_form`): `png` and `albedo.png` the dataset's PNGs,
+//! `mask.npy` (uint8 ids), `depth.npy` (float32 metres, background +inf), `normal.npy` and
+//! `shadow.npy` arrays decoded from the PNGs ([`pass_npy`], so no colour decoder can take them
+//! for colours), and `<stem>.json`, so WebDataset's key is the stem. Splits are each sample's recorded `split`
+//! (else, for the published ClevrTex, the public loader's position rule:
+//! [`clevrtex_scene::dataset::splits`], the rule of every reader). The files are those of
 //! the layout (`clevrtex_scene::layout`): a metadata `*_filename` only says whether a pass was
 //! written and must name the layout's file. Links leading out of the dataset are not followed
 //! and non-regular files not read (their samples are left out and listed). Shards of an
 //! earlier export into OUT that this one did not write are removed (only names of the form
 //! above). Tar headers carry no time, owner or mode of the machine: the same dataset gives the
-//! same bytes. Each shard is written under a temporary name and renamed when complete;
-//! `OUT/index.json` lists the shards and their sample counts.
+//! same bytes (and the arrays no machine-dependent byte). Each shard is written under a
+//! temporary name and renamed when complete; `OUT/index.json` lists the shards and their
+//! sample counts, and what each key holds.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -24,6 +28,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use clevrtex_scene::atomic::AtomicFile;
 use clevrtex_scene::dataset::{Dataset, DatasetError, Kind, SampleRef, VariantDir};
 use clevrtex_scene::layout::Split;
+use clevrtex_scene::passes::WebdatasetForm;
 use clevrtex_scene::Pass;
 use serde_json::{json, Value};
 
@@ -82,13 +87,18 @@ pub struct ExportReport {
     pub skipped: Vec<String>,
 }
 
-/// One sample to export: its metadata and the (extension, path) of each file.
+/// One file of a sample in a shard: its key (the extension after the stem), its path in the
+/// dataset, and the pass to decode it as when it becomes a `.npy` (`None`: the file's bytes).
+pub type SampleFile = (String, PathBuf, Option<Pass>);
+
+/// One sample to export: its metadata and the files it becomes.
 struct Sample {
     index: u64,
+    /// Its position among the variant's samples with metadata (for [`dataset::splits`]).
+    pos: usize,
     stem: String,
     split: Split,
-    files: Vec<(String, PathBuf)>,
-    bytes: u64,
+    files: Vec<SampleFile>,
 }
 
 /// The samples of one variant folder of `ds` (found by [`Dataset::open`]), in index order,
@@ -115,7 +125,8 @@ fn samples(
         .map(|s| (s.index, s))
         .collect();
     let mut out = Vec::new();
-    'samples: for (index, s) in found {
+    let mut recorded = vec![None; found.len()];
+    'samples: for (pos, (index, s)) in found.into_iter().enumerate() {
         let stem = s.stem.clone();
         let meta_path = s.metadata_path();
         let bytes = match ds.read(&meta_path, dataset::MAX_METADATA_BYTES) {
@@ -143,20 +154,44 @@ fn samples(
             ))
         };
         let file = meta_path.display().to_string();
-        let mut files: Vec<(String, PathBuf)> = dataset::listed_passes(&meta, &file, &stem)
+        // Passes whose encoding the metadata describes (ours) become arrays by it; the mask's
+        // ids are its pixels in any dataset. The published ClevrTex's other passes (another
+        // encoding, not described) stay PNGs under `<pass>.png`.
+        let described = dataset::MetadataView::of(&meta, &file)
+            .map(|v| v.passes)
+            .unwrap_or_default();
+        let mut files: Vec<SampleFile> = dataset::listed_passes(&meta, &file, &stem)
             .map_err(bad)?
             .into_iter()
-            .map(|pass| (pass.spec().webdataset_key.to_string(), s.pass_path(pass)))
+            .map(|pass| {
+                let spec = pass.spec();
+                match spec.webdataset_form {
+                    WebdatasetForm::Npy { .. }
+                        if pass == Pass::Mask || described.contains(&pass) =>
+                    {
+                        (
+                            spec.webdataset_key.to_string(),
+                            s.pass_path(pass),
+                            Some(pass),
+                        )
+                    }
+                    WebdatasetForm::Npy { .. } => {
+                        (format!("{}.png", spec.name), s.pass_path(pass), None)
+                    }
+                    WebdatasetForm::Png => {
+                        (spec.webdataset_key.to_string(), s.pass_path(pass), None)
+                    }
+                }
+            })
             .collect();
         if files.is_empty() {
             return Err(ExportError::Message(format!(
                 "`{file}` lists no pass (no `*_filename` key names a file): the sample has nothing to export\nhint: check the dataset with `clevrtex verify`"
             )));
         }
-        let split = dataset::split_of(&meta, &file).map_err(bad)?;
-        files.push(("json".into(), meta_path));
-        let mut bytes = 0;
-        for (_, p) in &files {
+        recorded[pos] = dataset::recorded_split(&meta["split"], &vd.variant, &file).map_err(bad)?;
+        files.push(("json".into(), meta_path, None));
+        for (_, p, _) in &files {
             match ds.classify(p) {
                 Kind::File => {}
                 Kind::Skipped(why) => {
@@ -168,24 +203,26 @@ fn samples(
                     continue 'samples;
                 }
             }
-            bytes += std::fs::metadata(p)
-                .map_err(|cause| ExportError::Io {
-                    what: format!(
-                        "`{}` (a pass the metadata of `{stem}` lists) is missing\nhint: check the dataset with `clevrtex verify`",
-                        p.display()
-                    ),
-                    cause,
-                })?
-                .len()
-                + 1024;
+            std::fs::metadata(p).map_err(|cause| ExportError::Io {
+                what: format!(
+                    "`{}` (a pass the metadata of `{stem}` lists) is missing\nhint: check the dataset with `clevrtex verify`",
+                    p.display()
+                ),
+                cause,
+            })?;
         }
         out.push(Sample {
             index,
-            split,
+            pos,
+            split: Split::Train,
             stem,
             files,
-            bytes,
         });
+    }
+    // The one split rule of every reader: the recorded split, else by position.
+    let splits = dataset::splits(&vd.variant, &recorded);
+    for s in &mut out {
+        s.split = splits[s.pos];
     }
     Ok(out)
 }
@@ -271,9 +308,11 @@ pub fn export(
                 if stop.load(Ordering::SeqCst) {
                     return Err(ExportError::Interrupted);
                 }
+                let entries = sample_entries(&ds.root, &s.files)?;
+                let size = tar_bytes(&entries);
                 if shard
                     .as_ref()
-                    .is_some_and(|w| w.samples() > 0 && w.bytes() + s.bytes > shard_size)
+                    .is_some_and(|w| w.samples() > 0 && w.bytes() + size > shard_size)
                 {
                     let done = shard.take().unwrap().finish()?;
                     total_bytes += done["bytes"].as_u64().unwrap_or(0);
@@ -285,10 +324,7 @@ pub fn export(
                     n += 1;
                     shard = Some(ShardWriter::create(out.join(name))?);
                 }
-                shard
-                    .as_mut()
-                    .unwrap()
-                    .add(&ds.root, s.index, &s.stem, &s.files)?;
+                shard.as_mut().unwrap().add(s.index, &s.stem, &entries)?;
                 total_samples += 1;
             }
             if let Some(w) = shard {
@@ -305,9 +341,9 @@ pub fn export(
         "source": dir.display().to_string(),
         "samples": total_samples,
         "shards": index,
-        "keys": std::iter::once("__key__ = stem")
-            .chain(Pass::ALL.map(|p| p.spec().webdataset_key))
-            .chain(["json"])
+        "keys": std::iter::once(json!({"key": "__key__", "holds": "the sample's stem"}))
+            .chain(Pass::ALL.map(|p| json!({"key": p.spec().webdataset_key, "holds": p.spec().webdataset_doc})))
+            .chain([json!({"key": "json", "holds": "the sample's metadata (docs/output-format.md)"})])
             .collect::<Vec<_>>(),
     });
     let index_path = out.join("index.json");
@@ -426,6 +462,148 @@ pub fn is_shard_name(name: &str) -> bool {
         && digits.bytes().all(|b| b.is_ascii_digit())
 }
 
+/// The bytes a tar holds for `entries`: a 512-byte header and the data padded to 512 bytes
+/// each.
+pub fn tar_bytes(entries: &[(String, Vec<u8>)]) -> u64 {
+    entries
+        .iter()
+        .map(|(_, d)| 512 + (d.len() as u64).div_ceil(512) * 512)
+        .sum()
+}
+
+/// The entries of one sample in a shard: each file of `files` read from the dataset under its
+/// canonical `root` ([`dataset::read`]: no link out of it, only regular files, capped), a pass
+/// marked for it decoded into its `.npy` array ([`pass_npy`]).
+pub fn sample_entries(
+    root: &Path,
+    files: &[SampleFile],
+) -> Result<Vec<(String, Vec<u8>)>, ShardError> {
+    let unread = |path: &Path, why: String| {
+        ShardError::Read(format!(
+            "`{}` {why}\nhint: check the dataset with `clevrtex verify`",
+            path.display()
+        ))
+    };
+    files
+        .iter()
+        .map(|(key, path, pass)| {
+            let bytes =
+                dataset::read(root, path, dataset::MAX_FILE_BYTES).map_err(|w| unread(path, w))?;
+            let data = match pass {
+                None => bytes,
+                Some(pass) => pass_npy(*pass, &bytes, path).map_err(|w| unread(path, w))?,
+            };
+            Ok((key.clone(), data))
+        })
+        .collect()
+}
+
+/// The `.npy` of a pass's PNG `bytes` (of the layout and encoding of the pass table:
+/// [`clevrtex_scene::passes`]): the mask's ids as `uint8 (H, W)` (a palette's indices, or an
+/// 8-bit grey image's values: the published ClevrTex's masks); depth in metres as `float32
+/// (H, W)`, background `+inf`; normals as `float32 (H, W, 3)` unit vectors, background
+/// `(0, 0, 0)`; the shadow amount as `float32 (H, W)` in `[0, 1]`. `Err` says why not, one line.
+pub fn pass_npy(pass: Pass, bytes: &[u8], path: &Path) -> Result<Vec<u8>, String> {
+    use clevrtex_scene::passes::{DEPTH_BACKGROUND, DEPTH_SCALE_M, NORMAL_BACKGROUND};
+    let png = crate::post::decode_png_bytes(bytes, path).map_err(|e| match e {
+        crate::RenderError::BadOutput { problem, .. } => problem,
+        other => other.to_string().lines().next().unwrap_or("").to_string(),
+    })?;
+    let WebdatasetForm::Npy { descr, channels } = pass.spec().webdataset_form else {
+        return Err(format!(
+            "the {} pass is not stored as an array",
+            pass.name()
+        ));
+    };
+    let (w, h) = (png.width as usize, png.height as usize);
+    let layout = |bits: u8, ch: usize| -> Result<(), String> {
+        if png.bits == bits && png.channels == ch {
+            Ok(())
+        } else {
+            Err(format!(
+                "is a {}-bit {}-channel PNG, not the {bits}-bit {ch}-channel {} pass",
+                png.bits,
+                png.channels,
+                pass.name()
+            ))
+        }
+    };
+    let mut out = npy_header(
+        descr,
+        &[h, w, usize::from(channels)][..if channels == 1 { 2 } else { 3 }],
+    );
+    match pass {
+        Pass::Mask => {
+            layout(8, 1)?;
+            out.extend(png.data.iter().map(|&v| v as u8));
+        }
+        Pass::Depth => {
+            layout(16, 1)?;
+            for &v in &png.data {
+                let m = if v == DEPTH_BACKGROUND {
+                    f32::INFINITY
+                } else {
+                    (f64::from(v) * DEPTH_SCALE_M) as f32
+                };
+                out.extend(m.to_le_bytes());
+            }
+        }
+        Pass::Normal => {
+            layout(16, 3)?;
+            for px in png.data.chunks_exact(3) {
+                let n = if px == NORMAL_BACKGROUND {
+                    [0.0; 3]
+                } else {
+                    let v = [0, 1, 2].map(|i| f64::from(px[i]) / 65535.0 * 2.0 - 1.0);
+                    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                    if len > 0.0 {
+                        v.map(|c| c / len)
+                    } else {
+                        [0.0; 3]
+                    }
+                };
+                for c in n {
+                    out.extend((c as f32).to_le_bytes());
+                }
+            }
+        }
+        Pass::Shadow => {
+            layout(8, 1)?;
+            for &v in &png.data {
+                out.extend((f32::from(v) / 255.0).to_le_bytes());
+            }
+        }
+        Pass::Rgb | Pass::Albedo => {
+            return Err(format!(
+                "the {} pass is not stored as an array",
+                pass.name()
+            ))
+        }
+    }
+    Ok(out)
+}
+
+/// The header of a NumPy `.npy` file (format version 1.0) of C-order `shape` and dtype
+/// `descr`, padded with spaces so the data starts at a multiple of 64 bytes (NumPy's
+/// `numpy.lib.format`). Nothing in it depends on the machine: the same array, the same bytes.
+pub fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(ToString::to_string).collect();
+    let shape = match dims.len() {
+        1 => format!("({},)", dims[0]),
+        _ => format!("({})", dims.join(", ")),
+    };
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
+    // magic (6) + version (2) + length (2) + dict + '\n', to a multiple of 64.
+    let pad = (64 - (10 + dict.len() + 1) % 64) % 64;
+    dict.push_str(&" ".repeat(pad));
+    dict.push('\n');
+    let mut out = Vec::with_capacity(10 + dict.len());
+    out.extend(b"\x93NUMPY\x01\x00");
+    out.extend((dict.len() as u16).to_le_bytes());
+    out.extend(dict.as_bytes());
+    out
+}
+
 /// A tar shard being written under a unique temporary name (an [`AtomicFile`]: removed if it
 /// is never finished).
 pub struct ShardWriter {
@@ -466,23 +644,16 @@ impl ShardWriter {
         self.samples
     }
 
-    /// Add sample `index` with key `stem`: each `(extension, path)` of `files`, read from the
-    /// dataset under its canonical `root` ([`dataset::read`]), becomes `<stem>.<extension>`.
-    /// Headers carry no time, owner or mode of the machine.
+    /// Add sample `index` with key `stem`: each `(extension, bytes)` of `entries`
+    /// ([`sample_entries`]) becomes `<stem>.<extension>`. Headers carry no time, owner or mode
+    /// of the machine.
     pub fn add(
         &mut self,
-        root: &Path,
         index: u64,
         stem: &str,
-        files: &[(String, PathBuf)],
+        entries: &[(String, Vec<u8>)],
     ) -> Result<(), ShardError> {
-        for (ext, path) in files {
-            let data = dataset::read(root, path, dataset::MAX_FILE_BYTES).map_err(|why| {
-                ShardError::Read(format!(
-                    "`{}` {why}\nhint: check the dataset with `clevrtex verify`",
-                    path.display()
-                ))
-            })?;
+        for (ext, data) in entries {
             let mut h = tar::Header::new_ustar();
             h.set_size(data.len() as u64);
             h.set_mode(0o644);
@@ -559,11 +730,12 @@ mod tests {
         std::fs::create_dir(&data).unwrap();
         std::fs::write(data.join("a.png"), b"not really a png").unwrap();
         let root = dataset::root(&data).unwrap();
-        let files = vec![("png".to_string(), data.join("a.png"))];
+        let files = vec![("png".to_string(), data.join("a.png"), None)];
+        let entries = sample_entries(&root, &files).unwrap();
         let out = dir.path().join("full-train-000000.tar");
         {
             let mut w = ShardWriter::create(out.clone()).unwrap();
-            w.add(&root, 7, "CLEVRTEX_full_000007", &files).unwrap();
+            w.add(7, "CLEVRTEX_full_000007", &entries).unwrap();
             assert_eq!((w.samples(), w.bytes()), (1, 1024));
         }
         assert!(
@@ -573,18 +745,31 @@ mod tests {
         let mut bytes = Vec::new();
         for _ in 0..2 {
             let mut w = ShardWriter::create(out.clone()).unwrap();
-            w.add(&root, 7, "CLEVRTEX_full_000007", &files).unwrap();
+            w.add(7, "CLEVRTEX_full_000007", &entries).unwrap();
             let entry = w.finish().unwrap();
             assert_eq!(entry["first_index"], 7);
             assert_eq!(entry["samples"], 1);
             bytes.push(std::fs::read(&out).unwrap());
         }
         assert_eq!(bytes[0], bytes[1]);
-        let err = ShardWriter::create(out.clone())
-            .unwrap()
-            .add(&root, 8, "x", &[("png".into(), data.join("missing.png"))])
-            .unwrap_err();
+        let err =
+            sample_entries(&root, &[("png".into(), data.join("missing.png"), None)]).unwrap_err();
         assert!(err.to_string().contains("missing.png"), "{err}");
         assert!(err.to_string().contains("hint:"), "{err}");
+    }
+
+    #[test]
+    fn npy_headers_are_numpy_s_and_pad_to_64_bytes() {
+        for shape in [&[240usize, 320][..], &[2, 3, 3], &[5]] {
+            let h = npy_header("<f4", shape);
+            assert_eq!(h.len() % 64, 0);
+            assert_eq!(&h[..8], b"\x93NUMPY\x01\x00");
+            assert_eq!(usize::from(u16::from_le_bytes([h[8], h[9]])), h.len() - 10);
+            assert_eq!(*h.last().unwrap(), b'\n');
+        }
+        let h = String::from_utf8(npy_header("|u1", &[240, 320])[10..].to_vec()).unwrap();
+        assert!(h.starts_with("{'descr': '|u1', 'fortran_order': False, 'shape': (240, 320), }"));
+        let h = String::from_utf8(npy_header("<f4", &[5])[10..].to_vec()).unwrap();
+        assert!(h.contains("'shape': (5,)"), "{h}");
     }
 }

@@ -18,7 +18,8 @@ use serde_json::Value;
 use crate::bounds::{self, OutOfBounds};
 use crate::scene_file::{Pass, RenderSettings};
 
-/// The built-in base scene (values of the reference's §3).
+/// The built-in base scene (the values of the public generator's `clevrtex-gen/generate.py`
+/// and `data/scene.blend`, karazijal/clevrtex-generation).
 pub const BASE_SCENE_JSON: &str = include_str!("../../../configs/base-scene.json");
 
 /// Built-in variants: name and file text, in the order `variant_names` lists them.
@@ -225,7 +226,8 @@ pub struct BackdropShape {
     pub rotation_z: f64,
 }
 
-/// Placement rules (reference §1).
+/// Placement rules (as the public generator's `clevrtex-gen/generate.py` places objects,
+/// karazijal/clevrtex-generation; Karazija et al., NeurIPS 2021 Datasets and Benchmarks).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Placement {

@@ -523,8 +523,9 @@ impl SampleRef {
         self.files.contains(&self.metadata_name())
     }
 
-    /// The split of the sample in a dataset of `total` images, by the layout's rule.
-    pub fn split(&self, total: u64) -> layout::Split {
+    /// The split the layout's position rule gives the sample in a run of `total` images (what
+    /// `generate` records; `verify` checks the recorded split against it).
+    pub fn rule_split(&self, total: u64) -> layout::Split {
         layout::Split::of(layout::variant_splits(&self.variant), self.index, total)
     }
 }
@@ -710,6 +711,32 @@ impl Dataset {
     }
 }
 
+/// The run manifests of the dataset at `out` (an output folder of `clevrtex generate`), by
+/// variant folder name order: `(variant, path)`. Lists only `out` and its `clevrtex_<variant>`
+/// folders (never a sample folder: cheap on any dataset), with the same rules as
+/// [`Dataset::open`] (no link out of `out` followed, only regular files).
+pub fn manifests_in(out: &Path) -> std::io::Result<Vec<(String, PathBuf)>> {
+    let root = root(out)?;
+    let mut found = Vec::new();
+    for (name, p, kind) in list(&root, out)? {
+        let Some(v) = name.strip_prefix("clevrtex_") else {
+            continue;
+        };
+        if kind != Kind::Dir || crate::layout::variant_name_problem(v).is_some() {
+            continue;
+        }
+        let Ok(entries) = list(&root, &p) else {
+            continue;
+        };
+        for (name, m, kind) in entries {
+            if kind == Kind::File && crate::manifest::is_manifest_name(&name) {
+                found.push((v.to_string(), m));
+            }
+        }
+    }
+    Ok(found)
+}
+
 /// Walk one variant folder: its sample folders, manifests, ledgers and temporaries.
 fn walk_variant(root: &Path, variant: &str, dir: &Path, out: PathBuf) -> VariantDir {
     let mut vd = VariantDir {
@@ -881,7 +908,7 @@ impl MetadataView {
         let n = meta_int(meta, file, "num_objects", 0, 255)? as usize;
         // The split names a folder or shard in `export` and a report row: `../x` is refused by
         // every reader alike (`verify` passed it while `export` refused it).
-        split_of(meta, file)?;
+        check_split(meta, file)?;
         let threshold = match meta.get("visibility_threshold_px") {
             None => 0,
             Some(_) => meta_int(meta, file, "visibility_threshold_px", 0, pixels)?,
@@ -955,7 +982,7 @@ pub fn check_metadata(meta: &Value, file: &str) -> Result<(), MetadataError> {
         Some(Value::Array(a)) => Some(a.len()),
         Some(v) => return Err(err("objects", format!("is {}, not a list", short(v)))),
     };
-    split_of(meta, file)?;
+    check_split(meta, file)?;
     if meta.get("num_objects").is_some() {
         let n = meta_int(meta, file, "num_objects", 0, 255)? as usize;
         if objects.is_some_and(|len| len != n) {
@@ -994,19 +1021,95 @@ pub fn listed_passes(meta: &Value, file: &str, stem: &str) -> Result<Vec<Pass>, 
     Ok(out)
 }
 
-/// The metadata's `split` (`test`, `val` or `train`; absent: `train`, as the published data).
-pub fn split_of(meta: &Value, file: &str) -> Result<layout::Split, MetadataError> {
+/// The metadata's `split`, checked without knowing the variant: `test`, `val`, `train`, none,
+/// or (the public generator records its variant there) a name a variant may have; anything
+/// else (`../x`) is refused by every reader alike. [`recorded_split`] then reads it.
+fn check_split(meta: &Value, file: &str) -> Result<(), MetadataError> {
+    match &meta["split"] {
+        Value::String(s) if crate::layout::variant_name_problem(s).is_none() => Ok(()),
+        split => recorded_split(split, "", file).map(|_| ()),
+    }
+}
+
+/// The split a sample's metadata records in `split`: `Some` for `test`, `val` or `train`;
+/// `None` where it records none: `split` absent, or the name of the sample's `variant` (the
+/// public generator, karazijal/clevrtex-generation, writes the variant there, so the published
+/// ClevrTex is split by position: [`splits`]). Anything else is an error naming the file and
+/// the key.
+pub fn recorded_split(
+    split: &Value,
+    variant: &str,
+    file: &str,
+) -> Result<Option<layout::Split>, MetadataError> {
     let err = |what: String| MetadataError {
         file: file.to_string(),
         key: "split".into(),
         what,
     };
-    match &meta["split"] {
-        Value::Null => Ok(layout::Split::Train),
-        Value::String(s) => {
-            layout::Split::parse(s).ok_or_else(|| err(format!("is `{s}`, not test, val or train")))
-        }
-        other => Err(err(format!("is {other}, not test, val or train"))),
+    match split {
+        Value::Null => Ok(None),
+        Value::String(s) if s == variant => Ok(None),
+        Value::String(s) => layout::Split::parse(s).map(Some).ok_or_else(|| {
+            err(format!(
+                "is `{}`, not test, val or train",
+                crate::text::printable(s)
+            ))
+        }),
+        other => Err(err(format!("is {}, not test, val or train", short(other)))),
+    }
+}
+
+/// The split of each sample of one variant, the samples given in index order with the split
+/// each records ([`recorded_split`]): the one rule every reader follows (`Dataset`, `eval`,
+/// `export`, `verify`, `report`). The recorded split is authoritative: `generate` fixes it from
+/// `--total` and a dataset grown with `--start` keeps it. A sample that records none (the
+/// published ClevrTex) gets the public loader's position rule among the samples given (test the
+/// first `int(0.1 N)`, val up to `int(0.2 N)`, train the rest; a test-only variant all test).
+pub fn splits(variant: &str, recorded: &[Option<layout::Split>]) -> Vec<layout::Split> {
+    let rule = layout::variant_splits(variant);
+    let n = recorded.len() as u64;
+    recorded
+        .iter()
+        .enumerate()
+        .map(|(i, r)| r.unwrap_or_else(|| layout::Split::of(rule, i as u64, n)))
+        .collect()
+}
+
+/// How many of `splits` are in each split, for messages: `test 0, val 0, train 4`.
+pub fn split_sizes(splits: &[layout::Split]) -> String {
+    layout::Split::ALL
+        .iter()
+        .map(|s| format!("{} {}", s.name(), splits.iter().filter(|x| *x == s).count()))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Only the `split` of a sample's metadata (the rest skipped unparsed, so reading the splits
+/// of a large dataset costs little more than listing it).
+#[derive(serde::Deserialize)]
+struct SplitOnly {
+    #[serde(default)]
+    split: Value,
+}
+
+/// The split the metadata file `path` (of a sample of `variant`, in the dataset whose
+/// canonical root is `root`) records ([`recorded_split`]), reading only that key; `Err` says
+/// why not in one line, without the path (unreadable, not JSON, a bad `split`).
+pub fn read_recorded_split(
+    root: &Path,
+    path: &Path,
+    variant: &str,
+) -> Result<Option<layout::Split>, String> {
+    let bytes = read(root, path, MAX_METADATA_BYTES)?;
+    let only: SplitOnly =
+        serde_json::from_slice(&bytes).map_err(|e| format!("is not valid metadata: {e}"))?;
+    recorded_split(&only.split, variant, "").map_err(|e| format!("key `split` {}", e.what))
+}
+
+impl Dataset {
+    /// The split sample `s`'s metadata records ([`read_recorded_split`]).
+    pub fn read_recorded_split(&self, s: &SampleRef) -> Result<Option<layout::Split>, String> {
+        read_recorded_split(&self.root, &s.metadata_path(), &s.variant)
     }
 }
 
@@ -1211,10 +1314,16 @@ mod tests {
         let meta =
             serde_json::json!({"image_filename": "CLEVRTEX_camo_000001.png", "split": "val"});
         assert_eq!(listed_passes(&meta, "m", stem).unwrap(), [Pass::Rgb]);
-        assert_eq!(split_of(&meta, "m").unwrap(), layout::Split::Val);
         assert_eq!(
-            split_of(&serde_json::json!({}), "m").unwrap(),
-            layout::Split::Train
+            recorded_split(&meta["split"], "camo", "m").unwrap(),
+            Some(layout::Split::Val)
+        );
+        // Absent, or the variant's name (the public generator's metadata): none recorded.
+        assert_eq!(recorded_split(&Value::Null, "camo", "m").unwrap(), None);
+        assert_eq!(recorded_split(&"camo".into(), "camo", "m").unwrap(), None);
+        assert_eq!(
+            recorded_split(&"full".into(), "camo", "m").unwrap_err().key,
+            "split"
         );
         let e = listed_passes(
             &serde_json::json!({"mask_filename": "../../etc/passwd"}),
@@ -1224,7 +1333,7 @@ mod tests {
         .unwrap_err();
         assert_eq!(e.key, "mask_filename");
         assert_eq!(
-            split_of(&serde_json::json!({"split": 3}), "m")
+            recorded_split(&serde_json::json!(3), "camo", "m")
                 .unwrap_err()
                 .key,
             "split"
@@ -1290,5 +1399,28 @@ mod tests {
         std::os::unix::fs::symlink(&ds.root, &alias).unwrap();
         let via = alias.join("clevrtex_camo").join("moved").join(&meta);
         assert_eq!(read_beneath(&ds.root, &via, 100).unwrap(), b"{}");
+    }
+
+    #[test]
+    fn recorded_splits_win_and_unrecorded_ones_follow_the_position_rule() {
+        use layout::Split::{Test, Train, Val};
+        // A dataset grown in two runs of 10 (`--total` 10 each): what each run recorded.
+        let mut grown: Vec<Option<layout::Split>> = Vec::new();
+        for _run in 0..2 {
+            grown.push(Some(Test));
+            grown.push(Some(Val));
+            grown.extend(std::iter::repeat_n(Some(Train), 8));
+        }
+        let s = splits("full", &grown);
+        assert_eq!((s[1], s[2], s[11]), (Val, Train, Val));
+        assert_eq!(split_sizes(&s), "test 2, val 2, train 16");
+        // None recorded (the published ClevrTex): the public loader's positions.
+        let s = splits("full", &[None; 20]);
+        assert_eq!(split_sizes(&s), "test 2, val 2, train 16");
+        assert_eq!((s[1], s[2], s[4]), (Test, Val, Train));
+        assert_eq!(
+            split_sizes(&splits("outd", &[None; 7])),
+            "test 7, val 0, train 0"
+        );
     }
 }

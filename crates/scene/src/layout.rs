@@ -1,4 +1,5 @@
-//! The published dataset layout (reference §4), in one place: folders, stems, file names and
+//! The published dataset layout (as the public loader `clevrtex_eval.py` of the public
+//! generator, karazijal/clevrtex-generation, reads it), in one place: folders, stems, file names and
 //! which split an index belongs to. Used by `sample`, `generate`/`render` and `eval`.
 //!
 //! `OUT/clevrtex_<variant>/<index / 1000>/CLEVRTEX_<variant>_<index:06>{.png, _flat.png,

@@ -113,6 +113,24 @@ pub struct Encoding {
     pub undefined_when: Option<&'static str>,
 }
 
+/// How `clevrtex export` stores a pass in a WebDataset sample. Data that is not a colour
+/// (ids, metres, vectors, fractions) is a NumPy array: a colour decoder
+/// (`webdataset`'s `.decode("rgb")`, Hugging Face's `Image`) cannot mistake it for a picture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WebdatasetForm {
+    /// The PNG file as it is (a colour image).
+    Png,
+    /// A NumPy `.npy` array (C order, little-endian), decoded from the PNG with the pass's
+    /// encoding: `descr` the NumPy dtype (`|u1`, `<f4`), `channels` 1 for `(H, W)`, 3 for
+    /// `(H, W, 3)`.
+    Npy {
+        /// NumPy dtype string.
+        descr: &'static str,
+        /// Values per pixel.
+        channels: u8,
+    },
+}
+
 /// Everything about one pass that is data (see the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PassSpec {
@@ -131,6 +149,11 @@ pub struct PassSpec {
     pub metadata_key: &'static str,
     /// The pass's key (extension) in a WebDataset sample (`clevrtex export`).
     pub webdataset_key: &'static str,
+    /// How `clevrtex export` stores it under that key.
+    pub webdataset_form: WebdatasetForm,
+    /// What a reader gets from that key: dtype, shape and units (the docs and the dataset
+    /// card print it).
+    pub webdataset_doc: &'static str,
     /// The PNG written.
     pub png: PngKind,
     /// The encoding written into the metadata.
@@ -161,6 +184,8 @@ const SPECS: [PassSpec; 6] = [
         file_suffix: "",
         metadata_key: "image_filename",
         webdataset_key: "png",
+        webdataset_form: WebdatasetForm::Png,
+        webdataset_doc: "the 8-bit sRGB PNG, (H, W, 3)",
         png: PngKind::Rgb8,
         encoding: encoding(
             8,
@@ -175,7 +200,12 @@ const SPECS: [PassSpec; 6] = [
         exr_layers: &[("IndexOB", "X")],
         file_suffix: "_flat",
         metadata_key: "mask_filename",
-        webdataset_key: "flat.png",
+        webdataset_key: "mask.npy",
+        webdataset_form: WebdatasetForm::Npy {
+            descr: "|u1",
+            channels: 1,
+        },
+        webdataset_doc: "uint8 (H, W) object ids: 0 background, i = objects[i-1] of the metadata",
         png: PngKind::Palette8,
         encoding: encoding(
             8,
@@ -190,7 +220,12 @@ const SPECS: [PassSpec; 6] = [
         exr_layers: &[("Depth", "Z")],
         file_suffix: "_depth_0001",
         metadata_key: "depth_filename",
-        webdataset_key: "depth.png",
+        webdataset_key: "depth.npy",
+        webdataset_form: WebdatasetForm::Npy {
+            descr: "<f4",
+            channels: 1,
+        },
+        webdataset_doc: "float32 (H, W) planar depth in metres (along the camera's view axis); background +inf",
         png: PngKind::Gray16,
         encoding: Encoding {
             scale: Some(DEPTH_SCALE_M),
@@ -209,7 +244,12 @@ const SPECS: [PassSpec; 6] = [
         exr_layers: &[("Normal", "XYZ")],
         file_suffix: "_normal_0001",
         metadata_key: "normal_filename",
-        webdataset_key: "normal.png",
+        webdataset_key: "normal.npy",
+        webdataset_form: WebdatasetForm::Npy {
+            descr: "<f4",
+            channels: 3,
+        },
+        webdataset_doc: "float32 (H, W, 3) world-space unit normals (x, y, z); background (0, 0, 0)",
         png: PngKind::Rgb16,
         encoding: Encoding {
             space: Some("world"),
@@ -225,6 +265,8 @@ const SPECS: [PassSpec; 6] = [
         file_suffix: "_albedo_0001",
         metadata_key: "albedo_filename",
         webdataset_key: "albedo.png",
+        webdataset_form: WebdatasetForm::Png,
+        webdataset_doc: "the 8-bit PNG, (H, W, 3): the material's base colour, linear values encoded with the sRGB transfer curve",
         png: PngKind::Rgb8,
         encoding: encoding(
             8,
@@ -239,7 +281,12 @@ const SPECS: [PassSpec; 6] = [
         exr_layers: &[("DiffDir", "RGB")],
         file_suffix: "_shadow_0001",
         metadata_key: "shadow_filename",
-        webdataset_key: "shadow.png",
+        webdataset_key: "shadow.npy",
+        webdataset_form: WebdatasetForm::Npy {
+            descr: "<f4",
+            channels: 1,
+        },
+        webdataset_doc: "float32 (H, W) shadow amount in [0, 1] (1 - shadowed / unshadowed direct light); 0 where undefined",
         png: PngKind::Gray8,
         encoding: Encoding {
             undefined: Some(SHADOW_UNDEFINED),

@@ -78,7 +78,8 @@ impl Levers {
 }
 
 impl Sampling {
-    /// The original generator's setting (reference §3): 512 fixed samples, max bounces 12
+    /// The original generator's setting (the public generator's `clevrtex-gen/generate.py`
+    /// defaults, karazijal/clevrtex-generation): 512 fixed samples, max bounces 12
     /// (diffuse 4, glossy 4, transmission 12, transparent 8), no clamping, no adaptive
     /// sampling.
     pub const ORIGINAL: Sampling = Sampling {

@@ -8,6 +8,8 @@
   metadata arrays (docs/python.md).
 - `collate`: batches `Dataset` items for `torch.utils.data.DataLoader` (torch tensors when
   torch is installed, numpy otherwise).
+- `wds.decode`: a sample of the WebDataset shards of `clevrtex export` as arrays (module
+  `clevrtex.wds`).
 
 Scoring runs in Rust with the GIL released, in parallel over the images of a batch. Metric
 definitions and how the protocols differ: docs/eval.md.
@@ -21,8 +23,9 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _native
+from . import wds
 
-__all__ = ["Evaluator", "evaluate", "Dataset", "collate", "PASSES", "METRICS", "protocol_metrics"]
+__all__ = ["Evaluator", "evaluate", "Dataset", "collate", "PASSES", "METRICS", "protocol_metrics", "wds"]
 
 #: Every metric's name, in report order.
 METRICS: Tuple[str, ...] = tuple(_native.metric_names())

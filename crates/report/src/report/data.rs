@@ -38,6 +38,7 @@ pub struct Sample {
     pub index: u64,
     pub stem: String,
     pub dir: PathBuf,
+    /// `test`, `val` or `train`: recorded, else by position (`clevrtex_scene::dataset::splits`).
     pub split: String,
     pub ground_material: String,
     pub objects: Vec<Object>,
@@ -157,7 +158,12 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
                     reader::check_metadata(&meta, &file).map_err(|e| {
                         format!("`{file}` is not valid metadata: key `{}` {}", e.key, e.what)
                     })?;
+                    let split =
+                        reader::recorded_split(&meta["split"], &variant, &file).map_err(|e| {
+                            format!("`{file}` is not valid metadata: key `split` {}", e.what)
+                        })?;
                     parse(variant, index, stem, dir, &meta)
+                        .map(|s| (s, split))
                         .map_err(|e| format!("`{file}` is not valid metadata: {e:#}"))
                 });
             bar.inc(1);
@@ -165,11 +171,33 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
         })
         .collect::<Vec<_>>();
     let mut samples = Vec::new();
+    let mut recorded = Vec::new();
     for r in read {
         match r {
-            Ok(s) => samples.push(s),
+            Ok((s, split)) => {
+                samples.push(s);
+                recorded.push(split);
+            }
             Err(p) => problems.push(p),
         }
+    }
+    // The one split rule of every reader (`clevrtex_scene::dataset::splits`): the recorded
+    // split, else (the published ClevrTex) the position among the variant's samples.
+    let mut start = 0;
+    while start < samples.len() {
+        let variant = samples[start].variant.clone();
+        let end = start
+            + samples[start..]
+                .iter()
+                .take_while(|s| s.variant == variant)
+                .count();
+        for (s, split) in samples[start..end]
+            .iter_mut()
+            .zip(reader::splits(&variant, &recorded[start..end]))
+        {
+            s.split = split.name().to_string();
+        }
+        start = end;
     }
     if samples.is_empty() {
         bail!(
@@ -244,7 +272,8 @@ fn parse(
         index,
         stem,
         dir,
-        split: m["split"].as_str().unwrap_or("?").to_string(),
+        // Set by `read` from the one split rule.
+        split: String::new(),
         ground_material: m["ground_material"].as_str().unwrap_or("?").to_string(),
         objects,
         attempt: m["attempt"].as_u64().map(|a| a as u32),

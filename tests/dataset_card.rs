@@ -1,0 +1,82 @@
+//! `DATASET_CARD.md` (issue 32): `generate` writes it into its `--out` folder from the union
+//! of the runs' manifests, so shards writing into one folder at once leave a card of every
+//! run; `verify`, `export` and `report` do not take it for a file of the dataset.
+
+use crate::many_writers::generate;
+use crate::util::{blender_or_skip, clevrtex, text};
+
+#[test]
+fn shards_writing_at_once_leave_a_card_of_every_run() {
+    let Some(blender) = blender_or_skip("shards_writing_at_once_leave_a_card_of_every_run") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    // Two shards of 0..4 at once, then the dataset grown by 4..6 (`--total` 6).
+    let children: Vec<_> = ["0/2", "1/2"]
+        .iter()
+        .map(|s| {
+            generate(&blender, &out, &["-n", "4", "--shard", s])
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    for c in children {
+        let o = c.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    }
+    let card = std::fs::read_to_string(out.join("DATASET_CARD.md")).unwrap();
+    for row in [
+        "| `clevr` | 0..4 | 0/2 | 4 |",
+        "| `clevr` | 0..4 | 1/2 | 4 |",
+    ] {
+        assert!(card.contains(row), "{row}\n{card}");
+    }
+    assert!(card.contains("| `clevr` | 0 | 0 | 4 | 4 | 4 |"), "{card}");
+    let o = generate(&blender, &out, &["--start", "4", "-n", "2"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let card = std::fs::read_to_string(out.join("DATASET_CARD.md")).unwrap();
+    assert!(card.contains("| `clevr` | 0 | 0 | 6 | 6 | 6 |"), "{card}");
+    assert!(
+        card.contains("--shard 1/2") && card.contains("--start 4"),
+        "{card}"
+    );
+    assert!(!card.contains("| depth |") && card.contains("| mask | `<stem>_flat.png`"));
+    assert!(
+        card.contains("32x24 pixels, 1 Cycles samples per pixel"),
+        "{card}"
+    );
+    // No temporary is left, and the card is no file of the dataset to the readers.
+    let names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        !names.iter().any(|n| n.contains("clevrtex-tmp")),
+        "{names:?}"
+    );
+    let o = clevrtex().arg("verify").arg(&out).output().unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let o = clevrtex()
+        .arg("export")
+        .arg(&out)
+        .arg(dir.path().join("wds"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(!text(&o).contains("DATASET_CARD"), "{}", text(&o));
+    let o = clevrtex()
+        .arg("report")
+        .arg("--out")
+        .arg(dir.path().join("report.html"))
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(!text(&o).contains("DATASET_CARD"), "{}", text(&o));
+}
