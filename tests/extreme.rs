@@ -395,6 +395,7 @@ fn render(blender: PathBuf, out: &Path, scenes: &[SceneFile]) -> Vec<SampleStats
         blender,
         materials_json: clevrtex_render::default_materials_json().unwrap(),
         user_materials: Default::default(),
+        config_hash: None,
         workers: 1,
         threads: 0,
         timeout: Some(Duration::from_secs(900)),

@@ -435,6 +435,7 @@ pub(crate) fn render_fixtures(
         blender,
         materials_json: clevrtex_render::default_materials_json().unwrap(),
         user_materials: Default::default(),
+        config_hash: None,
         workers: 1,
         threads: 0,
         timeout: None,

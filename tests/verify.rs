@@ -759,3 +759,76 @@ fn a_rerun_with_other_settings_is_refused_and_verify_checks_samples_against_thei
         "sample 1 is what the manifest says: {t}"
     );
 }
+
+/// The manifest of shard folder `out` with its `files` hashed again from what is on disk, as
+/// a dataset whose metadata was replaced along with its manifest would have them: the byte
+/// check passes, only the metadata-vs-manifest comparison is left to find a difference.
+fn rehash_manifest(out: &Path) {
+    let manifest = manifest_of(out);
+    let mut m: Value = serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+    let files: Vec<String> = m["files"].as_object().unwrap().keys().cloned().collect();
+    let hashed =
+        clevrtex_render::manifest::hash_files(&out.join("clevrtex_clevr"), &files).unwrap();
+    m["files"] = serde_json::to_value(hashed).unwrap();
+    std::fs::write(&manifest, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
+}
+
+/// Issue 34: `generate` records the run's config hash in each sample's metadata (its
+/// manifest's `config_hash`) and `verify` compares the two, as it does the seed: a sample
+/// whose `config_hash` is another config's is named, and the dataset is not whole, even with
+/// the manifest's file hashes made to match. A metadata file without the key (older datasets,
+/// the published ClevrTex) is not compared and passes.
+#[test]
+fn verify_names_a_sample_made_from_another_config_than_its_manifest() {
+    let Some((_dir, a, b)) = copy() else { return };
+    let m: Value = serde_json::from_slice(&std::fs::read(manifest_of(&b)).unwrap()).unwrap();
+    let run_hash = m["config_hash"].as_str().unwrap().to_string();
+    let f = sample(&b, 1, ".json");
+    let mut meta: Value = serde_json::from_slice(&std::fs::read(&f).unwrap()).unwrap();
+    assert_eq!(
+        meta["config_hash"].as_str(),
+        Some(run_hash.as_str()),
+        "the sample records its run's config hash"
+    );
+    let (out, t) = verify(&[&a, &b]);
+    assert_eq!(out.status.code(), Some(0), "untouched: {t}");
+
+    let other = if run_hash == "0123456789abcdef" {
+        "fedcba9876543210"
+    } else {
+        "0123456789abcdef"
+    };
+    meta["config_hash"] = other.into();
+    std::fs::write(&f, serde_json::to_vec_pretty(&meta).unwrap()).unwrap();
+    rehash_manifest(&b);
+    let (out, t) = verify(&[&a, &b]);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    let lines: Vec<&str> = t.lines().collect();
+    let at = lines
+        .iter()
+        .position(|l| l.trim_start().starts_with("CLEVRTEX_clevr_000001 "))
+        .unwrap_or_else(|| panic!("sample 1 not named: {t}"));
+    let line = lines[at + 1];
+    assert!(line.contains("MANIFEST-0-4-1of2.json"), "{line}");
+    assert!(
+        line.contains(&format!("config_hash {run_hash} vs \"{other}\"")),
+        "{line}"
+    );
+    assert!(!line.contains("seed"), "only the config differs: {line}");
+    for index in [0, 2, 3] {
+        assert!(
+            !t.contains(&format!("CLEVRTEX_clevr_{index:06} ")),
+            "sample {index} is what its manifest says: {t}"
+        );
+    }
+
+    meta.as_object_mut().unwrap().remove("config_hash");
+    std::fs::write(&f, serde_json::to_vec_pretty(&meta).unwrap()).unwrap();
+    rehash_manifest(&b);
+    let (out, t) = verify(&[&a, &b]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "no `config_hash`: not compared: {t}"
+    );
+}

@@ -43,7 +43,7 @@ pub(crate) fn run_jobs(
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the workers; finished samples are kept",
     });
-    let (opts, user) = pool_options(
+    let (mut opts, user) = pool_options(
         args,
         blender,
         ledger.clone(),
@@ -53,6 +53,9 @@ pub(crate) fn run_jobs(
     )?;
     if let Some(plan) = manifest.as_mut() {
         plan.run.user_materials = user;
+        // Each sample records the run's config hash, so `verify` can tell a sample made from
+        // another config than the manifest claiming it.
+        opts.config_hash = Some(plan.run.config_hash.clone());
     }
     let total = jobs.len();
     let bar = progress_bar(total);
@@ -274,6 +277,7 @@ pub(crate) fn pool_options(
         blender,
         materials_json,
         user_materials: user_materials::hashes(&user),
+        config_hash: None,
         workers: args.workers.unwrap_or_else(|| {
             clevrtex_render::device::default_workers(&devices, pool::default_workers())
         }),

@@ -210,6 +210,8 @@ pub(crate) struct JobSettings {
     pub(crate) grace: Duration,
     /// User material name -> content hash ([`crate::pool::PoolOptions::user_materials`]).
     pub(crate) user_materials: std::collections::BTreeMap<String, String>,
+    /// The run's config hash ([`crate::pool::PoolOptions::config_hash`]).
+    pub(crate) config_hash: Option<String>,
 }
 
 /// Turn `job` into a written sample on `slot`: attempts, the visibility check, the final
@@ -322,6 +324,7 @@ pub(crate) fn run_job(
                 blender_compat: facts_compat,
                 passes: job.passes.clone(),
                 user_materials: &opts.user_materials,
+                config_hash: opts.config_hash.as_deref(),
             },
         );
         let meta_name = layout::metadata_file(&job.stem);

@@ -25,6 +25,8 @@ pub struct RenderFacts<'a> {
     pub passes: Vec<Pass>,
     /// The run's user materials, name -> content hash; those the scene uses are recorded.
     pub user_materials: &'a BTreeMap<String, String>,
+    /// The run's config hash (`generate`'s manifest `config_hash`); `None` for `render`.
+    pub config_hash: Option<&'a str>,
 }
 
 /// Camera intrinsics `K` (pixels, origin at the top-left corner, y down, principal point at
@@ -95,6 +97,11 @@ pub struct SampleMetadata {
     pub stem: String,
     /// Run seed.
     pub seed: u64,
+    /// The config hash of the `generate` run that made the sample (its manifest's
+    /// `config_hash`), so `verify` can tell a sample made from another config; absent from
+    /// `render` and in older datasets.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub config_hash: Option<String>,
     /// Accepted layout attempt.
     pub attempt: u32,
     /// The camera.
@@ -145,6 +152,7 @@ pub fn build(scene: &SceneFile, facts: &RenderFacts<'_>) -> SampleMetadata {
         variant: scene.variant.clone(),
         stem: scene.stem.clone(),
         seed: scene.seed,
+        config_hash: facts.config_hash.map(str::to_string),
         attempt: scene.attempt,
         camera: CameraMetadata {
             intrinsics: intrinsics(scene),

@@ -33,6 +33,9 @@ pub struct PoolOptions {
     /// The user materials (`--materials DIR`) a scene may use: name -> content hash of the
     /// `.blend` or file and every image it reads, recorded in each sample's metadata.
     pub user_materials: std::collections::BTreeMap<String, String>,
+    /// The run's config hash (`generate`'s manifest `config_hash`), recorded in each sample's
+    /// metadata; `None` (not recorded) for `render`.
+    pub config_hash: Option<String>,
     /// Number of Blender processes.
     pub workers: usize,
     /// Cycles threads per process; 0 = the machine's cores shared evenly by the workers
@@ -372,6 +375,7 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         keep_exr: opts.keep_exr,
         grace,
         user_materials: opts.user_materials.clone(),
+        config_hash: opts.config_hash.clone(),
     };
     loop {
         if shared.stopping() {

@@ -937,7 +937,8 @@ fn check_sample_files(
 }
 
 /// What of a sample's metadata differs from the run settings of the manifest `m` that claims
-/// it: variant, seed, passes, each render setting (size, samples, ...), one phrase each.
+/// it: variant, seed, config hash (when the metadata records one), passes, each render setting
+/// (size, samples, ...), one phrase each.
 fn differs_from_manifest(meta: &Value, view: &MetadataView, m: &Manifest) -> Vec<String> {
     let mut d = Vec::new();
     if meta["variant"].as_str() != Some(m.variant.as_str()) {
@@ -952,6 +953,18 @@ fn differs_from_manifest(meta: &Value, view: &MetadataView, m: &Manifest) -> Vec
             "seed {} vs {}",
             m.seed,
             dataset::short(&meta["seed"])
+        ));
+    }
+    // Absent from older datasets (and `render`'s samples): not compared.
+    if view
+        .config_hash
+        .as_ref()
+        .is_some_and(|h| *h != m.config_hash)
+    {
+        d.push(format!(
+            "config_hash {} vs {}",
+            m.config_hash,
+            dataset::short(&meta["config_hash"])
         ));
     }
     if !m.passes.is_empty() {

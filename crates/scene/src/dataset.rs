@@ -855,7 +855,8 @@ pub fn short(v: &Value) -> String {
 /// The values of a sample's metadata that size or index something, typed and bounded before
 /// anything is sized by them: the image's size (at most [`MAX_IMAGE_SIDE`] a side), the
 /// objects (at most 255, a list as long as `num_objects`), the visibility threshold and each
-/// object's visible pixels (at most the image's pixels), the passes listed.
+/// object's visible pixels (at most the image's pixels), the passes listed; and the run's
+/// `config_hash` (a string when present) that `verify` compares with the manifest.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MetadataView {
     /// `render.width`.
@@ -872,6 +873,9 @@ pub struct MetadataView {
     pub image_index: Option<u64>,
     /// The passes the metadata's `passes` names (unknown names left out).
     pub passes: Vec<Pass>,
+    /// `config_hash`: the config hash of the `generate` run that made the sample (absent:
+    /// `None`, in older datasets, the published data and `render`'s samples).
+    pub config_hash: Option<String>,
 }
 
 /// A whole number from the metadata at `key` (dotted), within `lo..=hi`.
@@ -909,6 +913,11 @@ impl MetadataView {
         // The split names a folder or shard in `export` and a report row: `../x` is refused by
         // every reader alike (`verify` passed it while `export` refused it).
         check_split(meta, file)?;
+        let config_hash = match meta.get("config_hash") {
+            None => None,
+            Some(Value::String(h)) => Some(h.clone()),
+            Some(v) => return Err(err("config_hash", format!("is {}, not a string", short(v)))),
+        };
         let threshold = match meta.get("visibility_threshold_px") {
             None => 0,
             Some(_) => meta_int(meta, file, "visibility_threshold_px", 0, pixels)?,
@@ -954,6 +963,7 @@ impl MetadataView {
                 .as_object()
                 .map(|m| m.keys().filter_map(|k| Pass::from_name(k)).collect())
                 .unwrap_or_default(),
+            config_hash,
         })
     }
 }
@@ -1275,6 +1285,16 @@ mod tests {
         assert_eq!(v.visible_pixels, [Some(3)]);
         assert_eq!(v.image_index, Some(9));
         assert_eq!(v.passes.len(), 2);
+        assert_eq!(v.config_hash, None, "absent: not compared");
+        let mut hashed = good.clone();
+        hashed["config_hash"] = "00ff".into();
+        assert_eq!(
+            MetadataView::of(&hashed, "m.json")
+                .unwrap()
+                .config_hash
+                .as_deref(),
+            Some("00ff")
+        );
         let bad = |patch: serde_json::Value| {
             let mut m = good.clone();
             for (k, val) in patch.as_object().unwrap() {
@@ -1300,6 +1320,10 @@ mod tests {
             "num_objects"
         );
         assert_eq!(bad(serde_json::json!({"num_objects": 2})).key, "objects");
+        assert_eq!(
+            bad(serde_json::json!({"config_hash": 7})).key,
+            "config_hash"
+        );
         assert_eq!(bad(serde_json::json!({"objects": {"a": 1}})).key, "objects");
         assert_eq!(
             bad(serde_json::json!({"objects": [{"visible_pixels": 9}]})).key,
