@@ -287,8 +287,10 @@ fn startup_timeout_is_a_flag_and_its_hint_names_it() {
     assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
 }
 
-/// A scene file the bridge cannot build is named as the user's file in the message (not the
-/// worker's temporary copy), with what was wrong.
+/// A scene file that cannot be built is named as the user's file in the message (not the
+/// worker's temporary copy), with what was wrong. An unknown material, which the bridge used to
+/// fail on (exit 3), is refused before any image is rendered since `render` checks the scene
+/// files' materials against the catalogue and `--materials` (issue 33): exit 1.
 #[test]
 fn bridge_errors_name_the_users_scene_file() {
     let Some(blender) = blender_or_skip("bridge_errors_name_the_users_scene_file") else {
@@ -310,10 +312,15 @@ fn bridge_errors_name_the_users_scene_file() {
         .output()
         .unwrap();
     let t = text(&out);
-    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert_eq!(out.status.code(), Some(1), "{t}");
     assert!(
-        t.contains(&format!("(scene file `{}`)", file.display())),
+        t.contains(&format!("scene file `{}`", file.display())),
         "{t}"
     );
     assert!(t.contains("no_such_material"), "{t}");
+    assert!(t.contains("hint: "), "{t}");
+    assert!(
+        !dir.path().join("out").join("clevrtex_clevr").exists(),
+        "{t}"
+    );
 }

@@ -35,7 +35,7 @@ pub struct RenderArgs {
     /// references. Numbers are for comparing settings, not for the docs' per-image costs.
     #[arg(long)]
     quick: bool,
-    #[arg(long, value_name = "N", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024), help = format!(
+    #[arg(long, value_name = "N", help = format!(
         "Number of scenes, 1 to 1024 (default 8, 2 with `--quick`); scene i is image i of the variant `{}` (cycling), seed {}",
         clevrtex_bench::scenes::VARIANTS.join(", "),
         clevrtex_bench::scenes::SEED

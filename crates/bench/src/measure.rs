@@ -145,6 +145,9 @@ pub struct Plan {
     pub reference_samples: u32,
 }
 
+/// The most scenes `--scenes` takes (`clevrtex bench render --help`).
+pub const MAX_SCENES: usize = 1024;
+
 impl Plan {
     /// The sizes given (`None`: the default, smaller with `quick`); each must be positive.
     pub fn new(
@@ -162,6 +165,12 @@ impl Plan {
         };
         if plan.scenes == 0 || plan.width == 0 || plan.height == 0 || plan.reference_samples == 0 {
             bail!("`--scenes`, `--width`, `--height` and `--reference-samples` must be positive\nhint: e.g. `clevrtex bench render --quick`");
+        }
+        if plan.scenes > MAX_SCENES {
+            bail!(
+                "`--scenes {}` is over {MAX_SCENES}\nhint: the bench compares a few scenes; pass 1 to {MAX_SCENES}",
+                plan.scenes
+            );
         }
         Ok(plan)
     }

@@ -204,5 +204,5 @@ def test_bad_input_is_named(data, tmp_path):
     small.mkdir(parents=True)
     for i in range(4):
         _sample(str(small), i, total=4)
-    with pytest.raises(ValueError, match=r"split `test` of `clevr` .* is empty \(splits found: test 0, val 0, train 4\)"):
+    with pytest.raises(ValueError, match=r"the `test` split of `.*small` is empty: it has 4 samples in all \(test 0, val 0, train 4\)"):
         clevrtex.Dataset(str(tmp_path / "small"), "clevr", split="test")
