@@ -3,8 +3,6 @@
 
 use crate::util::{blender_or_skip, clevrtex, test_python_or_skip, text};
 
-/// The variable that makes the torch half of the WebDataset test required.
-const REQUIRE_TORCH: &str = "CLEVRTEX_REQUIRE_TORCH";
 
 /// Reads every shard of `index.json` with the real `webdataset` library, raw and through
 /// `.decode("rgb")` (and `"torchrgb"` when torch is there), and with Hugging Face `datasets`'
@@ -206,9 +204,9 @@ fn webdataset_shards_round_trip_through_the_webdataset_library() {
     if lines.last() == Some(&"torch: no") {
         crate::util::skip(
             "webdataset_shards_round_trip (its `.decode(\"torchrgb\")` half)",
-            REQUIRE_TORCH,
+            crate::util::REQUIRE_TOOLS,
             "no torch in the test venv",
-            "install torch into `.venv-test`",
+            "run `./scripts/setup.sh --torch`",
         );
     }
 
