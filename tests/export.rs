@@ -3,7 +3,6 @@
 
 use crate::util::{blender_or_skip, clevrtex, test_python_or_skip, text};
 
-
 /// Reads every shard of `index.json` with the real `webdataset` library, raw and through
 /// `.decode("rgb")` (and `"torchrgb"` when torch is there), and with Hugging Face `datasets`'
 /// `webdataset` builder, and checks each sample against the dataset's own files (found
