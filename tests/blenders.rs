@@ -72,7 +72,7 @@ fn mean_rgb(path: &Path, keep: impl Fn(usize) -> bool) -> [f64; 3] {
     let png = decode_png(path).unwrap();
     assert_eq!(png.channels, 3);
     let (mut sum, mut n) = ([0.0; 3], 0usize);
-    for (i, px) in png.data.chunks(3).enumerate().filter(|(i, _)| keep(*i)) {
+    for (_, px) in png.data.chunks(3).enumerate().filter(|(i, _)| keep(*i)) {
         for c in 0..3 {
             sum[c] += px[c] as f64;
         }
