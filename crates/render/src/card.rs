@@ -369,19 +369,8 @@ pub fn write_card(out: &Path) -> Result<PathBuf, String> {
         .unwrap_or_else(|| "clevrtex dataset".into());
     let text = card_text(&title, &variants);
     let path = out.join(CARD_FILE);
-    let tmp = out.join(format!(
-        "{CARD_FILE}.{}{}",
-        crate::tmp::owner_tag(),
-        crate::output::TMP_SUFFIX
-    ));
-    crate::post::write_file(&tmp, text.as_bytes())
-        .and_then(|()| {
-            std::fs::rename(&tmp, &path).map_err(|e| {
-                let _ = std::fs::remove_file(&tmp);
-                crate::RenderError::write(&path, e)
-            })
-        })
-        .map_err(|e| e.to_string())?;
+    // The one atomic writer: a unique temporary, no link followed, removed on every error.
+    crate::post::write_file(&path, text.as_bytes()).map_err(|e| e.to_string())?;
     drop(lock);
     Ok(path)
 }
