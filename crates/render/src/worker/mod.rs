@@ -59,7 +59,7 @@ impl WorkerOptions {
     /// options are assembled; change one with the `with_*` methods.
     pub fn new(
         blender: PathBuf,
-        bridge: &crate::BridgeDir,
+        bridge: &crate::bridge::BridgeDir,
         interrupt: Arc<AtomicBool>,
     ) -> WorkerOptions {
         WorkerOptions {
