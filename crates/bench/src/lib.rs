@@ -7,7 +7,7 @@
 //! the reference scene file, the recipes of the materials it uses and the Blender version
 //! ([`measure`]). The rows go to a CSV ([`csv`]); means over scenes make a table, a summary
 //! and a log-log plot of error against time ([`summary`], [`plot`]). The command line only
-//! parses, hands in a Blender ([`measure::Render`]) and prints. See `docs/performance.md`,
+//! parses, hands in a Blender ([`measure::Render`]) and prints. See `docs/notes/performance.md`,
 //! section `bench`.
 
 pub mod csv;
