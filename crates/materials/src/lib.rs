@@ -495,7 +495,7 @@ impl Catalogue {
                     &b.file.display().to_string(),
                     "",
                     b.left_out(),
-                    &format!("name the built-in `{}`, which plays its part", b.builtin),
+                    format!("name the built-in `{}`, which plays its part", b.builtin),
                 );
             }
             Error::new(
