@@ -92,8 +92,8 @@ fn unknown_key_names_file_and_key() {
 #[test]
 fn unknown_names_and_empty_lists_are_errors() {
     let full = include_str!("../../../configs/full.json");
-    let e = Config::from_json_str(&full.replacen("\"monkey\"", "\"donkey\"", 1), "f.json")
-        .unwrap_err();
+    let e =
+        Config::from_json_str(&full.replacen("\"monkey\"", "\"donkey\"", 1), "f.json").unwrap_err();
     assert_eq!(e.key, "objects.shapes[3]");
     assert_eq!(e.value.as_deref(), Some("donkey"));
     let e = Config::from_json_str(
