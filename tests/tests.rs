@@ -29,6 +29,7 @@ mod sample;
 mod shadow;
 mod slurm;
 mod splits;
+mod structure;
 mod trust_paths;
 mod user_materials;
 mod verify;

@@ -17,7 +17,7 @@ use clevrtex_report::materials::{self, cost, figures, measure_output, sheet, sta
 
 use crate::exit::{CmdResult, OK};
 use crate::materials_blender::{
-    render_all, render_all_in_temp, render_into_cache, session, Outcome,
+    render_all, render_all_in_temp, render_into_cache, session, Outcome, RenderOptions,
 };
 
 /// Arguments of `clevrtex materials`.
@@ -90,32 +90,45 @@ struct CostArgs {
 }
 
 #[derive(Debug, clap::Args)]
-pub(crate) struct BatchArgs {
+struct BatchArgs {
     /// Which materials: main, ood, basic, background, user or all.
     #[arg(long, default_value = "all")]
-    pub(crate) set: String,
+    set: String,
     /// Only these materials (comma-separated), instead of `--set`.
     #[arg(long, value_delimiter = ',')]
-    pub(crate) names: Vec<String>,
+    names: Vec<String>,
     /// Blender executable (default: `CLEVRTEX_BLENDER`, else `blender` on `PATH`).
     #[arg(long, env = "CLEVRTEX_BLENDER")]
-    pub(crate) blender: Option<PathBuf>,
+    blender: Option<PathBuf>,
     /// Cycles threads, 0 to 1024 (0: automatic).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=crate::run_args::MAX_THREADS as i64))]
-    pub(crate) threads: u32,
+    threads: u32,
     /// Time limit per material render, seconds; a worker over it is killed and the render
     /// retried. Default: 600 + 8 per sample at 320x240, and a worker silent for 300 s counts
     /// as hung. More than 0, at most 604800 (a week).
     #[arg(long, value_name = "SECONDS")]
-    pub(crate) timeout: Option<f64>,
+    timeout: Option<f64>,
     /// Restarts of a crashed or hung Blender worker per material before the command stops
     /// (0 to 100).
     #[arg(long, default_value_t = 2, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=crate::run_args::MAX_RETRIES as i64))]
-    pub(crate) retries: u32,
+    retries: u32,
     /// Time limit for a Blender worker to start (load the bridge and answer `ready`), seconds:
     /// more than 0, at most 604800.
     #[arg(long, default_value_t = clevrtex_render::STARTUP_TIMEOUT.as_secs_f64(), value_name = "SECONDS")]
-    pub(crate) startup_timeout: f64,
+    startup_timeout: f64,
+}
+
+impl BatchArgs {
+    /// What the material renders take of these arguments.
+    fn render_options(&self) -> RenderOptions {
+        RenderOptions {
+            blender: self.blender.clone(),
+            threads: self.threads,
+            timeout: self.timeout,
+            retries: self.retries,
+            startup_timeout: self.startup_timeout,
+        }
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -204,7 +217,14 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
             displacement: 0.0,
             random: 0.37,
         };
-        let failed = render_into_cache(cat, &missing, &a.batch, &settings, &cache, &key)?;
+        let failed = render_into_cache(
+            cat,
+            &missing,
+            &a.batch.render_options(),
+            &settings,
+            &cache,
+            &key,
+        )?;
         if !failed.is_empty() {
             bail!(
                 "{} material(s) failed to build:\n{}\nhint: run `clevrtex materials check --names <name>` for the traceback",
@@ -231,8 +251,9 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
         displacement: 0.0,
         random: 0.37,
     };
-    let mut session = session(cat, &names, &a)?;
-    let outcomes = render_all_in_temp(&mut session, &a, &settings, &names, &dir)?;
+    let opts = a.render_options();
+    let mut session = session(cat, &names, &opts)?;
+    let outcomes = render_all_in_temp(&mut session, &opts, &settings, &names, &dir)?;
     session.close();
     let mut failed = 0;
     let mut out = std::io::stdout().lock();
@@ -280,7 +301,8 @@ fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
         std::env::temp_dir().join(format!("clevrtex-stats-{}", std::process::id()))
     });
     let mut feats = Vec::new();
-    let mut session = session(cat, &names, &a.batch)?;
+    let opts = a.batch.render_options();
+    let mut session = session(cat, &names, &opts)?;
     for (i, random) in [0.37, 0.81].into_iter().enumerate() {
         let settings = MaterialSettings {
             mode: MaterialMode::Tile,
@@ -290,7 +312,7 @@ fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
             random,
         };
         let out_dir = dir.join(format!("r{i}"));
-        let outcomes = render_all(&mut session, &a.batch, &settings, &names, &out_dir)?;
+        let outcomes = render_all(&mut session, &opts, &settings, &names, &out_dir)?;
         let mut f = Vec::new();
         for (name, outcome) in names.iter().zip(outcomes) {
             let file = match outcome {
@@ -359,8 +381,9 @@ fn cost(cat: &Catalogue, a: CostArgs) -> CmdResult {
         displacement: 0.0,
         random: 0.37,
     };
-    let mut session = session(cat, &names, &a.batch)?;
-    let outcomes = render_all_in_temp(&mut session, &a.batch, &settings, &names, &dir)?;
+    let opts = a.batch.render_options();
+    let mut session = session(cat, &names, &opts)?;
+    let outcomes = render_all_in_temp(&mut session, &opts, &settings, &names, &dir)?;
     session.close();
     // A material that failed to build has no time (NaN), so it shows as such in the table.
     let times: Vec<f64> = outcomes

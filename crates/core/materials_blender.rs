@@ -2,7 +2,7 @@
 //! of materials (the shared [`BlenderSession`]: `generate`'s restart-and-retry policy, Ctrl-C
 //! stopping Blender), one `material` request per material (`docs/bridge-protocol.md`).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::Context;
@@ -10,8 +10,23 @@ use clevrtex_materials::Catalogue;
 use clevrtex_render::{MaterialReply, MaterialSettings, RenderError};
 
 use crate::blender_session::{command_error, BlenderSession, Settings};
-use crate::cmd_materials::BatchArgs;
 use crate::interrupt::{self, OnInterrupt};
+
+/// How the materials are rendered: the Blender and the limits of its worker (the values of
+/// `materials`'s `--blender`, `--threads`, `--timeout`, `--retries` and `--startup-timeout`).
+#[derive(Debug, Clone)]
+pub(crate) struct RenderOptions {
+    /// Blender executable (`None`: `CLEVRTEX_BLENDER`, else `blender` on `PATH`).
+    pub(crate) blender: Option<PathBuf>,
+    /// Cycles threads (0: automatic).
+    pub(crate) threads: u32,
+    /// Time limit per material render, seconds (`None`: by the render's size and samples).
+    pub(crate) timeout: Option<f64>,
+    /// Restarts of a crashed or hung worker per material.
+    pub(crate) retries: u32,
+    /// Time limit for a worker to start, seconds.
+    pub(crate) startup_timeout: f64,
+}
 
 /// How one material's render came out.
 pub(crate) enum Outcome {
@@ -31,7 +46,7 @@ pub(crate) enum Outcome {
 pub(crate) fn session(
     cat: &Catalogue,
     names: &[&str],
-    a: &BatchArgs,
+    a: &RenderOptions,
 ) -> anyhow::Result<BlenderSession> {
     if let Some(t) = a.timeout {
         crate::run_args::seconds("--timeout", t)?;
@@ -57,7 +72,7 @@ pub(crate) fn session(
 
 /// The time limit of one render: `--timeout`, else 600 s + 8 s per sample at 320x240 (the
 /// rule `generate` uses for scenes).
-fn timeout(a: &BatchArgs, s: &MaterialSettings) -> Duration {
+fn timeout(a: &RenderOptions, s: &MaterialSettings) -> Duration {
     let pixels = f64::from(s.size) * f64::from(s.size) / (320.0 * 240.0);
     let auto = 600.0 + 8.0 * f64::from(s.samples) * pixels.max(0.05);
     Duration::from_secs_f64(a.timeout.unwrap_or(auto))
@@ -68,7 +83,7 @@ fn timeout(a: &BatchArgs, s: &MaterialSettings) -> Duration {
 /// failing (after `--retries` restarts) or an interrupt ends it with an error.
 pub(crate) fn render_all(
     session: &mut BlenderSession,
-    a: &BatchArgs,
+    a: &RenderOptions,
     settings: &MaterialSettings,
     names: &[&str],
     out_dir: &Path,
@@ -93,7 +108,7 @@ pub(crate) fn render_all(
 /// [`render_all`] into `dir`, which is removed afterwards whatever happened.
 pub(crate) fn render_all_in_temp(
     session: &mut BlenderSession,
-    a: &BatchArgs,
+    a: &RenderOptions,
     settings: &MaterialSettings,
     names: &[&str],
     dir: &Path,
@@ -109,7 +124,7 @@ pub(crate) fn render_all_in_temp(
 pub(crate) fn render_into_cache(
     cat: &Catalogue,
     missing: &[&str],
-    a: &BatchArgs,
+    a: &RenderOptions,
     settings: &MaterialSettings,
     cache: &Path,
     key: &dyn Fn(&str) -> String,

@@ -21,11 +21,13 @@
 pub mod dataset;
 pub mod error;
 pub mod evaluate;
+mod image;
 pub mod lsa;
 pub mod meta;
 pub mod metrics;
 pub mod output;
 pub mod predict;
+mod protocol;
 pub mod read;
 pub mod resize;
 

@@ -75,6 +75,7 @@ mod tests {
         for name in [
             "worker.py",
             "compat.py",
+            "compat_principled.py",
             "builder.py",
             "shapes.py",
             "passes.py",

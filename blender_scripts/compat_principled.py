@@ -1,0 +1,314 @@
+"""The Principled BSDF across versions, part of `compat` (import it through `compat`, the
+one home of Blender-version differences): its inputs by their 3.x names, and the v2 node of
+4.0+ made to render as 3.4's v1 (the `PARITY` switches, `principled_output`).
+"""
+
+import math
+
+import bpy
+
+VERSION = bpy.app.version
+
+# Principled BSDF inputs renamed in 4.0, by their 3.x name; None: removed without a
+# replacement (4.x scatters the base colour).
+_PRINCIPLED_4X = {
+    "Subsurface": "Subsurface Weight",
+    "Subsurface Color": None,
+    "Specular": "Specular IOR Level",
+    "Transmission": "Transmission Weight",
+    "Coat": "Coat Weight",
+    "Clearcoat": "Coat Weight",
+    "Clearcoat Roughness": "Coat Roughness",
+    "Sheen": "Sheen Weight",
+    "Emission": "Emission Color",
+}
+
+
+def principled_input(node, name):
+    """A principled BSDF input by its 3.x name, mapped to the 4.x name where it changed;
+    None where this version has no such input."""
+    if name in node.inputs:
+        return node.inputs[name]
+    new = _PRINCIPLED_4X.get(name, name)
+    return None if new is None else node.inputs[new]
+
+
+# Principled BSDF v2 (4.0+) rendering as 3.4's v1 (issue 24, docs/notes/performance.md "Blender
+# 3.4, 4.5 and 5.0 at parity"). Scene files and material recipes are in 3.x terms; each
+# switch below is one difference, on by default (the study script dev/parity_measure.py
+# turns them off one at a time with `--parity-off`):
+#
+# - `coat`: v2's coat is a physical layer of weight w and IOR 1.5; v1's clearcoat was a
+#   quarter as strong (0.25 w of an F0 0.04 lobe), so Blender's own versioning of 3.x files
+#   multiplies Clearcoat by 0.25 (versioning_400.cc, version_principled_bsdf_coat). At full
+#   strength the sharp coats (roughness 0-0.15) of most recipes reflect the small studio
+#   lights 4x as brightly: the caustic fireflies of 4.5, and a darker base under the coat.
+# - `sheen`: v2's sheen is a microfiber layer; Blender's versioning multiplies a constant
+#   Sheen by 0.2 with a white tint (version_principled_bsdf_sheen).
+# - `ggx`: v1's default distribution is single-scatter GGX, v2's multiscatter GGX (energy
+#   compensated, brighter rough metals); 3.4's is kept.
+# - `ior`: v1's specular reflectance comes from `Specular` alone (F0 = 0.08 x Specular);
+#   v2's from IOR x `Specular IOR Level`, which equals v1's at IOR 1.5 (4.0-4.1 default
+#   1.45): set to 1.5.
+# - `layers`: v1 ADDS its specular and clearcoat lobes to the diffuse; v2 layers them, so the
+#   diffuse under them loses what they reflect (DiffCol 12% under 3.4's on the bench scenes,
+#   the darker 4.x image; Blender has no switch for it). [`principled_output`] builds v1's sum
+#   from v2 nodes: the principled node without its specular and coat (diffuse, metal, sheen),
+#   plus (1 - metallic) x a GGX lobe of F0 0.08 x Specular, plus the coat weight x a GGX lobe
+#   of F0 0.04 (IOR 1.5) on the unbumped normal, as v1's clearcoat.
+# - `fresnel`: those added lobes reflect by the Fresnel equations of the IOR of their F0, as
+#   v1's do, not by Schlick's approximation (a metal lobe's). Schlick's is 16-22% under the
+#   dielectric between 45 and 60 degrees of incidence, where the camera sees the fill and back
+#   lights reflected in the backdrop: with it those two lights were 8% darker than on 3.4
+#   (measured with dev/area_light_probe.py and parity_measure.py --only-light; the lights'
+#   power, `area_light_energy`, is exact at every angle and size).
+# - `light_tree`: Cycles 4.0+ picks light samples with its light tree by default (3.4 has
+#   none). On the bench scenes (three studio area lights and a sun, sharp coats) it is what is
+#   left of 4.x's extra noise once the BSDF matches: relative error at 64 spp 0.451 / 0.143
+#   with the tree, 0.262 / 0.093 without, 3.4 0.257 / 0.081 (full / camo). A scene file's
+#   `render.light_tree` still wins.
+# - `coat_gtr1`: v1's clearcoat is evaluated (and its pdf reported for MIS) with Disney's GTR1
+#   distribution of alpha^2 = Clearcoat Roughness^4 (Cycles 3.x bsdf_microfacet.h,
+#   `bsdf_clearcoat_D` / `D_GTR1`, masking with a fixed alpha 0.25), whose peak is
+#   |ln alpha^2| times lower than GGX's and whose tails are long; 4.x has no GTR1. GTR1 is
+#   exactly the mean of GGX distributions whose alpha^2 is log-uniform on [alpha^2, 1]
+#   ([`coat_gtr1_lobes`]), so the coat lobe becomes a mix of three GGX lobes fitted to it,
+#   weights summing to 1 (GTR1's normalisation). Needs `layers` (the coat is an added lobe).
+#   One coat under one light at roughness 0.15-0.3, 4.5 over 3.4: peak 0.80-1.00, energy
+#   0.95-1.01 (one GGX lobe: 3.1-6.7x, 1.19-1.44); bench squared error at 64 samples 1.21x /
+#   0.98x 3.4's (one lobe: 2.31x / 1.46x), for three more lobes' shading time.
+PARITY = {"coat": True, "sheen": True, "ggx": True, "ior": True, "layers": True,
+          "fresnel": True, "light_tree": True, "coat_gtr1": True}
+
+# Factor of a 3.x input's constant value for its 4.0+ input, per PARITY switch.
+_PRINCIPLED_SCALE = {"Clearcoat": ("coat", 0.25), "Sheen": ("sheen", 0.2)}
+
+
+def parity_settings():
+    """The parity switches in effect on this version (empty before 4.0: nothing to match),
+    for the run manifest and the bench."""
+    if VERSION < (4, 0, 0):
+        return {}
+    return dict(PARITY)
+
+
+def setup_principled(node):
+    """Make a new Principled BSDF node render as 3.4's v1 where v2 differs by a setting
+    ([`PARITY`]): distribution, IOR, sheen tint. No-op before 4.0."""
+    if VERSION < (4, 0, 0):
+        return
+    if PARITY["ggx"]:
+        node.distribution = "GGX"
+    if PARITY["ior"] and "IOR" in node.inputs:
+        node.inputs["IOR"].default_value = 1.5
+    if PARITY["sheen"] and "Sheen Tint" in node.inputs:
+        tint = node.inputs["Sheen Tint"]
+        if tint.type == "RGBA":
+            tint.default_value = (1.0, 1.0, 1.0, 1.0)
+
+
+def _copy_input(nt, src, dst):
+    """Give input socket `dst` what feeds `src`: its link, else its constant."""
+    if src.is_linked:
+        nt.links.new(src.links[0].from_socket, dst)
+    else:
+        dst.default_value = src.default_value
+
+
+def _ior_from_f0(f0):
+    """The IOR whose normal-incidence Fresnel reflectance is `f0` (0 <= f0 < 1)."""
+    r = math.sqrt(f0)
+    return (1.0 + r) / (1.0 - r)
+
+
+def _solve(a, b):
+    """x with a x = b (Gauss-Jordan, partial pivoting); None if singular."""
+    n = len(b)
+    m = [list(row) + [b[i]] for i, row in enumerate(a)]
+    for c in range(n):
+        p = max(range(c, n), key=lambda r: abs(m[r][c]))
+        m[c], m[p] = m[p], m[c]
+        if abs(m[c][c]) < 1e-300:
+            return None
+        for r in range(n):
+            if r != c:
+                f = m[r][c] / m[c][c]
+                for k in range(c, n + 1):
+                    m[r][k] -= f * m[c][k]
+    return [m[i][n] / m[i][i] for i in range(n)]
+
+
+def _mix_fit(bs, ss, target):
+    """Weights (summing to 1) of GGX lobes of alpha^2 `bs` whose energy within tan^2 = s of
+    the half vector best fits `target` at `ss` (least squares), and the sum of squares
+    (penalised where a weight is negative)."""
+    k = len(bs)
+    cols = [[s / (b + s) for s in ss] for b in bs]
+    a = [[sum(x * y for x, y in zip(cols[i], cols[j])) for j in range(k)] + [1.0]
+         for i in range(k)]
+    a.append([1.0] * k + [0.0])
+    sol = _solve(a, [sum(x * t for x, t in zip(cols[i], target)) for i in range(k)] + [1.0])
+    if sol is None:
+        return None, float("inf")
+    w = sol[:k]
+    err = sum((sum(w[i] * cols[i][j] for i in range(k)) - t) ** 2
+              for j, t in enumerate(target))
+    return w, err + 1e3 * sum(-x for x in w if x < 0)
+
+
+_GTR1_LOBES = {}
+
+
+def coat_gtr1_lobes(roughness, k=3):
+    """[(roughness, weight)] of `k` GGX lobes (4.x roughness: alpha = roughness^2) whose mix
+    approximates v1's clearcoat distribution, GTR1 with alpha^2 = a2 = `roughness`^4.
+
+    With s = tan^2 of the half vector's angle, GGX's energy within s (the integral of
+    D cos over that cone) is s / (b + s) for its alpha^2 b, and GTR1's is
+    ln((a2 + s) / (a2 (1 + s))) / ln(1 / a2): exactly the mean of GGX's over ln b uniform on
+    [ln a2, 0]. The fit: least squares on that energy at 80 values of s log-spaced from
+    a2 / 100 to 1000 (what a light of each angular size collects), weights summing to 1
+    (solved exactly for given lobes), the lobes' ln b by Nelder-Mead from the fractions
+    0.86, 0.5, 0.14 of ln a2. For roughness 0.05-0.3 the three lobes sit at fractions
+    ~0.85-0.88, 0.5, 0.12-0.15 with weights ~0.3, 0.4, 0.3; RMS energy error 0.006 (0.05) to
+    0.0002 (0.3), peak D 0.67-0.99x GTR1's where one GGX lobe's is 4.9-12x. Roughness 0 (a
+    mirror) and 1 (GTR1 flat) keep one lobe."""
+    if not 0.0 < roughness < 1.0 or k < 2:
+        return [(roughness, 1.0)]
+    key = (round(roughness, 6), k)
+    if key in _GTR1_LOBES:
+        return _GTR1_LOBES[key]
+    a2 = roughness ** 4
+    lo, hi = math.log(a2 * 1e-2), math.log(1e3)
+    ss = [math.exp(lo + (hi - lo) * i / 79.0) for i in range(80)]
+    target = [math.log((a2 + s) / (a2 * (1.0 + s))) / -math.log(a2) for s in ss]
+    top = math.log(a2)
+    start = [0.86, 0.5, 0.14] if k == 3 else [1.0 - (i + 0.5) / k for i in range(k)]
+
+    def cost(x):
+        if any(v < top or v > 0.0 for v in x):
+            return float("inf")
+        return _mix_fit([math.exp(v) for v in x], ss, target)[1]
+
+    pts = [[top * f for f in start]]
+    pts += [[v + (0.3 if j == i else 0.0) for j, v in enumerate(pts[0])] for i in range(k)]
+    vals = [cost(p) for p in pts]
+    for _ in range(200):  # Nelder-Mead
+        order = sorted(range(k + 1), key=lambda i: vals[i])
+        pts, vals = [pts[i] for i in order], [vals[i] for i in order]
+        c = [sum(p[j] for p in pts[:-1]) / k for j in range(k)]
+        xr = [2.0 * c[j] - pts[-1][j] for j in range(k)]
+        fr = cost(xr)
+        if fr < vals[0]:
+            xe = [3.0 * c[j] - 2.0 * pts[-1][j] for j in range(k)]
+            fe = cost(xe)
+            pts[-1], vals[-1] = (xe, fe) if fe < fr else (xr, fr)
+        elif fr < vals[-2]:
+            pts[-1], vals[-1] = xr, fr
+        else:
+            xc = [0.5 * (c[j] + pts[-1][j]) for j in range(k)]
+            fc = cost(xc)
+            if fc < vals[-1]:
+                pts[-1], vals[-1] = xc, fc
+            else:
+                for i in range(1, k + 1):
+                    pts[i] = [0.5 * (pts[0][j] + pts[i][j]) for j in range(k)]
+                    vals[i] = cost(pts[i])
+    best = pts[min(range(k + 1), key=lambda i: vals[i])]
+    bs = sorted(math.exp(v) for v in best)
+    w, _ = _mix_fit(bs, ss, target)
+    _GTR1_LOBES[key] = [(b ** 0.25, wi) for b, wi in zip(bs, w)]
+    return _GTR1_LOBES[key]
+
+
+def _lobe(nt, f0, roughness_from, normal_from):
+    """A v2 principled node that is one GGX reflection lobe of normal-incidence reflectance
+    `f0`, roughness and normal as the given input sockets (None: unbumped normal).
+
+    With `PARITY["fresnel"]` the lobe is a dielectric's: black base (no diffuse, nothing
+    transmitted), IOR from `f0`, so its reflectance follows the Fresnel equations as v1's
+    specular and clearcoat lobes do (v1 interpolates between F0 and 1 by the dielectric
+    Fresnel of the IOR of F0, which with an untinted F0 is that Fresnel exactly). Without it,
+    a metal of base colour `f0` (white F82 tint): Schlick's approximation, which is up to 22%
+    under the dielectric between 45 and 70 degrees of incidence."""
+    n = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    n.distribution = "GGX"
+    if PARITY["fresnel"]:
+        n.inputs["Metallic"].default_value = 0.0
+        n.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        n.inputs["IOR"].default_value = _ior_from_f0(f0)
+        n.inputs["Specular IOR Level"].default_value = 0.5
+    else:
+        n.inputs["Metallic"].default_value = 1.0
+        n.inputs["Base Color"].default_value = (f0, f0, f0, 1.0)
+    if "Specular Tint" in n.inputs and n.inputs["Specular Tint"].type == "RGBA":
+        n.inputs["Specular Tint"].default_value = (1.0, 1.0, 1.0, 1.0)
+    if isinstance(roughness_from, (int, float)):
+        n.inputs["Roughness"].default_value = roughness_from
+    else:
+        _copy_input(nt, roughness_from, n.inputs["Roughness"])
+    if normal_from is not None and normal_from.is_linked:
+        nt.links.new(normal_from.links[0].from_socket, n.inputs["Normal"])
+    return n
+
+
+def _weighted(nt, shader, weight_from=None, weight=None, complement=False):
+    """`shader` times a weight (a constant `weight`, or what feeds `weight_from`), or times one
+    minus it (`complement`), as a Mix Shader with one input left empty (no light)."""
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    if weight_from is not None:
+        _copy_input(nt, weight_from, mix.inputs["Fac"])
+    else:
+        mix.inputs["Fac"].default_value = weight
+    nt.links.new(shader, mix.inputs[1 if complement else 2])
+    return mix.outputs["Shader"]
+
+
+def principled_output(nt, bsdf):
+    """The shader output of principled node `bsdf` (inputs already set in 3.x terms) to link
+    to the material output: the node's own output, or on 4.0+ with `PARITY["layers"]` v1's
+    sum of lobes built around it (see `PARITY`). Constants and links of the node's Specular,
+    Metallic, Roughness, Normal and Coat inputs are carried over to the extra nodes."""
+    if VERSION < (4, 0, 0) or not PARITY["layers"]:
+        return bsdf.outputs["BSDF"]
+    level = bsdf.inputs["Specular IOR Level"]
+    out = bsdf.outputs["BSDF"]
+    if level.is_linked:
+        return out  # not in the recipes: keep v2's layering
+    f0 = 0.08 * level.default_value
+    level.default_value = 0.0
+    if f0 > 0.0:
+        spec = _lobe(nt, f0, bsdf.inputs["Roughness"], bsdf.inputs["Normal"])
+        add = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(out, add.inputs[0])
+        nt.links.new(_weighted(nt, spec.outputs["BSDF"], weight_from=bsdf.inputs["Metallic"],
+                               complement=True), add.inputs[1])
+        out = add.outputs["Shader"]
+    coat = bsdf.inputs["Coat Weight"]
+    if not coat.is_linked and coat.default_value > 0.0:
+        weight = coat.default_value
+        coat.default_value = 0.0
+        rough = bsdf.inputs["Coat Roughness"]
+        if PARITY["coat_gtr1"] and not rough.is_linked:
+            lobes = coat_gtr1_lobes(rough.default_value)
+        else:
+            lobes = [(rough, 1.0)]
+        for r, w in lobes:
+            lobe = _lobe(nt, 0.04, r, None)
+            add = nt.nodes.new("ShaderNodeAddShader")
+            nt.links.new(out, add.inputs[0])
+            nt.links.new(_weighted(nt, lobe.outputs["BSDF"], weight=weight * w), add.inputs[1])
+            out = add.outputs["Shader"]
+    return out
+
+
+def principled_value(name, value):
+    """The value to give the input named `name` (3.x name) for a 3.x constant `value`: scaled
+    where v2's input is stronger ([`PARITY`]); anything but a number is returned as is (the
+    recipes give coat and sheen as numbers)."""
+    if VERSION < (4, 0, 0) or not isinstance(value, (int, float)):
+        return value
+    switch, factor = _PRINCIPLED_SCALE.get(name, (None, 1.0))
+    if switch is not None and PARITY[switch]:
+        return value * factor
+    return value
