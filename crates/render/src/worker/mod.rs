@@ -20,12 +20,12 @@ mod protocol;
 mod report;
 
 use process::Process;
+pub use protocol::BridgeTimings;
 use protocol::Unexpected;
 pub use protocol::{
     GroupImage, GroupSocket, InspectReply, MaterialMode, MaterialReply, MaterialSettings, Mode,
     Ready, RenderReply,
 };
-pub use report::BridgeTimings;
 
 /// How long Blender may take to start and send `ready`: the
 /// [`WorkerOptions::startup_timeout`] every command uses.

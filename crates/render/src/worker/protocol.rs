@@ -9,8 +9,28 @@ use std::path::{Path, PathBuf};
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 
-use super::report::BridgeTimings;
 use crate::error::{RenderError, Result};
+
+/// Timings the bridge reports for one request, in seconds.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+pub struct BridgeTimings {
+    /// Building (or updating) the Blender scene; 0 when the build was reused.
+    #[serde(default)]
+    pub build_s: f64,
+    /// Cycles rendering.
+    #[serde(default)]
+    pub render_s: f64,
+    /// CPU seconds of the whole Blender process (all threads) during the final render (not
+    /// the shadow pass's); `None` from bridges older than this field and for visibility renders.
+    #[serde(default)]
+    pub render_cpu_s: Option<f64>,
+    /// Writing the output files.
+    #[serde(default)]
+    pub write_s: f64,
+    /// The shadow pass's two direct-light renders, together (0 without the pass).
+    #[serde(default)]
+    pub shadow_render_s: f64,
+}
 
 /// The worker's `ready` message.
 #[derive(Debug, Clone, Deserialize)]

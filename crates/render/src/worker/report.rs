@@ -1,9 +1,7 @@
-//! What a worker reports besides its replies: the bridge's timings of a request, the tails of
+//! What a worker reports besides its replies: the tails of
 //! Blender's output kept for error reports, and the lines `doctor` prints of a `ready` reply.
 
 use std::collections::VecDeque;
-
-use serde::Deserialize;
 
 use super::protocol::Ready;
 use crate::error::Tails;
@@ -12,27 +10,6 @@ use crate::error::Tails;
 const TAIL_LINES: usize = 25;
 /// Longest line kept in the error tails.
 const MAX_TAIL_LINE: usize = 4096;
-
-/// Timings the bridge reports for one request, in seconds.
-#[derive(Debug, Clone, Copy, Default, Deserialize)]
-pub struct BridgeTimings {
-    /// Building (or updating) the Blender scene; 0 when the build was reused.
-    #[serde(default)]
-    pub build_s: f64,
-    /// Cycles rendering.
-    #[serde(default)]
-    pub render_s: f64,
-    /// CPU seconds of the whole Blender process (all threads) during the final render (not
-    /// the shadow pass's); `None` from bridges older than this field and for visibility renders.
-    #[serde(default)]
-    pub render_cpu_s: Option<f64>,
-    /// Writing the output files.
-    #[serde(default)]
-    pub write_s: f64,
-    /// The shadow pass's two direct-light renders, together (0 without the pass).
-    #[serde(default)]
-    pub shadow_render_s: f64,
-}
 
 /// The last lines of Blender's stdout (its chatter, not the replies) and stderr.
 #[derive(Debug, Default)]
