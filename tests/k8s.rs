@@ -16,9 +16,10 @@ fn indexed_job_yaml_names_the_dockerfiles_image_and_a_valid_command() {
 }
 
 /// The GPU variant (issue 35) passes the same checks, with the Dockerfile's `gpu` target as its
-/// image; each pod holds one GPU and runs one CUDA worker on it.
+/// image; each pod holds one GPU and runs four CUDA workers on it (a worker leaves its GPU idle
+/// while it builds the scene on the CPU), with the cores they use.
 #[test]
-fn gpu_indexed_job_names_the_gpu_image_one_gpu_and_one_worker_per_pod() {
+fn gpu_indexed_job_names_the_gpu_image_one_gpu_and_four_workers_per_pod() {
     let Some(job) = check_job(
         "gpu_indexed_job_yaml",
         "deploy/k8s/indexed-job-gpu.yaml",
@@ -37,8 +38,15 @@ fn gpu_indexed_job_names_the_gpu_image_one_gpu_and_one_worker_per_pod() {
         .map(|a| a.as_str().unwrap())
         .collect();
     let after = |flag: &str| args.iter().position(|a| *a == flag).map(|i| args[i + 1]);
-    assert_eq!(after("--workers"), Some("1"), "{args:?}");
+    assert_eq!(after("--workers"), Some("4"), "{args:?}");
     assert_eq!(after("--device"), Some("cuda"), "{args:?}");
+    // Every worker's threads have a requested core: workers x threads = the CPU request.
+    let threads: u32 = after("--threads").unwrap().parse().unwrap();
+    assert_eq!(
+        c["resources"]["requests"]["cpu"],
+        (4 * threads).to_string(),
+        "{c}"
+    );
     let dockerfile = std::fs::read_to_string(repo_root().join("deploy/k8s/Dockerfile")).unwrap();
     assert!(
         dockerfile.contains("FROM debian:bookworm-slim AS gpu"),

@@ -279,7 +279,11 @@ pub(crate) fn pool_options(
         user_materials: user_materials::hashes(&user),
         config_hash: None,
         workers: args.workers.unwrap_or_else(|| {
-            clevrtex_render::device::default_workers(&devices, pool::default_workers())
+            clevrtex_render::device::default_workers(
+                &devices,
+                pool::default_workers(),
+                pool::available_cores(),
+            )
         }),
         threads: args.threads.unwrap_or(0),
         timeout,

@@ -24,15 +24,16 @@ pub struct RunArgs {
     /// `./.venv-bpy/bin/python`).
     #[arg(long, env = "CLEVRTEX_BLENDER", value_name = "PATH")]
     pub(crate) blender: Option<PathBuf>,
-    /// Blender processes rendering in parallel, 1 to 1024. Default: one per GPU with `--device` on GPUs;
+    /// Blender processes rendering in parallel, 1 to 1024. Default on GPUs: one per 4 cores per
+    /// GPU, 1 to 4 per GPU (a worker's scene build and visibility pass leave its GPU idle);
     /// on the CPU 1 with one core, 2 with 2-15 cores (one worker's scene build, visibility pass
     /// and writing overlap the other's render), cores / 8 from 16 cores (docs/performance.md,
     /// "Workers x threads").
     #[arg(long, value_name = "N")]
     pub(crate) workers: Option<usize>,
     /// Cycles device: `auto` (the best GPU kind Blender reports: OptiX, CUDA, HIP; else the
-    /// CPU), `cpu`, `cuda`, `optix` or `hip`. With N GPUs, one worker per GPU (pinned by its
-    /// index) and `--workers` defaults to N.
+    /// CPU), `cpu`, `cuda`, `optix` or `hip`. With N GPUs, the workers are spread evenly over
+    /// them (each pinned to one GPU by its index); see `--workers` for how many.
     #[arg(long, default_value = "auto", value_name = "DEVICE")]
     pub(crate) device: String,
     /// Cycles threads per Blender process, 1 to 1024 (default: cores / workers).
