@@ -263,17 +263,17 @@ impl SceneFile {
         }
         // Names that become paths: one plain component each, checked here so that no value of
         // a scene file ever names a folder outside the output (docs/security.md).
-        if let Some(problem) = crate::layout::variant_name_problem(&self.variant) {
+        if let Some(problem) = crate::names::variant_name_problem(&self.variant) {
             return Err(format!("`variant` = {:?}: {problem}", self.variant));
         }
-        let stem = crate::layout::stem(&self.variant, self.index);
+        let stem = crate::names::stem(&self.variant, self.index);
         if self.stem != stem {
             return Err(format!(
                 "`stem` = {:?}: must be `{stem}` (`CLEVRTEX_<variant>_<index:06>`; it names the sample's files)",
                 self.stem
             ));
         }
-        if crate::layout::Split::parse(&self.split).is_none() {
+        if crate::names::Split::parse(&self.split).is_none() {
             return Err(format!(
                 "`split` = {:?}: must be `train`, `val` or `test`",
                 self.split
@@ -314,11 +314,11 @@ impl SceneFile {
             seen.push(*p);
         }
         for (i, o) in self.objects.iter().enumerate() {
-            if !crate::config::KNOWN_SHAPES.contains(&o.shape.as_str()) {
+            if !crate::names::KNOWN_SHAPES.contains(&o.shape.as_str()) {
                 return Err(format!(
                     "`objects[{i}].shape` = {:?}: unknown shape (the bridge builds {})",
                     o.shape,
-                    crate::config::KNOWN_SHAPES.join(", ")
+                    crate::names::KNOWN_SHAPES.join(", ")
                 ));
             }
         }
