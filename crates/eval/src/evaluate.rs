@@ -311,7 +311,7 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
     // A test-only variant (its config says `"splits": "test_only"`) is scored whole.
     let split = opts
         .split
-        .unwrap_or(match clevrtex_scene::layout::variant_splits(&variant) {
+        .unwrap_or(match clevrtex_dataset::layout::variant_splits(&variant) {
             clevrtex_scene::config::Splits::TestOnly => Split::All,
             clevrtex_scene::config::Splits::Standard => Split::Test,
         });
@@ -329,7 +329,7 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
         });
     }
     let pred_index = index_preds(preds, &variant)?;
-    let by_colour = clevrtex_scene::layout::variant_colour_breakdown(&variant);
+    let by_colour = clevrtex_dataset::layout::variant_colour_breakdown(&variant);
     let missing: Vec<&str> = samples
         .iter()
         .filter(|s| {
@@ -524,7 +524,7 @@ fn score_sample(
     let meta_bytes = s.read(&s.meta, crate::dataset::MAX_METADATA_BYTES)?;
     gt_png_size(&mask_bytes, &s.mask)?;
     if let Some(problem) =
-        clevrtex_scene::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
+        clevrtex_dataset::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
     {
         return Err(corrupt(&s.mask, problem, GT_HINT));
     }

@@ -9,7 +9,8 @@
 //! - [`pool::run`]: `N` workers rendering [`Job`]s in parallel, with the visibility-first
 //!   check, bounded retries, restarts, a failure ledger, resume and crash-safe output; this
 //!   is what `clevrtex generate` and `clevrtex render` call.
-//! - [`output`]: the file layout; [`post`]: the pass encodings.
+//! - [`output`]: writing a sample into the layout (`clevrtex_dataset::layout`); [`post`]: the
+//!   pass encodings.
 //!
 //! Rendering one scene file into a folder with a bare worker (no restarts; see [`Session`]
 //! for a worker that survives crashes):
@@ -36,9 +37,6 @@
 
 pub mod blender;
 pub mod bridge;
-pub mod card;
-/// The reader of untrusted dataset folders, in the pure `scene` crate so that `eval` shares it.
-pub use clevrtex_scene::dataset;
 pub mod device;
 mod error;
 pub mod exr_io;
@@ -46,17 +44,13 @@ pub mod gpu_probe;
 pub mod group;
 mod job;
 mod ledger;
-pub mod manifest;
 pub mod metadata;
 pub mod output;
 mod passes;
 pub mod pool;
 pub mod post;
-pub mod run_lock;
 mod session;
 pub mod tmp;
-pub mod verify;
-pub mod webdataset;
 mod worker;
 
 pub use bridge::BridgeDir;

@@ -1,5 +1,5 @@
 //! Crash-safe writing of a sample's files into the published layout (whose names and
-//! folders live in [`clevrtex_scene::layout`]).
+//! folders live in [`clevrtex_dataset::layout`]).
 //!
 //! Each file is written under a temporary name and renamed once every file of the sample
 //! is ready, metadata last; a sample is complete only when all its files exist.
@@ -7,26 +7,14 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use clevrtex_scene::atomic::AtomicFile;
-
-use clevrtex_scene::layout::{exr_files, legacy_exr_files, metadata_file, pass_file};
+use clevrtex_dataset::atomic::AtomicFile;
+use clevrtex_dataset::layout::{expected_files, legacy_exr_files};
 use clevrtex_scene::Pass;
 
 use crate::error::{RenderError, Result};
 
-/// Suffix of temporary files (the layout's, [`clevrtex_scene::layout::TMP_SUFFIX`]).
-pub use clevrtex_scene::layout::TMP_SUFFIX;
-
-/// Every file a complete sample has: one per requested pass, the metadata, and the EXRs
-/// when kept.
-pub fn expected_files(stem: &str, passes: &[Pass], keep_exr: bool) -> Vec<String> {
-    let mut v: Vec<String> = passes.iter().map(|&p| pass_file(stem, p)).collect();
-    if keep_exr {
-        v.extend(exr_files(stem, passes.contains(&Pass::Shadow)));
-    }
-    v.push(metadata_file(stem));
-    v
-}
+/// Suffix of temporary files (the layout's, [`clevrtex_dataset::layout::TMP_SUFFIX`]).
+pub use clevrtex_dataset::layout::TMP_SUFFIX;
 
 /// Whether every file of the sample exists in `dir`.
 pub fn is_complete(dir: &Path, stem: &str, passes: &[Pass], keep_exr: bool) -> bool {
@@ -51,12 +39,14 @@ pub fn remove_other_outputs(dir: &Path, stem: &str, passes: &[Pass], keep_exr: b
 /// their writer's owner tag ([`crate::tmp::owner_tag`]): files of live runs (other shards
 /// writing into the same folder) and of other machines are left alone.
 pub fn remove_stale_temps(dir: &Path) {
-    let Ok(root) = crate::dataset::root(dir) else {
+    let Ok(root) = clevrtex_dataset::dataset::root(dir) else {
         return;
     };
-    for (name, path, kind) in crate::dataset::list(&root, dir).unwrap_or_default() {
+    for (name, path, kind) in clevrtex_dataset::dataset::list(&root, dir).unwrap_or_default() {
         if let Some(stem) = name.strip_suffix(TMP_SUFFIX) {
-            if kind == crate::dataset::Kind::File && crate::tmp::tagged_name_is_stale(stem) {
+            if kind == clevrtex_dataset::dataset::Kind::File
+                && clevrtex_dataset::atomic::tagged_name_is_stale(stem)
+            {
                 let _ = std::fs::remove_file(path);
             }
         }
@@ -75,9 +65,9 @@ pub struct Staged {
 impl Staged {
     /// Start staging files into `dir`, a sample folder of the layout under `out` (created if
     /// missing; a link out of `out` or anything but a folder in its place is refused:
-    /// [`clevrtex_scene::layout::make_dir`]).
+    /// [`clevrtex_dataset::layout::make_dir`]).
     pub fn new(out: &Path, dir: &Path) -> Result<Staged> {
-        clevrtex_scene::layout::make_dir(out, dir).map_err(RenderError::Refused)?;
+        clevrtex_dataset::layout::make_dir(out, dir).map_err(RenderError::Refused)?;
         Ok(Staged {
             dir: dir.to_path_buf(),
             files: Vec::new(),
@@ -123,6 +113,7 @@ impl Staged {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clevrtex_dataset::layout::pass_file;
 
     #[test]
     fn layout_matches_the_reference() {

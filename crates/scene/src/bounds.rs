@@ -89,10 +89,11 @@ const fn closed(what: &'static str, min: f64, max: f64, reason: &'static str) ->
     }
 }
 
-/// Largest index of an image, plus one: the dataset cap of `verify`
-/// ([`crate::manifest::MAX_RUN_INDICES`]), so a scene, `sample` or `generate` never makes an
-/// index `verify` refuses.
-pub const INDEX_END: u64 = crate::manifest::MAX_RUN_INDICES;
+/// Largest index of an image, plus one: 100 million, a hundred times the largest dataset anyone
+/// renders. Also the dataset cap of `verify` (`clevrtex_dataset::manifest::MAX_RUN_INDICES`,
+/// the most indices a manifest's range or the union of a dataset's runs may hold), so a scene,
+/// `sample` or `generate` never makes an index `verify` refuses.
+pub const INDEX_END: u64 = 100_000_000;
 
 /// Image index in a scene file (and `--start`, `--start + -n`, `--total` of `sample` and
 /// `generate`).

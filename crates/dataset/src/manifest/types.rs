@@ -9,8 +9,8 @@
 //! end of a run that was not interrupted with every file (`finished: true`). Paths are relative
 //! to the variant folder, e.g. `0/CLEVRTEX_full_000000.png`.
 //!
-//! The reading side and the types live here, in the pure `scene` crate, so the dataset reader
-//! ([`crate::dataset`]) and the writer (`clevrtex_render::manifest`) share one definition.
+//! The types and the reading side; the dataset reader ([`crate::dataset`]) and the writing side
+//! ([`crate::manifest::write`]) share them.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -23,8 +23,9 @@ pub const MANIFEST_FORMAT: &str = "clevrtex-manifest";
 pub const MANIFEST_VERSION: u32 = 1;
 /// The most indices one manifest's range (`end - start`), or the union of a dataset's runs,
 /// may hold: 100 million, a hundred times the largest dataset anyone renders. A file with
-/// more is refused before anything is sized by it.
-pub const MAX_RUN_INDICES: u64 = 100_000_000;
+/// more is refused before anything is sized by it. The bound of image indices
+/// ([`clevrtex_scene::bounds::INDEX_END`]), so a run never makes an index `verify` refuses.
+pub const MAX_RUN_INDICES: u64 = clevrtex_scene::bounds::INDEX_END;
 
 /// One file of the manifest.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

@@ -11,8 +11,8 @@
 //! `shadow.npy` arrays decoded from the PNGs ([`pass_npy`], so no colour decoder can take them
 //! for colours), and `<stem>.json`, so WebDataset's key is the stem. Splits are each sample's recorded `split`
 //! (else, for the published ClevrTex, the public loader's position rule:
-//! [`clevrtex_scene::dataset::splits`], the rule of every reader). The files are those of
-//! the layout (`clevrtex_scene::layout`): a metadata `*_filename` only says whether a pass was
+//! [`crate::dataset::splits`], the rule of every reader). The files are those of
+//! the layout (`crate::layout`): a metadata `*_filename` only says whether a pass was
 //! written and must name the layout's file. Links leading out of the dataset are not followed
 //! and non-regular files not read (their samples are left out and listed). Shards of an
 //! earlier export into OUT that this one did not write are removed (only names of the form
@@ -25,9 +25,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use clevrtex_scene::atomic::AtomicFile;
-use clevrtex_scene::dataset::{Dataset, DatasetError, Kind, SampleRef, VariantDir};
-use clevrtex_scene::layout::Split;
+use crate::atomic::AtomicFile;
+use crate::dataset::{Dataset, DatasetError, Kind, SampleRef, VariantDir};
+use crate::layout::Split;
 use clevrtex_scene::passes::WebdatasetForm;
 use clevrtex_scene::Pass;
 use serde_json::{json, Value};
@@ -348,7 +348,7 @@ pub fn export(
     });
     let index_path = out.join("index.json");
     let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise") + "\n";
-    clevrtex_scene::atomic::write(&index_path, text.as_bytes())
+    crate::atomic::write(&index_path, text.as_bytes())
         .map_err(io_err(format!("cannot write `{}`", index_path.display())))?;
     Ok(ExportReport {
         samples: total_samples,
@@ -491,7 +491,7 @@ pub fn sample_entries(
                 dataset::read(root, path, dataset::MAX_FILE_BYTES).map_err(|w| unread(path, w))?;
             let data = match pass {
                 None => bytes,
-                Some(pass) => pass_npy(*pass, &bytes, path).map_err(|w| unread(path, w))?,
+                Some(pass) => pass_npy(*pass, &bytes).map_err(|w| unread(path, w))?,
             };
             Ok((key.clone(), data))
         })
@@ -503,12 +503,9 @@ pub fn sample_entries(
 /// 8-bit grey image's values: the published ClevrTex's masks); depth in metres as `float32
 /// (H, W)`, background `+inf`; normals as `float32 (H, W, 3)` unit vectors, background
 /// `(0, 0, 0)`; the shadow amount as `float32 (H, W)` in `[0, 1]`. `Err` says why not, one line.
-pub fn pass_npy(pass: Pass, bytes: &[u8], path: &Path) -> Result<Vec<u8>, String> {
+pub fn pass_npy(pass: Pass, bytes: &[u8]) -> Result<Vec<u8>, String> {
     use clevrtex_scene::passes::{DEPTH_BACKGROUND, DEPTH_SCALE_M, NORMAL_BACKGROUND};
-    let png = crate::post::decode_png_bytes(bytes, path).map_err(|e| match e {
-        crate::RenderError::BadOutput { problem, .. } => problem,
-        other => other.to_string().lines().next().unwrap_or("").to_string(),
-    })?;
+    let png = crate::png::decode(bytes)?;
     let WebdatasetForm::Npy { descr, channels } = pass.spec().webdataset_form else {
         return Err(format!(
             "the {} pass is not stored as an array",
@@ -619,7 +616,7 @@ pub struct ShardWriter {
 
 impl ShardWriter {
     /// Start the shard `path` (written under a temporary name of
-    /// [`clevrtex_scene::atomic`] until [`ShardWriter::finish`]).
+    /// [`crate::atomic`] until [`ShardWriter::finish`]).
     pub fn create(path: PathBuf) -> Result<ShardWriter, ShardError> {
         let f = AtomicFile::create(&path).map_err(io("cannot create a temporary for", &path))?;
         let tmp = f.tmp_path().to_path_buf();

@@ -24,8 +24,8 @@ use serde_json::Value;
 
 use crate::layout;
 use crate::manifest::Manifest;
-use crate::scene_file::MAX_IMAGE_SIDE;
-use crate::Pass;
+use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
+use clevrtex_scene::Pass;
 
 /// The largest file of a dataset that is read (1 GiB): far over any PNG of the largest
 /// image, any metadata or any manifest this tool writes.
@@ -103,10 +103,10 @@ const O_NONBLOCK: i32 = 0x0004;
 /// they are no PNG at all (the decoder then says so). The mask must be 8-bit object ids, one
 /// channel: a palette index as clevrtex and the public ClevrTex write it, or greyscale (an RGB
 /// `_flat.png` would be read as three ids a pixel, a 16-bit one as ids past 255); the other
-/// passes must have their pass-table mode ([`crate::passes::PngKind`]). Used by `verify`,
+/// passes must have their pass-table mode ([`clevrtex_scene::passes::PngKind`]). Used by `verify`,
 /// `preview`, `report`, `materials measure`, `eval`'s ground truth and the Python `Dataset`.
 pub fn png_mode_problem(bytes: &[u8], pass: Pass) -> Option<String> {
-    use crate::passes::PngKind;
+    use clevrtex_scene::passes::PngKind;
     if bytes.len() < 26 || &bytes[..8] != b"\x89PNG\r\n\x1a\n" || &bytes[12..16] != b"IHDR" {
         return None;
     }
@@ -650,7 +650,7 @@ impl Dataset {
             };
             // `clevrtex_` followed by no variant name (or one no run could have written) is
             // named, not passed over: its samples would go unchecked.
-            if let Some(why) = crate::layout::variant_name_problem(v) {
+            if let Some(why) = clevrtex_scene::names::variant_name_problem(v) {
                 ds.skipped.push((
                     v.to_string(),
                     Skip {
@@ -722,7 +722,7 @@ pub fn manifests_in(out: &Path) -> std::io::Result<Vec<(String, PathBuf)>> {
         let Some(v) = name.strip_prefix("clevrtex_") else {
             continue;
         };
-        if kind != Kind::Dir || crate::layout::variant_name_problem(v).is_some() {
+        if kind != Kind::Dir || clevrtex_scene::names::variant_name_problem(v).is_some() {
             continue;
         }
         let Ok(entries) = list(&root, &p) else {
@@ -1036,7 +1036,7 @@ pub fn listed_passes(meta: &Value, file: &str, stem: &str) -> Result<Vec<Pass>, 
 /// else (`../x`) is refused by every reader alike. [`recorded_split`] then reads it.
 fn check_split(meta: &Value, file: &str) -> Result<(), MetadataError> {
     match &meta["split"] {
-        Value::String(s) if crate::layout::variant_name_problem(s).is_none() => Ok(()),
+        Value::String(s) if clevrtex_scene::names::variant_name_problem(s).is_none() => Ok(()),
         split => recorded_split(split, "", file).map(|_| ()),
     }
 }
@@ -1062,7 +1062,7 @@ pub fn recorded_split(
         Value::String(s) => layout::Split::parse(s).map(Some).ok_or_else(|| {
             err(format!(
                 "is `{}`, not test, val or train",
-                crate::text::printable(s)
+                clevrtex_scene::text::printable(s)
             ))
         }),
         other => Err(err(format!("is {}, not test, val or train", short(other)))),

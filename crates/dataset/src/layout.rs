@@ -8,9 +8,11 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::config::Config;
-pub use crate::names::{pass_file, stem, variant_name_problem, Split, Splits, MAX_VARIANT_NAME};
-use crate::passes::Pass;
+use clevrtex_scene::config::Config;
+pub use clevrtex_scene::names::{
+    pass_file, stem, variant_name_problem, Split, Splits, MAX_VARIANT_NAME,
+};
+use clevrtex_scene::passes::Pass;
 
 /// Suffix of temporary files (never matched by the public loader's `*.png` glob).
 pub const TMP_SUFFIX: &str = ".clevrtex-tmp";
@@ -130,6 +132,17 @@ pub fn exr_files(stem: &str, shadow: bool) -> Vec<String> {
 /// and without object shadows): removed when such a sample is written again.
 pub fn legacy_exr_files(stem: &str) -> [String; 2] {
     [format!("{stem}_direct.exr"), format!("{stem}_noshadow.exr")]
+}
+
+/// Every file a complete sample has: one per requested pass, the metadata, and the EXRs
+/// when kept.
+pub fn expected_files(stem: &str, passes: &[Pass], keep_exr: bool) -> Vec<String> {
+    let mut v: Vec<String> = passes.iter().map(|&p| pass_file(stem, p)).collect();
+    if keep_exr {
+        v.extend(exr_files(stem, passes.contains(&Pass::Shadow)));
+    }
+    v.push(metadata_file(stem));
+    v
 }
 
 /// The split rule of a variant: its built-in config's `splits`, or [`Splits::Standard`] for a

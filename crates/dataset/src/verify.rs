@@ -14,18 +14,18 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use clevrtex_scene::layout;
+use crate::layout;
 use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
 use clevrtex_scene::Pass;
 use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::Value;
 
-use clevrtex_scene::dataset::{self, Dataset, MetadataView, VariantDir};
-use clevrtex_scene::manifest::{in_ranges, merge_ranges as merge};
+use crate::dataset::{self, Dataset, MetadataView, VariantDir};
+use crate::manifest::{in_ranges, merge_ranges as merge};
 
+use crate::layout::TMP_SUFFIX;
 use crate::manifest::{self, FileEntry, Manifest, MAX_RUN_INDICES};
-use crate::output::TMP_SUFFIX;
 
 /// One sample found on disk: its files by name, and the folder they are in.
 #[derive(Debug, Clone)]
@@ -103,7 +103,7 @@ pub struct VariantReport {
     /// record them (file, group, textures, content hash); two runs recording one name with
     /// different contents is a manifest problem. Left out of the JSON when empty.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
-    pub user_materials: BTreeMap<String, clevrtex_scene::manifest::UserMaterial>,
+    pub user_materials: BTreeMap<String, crate::manifest::UserMaterial>,
     /// The canonical roots of the datasets the variant was found in: what every delete of
     /// [`remove_broken`] is made relative to.
     #[serde(skip)]
@@ -848,7 +848,7 @@ fn check_sample_files(
     // Kept EXRs (`--keep-exr`): checked without a manifest too (their bytes are the
     // manifest's business when there is one).
     for (name, bytes) in bytes_of.iter().filter(|(n, _)| n.ends_with(".exr")) {
-        if let Err(why) = crate::exr_io::check_kept(bytes, (w as usize, h as usize)) {
+        if let Err(why) = crate::exr::check_kept(bytes, (w as usize, h as usize)) {
             problems.push(format!("`{name}` {why}"));
         }
     }
@@ -870,7 +870,7 @@ fn check_sample_files(
             continue;
         };
         // The header's size before decoding: a PNG claiming a huge size is never allocated.
-        if let Some((pw, ph)) = crate::post::png_size(bytes) {
+        if let Some((pw, ph)) = crate::png::size(bytes) {
             if (pw, ph) != (w, h) {
                 problems.push(format!("`{name}` is {pw}x{ph} (the metadata says {w}x{h})"));
                 continue;
@@ -881,17 +881,10 @@ fn check_sample_files(
             problems.push(format!("`{name}` {problem}"));
             continue;
         }
-        let png = match crate::post::decode_png_bytes(bytes, &f.dir.join(&name)) {
+        let png = match crate::png::decode(bytes) {
             Ok(p) => p,
-            Err(crate::RenderError::BadOutput { problem, .. }) => {
+            Err(problem) => {
                 problems.push(format!("`{name}`: {problem}"));
-                continue;
-            }
-            Err(e) => {
-                problems.push(format!(
-                    "`{name}`: {}",
-                    e.to_string().lines().next().unwrap_or("")
-                ));
                 continue;
             }
         };
@@ -1040,7 +1033,7 @@ pub fn remove_broken_with(
             continue;
         }
         let mut names = vec![layout::metadata_file(&b.stem)];
-        names.extend(crate::output::expected_files(&b.stem, &Pass::ALL, true));
+        names.extend(crate::layout::expected_files(&b.stem, &Pass::ALL, true));
         names.extend(layout::legacy_exr_files(&b.stem));
         names.dedup();
         before_open(&b.dir);
@@ -1059,7 +1052,7 @@ pub fn remove_broken_with(
         // A live writer's temporary (another shard writing now) is not stray.
         let live = name
             .strip_suffix(TMP_SUFFIX)
-            .is_some_and(|stem| !crate::tmp::tagged_name_is_stale(stem));
+            .is_some_and(|stem| !crate::atomic::tagged_name_is_stale(stem));
         if live {
             continue;
         }
