@@ -732,7 +732,7 @@ fn validate(
 /// Every number of the base scene within the one table of bounds ([`crate::bounds`]), so
 /// that every scene sampled from it passes [`crate::SceneFile::validate`].
 fn check_base_bounds(base: &BaseScene) -> Result<(), OutOfBounds> {
-    bounds::check_render("base_scene.render", &base.render)?;
+    crate::scene_file::check_render("base_scene.render", &base.render)?;
     let c = &base.camera;
     let k = |s: &str| format!("base_scene.camera.{s}");
     bounds::check_all(&bounds::POSITION, &k("location"), &c.location)?;
