@@ -56,7 +56,7 @@ pub fn sample_dir(out: &Path, variant: &str, index: u64) -> PathBuf {
 /// every folder between, before anything is written into it. The one place the write side
 /// makes the layout's folders: an `--out` handed over (to resume or grow it) is untrusted, so
 /// every folder from `out` down to `dir` must be a folder inside `out`, judged as the read
-/// side judges ([`crate::dataset::classify`] against the canonical `out`). A link leading out
+/// side judges ([`crate::dataset::files::classify`] against the canonical `out`). A link leading out
 /// of `out`, a dangling link, a FIFO or a file where a folder belongs is refused, naming it,
 /// and nothing is written through it. `out` itself (the command line's) is trusted.
 pub fn make_dir(out: &Path, dir: &Path) -> Result<(), String> {
@@ -67,7 +67,7 @@ pub fn make_dir(out: &Path, dir: &Path) -> Result<(), String> {
             out.display()
         )
     })?;
-    let root = crate::dataset::root(out)
+    let root = crate::dataset::files::root(out)
         .map_err(|e| format!("cannot resolve `{}`: {e}", out.display()))?;
     let rel = dir.strip_prefix(out).map_err(|_| {
         format!(
@@ -93,15 +93,15 @@ pub fn make_dir(out: &Path, dir: &Path) -> Result<(), String> {
                 _ => {}
             }
         }
-        match crate::dataset::classify(&root, &path) {
-            crate::dataset::Kind::Dir => {}
-            crate::dataset::Kind::File => {
+        match crate::dataset::files::classify(&root, &path) {
+            crate::dataset::files::Kind::Dir => {}
+            crate::dataset::files::Kind::File => {
                 return Err(format!(
                 "`{}` is a file where the dataset's layout has a folder; nothing written\n{hint}",
                 path.display()
             ))
             }
-            crate::dataset::Kind::Skipped(why) => {
+            crate::dataset::files::Kind::Skipped(why) => {
                 return Err(format!(
                     "`{}` {why}; nothing is written through it\n{hint}",
                     path.display()

@@ -175,15 +175,16 @@ impl RunLock {
         let guard_path = variant_dir.join(GUARD);
         let guard = open_lock_file(&guard_path)?;
         guard.lock().map_err(|e| io("lock", &guard_path, e))?;
-        let root = crate::dataset::root(variant_dir).map_err(|e| io("read", variant_dir, e))?;
-        let entries =
-            crate::dataset::list(&root, variant_dir).map_err(|e| io("read", variant_dir, e))?;
+        let root =
+            crate::dataset::files::root(variant_dir).map_err(|e| io("read", variant_dir, e))?;
+        let entries = crate::dataset::files::list(&root, variant_dir)
+            .map_err(|e| io("read", variant_dir, e))?;
         let mine = file_name(start, end, shard[0], shard[1]);
         for (name, path, _) in entries {
             if !(name.starts_with(PREFIX) && name.ends_with(".lock")) {
                 continue;
             }
-            let holder = crate::dataset::read(&root, &path, MAX_LOCK_BYTES)
+            let holder = crate::dataset::files::read(&root, &path, MAX_LOCK_BYTES)
                 .and_then(|b| serde_json::from_slice::<Holder>(&b).map_err(|e| e.to_string()));
             let holder = match holder {
                 Ok(h) => h,
@@ -270,7 +271,7 @@ impl Drop for RunLock {
             let _ = b.join();
         }
         // Remove the file only while it is still ours (never another run's lock).
-        let ours = crate::dataset::read_regular(&self.path, MAX_LOCK_BYTES)
+        let ours = crate::dataset::files::read_regular(&self.path, MAX_LOCK_BYTES)
             .ok()
             .and_then(|b| serde_json::from_slice::<Holder>(&b).ok())
             .is_some_and(|h| h.pid == std::process::id() && h.host == crate::atomic::hostname());

@@ -118,8 +118,9 @@ pub fn render_differences(a: &serde_json::Value, b: &serde_json::Value) -> Vec<S
         b.as_object().unwrap_or(&empty),
     );
     let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
-    let show =
-        |v: Option<&serde_json::Value>| v.map_or("(none)".to_string(), crate::dataset::short);
+    let show = |v: Option<&serde_json::Value>| {
+        v.map_or("(none)".to_string(), crate::dataset::metadata::short)
+    };
     keys.into_iter()
         .filter(|k| a.get(*k) != b.get(*k))
         .take(20)
@@ -180,11 +181,12 @@ impl Manifest {
     }
 
     /// Read a manifest file: a regular file (a link only within its folder), at most
-    /// [`crate::dataset::MAX_FILE_BYTES`], whose values pass [`Manifest::check`].
+    /// [`crate::dataset::files::MAX_FILE_BYTES`], whose values pass [`Manifest::check`].
     pub fn read(path: &Path) -> Result<Manifest, String> {
         let dir = path.parent().unwrap_or(Path::new("."));
-        let root = crate::dataset::root(dir).map_err(|e| e.to_string())?;
-        let bytes = crate::dataset::read(&root, path, crate::dataset::MAX_FILE_BYTES)?;
+        let root = crate::dataset::files::root(dir).map_err(|e| e.to_string())?;
+        let bytes =
+            crate::dataset::files::read(&root, path, crate::dataset::files::MAX_FILE_BYTES)?;
         let m: Manifest = serde_json::from_slice(&bytes).map_err(|e| e.to_string())?;
         if m.format != MANIFEST_FORMAT || m.version != MANIFEST_VERSION {
             return Err(format!(

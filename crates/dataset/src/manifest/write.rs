@@ -103,10 +103,10 @@ impl Plan {
     /// and shard) is not compared; others still are.
     pub fn check_settings(&self, out: &Path, overwrite: bool) -> Result<()> {
         let vdir = self.variant_dir(out);
-        let Ok(root) = crate::dataset::root(&vdir) else {
+        let Ok(root) = crate::dataset::files::root(&vdir) else {
             return Ok(());
         };
-        let Ok(entries) = crate::dataset::list(&root, &vdir) else {
+        let Ok(entries) = crate::dataset::files::list(&root, &vdir) else {
             return Ok(());
         };
         let run = Manifest {
@@ -114,7 +114,7 @@ impl Plan {
             ..self.run.clone()
         };
         for (name, path, kind) in entries {
-            if kind != crate::dataset::Kind::File || !is_manifest_name(&name) {
+            if kind != crate::dataset::files::Kind::File || !is_manifest_name(&name) {
                 continue;
             }
             // An unreadable manifest is `verify`'s to report; it claims nothing here.
