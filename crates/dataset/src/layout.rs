@@ -4,7 +4,7 @@
 //!
 //! `OUT/clevrtex_<variant>/<index / 1000>/CLEVRTEX_<variant>_<index:06>{.png, _flat.png,
 //! _depth_0001.png, _normal_0001.png, _albedo_0001.png, _shadow_0001.png, .json}`; the pass
-//! suffixes come from the pass table ([`crate::passes`]).
+//! suffixes come from the pass table ([`clevrtex_scene::passes`]).
 
 use std::path::{Path, PathBuf};
 

@@ -274,7 +274,7 @@ fn check_split(meta: &Value, file: &str) -> Result<(), MetadataError> {
 /// The split a sample's metadata records in `split`: `Some` for `test`, `val` or `train`;
 /// `None` where it records none: `split` absent, or the name of the sample's `variant` (the
 /// public generator, karazijal/clevrtex-generation, writes the variant there, so the published
-/// ClevrTex is split by position: [`splits`]). Anything else is an error naming the file and
+/// ClevrTex is split by position: [`crate::dataset::splits()`]). Anything else is an error naming the file and
 /// the key.
 pub fn recorded_split(
     split: &Value,

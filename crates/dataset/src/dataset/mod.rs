@@ -16,10 +16,11 @@
 //! metadata (errors name the file and the key); the manifests' union is
 //! [`crate::manifest::union`]. No other module walks a dataset folder or parses a stem.
 //!
-//! By concern: [`files`] (the root, what an entry is, capped reads and deletes beneath the
-//! root's handle), [`walk`] ([`Dataset::open`], [`SampleRef`], [`VariantDir`]), [`metadata`]
-//! ([`MetadataView`], [`check_metadata`], a pass PNG's mode), [`splits`] (the one split rule).
-//! Everything is re-exported here: readers outside this crate name `dataset::X`.
+//! By concern: `files.rs` (the root, what an entry is, capped reads and deletes beneath the
+//! root's handle), `walk.rs` ([`Dataset::open`], [`SampleRef`], [`VariantDir`]), `metadata.rs`
+//! ([`MetadataView`], [`check_metadata`], a pass PNG's mode), `splits.rs` ([`splits()`]: the
+//! one split rule). Everything is re-exported here: readers outside this crate name
+//! `dataset::X`.
 
 pub(crate) mod files;
 pub(crate) mod metadata;

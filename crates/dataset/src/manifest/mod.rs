@@ -1,5 +1,5 @@
 //! The run manifest (`MANIFEST-<start>-<end>-<k>of<n>.json`): its types and reading
-//! ([`types`]: what a run made, the union of runs) and its writing ([`write`]: the hashes of a
+//! (`types.rs`: what a run made, the union of runs) and its writing (`write.rs`: the hashes of a
 //! run's files, the atomic write, the [`Plan`] of a `generate` run).
 
 pub mod types;

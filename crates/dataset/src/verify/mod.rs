@@ -7,14 +7,14 @@
 //! the right size and layout, mask ids exactly `0..=N` with every object above the visibility
 //! threshold (recounted, and equal to the metadata), no temporary files, every file's bytes
 //! equal to a manifest entry, and the failure ledger summarised. The dataset is walked and its
-//! metadata typed by [`Dataset::open`] and [`MetadataView`] (no link out of the dataset, only
+//! metadata typed by [`Dataset::open`] and [`crate::dataset::MetadataView`] (no link out of the dataset, only
 //! regular files, capped), and every count taken from a file is bounded before it sizes
 //! anything ([`MAX_RUN_INDICES`]).
 
 //!
-//! By concern: what it reports ([`report`]), the checks of one sample ([`checks`]), the
-//! commands it offers to rerun and how it prints them ([`command`]), `--remove-broken`
-//! ([`remove`]). Everything is re-exported here.
+//! By concern: what it reports (`report.rs`), the checks of one sample (`checks.rs`), the
+//! commands it offers to rerun and how it prints them (`command.rs`), `--remove-broken`
+//! (`remove.rs`). Everything is re-exported here.
 
 pub(crate) mod checks;
 pub(crate) mod command;

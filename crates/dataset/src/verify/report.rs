@@ -74,7 +74,7 @@ pub struct VariantReport {
     /// Entries of the failure ledgers: index -> error.
     pub ledger: BTreeMap<u64, String>,
     /// Each split's samples (of those found once) as index ranges `[first, last]`, by the one
-    /// split rule of every reader ([`dataset::splits`]: the recorded `split`, else by position).
+    /// split rule of every reader ([`crate::dataset::splits()`]: the recorded `split`, else by position).
     pub splits: BTreeMap<String, Vec<[u64; 2]>>,
     /// Commands to rerun after repair: those of the runs (from the manifests) whose indices
     /// are missing or broken or that did not finish, with `--out` set to the folder verified.
@@ -85,7 +85,7 @@ pub struct VariantReport {
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub user_materials: BTreeMap<String, crate::manifest::UserMaterial>,
     /// The canonical roots of the datasets the variant was found in: what every delete of
-    /// [`remove_broken`] is made relative to.
+    /// [`super::remove_broken`] is made relative to.
     #[serde(skip)]
     pub roots: Vec<PathBuf>,
 }

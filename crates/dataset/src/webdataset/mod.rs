@@ -22,7 +22,7 @@
 //! sample counts, and what each key holds.
 //!
 //! By concern: the export of a dataset (here), one shard's entries, names and writer
-//! ([`shard`]), a pass decoded into its `.npy` array ([`npy`]). Everything is re-exported here.
+//! (`shard.rs`), a pass decoded into its `.npy` array (`npy.rs`). Everything is re-exported here.
 
 pub(crate) mod npy;
 pub(crate) mod shard;
