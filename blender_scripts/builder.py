@@ -34,7 +34,7 @@ SCENE_VERSION = 1
 # `shadow_samples`, else the scene file's `render.shadow_samples`, else three eighths of the
 # scene's samples (24 at the default 64), at most SHADOW_SAMPLES_MAX.
 # Measured with blender_scripts/dev/shadow_measure.py against the same render at 256 spp
-# with another seed, at 320x240 (docs/performance.md, "Shadow pass"): RMSE 0.0083
+# with another seed, at 320x240 (docs/notes/performance.md, "Shadow pass"): RMSE 0.0083
 # (0.0074-0.0091 over five scenes) at 24, 0.0104 at 16, 0.018 at 8; an open floor exactly 0;
 # extra time at 24 over the 64-spp final render: 6-7% on `full` scenes with a flat floor,
 # 20% with a displaced one, 22-29% on `clevr` (a direct-light sample costs about the same
@@ -49,7 +49,7 @@ SHADOW_SAMPLES_MAX = 64
 SHADOW_FILTER_WIDTH = 0.01
 # Cycles 4.0+'s light tree in the shadow render: off, whatever the scene asks for the final
 # render. Measured on bpy 4.5 with the two renders the pass took before
-# (docs/performance.md, "Shadow pass"): with the tree, RMSE 0.034 at 16 samples on
+# (docs/notes/performance.md, "Shadow pass"): with the tree, RMSE 0.034 at 16 samples on
 # `clevr_000000` and `full_000000`; without, 0.0110 / 0.0099, as on 3.4.1 (which has no
 # tree). The light with and without object shadows shares its light samples either way (an
 # open floor is 0); the tree only spends them worse on this question.
@@ -424,7 +424,7 @@ def release_render():
     spinning in sched_yield (measured: ~28000 context switches a second, a whole core when the
     machine is otherwise idle, mostly kernel time) and one of bpy 5.0's busy at 100% while the
     worker waits for its next request; freed, none (blender_scripts/dev/spin_probe.py,
-    docs/performance.md "Blender 3.4, 4.5 and 5.0 at parity"). Turning the setting off frees
+    docs/notes/performance.md "Blender 3.4, 4.5 and 5.0 at parity"). Turning the setting off frees
     the session (Blender's update of the property); it is turned on again for the next
     request, whose shadow render reuses its final render's synced geometry."""
     r = bpy.context.scene.render

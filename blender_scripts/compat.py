@@ -160,7 +160,7 @@ def principled_input(node, name):
     return None if new is None else node.inputs[new]
 
 
-# Principled BSDF v2 (4.0+) rendering as 3.4's v1 (issue 24, docs/performance.md "Blender
+# Principled BSDF v2 (4.0+) rendering as 3.4's v1 (issue 24, docs/notes/performance.md "Blender
 # 3.4, 4.5 and 5.0 at parity"). Scene files and material recipes are in 3.x terms; each
 # switch below is one difference, on by default (the study script dev/parity_measure.py
 # turns them off one at a time with `--parity-off`):

@@ -4,7 +4,7 @@
 
 - name: catalogue name;
 - recipe: the material's entry of materials.json, resolved by clevrtex-materials (every
-  default filled, colours linear); see docs/materials.md;
+  default filled, colours linear); see docs/material-recipes.md;
 - instance: the scene file's MaterialInstance as a dict (random, color, displacement, scale);
 - context: {"displacement": bool, "albedo": bool} -- displacement False for the cheap
   visibility pass, where no displacement may be set up; albedo True when the albedo pass is

@@ -2,7 +2,7 @@
 """Flat-lit tile figures of a material at an object's and at the backdrop's scale (issue 23).
 
 The third and fourth passes of issue 23 chose and checked materials with these figures
-(docs/materials.md, "Third pass" and "Fourth pass"). Each material is copied as a user
+(docs/notes/materials.md, "Third pass" and "Fourth pass"). Each material is copied as a user
 material at 2x and 4x density (32 and 16 px per material unit on a 128 px tile, as on an
 object and on the backdrop of a 320x240 image), rendered flat-lit by `clevrtex materials
 stats`, and measured on the two `random` instances (r0, r1; the figures are their mean):

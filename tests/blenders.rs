@@ -2,8 +2,8 @@
 //! alike (`blender_scripts/compat.py` holds every version difference). Needs both; required
 //! under `CLEVRTEX_REQUIRE_TOOLS=1` plus `CLEVRTEX_REQUIRE_BPY=1` (what `.ci/run` sets).
 //!
-//! What "alike" means, and the tolerances (measured, see `docs/scene-format.md`, "What is
-//! byte-identical"):
+//! What "alike" means, and the tolerances (measured, see `docs/notes/scene-format.md`,
+//! "Across Blender versions"):
 //! - masks: identical ids on every pixel;
 //! - depth: within 1 mm on every pixel, except on a truly displaced backdrop (there the two
 //!   versions dice and sample the relief's steep edges differently: measured on `full` image 0
@@ -166,8 +166,9 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
         }
 
         // On a displaced backdrop, the objects' pixels only: the backdrop's shading there is the
-        // known gap of 4.x against 3.4 (docs/scene-format.md: `forest_ground_twigs`, displaced,
-        // is ~27 levels darker on 4.5, with this stop's code and the last stop's alike).
+        // known gap of 4.x against 3.4 (docs/notes/scene-format.md: `forest_ground_twigs`,
+        // displaced, is ~27 levels darker on 4.5, with this stop's code and the last stop's
+        // alike).
         let keep = |i: usize| !displaced_backdrop || ma.data[i] > 0;
         let (ra, rb) = (
             mean_rgb(&sub(&a, stem, ".png"), keep),

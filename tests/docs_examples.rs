@@ -1,9 +1,9 @@
 //! Docs that run (issue 32): every ```` ```sh ````, ```` ```bash ```` and ```` ```python ````
-//! block of README.md and docs/*.md runs as written, in one temporary folder holding `data/`
-//! (a 10-image `camo` dataset rendered tiny by this build), `preds/` (its masks as
-//! predictions) and `out/` (its WebDataset export), with this build's `clevrtex` and the test
-//! venv's `python` first on PATH. A block directly under `<!-- not run: REASON -->` is left
-//! out, and listed with its reason.
+//! block of README.md and docs/**/*.md (docs/notes/ included) runs as written, in one
+//! temporary folder holding `data/` (a 10-image `camo` dataset rendered tiny by this build),
+//! `preds/` (its masks as predictions) and `out/` (its WebDataset export), with this build's
+//! `clevrtex` and the test venv's `python` first on PATH. A block directly under
+//! `<!-- not run: REASON -->` is left out, and listed with its reason.
 //! Needs Blender and the test venv with the package and torch; skipped visibly without them,
 //! required in CI.
 
@@ -69,18 +69,27 @@ fn blocks(name: &str, text: &str) -> Vec<Block> {
     out
 }
 
-/// Every block of README.md and docs/*.md, in file order.
+/// The Markdown files under `dir`, its subfolders (`docs/notes/`) included, sorted by path.
+fn markdown_files(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap().flatten() {
+        let path = entry.path();
+        let kind = entry.file_type().unwrap();
+        if kind.is_dir() {
+            out.extend(markdown_files(&path));
+        } else if kind.is_file() && path.extension().is_some_and(|e| e == "md") {
+            out.push(path);
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Every block of README.md and docs/**/*.md, in file order.
 fn all_blocks() -> Vec<Block> {
     let root = repo_root();
     let mut files = vec![root.join("README.md")];
-    let mut docs: Vec<PathBuf> = std::fs::read_dir(root.join("docs"))
-        .unwrap()
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|e| e == "md"))
-        .collect();
-    docs.sort();
-    files.extend(docs);
+    files.extend(markdown_files(&root.join("docs")));
     files
         .iter()
         .flat_map(|f| {
@@ -109,6 +118,11 @@ fn docs_blocks_are_found_and_every_skip_says_why() {
             b.place
         );
     }
+    // The notes are read too (issue 36: measurements moved there keep their commands).
+    assert!(
+        all.iter().any(|b| b.place.starts_with("docs/notes/")),
+        "no block found under docs/notes/"
+    );
     // The README's Python example runs (issue 32: it called a `batches` that does not exist).
     assert!(all
         .iter()

@@ -127,7 +127,7 @@ fn sampler_ten_large_objects() {
 /// The largest count the default spacing rules allow (min-dist 0.25, margin 0.4, 6x6 area,
 /// sizes 0.4-0.9): measured over the first 100 images at seed 0, 10 objects always fit, 11 in
 /// 94, 12 in 7, 13 in none (the area bound alone would allow 61). Documented in
-/// `docs/performance.md` (bench) and checked here on 20 images.
+/// `docs/notes/performance.md` ("Extreme cases") and checked here on 20 images.
 #[test]
 fn sampler_largest_count_the_spacing_rules_allow() {
     let ok = |n: u32| {

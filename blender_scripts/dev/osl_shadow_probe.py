@@ -10,7 +10,7 @@ Per scene: the 64-spp final render (timed; `--no-final` skips it), then the OSL 
 white diffuse surface with and without object shadows, the backdrop shadowing both; Cycles'
 OSL back end ignores AOV outputs), twice (the second shows the cost without compiling).
 Writes OUT/<scene>/osl.exr (`Combined.R` = L, `Combined.G` = L0) and prints the times.
-Measured once (docs/performance.md, "Shadow pass": ~3.3 s of compilation per scene); a
+Measured once (docs/notes/performance.md, "Shadow pass": ~3.3 s of compilation per scene); a
 probe, not validated against the Cycles reference.
 """
 

@@ -1,6 +1,6 @@
 //! `clevrtex bench render`: error against run time of Cycles settings. This file parses the
 //! arguments, hands the bench (`clevrtex_bench`) a Blender session and prints what it measured.
-//! See `docs/performance.md`, section `bench`.
+//! See `docs/notes/performance.md`, section `bench`.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};

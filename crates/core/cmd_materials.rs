@@ -142,7 +142,7 @@ struct SheetArgs {
 
 /// Run `clevrtex materials`.
 pub fn run(args: Args) -> CmdResult {
-    let cat = materials::load(args.materials.as_deref())?;
+    let cat = crate::user_materials::load(args.materials.as_deref())?;
     match args.command {
         Sub::List => {
             let mut out = std::io::stdout().lock();

@@ -4,10 +4,10 @@
 //! A fixed set of scenes ([`scenes`]: several variants, fixed seeds) is rendered at each rung
 //! of a ladder of settings ([`ladder`]); each render is compared ([`metrics`]) with a
 //! high-sample reference of the same scene, cached under `OUT/references/<hash>/` and keyed by
-//! the reference scene file, the recipes of the materials it uses and the Blender version
-//! ([`measure`]). The rows go to a CSV ([`csv`]); means over scenes make a table, a summary
+//! the reference scene file, the recipes of the materials it uses (and the content hashes of
+//! its user materials, `--materials DIR`) and the Blender version ([`measure`]). The rows go to a CSV ([`csv`]); means over scenes make a table, a summary
 //! and a log-log plot of error against time ([`summary`], [`plot`]). The command line only
-//! parses, hands in a Blender ([`measure::Render`]) and prints. See `docs/performance.md`,
+//! parses, hands in a Blender ([`measure::Render`]) and prints. See `docs/notes/performance.md`,
 //! section `bench`.
 
 pub mod csv;

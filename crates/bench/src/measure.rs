@@ -364,14 +364,31 @@ impl Bench<'_> {
         // Only the recipes of the materials this scene uses: editing another material of the
         // catalogue must not throw away hours of references. (Bridge script changes are not
         // tracked: delete `OUT/references` after changing how materials are built.)
-        let used = std::iter::once(bs.scene.backdrop.material.name.as_str())
-            .chain(bs.scene.objects.iter().map(|o| o.material.name.as_str()));
-        let recipes = self.catalogue.resolved_json_for(used);
-        let key = clevrtex_materials::content_hash(&[
+        let used: Vec<&str> = std::iter::once(bs.scene.backdrop.material.name.as_str())
+            .chain(bs.scene.objects.iter().map(|o| o.material.name.as_str()))
+            .collect();
+        let recipes = self.catalogue.resolved_json_for(used.iter().copied());
+        // A user material's recipe names its files, not their contents: its content hash
+        // (the `.blend` and every image) is in the key too, so a texture edited in place
+        // renders a new reference. Built-in-only scenes keep the keys they had.
+        let mut user: Vec<&str> = used
+            .iter()
+            .filter_map(|n| self.catalogue.get(n))
+            .filter(|m| m.set == clevrtex_materials::Set::User)
+            .map(|m| m.hash.as_str())
+            .collect();
+        user.sort_unstable();
+        user.dedup();
+        let user = user.join(",");
+        let mut parts = vec![
             ref_json.as_bytes(),
             recipes.as_bytes(),
             self.blender_version.as_bytes(),
-        ]);
+        ];
+        if !user.is_empty() {
+            parts.push(user.as_bytes());
+        }
+        let key = clevrtex_materials::content_hash(&parts);
         let ref_dir = self.out.join("references").join(format!("{key:016x}"));
         let reference = match read_outputs(&ref_dir) {
             Ok(r) => {

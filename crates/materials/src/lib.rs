@@ -23,6 +23,9 @@
 //! files in our format (typically an `image` layer) and `*.blend` files holding a node group
 //! with inputs Color / Random / Displacement / Scale and outputs Shader (or BSDF) and
 //! Displacement. A user name equal to an existing one is an error, never a silent override.
+//! The public generator's CLEVR base materials (`Rubber.blend`, `MyMetal.blend`,
+//! `TabulaRasa.blend`, beside the textured ones in its `data/materials`) are recognised by
+//! name and left out of the user set ([`CLEVR_BASE`], [`Catalogue::clevr_base`]).
 #![deny(missing_docs)]
 
 mod error;
@@ -52,6 +55,50 @@ pub const CATALOGUE_JSON: &str = include_str!("../../../materials/catalogue.json
 pub const BLOCKS_JSON: &str = include_str!("../../../materials/blocks.json");
 /// Version of the resolved `materials.json` handed to the bridge.
 pub const RESOLVED_VERSION: u32 = 1;
+
+/// The public generator's CLEVR base materials, as (its name for the material: the file stem
+/// lowercased, as its `sampling.py` names every `.blend`; the built-in that plays the part
+/// here). Its `data/materials` folder, and the v2 tarballs that replace it, hold
+/// `Rubber.blend`, `MyMetal.blend` and `TabulaRasa.blend` beside the textured materials; every
+/// textured variant's config excludes exactly these three (`"exclude": ["tabularasa",
+/// "rubber", "mymetal"]` in `full.json`, `outd.json`, `pbg_varied_on_plainbg.json`, ...), and
+/// only CLEVR's objects (`clevr.json`, `vbg_colour_on_variedbg.json`: `rubber`, `mymetal`) and
+/// plain backdrop (`clevr.json`, `pbg_varied_on_plainbg.json`: `tabularasa`) use them, parts
+/// our built-in `rubber`, `metal` and `plain` play. So a user folder's `.blend` of one of
+/// these names is left out of set `user` ([`Catalogue::clevr_base`] lists them), not a clash.
+pub const CLEVR_BASE: [(&str, &str); 3] = [
+    ("rubber", "rubber"),
+    ("mymetal", "metal"),
+    ("tabularasa", "plain"),
+];
+
+/// A `.blend` of a user folder recognised as one of the public generator's CLEVR base
+/// materials ([`CLEVR_BASE`]) and left out of the user set.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ClevrBase {
+    /// The file.
+    pub file: std::path::PathBuf,
+    /// The public generator's name for it (`rubber`, `mymetal`, `tabularasa`).
+    pub name: &'static str,
+    /// The built-in material that plays its part (`rubber`, `metal`, `plain`).
+    pub builtin: &'static str,
+}
+
+impl ClevrBase {
+    /// Why `name` is not a material: "material `mymetal` is the public generator's CLEVR
+    /// base material `MyMetal.blend`, left out of set `user`".
+    pub fn left_out(&self) -> String {
+        format!(
+            "material `{}` is the public generator's CLEVR base material `{}`, which its \
+             textured variants never draw; `--materials` leaves it out of set `user`",
+            self.name,
+            self.file
+                .file_name()
+                .map(|f| f.to_string_lossy())
+                .unwrap_or_default()
+        )
+    }
+}
 
 /// Which group a material belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -120,6 +167,8 @@ pub struct Catalogue {
     materials: Vec<Material>,
     /// The user directories added, canonical (the folders their textures must stay in).
     user_dirs: Vec<std::path::PathBuf>,
+    /// The public generator's CLEVR base materials found in those directories, left out.
+    clevr_base: Vec<ClevrBase>,
 }
 
 impl Catalogue {
@@ -146,6 +195,7 @@ impl Catalogue {
         let mut out = Catalogue {
             materials: Vec::new(),
             user_dirs: Vec::new(),
+            clevr_base: Vec::new(),
         };
         for (i, e) in entries.iter().enumerate() {
             let field = |k: &str| format!("materials[{i}].{k}");
@@ -214,7 +264,10 @@ impl Catalogue {
     /// refers to becomes material `NAME` using the first node group with the ClevrTex
     /// interface. A folder of Poly Haven or ambientCG texture maps becomes material
     /// `<folder name>` of kind `pbr` (see [`pbr`]; every map it uses is checked here).
-    /// Names are the lowercased file stems (folder names); a clash is an error.
+    /// Names are the lowercased file stems (folder names); a clash is an error. A `.blend`
+    /// that is one of the public generator's CLEVR base materials by name ([`CLEVR_BASE`]:
+    /// `Rubber.blend`, `MyMetal.blend`, `TabulaRasa.blend`, any case) and that no JSON file
+    /// refers to is left out, unread, and listed by [`Catalogue::clevr_base`].
     pub fn add_user_dir(&mut self, dir: &Path) -> Result<(), Error> {
         let shown = dir.display().to_string();
         let rd = std::fs::read_dir(dir).map_err(|e| {
@@ -254,6 +307,7 @@ impl Catalogue {
         }
         let mut referenced = Vec::new();
         let mut added = Vec::new();
+        let mut clevr_base = Vec::new();
         for path in &files {
             if path.extension().is_some_and(|e| e == "json") {
                 let shown = path.display().to_string();
@@ -278,6 +332,17 @@ impl Catalogue {
             if path.extension().is_some_and(|e| e == "blend") {
                 let abs = path.canonicalize().unwrap_or(path.clone());
                 if referenced.contains(&abs.to_string_lossy().into_owned()) {
+                    continue;
+                }
+                let stem = path.file_stem().map(|s| s.to_string_lossy().to_lowercase());
+                if let Some(&(name, builtin)) =
+                    CLEVR_BASE.iter().find(|(n, _)| stem.as_deref() == Some(*n))
+                {
+                    clevr_base.push(ClevrBase {
+                        file: path.clone(),
+                        name,
+                        builtin,
+                    });
                     continue;
                 }
                 let shown = path.display().to_string();
@@ -312,7 +377,20 @@ impl Catalogue {
             self.insert(m)?;
         }
         self.user_dirs.push(root);
+        self.clevr_base.extend(clevr_base);
         Ok(())
+    }
+
+    /// The `.blend` files of the user directories that are the public generator's CLEVR base
+    /// materials ([`CLEVR_BASE`]), left out of set `user`, in file order.
+    pub fn clevr_base(&self) -> &[ClevrBase] {
+        &self.clevr_base
+    }
+
+    /// The left-out CLEVR base material the public generator calls `name`, if a user
+    /// directory held it (for an error that says why `name` is not a material).
+    pub fn clevr_base_named(&self, name: &str) -> Option<&ClevrBase> {
+        self.clevr_base.iter().find(|b| b.name == name)
     }
 
     /// The PBR texture folders among `files` (the entries of `dir`): each folder holding Poly
@@ -411,6 +489,15 @@ impl Catalogue {
     /// A material by name, or an error naming the unknown material.
     pub fn require(&self, name: &str) -> Result<&Material, Error> {
         self.get(name).ok_or_else(|| {
+            if let Some(b) = self.clevr_base_named(name) {
+                return Error::new(
+                    ErrorKind::UnknownMaterial,
+                    &b.file.display().to_string(),
+                    "",
+                    b.left_out(),
+                    format!("name the built-in `{}`, which plays its part", b.builtin),
+                );
+            }
             Error::new(
                 ErrorKind::UnknownMaterial,
                 "catalogue.json",
@@ -705,6 +792,62 @@ mod tests {
         std::fs::rename(dir.join("bricks.json"), dir.join("My Bricks.json")).unwrap();
         cat.add_user_dir(&dir).unwrap();
         assert_eq!(cat.get("my_bricks").unwrap().set, Set::User);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The public generator's `Rubber.blend`, `MyMetal.blend` and `TabulaRasa.blend` are its
+    /// CLEVR base materials: left out of the user set, unread (not even a `.blend` header is
+    /// needed), listed, and named by `require`; any other `.blend` named like a built-in
+    /// still clashes.
+    #[test]
+    fn the_generators_clevr_base_materials_are_left_out_not_clashes() {
+        let dir = std::env::temp_dir().join(format!("clevrtex-base-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for f in ["Rubber.blend", "MyMetal.blend", "tabularasa.blend"] {
+            std::fs::write(dir.join(f), b"not read").unwrap();
+        }
+        std::fs::write(
+            dir.join("Bricks01.json"),
+            r#"{"description": "d", "layers": [{"block": "solid"}]}"#,
+        )
+        .unwrap();
+        let mut cat = Catalogue::builtin().unwrap();
+        cat.add_user_dir(&dir).unwrap();
+        assert_eq!(cat.names(Set::User), ["bricks01"]);
+        assert_eq!(cat.get("rubber").unwrap().set, Set::Basic);
+        let base: Vec<(&str, &str)> = cat
+            .clevr_base()
+            .iter()
+            .map(|b| (b.name, b.builtin))
+            .collect();
+        assert_eq!(
+            base,
+            [
+                ("mymetal", "metal"),
+                ("rubber", "rubber"),
+                ("tabularasa", "plain")
+            ]
+        );
+        let e = cat.require("mymetal").unwrap_err();
+        assert_eq!(e.kind, ErrorKind::UnknownMaterial);
+        let shown = e.to_string();
+        assert!(
+            shown.contains("MyMetal.blend") && shown.contains("built-in `metal`"),
+            "{shown}"
+        );
+        // Another built-in's name is still a clash, naming both files.
+        std::fs::write(dir.join("Metal.blend"), b"BLENDER-v304").unwrap();
+        let e = Catalogue::builtin()
+            .unwrap()
+            .add_user_dir(&dir)
+            .unwrap_err();
+        assert_eq!(e.kind, ErrorKind::Clash);
+        let shown = e.to_string();
+        assert!(
+            shown.contains("Metal.blend")
+                && shown.contains("already defined by `basic/metal.json`"),
+            "{shown}"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

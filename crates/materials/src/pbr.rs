@@ -15,7 +15,8 @@
 //! of either layout is not a PBR folder (a `.blend` pack's `textures/` folder, say).
 //!
 //! Every map read is checked here, from its header only (the `image` crate; nothing is
-//! decoded), before any render: readable, a known image format, sides at most [`MAX_SIDE`],
+//! decoded), before any render: readable, a known image format, sides at most
+//! [`MAX_TEXTURE_SIDE`] (the one cap on a loaded texture, `texture.rs`),
 //! and of the right kind (colour, normal and packed ARM maps have 3 or 4 channels).
 
 use std::path::{Path, PathBuf};
@@ -23,10 +24,8 @@ use std::path::{Path, PathBuf};
 use serde_json::{Map, Value};
 
 use crate::error::{Error, ErrorKind};
+use crate::texture::{side_problem, MAX_TEXTURE_SIDE};
 
-/// The largest image side loaded, in pixels: Poly Haven's and ambientCG's largest downloads
-/// are 16K. A 16,384 x 16,384 8-bit RGBA map is 1 GiB in Blender's memory.
-pub const MAX_SIDE: u32 = 16_384;
 /// World units (scene units) per repeat of the maps, unless `material.json` says otherwise.
 pub const DEFAULT_TILE: f64 = 1.0;
 /// Displacement distance in world units at instance displacement strength 1 (the map's
@@ -225,7 +224,12 @@ pub(crate) fn recipe(name: &str, dir: &Path, root: &Path) -> Result<Option<Value
         .filter(|(n, _)| n.kind == Kind::Color)
         .map(|(n, _)| n.res)
         .collect();
-    let Some(res) = colour_res.iter().copied().filter(|&r| r <= MAX_SIDE).max() else {
+    let Some(res) = colour_res
+        .iter()
+        .copied()
+        .filter(|&r| r <= MAX_TEXTURE_SIDE)
+        .max()
+    else {
         let (msg, hint) = if colour_res.is_empty() {
             (
                 format!("texture folder of material `{name}` has no colour map"),
@@ -240,9 +244,12 @@ pub(crate) fn recipe(name: &str, dir: &Path, root: &Path) -> Result<Option<Value
         } else {
             (
                 format!(
-                    "every colour map of material `{name}` is larger than the {MAX_SIDE}-pixel cap"
+                    "every colour map of material `{name}` is larger than the {MAX_TEXTURE_SIDE}-pixel cap on a loaded texture"
                 ),
-                format!("download a resolution of {}K or less", MAX_SIDE / 1024),
+                format!(
+                    "download a resolution of {}K or less",
+                    MAX_TEXTURE_SIDE / 1024
+                ),
             )
         };
         return Err(err(ErrorKind::BadValue, &shown, msg, &hint));
@@ -329,7 +336,7 @@ pub(crate) fn recipe(name: &str, dir: &Path, root: &Path) -> Result<Option<Value
 }
 
 /// Check one map before any render: no link out of `root`, a regular file, a readable image
-/// header of a known format, sides within [`MAX_SIDE`], channels fit for `kind`. Returns the
+/// header of a known format, sides within [`MAX_TEXTURE_SIDE`], channels fit for `kind`. Returns the
 /// canonical path.
 fn check_map(name: &str, kind: Kind, path: &Path, root: &Path) -> Result<PathBuf, Error> {
     let shown = path.display().to_string();
@@ -384,16 +391,11 @@ fn check_map(name: &str, kind: Kind, path: &Path, root: &Path) -> Result<PathBuf
         .into_decoder()
         .map_err(|e| bad_image(e.to_string()))?;
     let (w, h) = image::ImageDecoder::dimensions(&decoder);
-    if w == 0 || h == 0 {
-        return Err(bad_image(format!("its size is {w} x {h}")));
-    }
-    if w > MAX_SIDE || h > MAX_SIDE {
+    if let Some(problem) = side_problem(w, h) {
         return Err(err(
             ErrorKind::BadValue,
-            format!(
-                "the {what} of material `{name}` is {w} x {h} pixels, over the cap of {MAX_SIDE} per side"
-            ),
-            &format!("use a download of {}K or less", MAX_SIDE / 1024),
+            format!("the {what} of material `{name}` {problem}"),
+            &format!("use a download of {}K or less", MAX_TEXTURE_SIDE / 1024),
         ));
     }
     let channels = image::ImageDecoder::color_type(&decoder).channel_count();

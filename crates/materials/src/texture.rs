@@ -14,9 +14,24 @@ use crate::{Error, ErrorKind};
 pub const MAX_BLEND_BYTES: u64 = 256 << 20;
 /// Largest image file a user material may read.
 pub const MAX_TEXTURE_BYTES: u64 = 256 << 20;
-/// Largest side, in pixels, of a texture a user material may read: 8K textures load
-/// (about 256 MB as 8-bit RGBA in each worker), 16K and larger are refused.
+/// Largest side, in pixels, of any image a user material loads: the textures of a `.blend`
+/// node group ([`check_texture`]) and the maps of a PBR folder ([`crate::pbr`]) alike. The
+/// one cap, chosen from memory: an N x N map decoded as 8-bit RGBA is 4N^2 bytes, in every
+/// Blender worker (and once more here while [`check_texture`] decodes it). 8192 is 256 MiB a
+/// map, about 1 GiB for a PBR material's four maps (colour, normal, roughness,
+/// displacement) per worker; 16,384 would be 1 GiB a map and 4 GiB a material per worker,
+/// several materials and workers over. The field's libraries fit: the ClevrTex v2 materials
+/// are 3K, Poly Haven ships 1K to 8K (some 16K) and ambientCG 1K to 8K; of a PBR folder
+/// with several resolutions the largest within the cap is used.
 pub const MAX_TEXTURE_SIDE: u32 = 8192;
+
+/// Why an image of `w` x `h` pixels may not be loaded, if it may not: a side of 0 or over
+/// [`MAX_TEXTURE_SIDE`]. The message follows the image's name ("`x.png` is ...").
+pub(crate) fn side_problem(w: u32, h: u32) -> Option<String> {
+    (w == 0 || h == 0 || w.max(h) > MAX_TEXTURE_SIDE).then(|| {
+        format!("is {w}x{h} pixels; a side may be 1 to {MAX_TEXTURE_SIDE} (the cap on a loaded texture)")
+    })
+}
 
 /// Where `reference` (an image path as a `.blend` stores it: `//textures/x.jpg` relative to
 /// the `.blend`, or absolute) points, for a `.blend` at `blend`.
@@ -117,10 +132,8 @@ pub fn check_texture(
             e.to_string().trim_end()
         ))
     })?;
-    if w.max(h) > MAX_TEXTURE_SIDE || w == 0 || h == 0 {
-        return Err(bad(format!(
-            "is {w}x{h} pixels; the side allowed is 1 to {MAX_TEXTURE_SIDE}"
-        )));
+    if let Some(problem) = side_problem(w, h) {
+        return Err(bad(problem));
     }
     // Decode to the end: a truncated or corrupt file fails here, not as pink in Blender.
     let mut reader = image::ImageReader::open(&canon)

@@ -2,7 +2,7 @@
 //! variants) against the 256-spp reference, on the EXRs that
 //! `blender_scripts/dev/shadow_measure.py` leaves in its `--out` folder (white methods are
 //! saved as `white-single-N.exr`, one render, or `white-paired-N_{lit,un}.exr`, a pair; dev
-//! only; numbers in `docs/performance.md`, "Shadow pass"):
+//! only; numbers in `docs/notes/performance.md`, "Shadow pass"):
 //!
 //! ```text
 //! cargo run --release -p clevrtex-render --example shadow_filter_measure -- \

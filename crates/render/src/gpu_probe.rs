@@ -28,7 +28,7 @@ pub fn plan_devices(
     {
         return Ok(vec![Placement::cpu()]);
     }
-    let bridge = crate::BridgeDir::create(materials_json)?;
+    let bridge = crate::bridge::BridgeDir::create(materials_json)?;
     let started = Worker::start(
         &WorkerOptions::new(blender.to_path_buf(), &bridge, Arc::clone(interrupt))
             .with_threads(1)

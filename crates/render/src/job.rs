@@ -300,8 +300,7 @@ pub(crate) fn run_job(
         let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
         let mut staged = Staged::new(&opts.out, &dir)?;
         let objects = write_passes(
-            &reply,
-            &work,
+            &|role| reply.file(role, &work),
             &scene,
             &job.passes,
             &job.stem,

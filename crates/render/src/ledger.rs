@@ -13,8 +13,9 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
+use clevrtex_dataset::dataset;
+
 use crate::error::{RenderError, Result};
-use crate::job::Job;
 
 /// A run's handle on its ledger file.
 #[derive(Debug)]
@@ -48,14 +49,9 @@ fn load(path: &Path) -> std::result::Result<(BTreeMap<String, String>, usize), S
         }
         Ok(_) => {}
     }
-    let bytes = match clevrtex_dataset::dataset::read_regular(
-        path,
-        clevrtex_dataset::dataset::MAX_LEDGER_BYTES,
-    ) {
+    let bytes = match dataset::read_regular(path, dataset::MAX_LEDGER_BYTES) {
         Ok(b) => b,
-        Err(clevrtex_dataset::dataset::ReadError::Io(e))
-            if e.kind() == std::io::ErrorKind::NotFound =>
-        {
+        Err(dataset::ReadError::Io(e)) if e.kind() == std::io::ErrorKind::NotFound => {
             return Ok((entries, 0))
         }
         Err(e) => return Err(refuse(&e.to_string())),
@@ -134,13 +130,19 @@ impl Ledger {
         clevrtex_dataset::atomic::write(&self.path, body.as_bytes())
     }
 
-    /// Record the failure of `job` (replacing an earlier one of the same stem). On error the
-    /// file on disk is unchanged.
-    pub(crate) fn record(&self, job: &Job, err: &RenderError) -> std::io::Result<()> {
+    /// Record the failure `err` of image `index` (`stem`, of `variant`), replacing an earlier
+    /// one of the same stem. On error the file on disk is unchanged.
+    pub(crate) fn record(
+        &self,
+        index: u64,
+        stem: &str,
+        variant: &str,
+        err: &RenderError,
+    ) -> std::io::Result<()> {
         let line = serde_json::json!({
-            "index": job.index,
-            "stem": job.stem,
-            "variant": job.variant,
+            "index": index,
+            "stem": stem,
+            "variant": variant,
             "error": err.to_string(),
             "time_unix": std::time::SystemTime::now()
                 .duration_since(std::time::UNIX_EPOCH)
@@ -148,7 +150,7 @@ impl Ledger {
                 .unwrap_or(0),
         });
         self.update(|entries| {
-            entries.insert(job.stem.clone(), line.to_string());
+            entries.insert(stem.to_string(), line.to_string());
             true
         })
     }

@@ -35,6 +35,19 @@
 //! ```
 #![deny(missing_docs)]
 
+// The files' layers, lowest first. A file uses files of lower layers (or of its own, without
+// a circle), never of a higher one and never the crate root's re-exports: what a lower file
+// needs from above comes in as an argument (the ledger gets an image's index, stem and
+// variant, not a `Job`; `passes` gets the bridge's file lookup, not a `RenderReply`). A
+// dataset on disk (its layout, reader, manifests, lock, `verify`, `export`, card) is the
+// `clevrtex-dataset` crate's, below this one.
+//   1. error, group, device, tmp: messages, process groups, the device plan, temporary folders
+//   2. blender, bridge, exr_io, post: finding Blender, the embedded bridge, EXRs, encodings
+//   3. output, metadata, passes, ledger: a sample and the failure ledger written to disk
+//   4. worker (process, protocol, report): one Blender process
+//   5. session, gpu_probe, job: a worker restarted, asked for its GPUs, rendering one image
+//   6. pool: the run
+
 pub mod blender;
 pub mod bridge;
 pub mod device;

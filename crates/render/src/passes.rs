@@ -1,7 +1,7 @@
 //! The encoder of each pass of the pass table ([`clevrtex_scene::passes`]): the bridge's
 //! EXR layers (named by the table) in, the published PNG (of the table's kind) out.
 
-use std::path::Path;
+use std::path::PathBuf;
 
 use clevrtex_dataset::layout;
 use clevrtex_scene::passes::Source;
@@ -11,7 +11,6 @@ use crate::error::{RenderError, Result};
 use crate::exr_io::Channels;
 use crate::output::Staged;
 use crate::post::{self, ObjectPixels};
-use crate::worker::RenderReply;
 
 /// The float planes of layer `layer` (an index into the pass's `exr_layers`) of `pass`, one
 /// per channel letter.
@@ -65,14 +64,13 @@ fn encode(pass: Pass, fin: &Channels, shadow: Option<&Channels>, ids: &[u8]) -> 
     })
 }
 
-/// Read the shadow pass's EXR (`role` in the reply's files), checking its size.
-fn read_shadow_exr(
-    reply: &RenderReply,
-    role: &str,
-    work: &Path,
-    size: (usize, usize),
-) -> Result<Channels> {
-    let path = reply.file(role, work)?;
+/// The file of a role (`passes`, `shadow`, `rgb`) the bridge reported, checked (the worker's
+/// [`crate::RenderReply::file`] in its scratch folder).
+type BridgeFile<'a> = &'a dyn Fn(&str) -> Result<PathBuf>;
+
+/// Read the shadow pass's EXR (`role` in the bridge's files), checking its size.
+fn read_shadow_exr(file: BridgeFile, role: &str, size: (usize, usize)) -> Result<Channels> {
+    let path = file(role)?;
     let ch = Channels::read_sized(&path, size)?;
     if (ch.width, ch.height) != size {
         return Err(RenderError::BadOutput {
@@ -86,18 +84,17 @@ fn read_shadow_exr(
     Ok(ch)
 }
 
-/// Decode the bridge's files, encode every requested pass into `staged`, and return the
-/// per-object visibility measured on the final mask.
+/// Decode the bridge's files (each role's path from `file`), encode every requested pass
+/// into `staged`, and return the per-object visibility measured on the final mask.
 pub(crate) fn write_passes(
-    reply: &RenderReply,
-    work: &Path,
+    file: BridgeFile,
     scene: &SceneFile,
     passes: &[Pass],
     stem: &str,
     keep_exr: bool,
     staged: &mut Staged,
 ) -> Result<Vec<ObjectPixels>> {
-    let exr_path = reply.file("passes", work)?;
+    let exr_path = file("passes")?;
     let asked = (scene.render.width as usize, scene.render.height as usize);
     let ch = Channels::read_sized(&exr_path, asked)?;
     let (w, h) = (ch.width as u32, ch.height as u32);
@@ -114,18 +111,13 @@ pub(crate) fn write_passes(
     let ids = post::instance_ids(ch.get(&index_channel())?, n, &exr_path)?;
     let objects = post::object_pixels(&ids, ch.width, n);
     let shadow = match passes.iter().any(|p| p.spec().source == Source::ShadowExr) {
-        true => Some(read_shadow_exr(
-            reply,
-            "shadow",
-            work,
-            (ch.width, ch.height),
-        )?),
+        true => Some(read_shadow_exr(file, "shadow", (ch.width, ch.height))?),
         false => None,
     };
     for &pass in passes {
         let name = layout::pass_file(stem, pass);
         if pass.spec().source == Source::RgbPng {
-            let from = reply.file("rgb", work)?;
+            let from = file("rgb")?;
             let bytes = std::fs::read(&from).map_err(|e| {
                 RenderError::io(
                     "cannot read render output",
@@ -169,7 +161,7 @@ pub(crate) fn write_passes(
         let names = layout::exr_files(stem, passes.contains(&Pass::Shadow));
         staged.copy(&names[0], &exr_path)?;
         if names.len() == 2 {
-            staged.copy(&names[1], &reply.file("shadow", work)?)?;
+            staged.copy(&names[1], &file("shadow")?)?;
         }
     }
     Ok(objects)

@@ -314,7 +314,7 @@ impl Shared<'_> {
         let ledger = self.ledger.lock().unwrap();
         self.failed_stems.lock().unwrap().insert(job.stem.clone());
         ledger
-            .record(job, err)
+            .record(job.index, &job.stem, &job.variant, err)
             .map_err(|cause| RenderError::LedgerWrite {
                 path: ledger.path().to_path_buf(),
                 index: job.index,

@@ -134,13 +134,13 @@ fn srgb8(v: f32) -> u8 {
 /// the error left is Monte-Carlo noise on shadow edges, which every window tried blurs more
 /// than it denoises (3x3 windows, with or without a limit on the difference of the
 /// neighbours' own values: 0.0104 -> 0.0109-0.0142 mean RMSE over five scenes; helpful only
-/// at 8 samples; `docs/performance.md`, "Shadow pass").
+/// at 8 samples; `docs/notes/performance.md`, "Shadow pass").
 pub const SHADOW_FILTER_RADIUS: usize = 0;
 /// Relative tolerance of the unshadowed light between a pixel and the neighbours it averages
 /// ([`SHADOW_FILTER`]).
 pub const SHADOW_FILTER_TOLERANCE: f32 = 0.25;
 
-/// The filter of the shipped shadow pass (measured in `docs/performance.md`, "Shadow pass").
+/// The filter of the shipped shadow pass (measured in `docs/notes/performance.md`, "Shadow pass").
 pub const SHADOW_FILTER: ShadowFilter = ShadowFilter {
     radius: SHADOW_FILTER_RADIUS,
     tolerance: SHADOW_FILTER_TOLERANCE,

@@ -15,6 +15,8 @@ const PREFIXES: [&str; 3] = ["clevrtex-bridge-", "clevrtex-work-", "clevrtex-ble
 const OWNER: &str = "owner";
 
 use clevrtex_dataset::atomic::start_time;
+
+use crate::error::{RenderError, Result};
 pub use clevrtex_dataset::atomic::{
     hostname, own_start_time, owner_tag, process_alive, tagged_name_is_stale, HOST_ENV,
 };
@@ -26,14 +28,14 @@ fn owner_line() -> String {
 }
 
 /// A fresh private folder `$TMPDIR/<prefix>XXXXXX` owned by this process.
-pub(crate) fn private_dir(prefix: &str) -> crate::Result<tempfile::TempDir> {
+pub(crate) fn private_dir(prefix: &str) -> Result<tempfile::TempDir> {
     let make = || -> std::io::Result<tempfile::TempDir> {
         let dir = tempfile::Builder::new().prefix(prefix).tempdir()?;
         std::fs::write(dir.path().join(OWNER), owner_line())?;
         Ok(dir)
     };
     make().map_err(|e| {
-        crate::RenderError::io(
+        RenderError::io(
             "cannot create a temporary folder in",
             std::env::temp_dir(),
             e,
@@ -45,7 +47,7 @@ pub(crate) fn private_dir(prefix: &str) -> crate::Result<tempfile::TempDir> {
 /// A fresh private scratch folder `$TMPDIR/clevrtex-work-XXXXXX` owned by this process, removed
 /// when dropped (or by a later run's [`remove_stale`] after a `kill -9`): where `generate
 /// --estimate` renders its calibration images, so that nothing is written into `--out`.
-pub fn scratch_dir() -> crate::Result<tempfile::TempDir> {
+pub fn scratch_dir() -> Result<tempfile::TempDir> {
     private_dir("clevrtex-work-")
 }
 

@@ -810,14 +810,40 @@ fn resolve(
     }
     for (field, names) in [("include", &sel.include), ("exclude", &sel.exclude)] {
         for (i, n) in names.iter().enumerate() {
-            if !known(n) {
+            if known(n) {
+                continue;
+            }
+            // The public generator's configs exclude its CLEVR base materials (`rubber`,
+            // `mymetal`, `tabularasa`), which `--materials` never adds: excluding one is what
+            // was asked, whether or not the folder held it; including one is an error that
+            // names the built-in playing its part.
+            let base = clevrtex_materials::CLEVR_BASE
+                .iter()
+                .find(|(name, _)| name == n);
+            if let (Some(_), "exclude") = (base, field) {
+                continue;
+            }
+            if let Some(&(name, builtin)) = base {
+                let problem = match catalogue.clevr_base_named(name) {
+                    Some(b) => b.left_out(),
+                    None => format!(
+                        "unknown material: the public generator's CLEVR base material \
+                         `{name}`, which `--materials` never adds"
+                    ),
+                };
                 return Err(err(
                     &format!("{key}.{field}[{i}]"),
                     Some(n.clone()),
-                    "unknown material",
-                    "run `clevrtex materials list` to see the catalogue",
+                    &problem,
+                    &format!("name the built-in `{builtin}`, which plays its part"),
                 ));
             }
+            return Err(err(
+                &format!("{key}.{field}[{i}]"),
+                Some(n.clone()),
+                "unknown material",
+                "run `clevrtex materials list` to see the catalogue",
+            ));
         }
     }
     out.extend(sel.include.iter().cloned());
@@ -952,6 +978,25 @@ mod tests {
         .unwrap_err();
         assert_eq!(e.key, "objects.materials", "{e}");
         assert!(e.to_string().contains("\nhint: "));
+    }
+
+    /// The public generator's configs exclude its CLEVR base materials (`"exclude":
+    /// ["tabularasa", "rubber", "mymetal"]`), which `--materials` never adds: accepted.
+    /// Including one names the built-in that plays its part.
+    #[test]
+    fn the_generators_clevr_base_names_may_be_excluded_not_included() {
+        let full = include_str!("../../../configs/full.json");
+        let main = "\"sets\": [\n        \"main\"\n      ]";
+        let with = |sel: &str| full.replacen(main, sel, 1);
+        let c = Config::from_json_str(
+            &with(r#""sets": ["main"], "exclude": ["tabularasa", "rubber", "mymetal"]"#),
+            "f.json",
+        )
+        .unwrap();
+        assert_eq!(c.objects.materials.len(), 61);
+        let e = Config::from_json_str(&with(r#""include": ["tabularasa"]"#), "f.json").unwrap_err();
+        assert_eq!(e.key, "objects.materials.include[0]", "{e}");
+        assert!(e.hint.contains("built-in `plain`"), "{e}");
     }
 
     #[test]

@@ -26,7 +26,8 @@ pub const SHADOW_EPS: f32 = 1e-4;
 /// ... and the fraction of the image's 99th-percentile unshadowed luminance below which it
 /// does too: a surface that gets under 1% of the typical direct light (grazing or turned
 /// away from every light) has no shadow worth the name, and its ratio of two tiny numbers
-/// is all noise (it was most of the 256-sample reference's own error; docs/performance.md).
+/// is all noise (it was most of the 256-sample reference's own error;
+/// docs/notes/performance.md, "Shadow pass").
 pub const SHADOW_REL_EPS: f32 = 0.01;
 
 /// A render pass. The same names key the bridge's pass table (`blender_scripts/passes.py`).

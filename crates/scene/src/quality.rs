@@ -1,5 +1,5 @@
 //! Quality presets: named Cycles settings chosen from the error-against-time curve that
-//! `clevrtex bench render` measures (`docs/performance.md`, section `bench`).
+//! `clevrtex bench render` measures (`docs/notes/performance.md`, section `bench`).
 //!
 //! A preset changes only the sampling and light-path fields of [`RenderSettings`]
 //! (samples, adaptive threshold, bounces, indirect clamp); resolution, filter and colour
@@ -150,7 +150,7 @@ impl Quality {
         }
     }
 
-    /// The settings of the preset. Why these values: `docs/performance.md`, section `bench`.
+    /// The settings of the preset. Why these values: `docs/notes/performance.md`, section `bench`.
     pub fn settings(self) -> Sampling {
         let o = Sampling::ORIGINAL;
         match self {
@@ -158,7 +158,7 @@ impl Quality {
             // stopping any pixel (measured: bit-identical images), so a threshold buys nothing.
             Quality::Draft => Sampling { samples: 16, ..o },
             // Adaptive sampling stops the quiet pixels (plain backdrops, CAMO) early; on
-            // busy textures it changes little (measured in docs/performance.md).
+            // busy textures it changes little (measured in docs/notes/performance.md).
             Quality::Standard => Sampling {
                 samples: 512,
                 adaptive_threshold: Some(0.01),
