@@ -12,11 +12,11 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 
+use clevrtex_dataset::layout;
 use clevrtex_eval::{score_image, Metric};
 use clevrtex_render::exr_io::Channels;
 use clevrtex_render::pool::{self, Job, PoolEvent, PoolOptions, SampleStats};
 use clevrtex_render::post::{self, decode_png, DecodedPng};
-use clevrtex_scene::layout;
 use clevrtex_scene::sample::{max_objects_bound, SampleError};
 use clevrtex_scene::{look_at_matrix, project, Config, Pass, SampleRequest, SceneFile};
 use serde_json::Value;

@@ -323,7 +323,8 @@ fn indexed_job_names_the_host_by_job_and_index_not_by_pod() {
         assert!(pos(var) < pos("CLEVRTEX_HOST"), "{var} must come first");
     }
     // And clevrtex reads that variable.
-    let src = std::fs::read_to_string(crate::util::repo_root().join("crates/scene/src/atomic.rs"))
-        .unwrap();
+    let src =
+        std::fs::read_to_string(crate::util::repo_root().join("crates/dataset/src/atomic.rs"))
+            .unwrap();
     assert!(src.contains("pub const HOST_ENV: &str = \"CLEVRTEX_HOST\""));
 }

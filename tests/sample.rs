@@ -949,7 +949,7 @@ fn splits_agree_with_the_public_loaders_rule_for_totals_1_to_41() {
         // The readers' rule for samples that record no split (the published ClevrTex): the
         // same positions.
         let by_position = |variant: &str| {
-            clevrtex_scene::dataset::splits(variant, &vec![None; n as usize])
+            clevrtex_dataset::dataset::splits(variant, &vec![None; n as usize])
                 .into_iter()
                 .map(|s| s.name())
                 .collect::<Vec<_>>()

@@ -735,7 +735,7 @@ fn a_rerun_with_other_settings_is_refused_and_verify_checks_samples_against_thei
     }
     let mut m: Value = serde_json::from_slice(&std::fs::read(manifest_of(&b)).unwrap()).unwrap();
     let files: Vec<String> = m["files"].as_object().unwrap().keys().cloned().collect();
-    let hashed = clevrtex_render::manifest::hash_files(&a.join("clevrtex_clevr"), &files).unwrap();
+    let hashed = clevrtex_dataset::manifest::hash_files(&a.join("clevrtex_clevr"), &files).unwrap();
     m["files"] = serde_json::to_value(hashed).unwrap();
     std::fs::write(&manifest, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
     let (out, t) = verify(&[&a]);
@@ -768,7 +768,7 @@ fn rehash_manifest(out: &Path) {
     let mut m: Value = serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
     let files: Vec<String> = m["files"].as_object().unwrap().keys().cloned().collect();
     let hashed =
-        clevrtex_render::manifest::hash_files(&out.join("clevrtex_clevr"), &files).unwrap();
+        clevrtex_dataset::manifest::hash_files(&out.join("clevrtex_clevr"), &files).unwrap();
     m["files"] = serde_json::to_value(hashed).unwrap();
     std::fs::write(&manifest, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
 }

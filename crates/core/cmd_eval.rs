@@ -106,10 +106,10 @@ fn parse_metric(s: &str) -> Result<MetricSel, String> {
     })
 }
 
-/// Write `text` to `path` with the one atomic writer ([`clevrtex_scene::atomic`]): a unique
+/// Write `text` to `path` with the one atomic writer ([`clevrtex_dataset::atomic`]): a unique
 /// temporary, never a link followed, no partial file or temporary left behind.
 fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
-    clevrtex_scene::atomic::write(path, text.as_bytes()).map_err(|e| {
+    clevrtex_dataset::atomic::write(path, text.as_bytes()).map_err(|e| {
         anyhow::anyhow!(
             "cannot write `{}`: {e}\nhint: check that FILE is not a directory and that its directory exists and is writable",
             path.display()

@@ -1,11 +1,11 @@
 //! `clevrtex export --format webdataset DIR OUT`: the dataset as WebDataset tar shards, to
-//! stream into training. The export is `clevrtex_render::webdataset::export` (the layout of
+//! stream into training. The export is `clevrtex_dataset::webdataset::export` (the layout of
 //! the shards is documented there and in docs/output-format.md); this parses and prints.
 
 use std::path::PathBuf;
 
 use anyhow::bail;
-use clevrtex_render::webdataset::{export, ExportError};
+use clevrtex_dataset::webdataset::{export, ExportError};
 
 use crate::exit::{self, CmdResult};
 

@@ -5,9 +5,10 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::{bail, Context};
-use clevrtex_render::manifest;
+use clevrtex_dataset::layout;
+use clevrtex_dataset::manifest;
 use clevrtex_render::pool::{Job, Jobs};
-use clevrtex_scene::{layout, Config, Pass, SampleRequest};
+use clevrtex_scene::{Config, Pass, SampleRequest};
 
 use crate::exit::CmdResult;
 use crate::run_args::{index_range, parse_passes, within, RunArgs, MAX_ATTEMPTS};

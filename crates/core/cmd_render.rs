@@ -5,8 +5,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::bail;
+use clevrtex_dataset::layout;
 use clevrtex_render::pool::Job;
-use clevrtex_scene::{layout, SceneFile};
+use clevrtex_scene::SceneFile;
 
 use crate::exit::CmdResult;
 use crate::run::run_jobs;
@@ -29,7 +30,7 @@ pub fn run(args: Args) -> CmdResult {
     for p in &args.scenes {
         if p.is_dir() {
             let mut found = Vec::new();
-            let root = clevrtex_scene::dataset::root(p)
+            let root = clevrtex_dataset::dataset::root(p)
                 .map_err(|e| anyhow::anyhow!("cannot read folder `{}`: {e}", p.display()))?;
             find_scene_files(&root, p, &mut found)?;
             found.sort();
@@ -128,16 +129,16 @@ fn find_scene_files(root: &Path, dir: &Path, found: &mut Vec<PathBuf>) -> anyhow
         if entry.file_type().is_ok_and(|t| t.is_dir()) {
             find_scene_files(root, &path, found)?;
         } else if path.extension().is_some_and(|e| e == "json") {
-            match clevrtex_scene::dataset::classify(root, &path) {
-                clevrtex_scene::dataset::Kind::File => found.push(path),
-                clevrtex_scene::dataset::Kind::Skipped(why) => {
+            match clevrtex_dataset::dataset::classify(root, &path) {
+                clevrtex_dataset::dataset::Kind::File => found.push(path),
+                clevrtex_dataset::dataset::Kind::Skipped(why) => {
                     eprintln!(
                         "warning: scene file `{}` {}",
                         clevrtex_scene::text::printable(&path.display().to_string()),
                         why
                     )
                 }
-                clevrtex_scene::dataset::Kind::Dir => {}
+                clevrtex_dataset::dataset::Kind::Dir => {}
             }
         }
     }

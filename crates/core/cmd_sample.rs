@@ -5,7 +5,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::{bail, Context};
-use clevrtex_scene::{config::Config, sample, sample_dir, SampleRequest};
+use clevrtex_dataset::layout::sample_dir;
+use clevrtex_scene::{config::Config, sample, SampleRequest};
 use rayon::prelude::*;
 
 use crate::exit::{CmdResult, Interrupted, OK};
@@ -134,7 +135,7 @@ pub fn run(args: Args) -> CmdResult {
             let d = sample_dir(&args.out, &config.name, i);
             if last_dir.as_ref() != Some(&d) {
                 // A folder of the layout that is a link out of `--out` is refused, naming it.
-                clevrtex_scene::layout::make_dir(&args.out, &d).map_err(anyhow::Error::msg)?;
+                clevrtex_dataset::layout::make_dir(&args.out, &d).map_err(anyhow::Error::msg)?;
                 last_dir = Some(d);
             }
         }
@@ -190,12 +191,12 @@ pub fn run(args: Args) -> CmdResult {
 /// Indices sampled and written per batch (bounds memory for any `-n`).
 const SAMPLE_CHUNK: usize = 1 << 16;
 
-/// Write one scene file with the one atomic writer ([`clevrtex_scene::atomic`]).
+/// Write one scene file with the one atomic writer ([`clevrtex_dataset::atomic`]).
 fn write_scene(out: &Path, variant: &str, scene: &clevrtex_scene::SceneFile) -> anyhow::Result<()> {
     let dir = sample_dir(out, variant, scene.index);
     let path = dir.join(format!("{}.json", scene.stem));
     let text = clevrtex_scene::to_pretty_json(scene).context("cannot serialise scene")?;
-    clevrtex_scene::atomic::write(&path, text.as_bytes()).map_err(|e| {
+    clevrtex_dataset::atomic::write(&path, text.as_bytes()).map_err(|e| {
         anyhow::anyhow!(
             "cannot write `{}`: {e}\nhint: check free space and permissions under `--out`",
             path.display()

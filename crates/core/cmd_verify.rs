@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use clevrtex_render::verify::{self, index_ranges, shell_words, VariantReport, VerifyOptions};
+use clevrtex_dataset::verify::{self, index_ranges, shell_words, VariantReport, VerifyOptions};
 
 use crate::exit::{self, CmdResult};
 
@@ -153,7 +153,7 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
                 .collect::<Vec<_>>()
                 .join("\n    "),
         };
-        if clevrtex_scene::layout::variant_name_problem(&r.variant).is_some() {
+        if clevrtex_dataset::layout::variant_name_problem(&r.variant).is_some() {
             // A `clevrtex_<x>` folder no run could have written: no command repairs it.
             println!("  to repair: move or rename the folder named above; it is not a variant's folder and nothing in it was checked");
         } else if remove {
@@ -208,7 +208,7 @@ pub fn run(args: Args) -> CmdResult {
     );
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&reports)? + "\n";
-        clevrtex_scene::atomic::write(path, text.as_bytes())
+        clevrtex_dataset::atomic::write(path, text.as_bytes())
             .with_context(|| format!("cannot write `{}`", path.display()))?;
     }
     if args.remove_broken {

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::bail;
-use clevrtex_render::manifest;
+use clevrtex_dataset::manifest;
 use clevrtex_render::pool::{self, Jobs, PoolEvent, PoolOptions, RunReport};
 use clevrtex_render::RenderError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -145,7 +145,7 @@ pub(crate) fn run_jobs(
     // anything is written; then the plan, so even a run that never ends is known to `verify`.
     let _lock = match &manifest {
         Some(plan) => {
-            let lock = clevrtex_render::run_lock::RunLock::acquire(
+            let lock = clevrtex_dataset::run_lock::RunLock::acquire(
                 &plan.variant_dir(&args.out),
                 plan.run.start,
                 plan.run.end,
@@ -247,7 +247,7 @@ pub(crate) fn pool_options(
     ),
 ) -> anyhow::Result<(
     PoolOptions,
-    std::collections::BTreeMap<String, clevrtex_scene::manifest::UserMaterial>,
+    std::collections::BTreeMap<String, clevrtex_dataset::manifest::UserMaterial>,
 )> {
     let (timeout, startup_timeout) = checked_numbers(args)?;
     let choice = run_args::device_choice(&args.device)?;
@@ -416,12 +416,14 @@ fn check_output_writable(out: &Path) -> anyhow::Result<()> {
     })?;
     // A temporary of the one atomic writer, dropped unrenamed: nothing is left, and nothing
     // planted there is written through or removed.
-    clevrtex_scene::atomic::AtomicFile::create(&out.join(".clevrtex-write-test")).map_err(|e| {
-        anyhow::anyhow!(
-            "cannot write in output folder `{}`: {e}\n{hint}",
-            out.display()
-        )
-    })?;
+    clevrtex_dataset::atomic::AtomicFile::create(&out.join(".clevrtex-write-test")).map_err(
+        |e| {
+            anyhow::anyhow!(
+                "cannot write in output folder `{}`: {e}\n{hint}",
+                out.display()
+            )
+        },
+    )?;
     Ok(())
 }
 
@@ -483,10 +485,10 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
     }
 }
 
-/// Rewrite the dataset card from every run's manifest (`clevrtex_render::card`); a card that
+/// Rewrite the dataset card from every run's manifest (`clevrtex_dataset::card`); a card that
 /// cannot be written is a warning: the samples and the manifest are what the run made.
 fn write_card(out: &std::path::Path) {
-    if let Err(e) = clevrtex_render::card::write_card(out) {
+    if let Err(e) = clevrtex_dataset::card::write_card(out) {
         eprintln!("warning: the dataset card was not written: {e}");
     }
 }

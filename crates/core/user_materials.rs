@@ -11,9 +11,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::bail;
+use clevrtex_dataset::manifest::UserMaterial;
 use clevrtex_materials::{Catalogue, Set};
 use clevrtex_render::RenderError;
-use clevrtex_scene::manifest::UserMaterial;
 
 use crate::blender_session::{command_error, BlenderSession, Settings};
 

@@ -25,7 +25,7 @@ pub fn path(out: &Path) -> PathBuf {
 /// Write `rows` to [`path`]`(out)`.
 pub fn save(rows: &[Row], out: &Path) -> anyhow::Result<()> {
     let csv = path(out);
-    clevrtex_scene::atomic::write(&csv, to_csv(rows).as_bytes())
+    clevrtex_dataset::atomic::write(&csv, to_csv(rows).as_bytes())
         .with_context(|| format!("cannot write `{}`", csv.display()))
 }
 

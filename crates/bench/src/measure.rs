@@ -253,7 +253,7 @@ fn render_into(
         let _ = std::fs::remove_file(dir.join(f));
     }
     let path = dir.join("scene.json");
-    clevrtex_scene::atomic::write(&path, clevrtex_scene::to_pretty_json(scene)?.as_bytes())
+    clevrtex_dataset::atomic::write(&path, clevrtex_scene::to_pretty_json(scene)?.as_bytes())
         .with_context(|| format!("cannot write `{}`", path.display()))?;
     let started = Instant::now();
     let timeout = timeout_for(scene);

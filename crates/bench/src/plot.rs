@@ -46,7 +46,7 @@ pub fn write(
         image::ImageFormat::Png,
     )
     .context("cannot encode the PNG plot")?;
-    clevrtex_scene::atomic::write(&png, &bytes).with_context(|| {
+    clevrtex_dataset::atomic::write(&png, &bytes).with_context(|| {
         format!(
             "cannot write `{}`\nhint: check that the folder is writable",
             png.display()

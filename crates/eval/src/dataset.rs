@@ -3,8 +3,8 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
+use clevrtex_dataset::layout::{self, parse_stem};
 use clevrtex_scene::config::Splits;
-use clevrtex_scene::layout::{self, parse_stem};
 use rayon::prelude::*;
 
 use crate::error::EvalError;
@@ -26,18 +26,20 @@ pub struct GtSample {
     /// ([`GtSample::read`]), so a folder swapped for a link out of it is not read through.
     pub root: PathBuf,
     /// Its split: the one its metadata records, else (the published ClevrTex) the public
-    /// loader's position rule ([`clevrtex_scene::dataset::splits`]); `None` until
+    /// loader's position rule ([`clevrtex_dataset::dataset::splits`]); `None` until
     /// [`read_splits`] (a whole dataset needs no split, and reads no metadata to open).
     pub split: Option<layout::Split>,
 }
 
 impl GtSample {
     /// The bytes of `path` (one of this sample's files), at most `cap`, opened relative to the
-    /// dataset's root ([`clevrtex_scene::dataset::read_beneath`]).
+    /// dataset's root ([`clevrtex_dataset::dataset::read_beneath`]).
     pub fn read(&self, path: &Path, cap: u64) -> Result<Vec<u8>, EvalError> {
-        clevrtex_scene::dataset::read_beneath(&self.root, path, cap).map_err(|why| EvalError::Io {
-            path: path.to_path_buf(),
-            cause: why.into_io(),
+        clevrtex_dataset::dataset::read_beneath(&self.root, path, cap).map_err(|why| {
+            EvalError::Io {
+                path: path.to_path_buf(),
+                cause: why.into_io(),
+            }
         })
     }
 }
@@ -97,11 +99,11 @@ impl Split {
 /// How many of `samples` are in each split, for messages: `test 0, val 0, train 4`.
 pub fn split_sizes(samples: &[GtSample]) -> String {
     let splits: Vec<layout::Split> = samples.iter().filter_map(|s| s.split).collect();
-    clevrtex_scene::dataset::split_sizes(&splits)
+    clevrtex_dataset::dataset::split_sizes(&splits)
 }
 
 /// Every regular file under `dir`, recursively and depth-limited, walked with the reader of
-/// untrusted folders (`clevrtex_scene::dataset`): links are followed only inside `dir`, and
+/// untrusted folders (`clevrtex_dataset::dataset`): links are followed only inside `dir`, and
 /// FIFOs, sockets and devices are left out.
 pub fn walk(dir: &Path) -> Result<Vec<PathBuf>, EvalError> {
     Ok(walk_noting_skipped(dir)?.0)
@@ -112,7 +114,7 @@ pub type Skipped = Vec<(PathBuf, String)>;
 
 /// [`walk`], and the entries it left out.
 pub fn walk_noting_skipped(dir: &Path) -> Result<(Vec<PathBuf>, Skipped), EvalError> {
-    let root = clevrtex_scene::dataset::root(dir).map_err(|cause| EvalError::Io {
+    let root = clevrtex_dataset::dataset::root(dir).map_err(|cause| EvalError::Io {
         path: dir.to_path_buf(),
         cause,
     })?;
@@ -132,7 +134,7 @@ fn walk_into(
     skipped: &mut Skipped,
     seen: &mut std::collections::HashSet<PathBuf>,
 ) -> Result<(), EvalError> {
-    use clevrtex_scene::dataset::{list, Kind};
+    use clevrtex_dataset::dataset::{list, Kind};
     // Symlinked directories are followed once each, so a link cycle cannot blow up the walk.
     if !seen.insert(std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf())) {
         return Ok(());
@@ -165,12 +167,12 @@ pub const MAX_WALK_DEPTH: usize = 32;
 const NOTED_DEPTH: usize = 2 * MAX_WALK_DEPTH;
 
 /// Largest input file read (a prediction `.npz` of 1024 soft masks at 1024x1024 fits).
-pub const MAX_FILE_BYTES: u64 = clevrtex_scene::dataset::MAX_FILE_BYTES;
+pub const MAX_FILE_BYTES: u64 = clevrtex_dataset::dataset::MAX_FILE_BYTES;
 
 /// The bytes of an input file found by [`walk`]: a regular file (never a FIFO, which would
 /// block), at most [`MAX_FILE_BYTES`].
 pub fn read_file(path: &Path) -> Result<Vec<u8>, EvalError> {
-    clevrtex_scene::dataset::read_regular(path, MAX_FILE_BYTES).map_err(|why| EvalError::Io {
+    clevrtex_dataset::dataset::read_regular(path, MAX_FILE_BYTES).map_err(|why| EvalError::Io {
         path: path.to_path_buf(),
         cause: why.into_io(),
     })
@@ -183,7 +185,7 @@ pub const MAX_METADATA_BYTES: u64 = 64 << 20;
 /// The bytes of a ground-truth metadata file found by [`discover_gt`], like [`read_file`] but
 /// at most [`MAX_METADATA_BYTES`].
 pub fn read_metadata(path: &Path) -> Result<Vec<u8>, EvalError> {
-    clevrtex_scene::dataset::read_regular(path, MAX_METADATA_BYTES).map_err(|why| EvalError::Io {
+    clevrtex_dataset::dataset::read_regular(path, MAX_METADATA_BYTES).map_err(|why| EvalError::Io {
         path: path.to_path_buf(),
         cause: why.into_io(),
     })
@@ -194,14 +196,14 @@ fn file_name(p: &Path) -> &str {
 }
 
 /// Find the ground-truth samples under `dir` (a dataset: its `clevrtex_<variant>` folders, or
-/// one of them, walked by [`clevrtex_scene::dataset::Dataset::open`]), sorted by index.
+/// one of them, walked by [`clevrtex_dataset::dataset::Dataset::open`]), sorted by index.
 /// Without `variant`, the directory must hold exactly one variant. Gaps in the index sequence
 /// and duplicate stems are errors, as are samples missing their mask or metadata.
 pub fn discover_gt(
     dir: &Path,
     variant: Option<&str>,
 ) -> Result<(String, Vec<GtSample>), EvalError> {
-    use clevrtex_scene::dataset::{Dataset, DatasetError};
+    use clevrtex_dataset::dataset::{Dataset, DatasetError};
     use clevrtex_scene::Pass;
     if !dir.is_dir() {
         return Err(EvalError::not_a_dir(dir));
@@ -215,7 +217,7 @@ pub fn discover_gt(
     })?;
     let mut by_variant: BTreeMap<
         String,
-        Vec<(u64, String, PathBuf, &clevrtex_scene::dataset::SampleRef)>,
+        Vec<(u64, String, PathBuf, &clevrtex_dataset::dataset::SampleRef)>,
     > = BTreeMap::new();
     // A sample is any stem with an image, a mask or metadata: one whose image is missing (or
     // not read) is an error below, not left out (that would shift the splits, taken by
@@ -293,7 +295,7 @@ pub fn discover_gt(
                 continue;
             }
             if std::fs::symlink_metadata(p).is_ok() {
-                if let clevrtex_scene::dataset::Kind::Skipped(why) = ds.classify(p) {
+                if let clevrtex_dataset::dataset::Kind::Skipped(why) = ds.classify(p) {
                     return Err(EvalError::GtNotRead {
                         stem,
                         path: p.clone(),
@@ -321,16 +323,16 @@ pub fn discover_gt(
 
 /// Set each sample's [`GtSample::split`] (the samples of one variant of the dataset `gt`, as
 /// [`discover_gt`] found them, in index order): the split its metadata records, only that key
-/// read (in parallel), else by position (the one rule of `clevrtex_scene::dataset::splits`).
+/// read (in parallel), else by position (the one rule of `clevrtex_dataset::dataset::splits`).
 pub fn read_splits(gt: &Path, variant: &str, samples: &mut [GtSample]) -> Result<(), EvalError> {
-    let root = clevrtex_scene::dataset::root(gt).map_err(|cause| EvalError::Io {
+    let root = clevrtex_dataset::dataset::root(gt).map_err(|cause| EvalError::Io {
         path: gt.to_path_buf(),
         cause,
     })?;
     let recorded = samples
         .par_iter()
         .map(|s| {
-            clevrtex_scene::dataset::read_recorded_split(&root, &s.meta, variant).map_err(
+            clevrtex_dataset::dataset::read_recorded_split(&root, &s.meta, variant).map_err(
                 |reason| EvalError::Corrupt {
                     path: s.meta.clone(),
                     reason,
@@ -341,7 +343,7 @@ pub fn read_splits(gt: &Path, variant: &str, samples: &mut [GtSample]) -> Result
         .collect::<Result<Vec<_>, _>>()?;
     for (s, split) in samples
         .iter_mut()
-        .zip(clevrtex_scene::dataset::splits(variant, &recorded))
+        .zip(clevrtex_dataset::dataset::splits(variant, &recorded))
     {
         s.split = Some(split);
     }

@@ -123,7 +123,7 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
     // A test-only variant (its config says `"splits": "test_only"`) is scored whole.
     let split = opts
         .split
-        .unwrap_or(match clevrtex_scene::layout::variant_splits(&variant) {
+        .unwrap_or(match clevrtex_dataset::layout::variant_splits(&variant) {
             clevrtex_scene::config::Splits::TestOnly => Split::All,
             clevrtex_scene::config::Splits::Standard => Split::Test,
         });
@@ -141,7 +141,7 @@ pub fn evaluate(preds: &Path, gt: &Path, opts: &Options) -> Result<Report, EvalE
         });
     }
     let pred_index = index_preds(preds, &variant)?;
-    let by_colour = clevrtex_scene::layout::variant_colour_breakdown(&variant);
+    let by_colour = clevrtex_dataset::layout::variant_colour_breakdown(&variant);
     let missing: Vec<&str> = samples
         .iter()
         .filter(|s| {

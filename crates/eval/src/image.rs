@@ -112,7 +112,7 @@ pub(crate) fn score_sample(
     let meta_bytes = s.read(&s.meta, crate::dataset::MAX_METADATA_BYTES)?;
     gt_png_size(&mask_bytes, &s.mask)?;
     if let Some(problem) =
-        clevrtex_scene::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
+        clevrtex_dataset::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
     {
         return Err(corrupt(&s.mask, problem, GT_HINT));
     }

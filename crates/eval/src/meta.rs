@@ -1,5 +1,5 @@
 //! The per-sample metadata `.json`: only what the per-object breakdown needs, after the
-//! dataset reader's check (`clevrtex_scene::dataset::check_metadata`: ours whole, the
+//! dataset reader's check (`clevrtex_dataset::dataset::check_metadata`: ours whole, the
 //! downloaded ClevrTex's `objects` a list that `num_objects` counts). Unknown keys are ignored
 //! and names of unexpected types are kept as their JSON text.
 
@@ -56,7 +56,7 @@ pub fn parse(bytes: &[u8]) -> Result<SampleMeta, String> {
     }
     // The check every reader of a dataset applies (preview, report, export, the Python
     // `Dataset`): ours must be whole, the downloaded ClevrTex's typed where it has keys.
-    clevrtex_scene::dataset::check_metadata(&value, "")
+    clevrtex_dataset::dataset::check_metadata(&value, "")
         .map_err(|e| format!("key `{}` {}", e.key, e.what))?;
     let num_objects = value["objects"]
         .as_array()

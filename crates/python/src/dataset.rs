@@ -1,6 +1,6 @@
 //! A dataset as the Python `Dataset` sees it: its samples of a split, the name tables of its
 //! variant and the pass table, and its files read by the one dataset reader
-//! (`clevrtex_scene::dataset`: checked against the dataset's folder, capped, never a FIFO).
+//! (`clevrtex_dataset::dataset`: checked against the dataset's folder, capped, never a FIFO).
 
 use std::path::Path;
 
@@ -44,7 +44,7 @@ pub(crate) fn discover(
             split
         };
         // Each sample's split is the one its metadata records (the one rule of every reader,
-        // `clevrtex_scene::dataset::splits`); an empty split is an error naming the sizes.
+        // `clevrtex_dataset::dataset::splits`); an empty split is an error naming the sizes.
         if split.part().is_some() {
             clevrtex_eval::dataset::read_splits(Path::new(path), &variant, &mut samples)
                 .map_err(eval_error)?;
@@ -71,19 +71,19 @@ pub(crate) fn discover(
 /// their colour (the variant config's property, `Config::colour_breakdown`: `vbg`, `clevr`).
 #[pyfunction]
 pub(crate) fn colour_breakdown(variant: &str) -> bool {
-    clevrtex_scene::layout::variant_colour_breakdown(variant)
+    clevrtex_dataset::layout::variant_colour_breakdown(variant)
 }
 
 /// A variant with only a test split (its config says `"splits": "test_only"`, e.g. `outd`).
 fn is_test_only(variant: &str) -> bool {
-    clevrtex_scene::layout::variant_splits(variant) == clevrtex_scene::config::Splits::TestOnly
+    clevrtex_dataset::layout::variant_splits(variant) == clevrtex_scene::config::Splits::TestOnly
 }
 
-/// The bytes of the dataset's file `p`, read by the dataset reader (`clevrtex_scene::dataset`):
+/// The bytes of the dataset's file `p`, read by the dataset reader (`clevrtex_dataset::dataset`):
 /// a regular file only (a FIFO never blocks), at most `cap` bytes, and, with `root` (the
 /// dataset's canonical folder), not a link swapped in that leads out of the dataset.
 fn read_checked(root: Option<&Path>, p: &str, cap: u64) -> PyResult<Vec<u8>> {
-    use clevrtex_scene::dataset::{classify, read_beneath, read_regular, Kind};
+    use clevrtex_dataset::dataset::{classify, read_beneath, read_regular, Kind};
     if let Some(root) = root {
         if let Kind::Skipped(why) = classify(root, Path::new(p)) {
             if !why.starts_with("cannot be read") {
@@ -116,7 +116,7 @@ pub(crate) fn canonical_root(root: Option<&str>) -> PyResult<Option<std::path::P
 /// A dataset's PNG, its header's size checked before it is decoded (a 1 MB mask can declare
 /// 30000x30000: 4.5 GB decoded).
 pub(crate) fn dataset_png(root: Option<&Path>, p: &str) -> PyResult<Vec<u8>> {
-    let bytes = read_checked(root, p, clevrtex_scene::dataset::MAX_FILE_BYTES)?;
+    let bytes = read_checked(root, p, clevrtex_dataset::dataset::MAX_FILE_BYTES)?;
     read::png_size_of_dataset_image(&bytes)
         .map_err(|r| value_error(format!("cannot decode `{p}`: {r}")))?;
     Ok(bytes)
@@ -158,7 +158,7 @@ pub(crate) fn variant_names(
 }
 
 /// A sample's metadata, read as every reader of a dataset reads it
-/// (`clevrtex_scene::dataset`): checked again when read, so that a link swapped in after
+/// (`clevrtex_dataset::dataset`): checked again when read, so that a link swapped in after
 /// `discover` that leads out of the dataset `root` is not followed; a regular file opened
 /// non-blocking, at most 64 MiB. `ValueError` naming the file when it is not read, `OSError`
 /// (its subclass by errno: `FileNotFoundError`, `PermissionError`) when it cannot be opened.
@@ -168,7 +168,7 @@ pub(crate) fn read_metadata<'py>(
     path: &str,
     root: &str,
 ) -> PyResult<Bound<'py, PyBytes>> {
-    use clevrtex_scene::dataset::{classify, read_beneath, Kind, ReadError};
+    use clevrtex_dataset::dataset::{classify, read_beneath, Kind, ReadError};
     let p = Path::new(path);
     let read = py.allow_threads(|| {
         let root = Path::new(root).canonicalize().map_err(ReadError::Io)?;

@@ -19,8 +19,8 @@ pub(crate) fn eval_error(e: EvalError) -> PyErr {
 /// Why a file of the dataset was not read, as the Python exception of its kind: `OSError` of
 /// its errno (`FileNotFoundError`, `PermissionError`, ...) when it cannot be opened, else
 /// `ValueError`; the message names the file.
-pub(crate) fn read_error(path: &str, e: clevrtex_scene::dataset::ReadError) -> PyErr {
-    use clevrtex_scene::dataset::ReadError;
+pub(crate) fn read_error(path: &str, e: clevrtex_dataset::dataset::ReadError) -> PyErr {
+    use clevrtex_dataset::dataset::ReadError;
     match e {
         // OSError(errno, message, filename) is the subclass of its errno.
         ReadError::Io(e) => PyOSError::new_err((

@@ -30,7 +30,7 @@ fn load_pair(
         .map_err(|r| value_error(format!("cannot decode `{image}`: {r}")))?;
     let mask_bytes = dataset_png(root, mask)?;
     if let Some(problem) =
-        clevrtex_scene::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
+        clevrtex_dataset::dataset::png_mode_problem(&mask_bytes, clevrtex_scene::Pass::Mask)
     {
         return Err(value_error(format!("`{mask}` {problem}")));
     }

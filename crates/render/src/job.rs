@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use clevrtex_scene::{layout, Pass, SceneFile};
+use clevrtex_dataset::layout;
+use clevrtex_scene::{Pass, SceneFile};
 
 use crate::error::{RenderError, Result};
 use crate::exr_io::Channels;

@@ -13,7 +13,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use clevrtex_scene::dataset;
+use clevrtex_dataset::dataset;
 
 use crate::error::{RenderError, Result};
 
@@ -76,7 +76,7 @@ impl Ledger {
     /// The ledger at `path` (it need not exist), counting its unreadable lines. `Err` when
     /// something other than a regular file is in its place (a link, a FIFO).
     pub(crate) fn open(path: &Path) -> Result<Ledger> {
-        // Its lock file is judged when it is opened ([`crate::run_lock::open_lock_file`], at
+        // Its lock file is judged when it is opened ([`clevrtex_dataset::run_lock::open_lock_file`], at
         // the first change): a link or FIFO there is refused, naming it; a folder there fails
         // the write as a full disk would.
         Ok(Ledger {
@@ -113,8 +113,8 @@ impl Ledger {
     ) -> std::io::Result<()> {
         let dir = self.path.parent().unwrap_or(Path::new("."));
         std::fs::create_dir_all(dir)?;
-        let lock =
-            crate::run_lock::open_lock_file(&self.lock_path()).map_err(std::io::Error::other)?;
+        let lock = clevrtex_dataset::run_lock::open_lock_file(&self.lock_path())
+            .map_err(std::io::Error::other)?;
         lock.lock()?;
         let (mut entries, unreadable) = load(&self.path).map_err(std::io::Error::other)?;
         if !change(&mut entries) && unreadable == 0 {
@@ -127,7 +127,7 @@ impl Ledger {
             };
         }
         let body: String = entries.values().map(|l| format!("{l}\n")).collect();
-        clevrtex_scene::atomic::write(&self.path, body.as_bytes())
+        clevrtex_dataset::atomic::write(&self.path, body.as_bytes())
     }
 
     /// Record the failure `err` of image `index` (`stem`, of `variant`), replacing an earlier
@@ -172,7 +172,7 @@ impl Ledger {
             entries.len() != before
         })
         .map_err(|e| match e.kind() {
-            // A refusal of [`load`] or [`crate::run_lock::open_lock_file`], with its hint.
+            // A refusal of [`load`] or [`clevrtex_dataset::run_lock::open_lock_file`], with its hint.
             std::io::ErrorKind::Other => RenderError::Refused(format!(
                 "cannot update the failure ledger `{}`: {e}",
                 self.path.display()

@@ -9,7 +9,8 @@
 //! - [`pool::run`]: `N` workers rendering [`Job`]s in parallel, with the visibility-first
 //!   check, bounded retries, restarts, a failure ledger, resume and crash-safe output; this
 //!   is what `clevrtex generate` and `clevrtex render` call.
-//! - [`output`]: the file layout; [`post`]: the pass encodings.
+//! - [`output`]: writing a sample into the layout (`clevrtex_dataset::layout`); [`post`]: the
+//!   pass encodings.
 //!
 //! Rendering one scene file into a folder with a bare worker (no restarts; see [`Session`]
 //! for a worker that survives crashes):
@@ -37,21 +38,18 @@
 // The files' layers, lowest first. A file uses files of lower layers (or of its own, without
 // a circle), never of a higher one and never the crate root's re-exports: what a lower file
 // needs from above comes in as an argument (the ledger gets an image's index, stem and
-// variant, not a `Job`; `passes` gets the bridge's file lookup, not a `RenderReply`). The
-// dataset side still reads `crate::dataset` until it moves to its own crate.
+// variant, not a `Job`; `passes` gets the bridge's file lookup, not a `RenderReply`). A
+// dataset on disk (its layout, reader, manifests, lock, `verify`, `export`, card) is the
+// `clevrtex-dataset` crate's, below this one.
 //   1. error, group, device, tmp: messages, process groups, the device plan, temporary folders
 //   2. blender, bridge, exr_io, post: finding Blender, the embedded bridge, EXRs, encodings
-//   3. output, metadata, passes, ledger: a sample and the failure ledger written to disk;
-//      run_lock, manifest, verify, webdataset, card: the dataset side
+//   3. output, metadata, passes, ledger: a sample and the failure ledger written to disk
 //   4. worker (process, protocol, report): one Blender process
 //   5. session, gpu_probe, job: a worker restarted, asked for its GPUs, rendering one image
 //   6. pool: the run
 
 pub mod blender;
 pub mod bridge;
-pub mod card;
-/// The reader of untrusted dataset folders, in the pure `scene` crate so that `eval` shares it.
-pub use clevrtex_scene::dataset;
 pub mod device;
 mod error;
 pub mod exr_io;
@@ -59,17 +57,13 @@ pub mod gpu_probe;
 pub mod group;
 mod job;
 mod ledger;
-pub mod manifest;
 pub mod metadata;
 pub mod output;
 mod passes;
 pub mod pool;
 pub mod post;
-pub mod run_lock;
 mod session;
 pub mod tmp;
-pub mod verify;
-pub mod webdataset;
 mod worker;
 
 pub use bridge::BridgeDir;

@@ -1,5 +1,5 @@
 //! Crash-safe writing of a sample's files into the published layout (whose names and
-//! folders live in [`clevrtex_scene::layout`]).
+//! folders live in [`clevrtex_dataset::layout`]).
 //!
 //! Each file is written under a temporary name and renamed once every file of the sample
 //! is ready, metadata last; a sample is complete only when all its files exist.
@@ -7,27 +7,15 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use clevrtex_scene::atomic::{tagged_name_is_stale, AtomicFile};
-use clevrtex_scene::dataset;
-
-use clevrtex_scene::layout::{exr_files, legacy_exr_files, metadata_file, pass_file};
+use clevrtex_dataset::atomic::{tagged_name_is_stale, AtomicFile};
+use clevrtex_dataset::dataset;
+use clevrtex_dataset::layout::{expected_files, legacy_exr_files};
 use clevrtex_scene::Pass;
 
 use crate::error::{RenderError, Result};
 
-/// Suffix of temporary files (the layout's, [`clevrtex_scene::layout::TMP_SUFFIX`]).
-pub use clevrtex_scene::layout::TMP_SUFFIX;
-
-/// Every file a complete sample has: one per requested pass, the metadata, and the EXRs
-/// when kept.
-pub fn expected_files(stem: &str, passes: &[Pass], keep_exr: bool) -> Vec<String> {
-    let mut v: Vec<String> = passes.iter().map(|&p| pass_file(stem, p)).collect();
-    if keep_exr {
-        v.extend(exr_files(stem, passes.contains(&Pass::Shadow)));
-    }
-    v.push(metadata_file(stem));
-    v
-}
+/// Suffix of temporary files (the layout's, [`clevrtex_dataset::layout::TMP_SUFFIX`]).
+pub use clevrtex_dataset::layout::TMP_SUFFIX;
 
 /// Whether every file of the sample exists in `dir`.
 pub fn is_complete(dir: &Path, stem: &str, passes: &[Pass], keep_exr: bool) -> bool {
@@ -49,7 +37,7 @@ pub fn remove_other_outputs(dir: &Path, stem: &str, passes: &[Pass], keep_exr: b
 }
 
 /// Remove temporary files a killed run left in `dir` (not recursive). Temporary names carry
-/// their writer's owner tag ([`clevrtex_scene::atomic::owner_tag`]): files of live runs
+/// their writer's owner tag ([`clevrtex_dataset::atomic::owner_tag`]): files of live runs
 /// (other shards writing into the same folder) and of other machines are left alone.
 pub fn remove_stale_temps(dir: &Path) {
     let Ok(root) = dataset::root(dir) else {
@@ -76,9 +64,9 @@ pub struct Staged {
 impl Staged {
     /// Start staging files into `dir`, a sample folder of the layout under `out` (created if
     /// missing; a link out of `out` or anything but a folder in its place is refused:
-    /// [`clevrtex_scene::layout::make_dir`]).
+    /// [`clevrtex_dataset::layout::make_dir`]).
     pub fn new(out: &Path, dir: &Path) -> Result<Staged> {
-        clevrtex_scene::layout::make_dir(out, dir).map_err(RenderError::Refused)?;
+        clevrtex_dataset::layout::make_dir(out, dir).map_err(RenderError::Refused)?;
         Ok(Staged {
             dir: dir.to_path_buf(),
             files: Vec::new(),
@@ -124,6 +112,7 @@ impl Staged {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clevrtex_dataset::layout::pass_file;
 
     #[test]
     fn layout_matches_the_reference() {

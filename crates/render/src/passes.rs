@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use clevrtex_scene::layout;
+use clevrtex_dataset::layout;
 use clevrtex_scene::passes::Source;
 use clevrtex_scene::{Pass, SceneFile};
 
@@ -128,7 +128,7 @@ pub(crate) fn write_passes(
             })?;
             // Checked from its header as the EXRs are: an image of another size than the one
             // asked for fails the image (`verify` would call the sample broken).
-            match post::png_size(&bytes) {
+            match clevrtex_dataset::png::size(&bytes) {
                 Some(size) if size == (w, h) => {}
                 found => {
                     return Err(RenderError::BadOutput {

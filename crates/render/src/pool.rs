@@ -19,7 +19,7 @@ use crate::ledger::Ledger;
 use crate::output;
 use crate::session::{Hooks, Session};
 use crate::worker::{RenderReply, Worker, WorkerOptions};
-use clevrtex_scene::layout;
+use clevrtex_dataset::layout;
 
 pub use crate::job::{auto_timeout, Job, Jobs, SampleStats, SceneMaker};
 

@@ -14,10 +14,10 @@ const PREFIXES: [&str; 3] = ["clevrtex-bridge-", "clevrtex-work-", "clevrtex-ble
 /// The ownership file in each folder.
 const OWNER: &str = "owner";
 
-use clevrtex_scene::atomic::start_time;
+use clevrtex_dataset::atomic::start_time;
 
 use crate::error::{RenderError, Result};
-pub use clevrtex_scene::atomic::{
+pub use clevrtex_dataset::atomic::{
     hostname, own_start_time, owner_tag, process_alive, tagged_name_is_stale, HOST_ENV,
 };
 

@@ -4,7 +4,7 @@
 //! ([`materials`]). The command line (`crates/core`) parses arguments, calls these and prints.
 //!
 //! Datasets are untrusted input (`docs/security.md`): every file is read through
-//! `clevrtex_render::dataset` (no link out of the dataset followed, no FIFO or device opened,
+//! `clevrtex_dataset::dataset` (no link out of the dataset followed, no FIFO or device opened,
 //! capped reads), and a PNG's size is checked from its header before it is decoded.
 
 pub mod font;

@@ -7,10 +7,11 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use clevrtex_render::dataset::{self, Kind};
+use clevrtex_dataset::dataset::{self, Kind};
+use clevrtex_dataset::layout;
 use clevrtex_render::post::{decode_png_bytes, DecodedPng};
 use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
-use clevrtex_scene::{layout, Pass};
+use clevrtex_scene::Pass;
 use image::{Rgb, RgbImage};
 use plotters::prelude::*;
 use serde_json::Value;
@@ -141,10 +142,10 @@ fn colour_map(t: f64) -> Rgb<u8> {
 }
 
 /// Find the samples to show, in index order. The dataset is walked by its one read side
-/// (`clevrtex_scene::dataset::Dataset::open`): a link out of the dataset, a FIFO or a device
+/// (`clevrtex_dataset::dataset::Dataset::open`): a link out of the dataset, a FIFO or a device
 /// is never followed or opened.
 fn find_samples(args: &Options) -> anyhow::Result<(Vec<Sample>, Vec<String>)> {
-    use clevrtex_scene::dataset::{Dataset, DatasetError};
+    use clevrtex_dataset::dataset::{Dataset, DatasetError};
     let hint = "hint: pass the `--out` folder of `clevrtex generate`";
     let ds = Dataset::open(&args.dir).map_err(|e| {
         let cause = match e {
@@ -202,7 +203,7 @@ fn find_samples(args: &Options) -> anyhow::Result<(Vec<Sample>, Vec<String>)> {
     for (_, _, stem, dir) in wanted {
         let path = dir.join(layout::metadata_file(&stem));
         let meta = ds
-            .read(&path, clevrtex_scene::dataset::MAX_METADATA_BYTES)
+            .read(&path, clevrtex_dataset::dataset::MAX_METADATA_BYTES)
             .and_then(|b| {
                 serde_json::from_slice::<Value>(&b)
                     .map_err(|e| format!("is not valid metadata: {e}"))
@@ -557,12 +558,12 @@ pub fn draw(args: &Options) -> anyhow::Result<Sheet> {
     })
 }
 
-/// Write a sheet to `out` as PNG, with the one atomic writer ([`clevrtex_scene::atomic`]).
+/// Write a sheet to `out` as PNG, with the one atomic writer ([`clevrtex_dataset::atomic`]).
 pub fn save(sheet: &RgbImage, out: &Path) -> anyhow::Result<()> {
     let mut png = Vec::new();
     sheet
         .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
         .context("cannot encode the sheet as PNG")?;
-    clevrtex_scene::atomic::write(out, &png)
+    clevrtex_dataset::atomic::write(out, &png)
         .with_context(|| format!("cannot write `{}`", out.display()))
 }

@@ -12,8 +12,6 @@
 
 use std::fmt;
 
-use crate::scene_file::RenderSettings;
-
 /// A closed (or, with `min_exclusive`, half-open) range of one kind of value, with its reason.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Bound {
@@ -89,10 +87,11 @@ const fn closed(what: &'static str, min: f64, max: f64, reason: &'static str) ->
     }
 }
 
-/// Largest index of an image, plus one: the dataset cap of `verify`
-/// ([`crate::manifest::MAX_RUN_INDICES`]), so a scene, `sample` or `generate` never makes an
-/// index `verify` refuses.
-pub const INDEX_END: u64 = crate::manifest::MAX_RUN_INDICES;
+/// Largest index of an image, plus one: 100 million, a hundred times the largest dataset anyone
+/// renders. Also the dataset cap of `verify` (`clevrtex_dataset::manifest::MAX_RUN_INDICES`,
+/// the most indices a manifest's range or the union of a dataset's runs may hold), so a scene,
+/// `sample` or `generate` never makes an index `verify` refuses.
+pub const INDEX_END: u64 = 100_000_000;
 
 /// Image index in a scene file (and `--start`, `--start + -n`, `--total` of `sample` and
 /// `generate`).
@@ -325,38 +324,19 @@ pub const TABLE: [&Bound; 29] = [
     &IMAGE_SIDE,
 ];
 
-/// Image width and height, px ([`crate::scene_file::MAX_IMAGE_SIDE`], checked as integers).
+/// Largest image side accepted anywhere (flags, configs, scene files, and every reader of a
+/// dataset, which checks PNG and EXR headers against it): 4096 px. At most 4096x4096 (16.8 M
+/// pixels; 4K frames fit) so that a hostile file under 1 MB that declares the largest size
+/// decodes in well under 2 GB in every reader (8192x8192 took `materials measure` to 2.8 GB).
+pub const MAX_IMAGE_SIDE: u32 = 4096;
+
+/// Image width and height, px ([`MAX_IMAGE_SIDE`], checked as integers).
 pub const IMAGE_SIDE: Bound = closed(
     "render width and height, px",
     1.0,
-    crate::scene_file::MAX_IMAGE_SIDE as f64,
+    MAX_IMAGE_SIDE as f64,
     "a hostile file declaring the largest size must decode in well under 2 GB in every reader",
 );
-
-/// The render settings' real numbers within their bounds (`prefix` is the key's start,
-/// `render` in a scene file, `base_scene.render` in a config). Width, height and samples are
-/// checked by their callers with their own messages.
-pub fn check_render(prefix: &str, r: &RenderSettings) -> Result<(), OutOfBounds> {
-    let key = |k: &str| format!("{prefix}.{k}");
-    for (k, v) in [
-        ("max_bounces", r.max_bounces),
-        ("diffuse_bounces", r.diffuse_bounces),
-        ("glossy_bounces", r.glossy_bounces),
-        ("transmission_bounces", r.transmission_bounces),
-        ("transparent_max_bounces", r.transparent_max_bounces),
-    ] {
-        BOUNCES.check(&key(k), f64::from(v))?;
-    }
-    FILTER_WIDTH.check(&key("filter_width"), f64::from(r.filter_width))?;
-    BLUR_GLOSSY.check(&key("blur_glossy"), f64::from(r.blur_glossy))?;
-    CLAMP_INDIRECT.check(&key("clamp_indirect"), f64::from(r.clamp_indirect))?;
-    if let Some(t) = r.adaptive_threshold {
-        ADAPTIVE_THRESHOLD.check(&key("adaptive_threshold"), f64::from(t))?;
-    }
-    EXPOSURE.check(&key("exposure"), f64::from(r.exposure))?;
-    GAMMA.check(&key("gamma"), f64::from(r.gamma))?;
-    Ok(())
-}
 
 /// Each coordinate of `v` within `bound` (`key` names the array).
 pub fn check_all(bound: &Bound, key: &str, v: &[f64]) -> Result<(), OutOfBounds> {
@@ -450,7 +430,7 @@ mod tests {
     #[test]
     fn reference_render_settings_are_within_bounds() {
         let c = crate::Config::builtin("full").unwrap();
-        check_render("render", &c.base.render).unwrap();
+        crate::scene_file::check_render("render", &c.base.render).unwrap();
     }
 }
 

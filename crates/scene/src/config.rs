@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::bounds::{self, OutOfBounds};
+pub use crate::names::{Splits, KNOWN_SHAPES};
 use crate::scene_file::{Pass, RenderSettings};
 
 /// The built-in base scene (the values of the public generator's `clevrtex-gen/generate.py`
@@ -31,18 +32,6 @@ const BUILTIN: [(&str, &str); 7] = [
     ("camo", include_str!("../../../configs/camo.json")),
     ("outd", include_str!("../../../configs/outd.json")),
     ("clevr", include_str!("../../../configs/clevr.json")),
-];
-
-/// Shapes the bridge can build, the four main ones first.
-pub const KNOWN_SHAPES: [&str; 8] = [
-    "cube",
-    "sphere",
-    "cylinder",
-    "monkey",
-    "cone",
-    "torus",
-    "icosahedron",
-    "teapot",
 ];
 
 /// A config that failed to load: the file, the key and the value at fault, and what to do.
@@ -85,16 +74,6 @@ impl std::fmt::Display for ConfigError {
 }
 
 impl std::error::Error for ConfigError {}
-
-/// Which images go to which split.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Splits {
-    /// First 10% of the run's indices `test`, next 10% `val`, the rest `train`.
-    Standard,
-    /// Every image is `test` (the OOD set).
-    TestOnly,
-}
 
 /// A size class: name and the scale applied to the unit mesh.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -545,7 +524,7 @@ fn validate(
         hint: "keep the value within its range; `docs/scene-format.md`, \"Bounds\", lists every bound and its reason".to_string(),
     }
     };
-    if let Some(problem) = crate::layout::variant_name_problem(&file.name) {
+    if let Some(problem) = crate::names::variant_name_problem(&file.name) {
         return Err(err(
             "name",
             Some(file.name),
@@ -753,7 +732,7 @@ fn validate(
 /// Every number of the base scene within the one table of bounds ([`crate::bounds`]), so
 /// that every scene sampled from it passes [`crate::SceneFile::validate`].
 fn check_base_bounds(base: &BaseScene) -> Result<(), OutOfBounds> {
-    bounds::check_render("base_scene.render", &base.render)?;
+    crate::scene_file::check_render("base_scene.render", &base.render)?;
     let c = &base.camera;
     let k = |s: &str| format!("base_scene.camera.{s}");
     bounds::check_all(&bounds::POSITION, &k("location"), &c.location)?;

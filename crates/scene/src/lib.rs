@@ -19,15 +19,12 @@
 //! ```
 #![deny(missing_docs)]
 
-pub mod atomic;
 pub mod bounds;
 pub mod camera;
 pub mod config;
-pub mod dataset;
 pub mod json;
-pub mod layout;
-pub mod manifest;
 pub mod metadata;
+pub mod names;
 pub mod passes;
 pub mod quality;
 mod rng;
@@ -39,8 +36,8 @@ pub mod text;
 pub use camera::{look_at_matrix, project, track_matrix};
 pub use config::{Config, ConfigError};
 pub use json::to_pretty_json;
-pub use layout::{sample_dir, stem};
 pub use metadata::{metadata, ClevrMetadata};
+pub use names::stem;
 pub use rng::SceneRng;
 pub use sample::{sample, SampleError, SampleRequest};
 pub use scene_file::{Pass, SceneFile};

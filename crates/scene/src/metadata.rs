@@ -4,7 +4,7 @@ use serde::Serialize;
 
 pub use crate::camera::Directions;
 use crate::camera::{directions, dot, project};
-use crate::layout;
+use crate::names;
 use crate::scene_file::{Pass, SceneFile};
 
 /// Threshold of the relationships: `j` is `behind` `i` when
@@ -125,7 +125,7 @@ pub fn metadata(scene: &SceneFile) -> ClevrMetadata {
         scene
             .passes
             .contains(&pass)
-            .then(|| layout::pass_file(&scene.stem, pass))
+            .then(|| names::pass_file(&scene.stem, pass))
     };
     ClevrMetadata {
         num_objects: scene.objects.len(),
@@ -187,7 +187,7 @@ mod tests {
             let key = pass.metadata_key();
             assert_eq!(
                 meta[key].as_str(),
-                Some(layout::pass_file(&scene.stem, pass).as_str()),
+                Some(names::pass_file(&scene.stem, pass).as_str()),
                 "{key}"
             );
         }

@@ -2,7 +2,7 @@
 
 use crate::camera::{directions, look_at_matrix, normalize, track_matrix};
 use crate::config::{Config, Placement};
-use crate::layout::{stem, Split};
+use crate::names::{stem, Split};
 use crate::rng::{below, choose, scene_rng, uniform, unit, Purpose, SceneRng};
 use crate::scene_file::{
     AreaLight, Backdrop, Camera, MaterialInstance, SceneFile, SceneObject, Sun, SCENE_FORMAT,

@@ -234,11 +234,8 @@ pub struct MaterialInstance {
     pub scale: Option<f64>,
 }
 
-/// Largest image side accepted anywhere (flags, configs, scene files, and every reader of a
-/// dataset, which checks PNG and EXR headers against it): 4096 px. At most 4096x4096 (16.8 M
-/// pixels; 4K frames fit) so that a hostile file under 1 MB that declares the largest size
-/// decodes in well under 2 GB in every reader (8192x8192 took `materials measure` to 2.8 GB).
-pub const MAX_IMAGE_SIDE: u32 = 4096;
+/// Largest image side accepted anywhere (in the one table of bounds, [`bounds::MAX_IMAGE_SIDE`]).
+pub use crate::bounds::MAX_IMAGE_SIDE;
 /// Most samples per pixel accepted.
 pub const MAX_SAMPLES: u32 = 1 << 16;
 /// Most objects in a scene: instance ids `1..=N` must fit the 8-bit mask.
@@ -263,17 +260,17 @@ impl SceneFile {
         }
         // Names that become paths: one plain component each, checked here so that no value of
         // a scene file ever names a folder outside the output (docs/security.md).
-        if let Some(problem) = crate::layout::variant_name_problem(&self.variant) {
+        if let Some(problem) = crate::names::variant_name_problem(&self.variant) {
             return Err(format!("`variant` = {:?}: {problem}", self.variant));
         }
-        let stem = crate::layout::stem(&self.variant, self.index);
+        let stem = crate::names::stem(&self.variant, self.index);
         if self.stem != stem {
             return Err(format!(
                 "`stem` = {:?}: must be `{stem}` (`CLEVRTEX_<variant>_<index:06>`; it names the sample's files)",
                 self.stem
             ));
         }
-        if crate::layout::Split::parse(&self.split).is_none() {
+        if crate::names::Split::parse(&self.split).is_none() {
             return Err(format!(
                 "`split` = {:?}: must be `train`, `val` or `test`",
                 self.split
@@ -314,11 +311,11 @@ impl SceneFile {
             seen.push(*p);
         }
         for (i, o) in self.objects.iter().enumerate() {
-            if !crate::config::KNOWN_SHAPES.contains(&o.shape.as_str()) {
+            if !crate::names::KNOWN_SHAPES.contains(&o.shape.as_str()) {
                 return Err(format!(
                     "`objects[{i}].shape` = {:?}: unknown shape (the bridge builds {})",
                     o.shape,
-                    crate::config::KNOWN_SHAPES.join(", ")
+                    crate::names::KNOWN_SHAPES.join(", ")
                 ));
             }
         }
@@ -345,7 +342,7 @@ impl SceneFile {
     /// Every value of the scene within the one table of bounds ([`crate::bounds`]).
     fn check_bounds(&self) -> Result<(), OutOfBounds> {
         bounds::INDEX.check("index", self.index as f64)?;
-        bounds::check_render("render", &self.render)?;
+        check_render("render", &self.render)?;
         let c = &self.camera;
         bounds::FOCAL_LENGTH_MM.check("camera.focal_length_mm", c.focal_length_mm)?;
         bounds::SENSOR_WIDTH_MM.check("camera.sensor_width_mm", c.sensor_width_mm)?;
@@ -419,6 +416,31 @@ fn check_numbers(v: &serde_json::Value, path: &mut String) -> Result<(), String>
         }
         _ => {}
     }
+    Ok(())
+}
+
+/// The render settings' real numbers within their bounds ([`crate::bounds`]) (`prefix` is the key's start,
+/// `render` in a scene file, `base_scene.render` in a config). Width, height and samples are
+/// checked by their callers with their own messages.
+pub fn check_render(prefix: &str, r: &RenderSettings) -> Result<(), OutOfBounds> {
+    let key = |k: &str| format!("{prefix}.{k}");
+    for (k, v) in [
+        ("max_bounces", r.max_bounces),
+        ("diffuse_bounces", r.diffuse_bounces),
+        ("glossy_bounces", r.glossy_bounces),
+        ("transmission_bounces", r.transmission_bounces),
+        ("transparent_max_bounces", r.transparent_max_bounces),
+    ] {
+        bounds::BOUNCES.check(&key(k), f64::from(v))?;
+    }
+    bounds::FILTER_WIDTH.check(&key("filter_width"), f64::from(r.filter_width))?;
+    bounds::BLUR_GLOSSY.check(&key("blur_glossy"), f64::from(r.blur_glossy))?;
+    bounds::CLAMP_INDIRECT.check(&key("clamp_indirect"), f64::from(r.clamp_indirect))?;
+    if let Some(t) = r.adaptive_threshold {
+        bounds::ADAPTIVE_THRESHOLD.check(&key("adaptive_threshold"), f64::from(t))?;
+    }
+    bounds::EXPOSURE.check(&key("exposure"), f64::from(r.exposure))?;
+    bounds::GAMMA.check(&key("gamma"), f64::from(r.gamma))?;
     Ok(())
 }
 

@@ -358,7 +358,7 @@ MAX_METADATA_BYTES = 64 << 20
 
 
 def _read_metadata(path: str, root: str) -> bytes:
-    """A sample's metadata as the dataset reader reads files (`clevrtex_scene::dataset`, in
+    """A sample's metadata as the dataset reader reads files (`clevrtex_dataset::dataset`, in
     Rust): a regular file only (a FIFO swapped in never blocks: it is opened non-blocking and
     checked before a byte is read), not a link leading out of the dataset `root`, at most
     `MAX_METADATA_BYTES`; `ValueError` naming the file otherwise, `OSError` (its errno's

@@ -1,5 +1,5 @@
 """`clevrtex.Dataset` and `clevrtex.collate`: a dataset in the published layout, read through
-the Rust dataset reader (`clevrtex_scene::dataset`: no link out of the dataset followed, no
+the Rust dataset reader (`clevrtex_dataset::dataset`: no link out of the dataset followed, no
 FIFO opened, capped reads), as numpy arrays, ready for `torch.utils.data.DataLoader`.
 
 A `Dataset` holds only strings, numbers and lists (no open file, no native handle), so it

@@ -16,7 +16,7 @@
 //!   region `r` apart (horizontal and vertical pairs); `q = D(1) / D(4)`; per image, the
 //!   backdrop's `q` over the median `q` of the objects.
 //!
-//! A dataset is untrusted input: files are read through `clevrtex_render::dataset` (links
+//! A dataset is untrusted input: files are read through `clevrtex_dataset::dataset` (links
 //! only inside the dataset, regular files only, a size cap), a PNG's header size is checked
 //! before anything is decoded, and every problem is an error naming the file.
 
@@ -24,8 +24,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context};
-use clevrtex_render::dataset;
-use clevrtex_scene::{layout, Pass};
+use clevrtex_dataset::dataset;
+use clevrtex_dataset::layout;
+use clevrtex_scene::Pass;
 use rayon::prelude::*;
 
 pub use super::regions::{
@@ -199,7 +200,7 @@ pub fn measure_sample(
 pub type Found = (String, String, PathBuf);
 
 /// The dataset's canonical root and its samples (found by the one read side of a dataset,
-/// `clevrtex_scene::dataset::Dataset::open`): the `--out` of `generate` or one
+/// `clevrtex_dataset::dataset::Dataset::open`): the `--out` of `generate` or one
 /// `clevrtex_<variant>` folder.
 pub fn find_samples(dir: &Path) -> anyhow::Result<(PathBuf, Vec<Found>)> {
     let hint =
@@ -207,8 +208,8 @@ pub fn find_samples(dir: &Path) -> anyhow::Result<(PathBuf, Vec<Found>)> {
     if !dir.is_dir() {
         bail!("dataset folder `{}` does not exist\n{hint}", dir.display());
     }
-    let ds = clevrtex_scene::dataset::Dataset::open(dir).map_err(|e| match e {
-        clevrtex_scene::dataset::DatasetError::Unreadable { cause, .. } => {
+    let ds = clevrtex_dataset::dataset::Dataset::open(dir).map_err(|e| match e {
+        clevrtex_dataset::dataset::DatasetError::Unreadable { cause, .. } => {
             anyhow::Error::new(cause).context(format!("cannot read `{}`", dir.display()))
         }
         other => other.into(),

@@ -1,5 +1,5 @@
 //! Reading a dataset for the report: every sample's metadata (in parallel), the manifests and
-//! the failure ledgers, found by the one read side of a dataset (`clevrtex_scene::dataset::
+//! the failure ledgers, found by the one read side of a dataset (`clevrtex_dataset::dataset::
 //! Dataset::open`). Works on our output and on the published ClevrTex layout, whose
 //! metadata lacks our keys (those come back as `None`).
 
@@ -7,8 +7,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::bail;
-use clevrtex_render::manifest::Manifest;
-use clevrtex_scene::dataset::{self as reader, DatasetError};
+use clevrtex_dataset::dataset::{self as reader, DatasetError};
+use clevrtex_dataset::manifest::Manifest;
 use clevrtex_scene::scene_file::MAX_IMAGE_SIDE;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
@@ -38,7 +38,7 @@ pub struct Sample {
     pub index: u64,
     pub stem: String,
     pub dir: PathBuf,
-    /// `test`, `val` or `train`: recorded, else by position (`clevrtex_scene::dataset::splits`).
+    /// `test`, `val` or `train`: recorded, else by position (`clevrtex_dataset::dataset::splits`).
     pub split: String,
     pub ground_material: String,
     pub objects: Vec<Object>,
@@ -181,7 +181,7 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
             Err(p) => problems.push(p),
         }
     }
-    // The one split rule of every reader (`clevrtex_scene::dataset::splits`): the recorded
+    // The one split rule of every reader (`clevrtex_dataset::dataset::splits`): the recorded
     // split, else (the published ClevrTex) the position among the variant's samples.
     let mut start = 0;
     while start < samples.len() {

@@ -68,10 +68,10 @@ pub fn make(dir: &Path, compare: Option<&Path>, options: &Options) -> anyhow::Re
     })
 }
 
-/// Write the page to `out` with the one atomic writer ([`clevrtex_scene::atomic`]), so that a
+/// Write the page to `out` with the one atomic writer ([`clevrtex_dataset::atomic`]), so that a
 /// failure leaves an older page whole and no temporary behind.
 pub fn write_page(out: &Path, html: &str) -> anyhow::Result<()> {
-    clevrtex_scene::atomic::write(out, html.as_bytes()).with_context(|| {
+    clevrtex_dataset::atomic::write(out, html.as_bytes()).with_context(|| {
         format!(
             "cannot write `{}`\nhint: check that the folder exists and is writable",
             out.display()

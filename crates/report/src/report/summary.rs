@@ -60,7 +60,7 @@ pub fn summarise(dir: &Path, args: &Options) -> anyhow::Result<Summary> {
     let bar = progress(0, "metadata files");
     let data = data::read(dir, &bar)?;
     bar.finish_and_clear();
-    let root = clevrtex_render::dataset::root(dir)
+    let root = clevrtex_dataset::dataset::root(dir)
         .with_context(|| format!("cannot read `{}`", dir.display()))?;
     // Pixels of a capped, evenly spread sample per variant.
     let mut by_variant: BTreeMap<&str, Vec<&data::Sample>> = BTreeMap::new();

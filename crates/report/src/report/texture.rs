@@ -8,8 +8,9 @@
 
 use std::path::{Path, PathBuf};
 
-use clevrtex_render::dataset::{self, Kind};
-use clevrtex_scene::{layout, Pass};
+use clevrtex_dataset::dataset::{self, Kind};
+use clevrtex_dataset::layout;
+use clevrtex_scene::Pass;
 use image::RgbImage;
 
 use crate::materials::stats::{distance, lab, region_features};

@@ -9,8 +9,8 @@
 //! end of a run that was not interrupted with every file (`finished: true`). Paths are relative
 //! to the variant folder, e.g. `0/CLEVRTEX_full_000000.png`.
 //!
-//! The reading side and the types live here, in the pure `scene` crate, so the dataset reader
-//! ([`crate::dataset`]) and the writer (`clevrtex_render::manifest`) share one definition.
+//! The types and the reading side; the dataset reader ([`crate::dataset`]) and the writing side
+//! ([`crate::manifest::write`]) share them.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -23,8 +23,9 @@ pub const MANIFEST_FORMAT: &str = "clevrtex-manifest";
 pub const MANIFEST_VERSION: u32 = 1;
 /// The most indices one manifest's range (`end - start`), or the union of a dataset's runs,
 /// may hold: 100 million, a hundred times the largest dataset anyone renders. A file with
-/// more is refused before anything is sized by it.
-pub const MAX_RUN_INDICES: u64 = 100_000_000;
+/// more is refused before anything is sized by it. The bound of image indices
+/// ([`clevrtex_scene::bounds::INDEX_END`]), so a run never makes an index `verify` refuses.
+pub const MAX_RUN_INDICES: u64 = clevrtex_scene::bounds::INDEX_END;
 
 /// One file of the manifest.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -117,8 +118,9 @@ pub fn render_differences(a: &serde_json::Value, b: &serde_json::Value) -> Vec<S
         b.as_object().unwrap_or(&empty),
     );
     let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
-    let show =
-        |v: Option<&serde_json::Value>| v.map_or("(none)".to_string(), crate::dataset::short);
+    let show = |v: Option<&serde_json::Value>| {
+        v.map_or("(none)".to_string(), crate::dataset::metadata::short)
+    };
     keys.into_iter()
         .filter(|k| a.get(*k) != b.get(*k))
         .take(20)
@@ -179,11 +181,12 @@ impl Manifest {
     }
 
     /// Read a manifest file: a regular file (a link only within its folder), at most
-    /// [`crate::dataset::MAX_FILE_BYTES`], whose values pass [`Manifest::check`].
+    /// [`crate::dataset::files::MAX_FILE_BYTES`], whose values pass [`Manifest::check`].
     pub fn read(path: &Path) -> Result<Manifest, String> {
         let dir = path.parent().unwrap_or(Path::new("."));
-        let root = crate::dataset::root(dir).map_err(|e| e.to_string())?;
-        let bytes = crate::dataset::read(&root, path, crate::dataset::MAX_FILE_BYTES)?;
+        let root = crate::dataset::files::root(dir).map_err(|e| e.to_string())?;
+        let bytes =
+            crate::dataset::files::read(&root, path, crate::dataset::files::MAX_FILE_BYTES)?;
         let m: Manifest = serde_json::from_slice(&bytes).map_err(|e| e.to_string())?;
         if m.format != MANIFEST_FORMAT || m.version != MANIFEST_VERSION {
             return Err(format!(

@@ -4,21 +4,18 @@
 //!
 //! `OUT/clevrtex_<variant>/<index / 1000>/CLEVRTEX_<variant>_<index:06>{.png, _flat.png,
 //! _depth_0001.png, _normal_0001.png, _albedo_0001.png, _shadow_0001.png, .json}`; the pass
-//! suffixes come from the pass table ([`crate::passes`]).
+//! suffixes come from the pass table ([`clevrtex_scene::passes`]).
 
-use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use crate::config::{Config, Splits};
-use crate::passes::Pass;
+use clevrtex_scene::config::Config;
+pub use clevrtex_scene::names::{
+    pass_file, stem, variant_name_problem, Split, Splits, MAX_VARIANT_NAME,
+};
+use clevrtex_scene::passes::Pass;
 
 /// Suffix of temporary files (never matched by the public loader's `*.png` glob).
 pub const TMP_SUFFIX: &str = ".clevrtex-tmp";
-
-/// File stem of image `index`: `CLEVRTEX_<variant>_<index:06>`.
-pub fn stem(variant: &str, index: u64) -> String {
-    format!("CLEVRTEX_{variant}_{index:06}")
-}
 
 /// Parse a file name `CLEVRTEX_<variant>_<index>` + `suffix` (the index at least six digits,
 /// as [`stem`] writes it) into (stem, variant, index).
@@ -45,30 +42,6 @@ pub fn parse_file_name(name: &str) -> Option<(&str, &str, u64)> {
 /// The failure ledger's file name in a variant folder.
 pub const LEDGER_FILE: &str = "failures.jsonl";
 
-/// Longest variant name: it becomes part of folder and file names.
-pub const MAX_VARIANT_NAME: usize = 64;
-
-/// Why `name` cannot be a variant's name, or `None` when it can. A variant's name becomes part
-/// of folder and file names (`clevrtex_<variant>`, `CLEVRTEX_<variant>_<index>`), so it must be
-/// 1 to [`MAX_VARIANT_NAME`] ASCII letters, digits, `_` or `-`: one path component that is
-/// never `.`, `..` or absolute, whatever file it was read from.
-pub fn variant_name_problem(name: &str) -> Option<String> {
-    if name.is_empty() || name.len() > MAX_VARIANT_NAME {
-        return Some(format!(
-            "must be 1 to {MAX_VARIANT_NAME} characters (it is used in file names)"
-        ));
-    }
-    if !name
-        .chars()
-        .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-    {
-        return Some(
-            "must be ASCII letters, digits, `_` or `-` (it is used in file names)".to_string(),
-        );
-    }
-    None
-}
-
 /// Folder of one variant: `OUT/clevrtex_<variant>`.
 pub fn variant_dir(out: &Path, variant: &str) -> PathBuf {
     out.join(format!("clevrtex_{variant}"))
@@ -83,7 +56,7 @@ pub fn sample_dir(out: &Path, variant: &str, index: u64) -> PathBuf {
 /// every folder between, before anything is written into it. The one place the write side
 /// makes the layout's folders: an `--out` handed over (to resume or grow it) is untrusted, so
 /// every folder from `out` down to `dir` must be a folder inside `out`, judged as the read
-/// side judges ([`crate::dataset::classify`] against the canonical `out`). A link leading out
+/// side judges ([`crate::dataset::files::classify`] against the canonical `out`). A link leading out
 /// of `out`, a dangling link, a FIFO or a file where a folder belongs is refused, naming it,
 /// and nothing is written through it. `out` itself (the command line's) is trusted.
 pub fn make_dir(out: &Path, dir: &Path) -> Result<(), String> {
@@ -94,7 +67,7 @@ pub fn make_dir(out: &Path, dir: &Path) -> Result<(), String> {
             out.display()
         )
     })?;
-    let root = crate::dataset::root(out)
+    let root = crate::dataset::files::root(out)
         .map_err(|e| format!("cannot resolve `{}`: {e}", out.display()))?;
     let rel = dir.strip_prefix(out).map_err(|_| {
         format!(
@@ -120,15 +93,15 @@ pub fn make_dir(out: &Path, dir: &Path) -> Result<(), String> {
                 _ => {}
             }
         }
-        match crate::dataset::classify(&root, &path) {
-            crate::dataset::Kind::Dir => {}
-            crate::dataset::Kind::File => {
+        match crate::dataset::files::classify(&root, &path) {
+            crate::dataset::files::Kind::Dir => {}
+            crate::dataset::files::Kind::File => {
                 return Err(format!(
                 "`{}` is a file where the dataset's layout has a folder; nothing written\n{hint}",
                 path.display()
             ))
             }
-            crate::dataset::Kind::Skipped(why) => {
+            crate::dataset::files::Kind::Skipped(why) => {
                 return Err(format!(
                     "`{}` {why}; nothing is written through it\n{hint}",
                     path.display()
@@ -137,11 +110,6 @@ pub fn make_dir(out: &Path, dir: &Path) -> Result<(), String> {
         }
     }
     Ok(())
-}
-
-/// File name of `pass` for the image with file stem `stem`: `<stem><suffix>.png`.
-pub fn pass_file(stem: &str, pass: Pass) -> String {
-    format!("{stem}{}.png", pass.spec().file_suffix)
 }
 
 /// File name of the metadata: `<stem>.json`.
@@ -166,60 +134,15 @@ pub fn legacy_exr_files(stem: &str) -> [String; 2] {
     [format!("{stem}_direct.exr"), format!("{stem}_noshadow.exr")]
 }
 
-/// A split of the published dataset.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Split {
-    /// The first `int(0.1 N)` images.
-    Test,
-    /// The next `int(0.2 N) - int(0.1 N)`.
-    Val,
-    /// The rest.
-    Train,
-}
-
-impl Split {
-    /// Every split, in the order of the published files.
-    pub const ALL: [Split; 3] = [Split::Test, Split::Val, Split::Train];
-
-    /// The split named `name` (`test`, `val` or `train`); `None` for any other text.
-    pub fn parse(name: &str) -> Option<Split> {
-        Split::ALL.into_iter().find(|s| s.name() == name)
+/// Every file a complete sample has: one per requested pass, the metadata, and the EXRs
+/// when kept.
+pub fn expected_files(stem: &str, passes: &[Pass], keep_exr: bool) -> Vec<String> {
+    let mut v: Vec<String> = passes.iter().map(|&p| pass_file(stem, p)).collect();
+    if keep_exr {
+        v.extend(exr_files(stem, passes.contains(&Pass::Shadow)));
     }
-
-    /// `test`, `val` or `train`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Split::Test => "test",
-            Split::Val => "val",
-            Split::Train => "train",
-        }
-    }
-
-    /// The positions of this split among `total` images with the rule `splits`, exactly as
-    /// the public loader cuts them: test `[0, int(0.1 N))`, val `[int(0.1 N), int(0.2 N))`,
-    /// train the rest (Python's float products, truncated). A test-only set is all test.
-    pub fn range(self, splits: Splits, total: u64) -> Range<u64> {
-        let (t, v) = match splits {
-            Splits::TestOnly => (total, total),
-            Splits::Standard => {
-                let t = (0.1 * total as f64) as u64;
-                (t, ((0.2 * total as f64) as u64).max(t))
-            }
-        };
-        match self {
-            Split::Test => 0..t,
-            Split::Val => t..v,
-            Split::Train => v..total,
-        }
-    }
-
-    /// The split of image `index` in a dataset of `total` images (see [`Split::range`]).
-    pub fn of(splits: Splits, index: u64, total: u64) -> Split {
-        [Split::Test, Split::Val]
-            .into_iter()
-            .find(|s| s.range(splits, total).contains(&index))
-            .unwrap_or(Split::Train)
-    }
+    v.push(metadata_file(stem));
+    v
 }
 
 /// The split rule of a variant: its built-in config's `splits`, or [`Splits::Standard`] for a
@@ -268,27 +191,6 @@ mod tests {
     }
 
     #[test]
-    fn variant_names_are_one_plain_path_component() {
-        for ok in ["camo", "my_variant-2", "A"] {
-            assert_eq!(variant_name_problem(ok), None, "{ok}");
-        }
-        let long = "x".repeat(MAX_VARIANT_NAME + 1);
-        for bad in [
-            "",
-            ".",
-            "..",
-            "a/b",
-            "/etc",
-            "a b",
-            "caf\u{e9}",
-            "a\0b",
-            long.as_str(),
-        ] {
-            assert!(variant_name_problem(bad).is_some(), "{bad:?}");
-        }
-    }
-
-    #[test]
     fn stems_parse_back() {
         assert_eq!(
             parse_stem("CLEVRTEX_full_000123.png", ".png"),
@@ -314,21 +216,6 @@ mod tests {
             Some(("CLEVRTEX_full_000123", "full", 123))
         );
         assert_eq!(parse_file_name("CLEVRTEX_full_000123.txt"), None);
-    }
-
-    #[test]
-    fn splits_follow_the_index() {
-        let s = Splits::Standard;
-        assert_eq!(Split::of(s, 0, 100), Split::Test);
-        assert_eq!(Split::of(s, 9, 100), Split::Test);
-        assert_eq!(Split::of(s, 10, 100), Split::Val);
-        assert_eq!(Split::of(s, 19, 100), Split::Val);
-        assert_eq!(Split::of(s, 20, 100), Split::Train);
-        assert_eq!(Split::of(Splits::TestOnly, 99, 100), Split::Test);
-        // The public loader's int(0.1 * 15) = 1: index 1 is `val`.
-        assert_eq!(Split::of(s, 1, 15), Split::Val);
-        assert_eq!(Split::Val.range(s, 15), 1..3);
-        assert_eq!(Split::Train.range(Splits::TestOnly, 7), 7..7);
     }
 
     #[test]

@@ -33,7 +33,7 @@ const MAX_LOCK_BYTES: u64 = 64 * 1024;
 /// What a lock file holds.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Holder {
-    /// Host name of the holder ([`crate::tmp::hostname`]).
+    /// Host name of the holder ([`crate::atomic::hostname`]).
     pub host: String,
     /// Its process id.
     pub pid: u32,
@@ -97,7 +97,7 @@ pub fn overlaps(a: (u64, u64, [u64; 2]), b: (u64, u64, [u64; 2])) -> bool {
 /// FIFO would block the open for good), and must be a regular file. Anything else is refused
 /// with a message naming it. Opened for writing: on NFS `flock` is emulated with POSIX locks,
 /// which need a writable descriptor.
-pub(crate) fn open_lock_file(path: &Path) -> Result<std::fs::File, String> {
+pub fn open_lock_file(path: &Path) -> Result<std::fs::File, String> {
     use std::os::unix::fs::OpenOptionsExt;
     let refuse = |what: &str| {
         format!(
@@ -116,7 +116,7 @@ pub(crate) fn open_lock_file(path: &Path) -> Result<std::fs::File, String> {
         .create(true)
         .truncate(false)
         .write(true)
-        .custom_flags(crate::post::no_follow_no_block())
+        .custom_flags(no_follow_no_block())
         .open(path);
     let file = match opened {
         Ok(f) => f,
@@ -139,12 +139,13 @@ pub(crate) fn open_lock_file(path: &Path) -> Result<std::fs::File, String> {
 
 /// Whether the holder of a lock file (its `holder`, the file's modification time) is gone.
 fn is_stale(holder: &Holder, modified: Option<SystemTime>) -> bool {
-    if holder.host == crate::tmp::hostname() {
+    if holder.host == crate::atomic::hostname() {
         // A start time of 0 (unknown) proves nothing: where this host's start times can be
         // read (always on Linux), a run here wrote its own, and where they cannot, no pid is
         // known to be alive either. So a lock naming this host with `pid_start` 0 (a file
         // someone wrote, e.g. naming pid 1) is stale.
-        return holder.pid_start == 0 || !crate::tmp::process_alive(holder.pid, holder.pid_start);
+        return holder.pid_start == 0
+            || !crate::atomic::process_alive(holder.pid, holder.pid_start);
     }
     modified
         .and_then(|m| SystemTime::now().duration_since(m).ok())
@@ -170,19 +171,20 @@ impl RunLock {
         };
         // The variant folder of `--out`: a link out of it is refused, naming it.
         let out = variant_dir.parent().unwrap_or(Path::new("."));
-        clevrtex_scene::layout::make_dir(out, variant_dir)?;
+        crate::layout::make_dir(out, variant_dir)?;
         let guard_path = variant_dir.join(GUARD);
         let guard = open_lock_file(&guard_path)?;
         guard.lock().map_err(|e| io("lock", &guard_path, e))?;
-        let root = crate::dataset::root(variant_dir).map_err(|e| io("read", variant_dir, e))?;
-        let entries =
-            crate::dataset::list(&root, variant_dir).map_err(|e| io("read", variant_dir, e))?;
+        let root =
+            crate::dataset::files::root(variant_dir).map_err(|e| io("read", variant_dir, e))?;
+        let entries = crate::dataset::files::list(&root, variant_dir)
+            .map_err(|e| io("read", variant_dir, e))?;
         let mine = file_name(start, end, shard[0], shard[1]);
         for (name, path, _) in entries {
             if !(name.starts_with(PREFIX) && name.ends_with(".lock")) {
                 continue;
             }
-            let holder = crate::dataset::read(&root, &path, MAX_LOCK_BYTES)
+            let holder = crate::dataset::files::read(&root, &path, MAX_LOCK_BYTES)
                 .and_then(|b| serde_json::from_slice::<Holder>(&b).map_err(|e| e.to_string()));
             let holder = match holder {
                 Ok(h) => h,
@@ -223,9 +225,9 @@ impl RunLock {
             }
         }
         let holder = Holder {
-            host: crate::tmp::hostname(),
+            host: crate::atomic::hostname(),
             pid: std::process::id(),
-            pid_start: crate::tmp::own_start_time(),
+            pid_start: crate::atomic::own_start_time(),
             start,
             end,
             shard,
@@ -233,7 +235,7 @@ impl RunLock {
         };
         let path = variant_dir.join(&mine);
         let text = serde_json::to_string_pretty(&holder).expect("lock serialises") + "\n";
-        clevrtex_scene::atomic::write(&path, text.as_bytes()).map_err(|e| io("write", &path, e))?;
+        crate::atomic::write(&path, text.as_bytes()).map_err(|e| io("write", &path, e))?;
         drop(guard);
         let (tx, rx) = mpsc::channel::<()>();
         let beat_path = path.clone();
@@ -242,7 +244,7 @@ impl RunLock {
             while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(HEARTBEAT) {
                 if let Ok(f) = std::fs::OpenOptions::new()
                     .append(true)
-                    .custom_flags(crate::post::no_follow_no_block())
+                    .custom_flags(no_follow_no_block())
                     .open(&beat_path)
                 {
                     let _ = f.set_modified(SystemTime::now());
@@ -269,14 +271,21 @@ impl Drop for RunLock {
             let _ = b.join();
         }
         // Remove the file only while it is still ours (never another run's lock).
-        let ours = crate::dataset::read_regular(&self.path, MAX_LOCK_BYTES)
+        let ours = crate::dataset::files::read_regular(&self.path, MAX_LOCK_BYTES)
             .ok()
             .and_then(|b| serde_json::from_slice::<Holder>(&b).ok())
-            .is_some_and(|h| h.pid == std::process::id() && h.host == crate::tmp::hostname());
+            .is_some_and(|h| h.pid == std::process::id() && h.host == crate::atomic::hostname());
         if ours {
             let _ = std::fs::remove_file(&self.path);
         }
     }
+}
+
+/// `O_NOFOLLOW | O_NONBLOCK`, for [`std::os::unix::fs::OpenOptionsExt::custom_flags`]: how a
+/// file in an output folder that may hold anyone's files is opened (a link in its place is
+/// not followed, a FIFO does not block).
+fn no_follow_no_block() -> i32 {
+    (rustix::fs::OFlags::NOFOLLOW | rustix::fs::OFlags::NONBLOCK).bits() as i32
 }
 
 #[cfg(test)]
@@ -314,7 +323,7 @@ mod tests {
         let pid = child.id();
         child.wait().unwrap();
         let dead = Holder {
-            host: crate::tmp::hostname(),
+            host: crate::atomic::hostname(),
             pid,
             pid_start: 1,
             start: 0,
@@ -348,7 +357,7 @@ mod tests {
     fn a_holder_of_this_host_with_an_unknown_start_time_is_stale() {
         let dir = tempfile::tempdir().unwrap();
         let forged = Holder {
-            host: crate::tmp::hostname(),
+            host: crate::atomic::hostname(),
             pid: 1,
             pid_start: 0,
             start: 0,

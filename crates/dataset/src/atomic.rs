@@ -1,4 +1,4 @@
-//! The one way this tool writes a file: [`AtomicFile`] (and [`write`] for bytes at hand).
+//! The one way this tool writes a file: [`AtomicFile`] (and [`write()`] for bytes at hand).
 //!
 //! A file is written under a temporary name beside its final one and renamed over it once
 //! complete and synced, so a reader (or a rerun after a kill) sees the old file or the new

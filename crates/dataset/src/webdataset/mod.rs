@@ -11,8 +11,8 @@
 //! `shadow.npy` arrays decoded from the PNGs ([`pass_npy`], so no colour decoder can take them
 //! for colours), and `<stem>.json`, so WebDataset's key is the stem. Splits are each sample's recorded `split`
 //! (else, for the published ClevrTex, the public loader's position rule:
-//! [`clevrtex_scene::dataset::splits`], the rule of every reader). The files are those of
-//! the layout (`clevrtex_scene::layout`): a metadata `*_filename` only says whether a pass was
+//! [`crate::dataset::splits`], the rule of every reader). The files are those of
+//! the layout (`crate::layout`): a metadata `*_filename` only says whether a pass was
 //! written and must name the layout's file. Links leading out of the dataset are not followed
 //! and non-regular files not read (their samples are left out and listed). Shards of an
 //! earlier export into OUT that this one did not write are removed (only names of the form
@@ -20,14 +20,24 @@
 //! same bytes (and the arrays no machine-dependent byte). Each shard is written under a
 //! temporary name and renamed when complete; `OUT/index.json` lists the shards and their
 //! sample counts, and what each key holds.
+//!
+//! By concern: the export of a dataset (here), one shard's entries, names and writer
+//! (`shard.rs`), a pass decoded into its `.npy` array (`npy.rs`). Everything is re-exported here.
+
+pub(crate) mod npy;
+pub(crate) mod shard;
+#[cfg(test)]
+mod tests;
+
+pub use npy::*;
+pub use shard::*;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use clevrtex_scene::atomic::AtomicFile;
-use clevrtex_scene::dataset::{Dataset, DatasetError, Kind, SampleRef, VariantDir};
-use clevrtex_scene::layout::Split;
+use crate::dataset::{Dataset, DatasetError, Kind, SampleRef, VariantDir};
+use crate::layout::Split;
 use clevrtex_scene::passes::WebdatasetForm;
 use clevrtex_scene::Pass;
 use serde_json::{json, Value};
@@ -86,10 +96,6 @@ pub struct ExportReport {
     /// Files or folders not followed or not read (their samples are left out), one line each.
     pub skipped: Vec<String>,
 }
-
-/// One file of a sample in a shard: its key (the extension after the stem), its path in the
-/// dataset, and the pass to decode it as when it becomes a `.npy` (`None`: the file's bytes).
-pub type SampleFile = (String, PathBuf, Option<Pass>);
 
 /// One sample to export: its metadata and the files it becomes.
 struct Sample {
@@ -348,7 +354,7 @@ pub fn export(
     });
     let index_path = out.join("index.json");
     let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise") + "\n";
-    clevrtex_scene::atomic::write(&index_path, text.as_bytes())
+    crate::atomic::write(&index_path, text.as_bytes())
         .map_err(io_err(format!("cannot write `{}`", index_path.display())))?;
     Ok(ExportReport {
         samples: total_samples,
@@ -412,364 +418,4 @@ fn remove_stale(out: &Path, written: &BTreeSet<String>) -> Result<Vec<String>, E
         }
     }
     Ok(stale)
-}
-
-/// What can go wrong while writing a shard. Shown as the command's error: the message, then
-/// (as the error's source) the OS error.
-#[derive(Debug, thiserror::Error)]
-pub enum ShardError {
-    /// A file of the shard could not be created or written.
-    #[error("{what}")]
-    Io {
-        /// What failed, e.g. "cannot write `OUT/full-train-000000.tar.clevrtex-tmp`".
-        what: String,
-        /// The OS error.
-        #[source]
-        cause: std::io::Error,
-    },
-    /// The finished shard could not be looked at.
-    #[error(transparent)]
-    Stat(std::io::Error),
-    /// A file of the dataset could not be read (the message says which and what to do).
-    #[error("{0}")]
-    Read(String),
-}
-
-fn io(what: &str, path: &Path) -> impl FnOnce(std::io::Error) -> ShardError {
-    let what = format!("{what} `{}`", path.display());
-    move |cause| ShardError::Io { what, cause }
-}
-
-/// The name of shard `n` of `split` of `variant`.
-pub fn shard_name(variant: &str, split: &str, n: u64) -> String {
-    format!("{variant}-{split}-{n:06}.tar")
-}
-
-/// Whether `name` is one of export's shard names, `<variant>-<split>-<6 digits>.tar`.
-pub fn is_shard_name(name: &str) -> bool {
-    let Some(rest) = name.strip_suffix(".tar") else {
-        return false;
-    };
-    let Some((head, digits)) = rest.rsplit_once('-') else {
-        return false;
-    };
-    let Some((variant, split)) = head.rsplit_once('-') else {
-        return false;
-    };
-    !variant.is_empty()
-        && Split::parse(split).is_some()
-        && digits.len() == 6
-        && digits.bytes().all(|b| b.is_ascii_digit())
-}
-
-/// The bytes a tar holds for `entries`: a 512-byte header and the data padded to 512 bytes
-/// each.
-pub fn tar_bytes(entries: &[(String, Vec<u8>)]) -> u64 {
-    entries
-        .iter()
-        .map(|(_, d)| 512 + (d.len() as u64).div_ceil(512) * 512)
-        .sum()
-}
-
-/// The entries of one sample in a shard: each file of `files` read from the dataset under its
-/// canonical `root` ([`dataset::read`]: no link out of it, only regular files, capped), a pass
-/// marked for it decoded into its `.npy` array ([`pass_npy`]).
-pub fn sample_entries(
-    root: &Path,
-    files: &[SampleFile],
-) -> Result<Vec<(String, Vec<u8>)>, ShardError> {
-    let unread = |path: &Path, why: String| {
-        ShardError::Read(format!(
-            "`{}` {why}\nhint: check the dataset with `clevrtex verify`",
-            path.display()
-        ))
-    };
-    files
-        .iter()
-        .map(|(key, path, pass)| {
-            let bytes =
-                dataset::read(root, path, dataset::MAX_FILE_BYTES).map_err(|w| unread(path, w))?;
-            let data = match pass {
-                None => bytes,
-                Some(pass) => pass_npy(*pass, &bytes, path).map_err(|w| unread(path, w))?,
-            };
-            Ok((key.clone(), data))
-        })
-        .collect()
-}
-
-/// The `.npy` of a pass's PNG `bytes` (of the layout and encoding of the pass table:
-/// [`clevrtex_scene::passes`]): the mask's ids as `uint8 (H, W)` (a palette's indices, or an
-/// 8-bit grey image's values: the published ClevrTex's masks); depth in metres as `float32
-/// (H, W)`, background `+inf`; normals as `float32 (H, W, 3)` unit vectors, background
-/// `(0, 0, 0)`; the shadow amount as `float32 (H, W)` in `[0, 1]`. `Err` says why not, one line.
-pub fn pass_npy(pass: Pass, bytes: &[u8], path: &Path) -> Result<Vec<u8>, String> {
-    use clevrtex_scene::passes::{DEPTH_BACKGROUND, DEPTH_SCALE_M, NORMAL_BACKGROUND};
-    let png = crate::post::decode_png_bytes(bytes, path).map_err(|e| match e {
-        crate::RenderError::BadOutput { problem, .. } => problem,
-        other => other.to_string().lines().next().unwrap_or("").to_string(),
-    })?;
-    let WebdatasetForm::Npy { descr, channels } = pass.spec().webdataset_form else {
-        return Err(format!(
-            "the {} pass is not stored as an array",
-            pass.name()
-        ));
-    };
-    let (w, h) = (png.width as usize, png.height as usize);
-    let layout = |bits: u8, ch: usize| -> Result<(), String> {
-        if png.bits == bits && png.channels == ch {
-            Ok(())
-        } else {
-            Err(format!(
-                "is a {}-bit {}-channel PNG, not the {bits}-bit {ch}-channel {} pass",
-                png.bits,
-                png.channels,
-                pass.name()
-            ))
-        }
-    };
-    let mut out = npy_header(
-        descr,
-        &[h, w, usize::from(channels)][..if channels == 1 { 2 } else { 3 }],
-    );
-    match pass {
-        Pass::Mask => {
-            layout(8, 1)?;
-            out.extend(png.data.iter().map(|&v| v as u8));
-        }
-        Pass::Depth => {
-            layout(16, 1)?;
-            for &v in &png.data {
-                let m = if v == DEPTH_BACKGROUND {
-                    f32::INFINITY
-                } else {
-                    (f64::from(v) * DEPTH_SCALE_M) as f32
-                };
-                out.extend(m.to_le_bytes());
-            }
-        }
-        Pass::Normal => {
-            layout(16, 3)?;
-            for px in png.data.chunks_exact(3) {
-                let n = if px == NORMAL_BACKGROUND {
-                    [0.0; 3]
-                } else {
-                    let v = [0, 1, 2].map(|i| f64::from(px[i]) / 65535.0 * 2.0 - 1.0);
-                    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-                    if len > 0.0 {
-                        v.map(|c| c / len)
-                    } else {
-                        [0.0; 3]
-                    }
-                };
-                for c in n {
-                    out.extend((c as f32).to_le_bytes());
-                }
-            }
-        }
-        Pass::Shadow => {
-            layout(8, 1)?;
-            for &v in &png.data {
-                out.extend((f32::from(v) / 255.0).to_le_bytes());
-            }
-        }
-        Pass::Rgb | Pass::Albedo => {
-            return Err(format!(
-                "the {} pass is not stored as an array",
-                pass.name()
-            ))
-        }
-    }
-    Ok(out)
-}
-
-/// The header of a NumPy `.npy` file (format version 1.0) of C-order `shape` and dtype
-/// `descr`, padded with spaces so the data starts at a multiple of 64 bytes (NumPy's
-/// `numpy.lib.format`). Nothing in it depends on the machine: the same array, the same bytes.
-pub fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
-    let dims: Vec<String> = shape.iter().map(ToString::to_string).collect();
-    let shape = match dims.len() {
-        1 => format!("({},)", dims[0]),
-        _ => format!("({})", dims.join(", ")),
-    };
-    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
-    // magic (6) + version (2) + length (2) + dict + '\n', to a multiple of 64.
-    let pad = (64 - (10 + dict.len() + 1) % 64) % 64;
-    dict.push_str(&" ".repeat(pad));
-    dict.push('\n');
-    let mut out = Vec::with_capacity(10 + dict.len());
-    out.extend(b"\x93NUMPY\x01\x00");
-    out.extend((dict.len() as u16).to_le_bytes());
-    out.extend(dict.as_bytes());
-    out
-}
-
-/// A tar shard being written under a unique temporary name (an [`AtomicFile`]: removed if it
-/// is never finished).
-pub struct ShardWriter {
-    tmp: PathBuf,
-    path: PathBuf,
-    /// `None` once finished.
-    builder: Option<tar::Builder<std::io::BufWriter<AtomicFile>>>,
-    bytes: u64,
-    samples: u64,
-    first: u64,
-    last: u64,
-}
-
-impl ShardWriter {
-    /// Start the shard `path` (written under a temporary name of
-    /// [`clevrtex_scene::atomic`] until [`ShardWriter::finish`]).
-    pub fn create(path: PathBuf) -> Result<ShardWriter, ShardError> {
-        let f = AtomicFile::create(&path).map_err(io("cannot create a temporary for", &path))?;
-        let tmp = f.tmp_path().to_path_buf();
-        Ok(ShardWriter {
-            tmp,
-            path,
-            builder: Some(tar::Builder::new(std::io::BufWriter::new(f))),
-            bytes: 0,
-            samples: 0,
-            first: 0,
-            last: 0,
-        })
-    }
-
-    /// Bytes written so far (tar headers and padding included).
-    pub fn bytes(&self) -> u64 {
-        self.bytes
-    }
-
-    /// Samples written so far.
-    pub fn samples(&self) -> u64 {
-        self.samples
-    }
-
-    /// Add sample `index` with key `stem`: each `(extension, bytes)` of `entries`
-    /// ([`sample_entries`]) becomes `<stem>.<extension>`. Headers carry no time, owner or mode
-    /// of the machine.
-    pub fn add(
-        &mut self,
-        index: u64,
-        stem: &str,
-        entries: &[(String, Vec<u8>)],
-    ) -> Result<(), ShardError> {
-        for (ext, data) in entries {
-            let mut h = tar::Header::new_ustar();
-            h.set_size(data.len() as u64);
-            h.set_mode(0o644);
-            h.set_mtime(0);
-            h.set_uid(0);
-            h.set_gid(0);
-            h.set_entry_type(tar::EntryType::Regular);
-            let name = format!("{stem}.{ext}");
-            self.builder
-                .as_mut()
-                .expect("not finished")
-                .append_data(&mut h, &name, data.as_slice())
-                .map_err(io("cannot write", &self.tmp))?;
-            self.bytes += 512 + (data.len() as u64).div_ceil(512) * 512;
-        }
-        if self.samples == 0 {
-            self.first = index;
-        }
-        self.last = index;
-        self.samples += 1;
-        Ok(())
-    }
-
-    /// Finish the tar, flush it to disk and rename it to its final name; its entry of
-    /// `index.json` (file, samples, bytes, first and last index).
-    pub fn finish(mut self) -> Result<Value, ShardError> {
-        let w = self
-            .builder
-            .take()
-            .expect("finished once")
-            .into_inner()
-            .map_err(io("cannot write", &self.tmp))?;
-        let f = w
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .map_err(io("cannot write", &self.tmp))?;
-        f.commit().map_err(io("cannot write", &self.path))?;
-        let size = std::fs::metadata(&self.path)
-            .map_err(ShardError::Stat)?
-            .len();
-        Ok(json!({
-            "file": self.path.file_name().unwrap().to_string_lossy(),
-            "samples": self.samples,
-            "bytes": size,
-            "first_index": self.first,
-            "last_index": self.last,
-        }))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn shard_names_are_recognised_and_nothing_else() {
-        assert!(is_shard_name(&shard_name("full", "train", 3)));
-        assert_eq!(shard_name("camo", "val", 12), "camo-val-000012.tar");
-        for name in [
-            "full-train-00003.tar",
-            "full-nope-000003.tar",
-            "-train-000003.tar",
-            "full-train-000003.tar.clevrtex-tmp",
-            "index.json",
-        ] {
-            assert!(!is_shard_name(name), "{name}");
-        }
-    }
-
-    #[test]
-    fn an_unfinished_shard_leaves_nothing_and_a_finished_one_is_reproducible() {
-        let dir = tempfile::tempdir().unwrap();
-        let data = dir.path().join("data");
-        std::fs::create_dir(&data).unwrap();
-        std::fs::write(data.join("a.png"), b"not really a png").unwrap();
-        let root = dataset::root(&data).unwrap();
-        let files = vec![("png".to_string(), data.join("a.png"), None)];
-        let entries = sample_entries(&root, &files).unwrap();
-        let out = dir.path().join("full-train-000000.tar");
-        {
-            let mut w = ShardWriter::create(out.clone()).unwrap();
-            w.add(7, "CLEVRTEX_full_000007", &entries).unwrap();
-            assert_eq!((w.samples(), w.bytes()), (1, 1024));
-        }
-        assert!(
-            std::fs::read_dir(dir.path()).unwrap().count() == 1,
-            "a temporary shard is left"
-        );
-        let mut bytes = Vec::new();
-        for _ in 0..2 {
-            let mut w = ShardWriter::create(out.clone()).unwrap();
-            w.add(7, "CLEVRTEX_full_000007", &entries).unwrap();
-            let entry = w.finish().unwrap();
-            assert_eq!(entry["first_index"], 7);
-            assert_eq!(entry["samples"], 1);
-            bytes.push(std::fs::read(&out).unwrap());
-        }
-        assert_eq!(bytes[0], bytes[1]);
-        let err =
-            sample_entries(&root, &[("png".into(), data.join("missing.png"), None)]).unwrap_err();
-        assert!(err.to_string().contains("missing.png"), "{err}");
-        assert!(err.to_string().contains("hint:"), "{err}");
-    }
-
-    #[test]
-    fn npy_headers_are_numpy_s_and_pad_to_64_bytes() {
-        for shape in [&[240usize, 320][..], &[2, 3, 3], &[5]] {
-            let h = npy_header("<f4", shape);
-            assert_eq!(h.len() % 64, 0);
-            assert_eq!(&h[..8], b"\x93NUMPY\x01\x00");
-            assert_eq!(usize::from(u16::from_le_bytes([h[8], h[9]])), h.len() - 10);
-            assert_eq!(*h.last().unwrap(), b'\n');
-        }
-        let h = String::from_utf8(npy_header("|u1", &[240, 320])[10..].to_vec()).unwrap();
-        assert!(h.starts_with("{'descr': '|u1', 'fortran_order': False, 'shape': (240, 320), }"));
-        let h = String::from_utf8(npy_header("<f4", &[5])[10..].to_vec()).unwrap();
-        assert!(h.contains("'shape': (5,)"), "{h}");
-    }
 }

@@ -1,14 +1,14 @@
-//! The run manifest's writing side (its types and reading: [`clevrtex_scene::manifest`], re-exported
-//! here): the hashes of a run's files, and the atomic write of `MANIFEST-<start>-<end>-<k>of<n>.json`.
+//! The run manifest's writing side (its types and reading: [`crate::manifest::types`]): the
+//! hashes of a run's files, and the atomic write of `MANIFEST-<start>-<end>-<k>of<n>.json`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-pub use clevrtex_scene::manifest::*;
+use super::types::*;
 
-use crate::error::{RenderError, Result};
+use crate::error::{Error, Result};
 
 /// Size and hash of each of `files` (paths relative to `root`), in parallel.
 pub fn hash_files(root: &Path, files: &[String]) -> Result<BTreeMap<String, FileEntry>> {
@@ -17,7 +17,7 @@ pub fn hash_files(root: &Path, files: &[String]) -> Result<BTreeMap<String, File
         .map(|rel| {
             let path = root.join(rel);
             let bytes = std::fs::read(&path).map_err(|e| {
-                RenderError::io(
+                Error::io(
                     "cannot read",
                     &path,
                     e,
@@ -35,10 +35,10 @@ pub fn hash_files(root: &Path, files: &[String]) -> Result<BTreeMap<String, File
         .collect()
 }
 
-/// Writing a manifest (a trait: the type lives in the `scene` crate).
+/// Writing a manifest (a trait: the type is the reading side's, [`crate::manifest::types`]).
 pub trait WriteManifest {
     /// Write to `variant_dir/`[`Manifest::name`] with the one atomic writer
-    /// ([`clevrtex_scene::atomic`]: no temporary is left on error, a full disk included).
+    /// ([`crate::atomic`]: no temporary is left on error, a full disk included).
     fn write(&self, variant_dir: &Path) -> Result<PathBuf>;
 }
 
@@ -46,7 +46,7 @@ impl WriteManifest for Manifest {
     fn write(&self, variant_dir: &Path) -> Result<PathBuf> {
         let path = variant_dir.join(self.name());
         let text = serde_json::to_string_pretty(self).expect("manifest serialises") + "\n";
-        crate::post::write_file(&path, text.as_bytes())?;
+        crate::atomic::write(&path, text.as_bytes()).map_err(|e| Error::write(&path, e))?;
         Ok(path)
     }
 }
@@ -67,7 +67,7 @@ pub struct Plan {
 impl Plan {
     /// `OUT/clevrtex_<variant>/`.
     pub fn variant_dir(&self, out: &Path) -> PathBuf {
-        clevrtex_scene::layout::variant_dir(out, &self.run.variant)
+        crate::layout::variant_dir(out, &self.run.variant)
     }
 
     /// The manifest of this run's range and shard as an earlier run left it, if readable.
@@ -103,10 +103,10 @@ impl Plan {
     /// and shard) is not compared; others still are.
     pub fn check_settings(&self, out: &Path, overwrite: bool) -> Result<()> {
         let vdir = self.variant_dir(out);
-        let Ok(root) = crate::dataset::root(&vdir) else {
+        let Ok(root) = crate::dataset::files::root(&vdir) else {
             return Ok(());
         };
-        let Ok(entries) = crate::dataset::list(&root, &vdir) else {
+        let Ok(entries) = crate::dataset::files::list(&root, &vdir) else {
             return Ok(());
         };
         let run = Manifest {
@@ -114,7 +114,7 @@ impl Plan {
             ..self.run.clone()
         };
         for (name, path, kind) in entries {
-            if kind != crate::dataset::Kind::File || !is_manifest_name(&name) {
+            if kind != crate::dataset::files::Kind::File || !is_manifest_name(&name) {
                 continue;
             }
             // An unreadable manifest is `verify`'s to report; it claims nothing here.
@@ -126,7 +126,7 @@ impl Plan {
             }
             let differ = m.settings_differ(&run);
             if !differ.is_empty() {
-                return Err(RenderError::Refused(format!(
+                return Err(Error::Refused(format!(
                     "`{}` was written by a run of indices {}..{} with other settings (that run vs this one: {}): rendering here would mix two datasets under one manifest\nhint: pass another `--out` for these settings, or rerun with the settings of that manifest (its `command`) to resume or repair it",
                     path.display(),
                     m.start,
@@ -161,7 +161,7 @@ impl Plan {
     /// `seconds`: time per sample made by this run, by index; those of complete samples an
     /// earlier run made are kept from its manifest.
     pub fn write(&self, out: &Path, seconds: &BTreeMap<u64, f64>) -> Result<PathBuf> {
-        use clevrtex_scene::layout;
+        use crate::layout;
         let vdir = self.variant_dir(out);
         let earlier = self
             .earlier(out)
@@ -174,7 +174,7 @@ impl Plan {
         for index in self.run.indices() {
             let stem = layout::stem(&self.run.variant, index);
             let dir = layout::sample_dir(out, &self.run.variant, index);
-            let names = crate::output::expected_files(&stem, &self.passes, self.keep_exr);
+            let names = crate::layout::expected_files(&stem, &self.passes, self.keep_exr);
             if !names.iter().all(|n| dir.join(n).is_file()) {
                 continue;
             }

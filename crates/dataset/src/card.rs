@@ -14,9 +14,9 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use clevrtex_scene::dataset;
-use clevrtex_scene::layout::{self, Split};
-use clevrtex_scene::manifest::{merge_ranges, Manifest};
+use crate::dataset;
+use crate::layout::{self, Split};
+use crate::manifest::{merge_ranges, Manifest};
 use clevrtex_scene::Pass;
 
 /// The card's file name, in the dataset's `--out` folder.
@@ -370,7 +370,8 @@ pub fn write_card(out: &Path) -> Result<PathBuf, String> {
     let text = card_text(&title, &variants);
     let path = out.join(CARD_FILE);
     // The one atomic writer: a unique temporary, no link followed, removed on every error.
-    crate::post::write_file(&path, text.as_bytes()).map_err(|e| e.to_string())?;
+    crate::atomic::write(&path, text.as_bytes())
+        .map_err(|e| crate::Error::write(&path, e).to_string())?;
     drop(lock);
     Ok(path)
 }

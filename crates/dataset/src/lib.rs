@@ -1,0 +1,36 @@
+//! Everything about a clevrtex dataset on disk: the published layout and its names
+//! ([`layout`], with the names a scene file carries from `clevrtex_scene::names`), the one
+//! reader of a dataset folder ([`dataset`]: the walk, capped reads beneath the root, the typed
+//! metadata view, the splits), the run manifests ([`manifest`]: types, reading, writing), the
+//! one atomic writer ([`atomic`]), the range lock of a dataset folder ([`run_lock`]),
+//! `clevrtex verify` ([`verify`]), the WebDataset `export` ([`webdataset`]) and the dataset
+//! card ([`card`]).
+//!
+//! Nothing here starts Blender: `clevrtex-render` writes samples through [`layout`],
+//! [`atomic`] and [`manifest`], and every reader (`verify`, `export`, `report`, `eval`, the
+//! Python `Dataset`) reads through [`dataset`].
+//!
+//! ```
+//! use clevrtex_dataset::layout;
+//! use std::path::Path;
+//!
+//! let dir = layout::sample_dir(Path::new("out"), "camo", 4711);
+//! assert_eq!(dir, Path::new("out/clevrtex_camo/4"));
+//! let stem = layout::stem("camo", 4711);
+//! assert_eq!(layout::metadata_file(&stem), "CLEVRTEX_camo_004711.json");
+//! ```
+#![deny(missing_docs)]
+
+pub mod atomic;
+pub mod card;
+pub mod dataset;
+pub mod error;
+pub mod exr;
+pub mod layout;
+pub mod manifest;
+pub mod png;
+pub mod run_lock;
+pub mod verify;
+pub mod webdataset;
+
+pub use error::Error;

@@ -1,0 +1,118 @@
+//! What `verify` reports: per variant ([`VariantReport`]), each broken sample ([`Broken`]).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+use crate::manifest::{FileEntry, Manifest};
+
+/// One sample found on disk: its files by name, and the folder they are in.
+#[derive(Debug, Clone)]
+pub(super) struct Found {
+    /// The dataset root it was found under (canonical), which no link may leave.
+    pub(super) root: PathBuf,
+    /// Variant folder the sample is under (`.../clevrtex_<variant>`).
+    pub(super) variant_dir: PathBuf,
+    /// The sample's folder.
+    pub(super) dir: PathBuf,
+    /// File names in `dir` that belong to the stem.
+    pub(super) files: BTreeSet<String>,
+}
+
+/// A broken sample and why.
+#[derive(Debug, Clone, Serialize)]
+pub struct Broken {
+    /// Image index.
+    pub index: u64,
+    /// File stem.
+    pub stem: String,
+    /// The sample's folder.
+    pub dir: PathBuf,
+    /// What is wrong, one line each.
+    pub problems: Vec<String>,
+    /// Whether a run of the manifests covers the index, so rerunning its command remakes the
+    /// sample: only such samples are removed by `--remove-broken`.
+    pub rerun_remakes: bool,
+}
+
+/// The most missing indices listed one by one (all are counted in `missing_count`).
+pub const MAX_LISTED: usize = 1_000_000;
+
+/// What `verify` found for one variant.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct VariantReport {
+    /// Variant name.
+    pub variant: String,
+    /// Indices the run was to make (the union of the manifests' ranges, else `0..=max found`).
+    pub expected: u64,
+    /// Where the expected indices came from.
+    pub expected_from: String,
+    /// Complete, intact samples.
+    pub ok: u64,
+    /// Expected indices with no sample (the first [`MAX_LISTED`]).
+    pub missing: Vec<u64>,
+    /// How many expected indices have no sample.
+    pub missing_count: u64,
+    /// Indices found more than once, with each place (folder and stem: `0000001` and
+    /// `000001` are both index 1).
+    pub duplicates: BTreeMap<u64, Vec<PathBuf>>,
+    /// Samples found but broken.
+    pub broken: Vec<Broken>,
+    /// Samples whose index the run did not ask for.
+    pub unexpected: Vec<u64>,
+    /// Temporary files left by killed runs.
+    pub temp_files: Vec<PathBuf>,
+    /// Entries not followed or not read: links leading out of the dataset, FIFOs, devices,
+    /// files over the size cap (one line each, naming the path).
+    pub skipped: Vec<String>,
+    /// Manifests read.
+    pub manifests: Vec<PathBuf>,
+    /// Problems with the manifests themselves (unreadable, runs that did not finish, shards
+    /// that disagree or lack one).
+    pub manifest_problems: Vec<String>,
+    /// Entries of the failure ledgers: index -> error.
+    pub ledger: BTreeMap<u64, String>,
+    /// Each split's samples (of those found once) as index ranges `[first, last]`, by the one
+    /// split rule of every reader ([`crate::dataset::splits()`]: the recorded `split`, else by position).
+    pub splits: BTreeMap<String, Vec<[u64; 2]>>,
+    /// Commands to rerun after repair: those of the runs (from the manifests) whose indices
+    /// are missing or broken or that did not finish, with `--out` set to the folder verified.
+    pub commands: Vec<Vec<String>>,
+    /// The user materials (`--materials DIR`) the runs drew from, by name, as their manifests
+    /// record them (file, group, textures, content hash); two runs recording one name with
+    /// different contents is a manifest problem. Left out of the JSON when empty.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub user_materials: BTreeMap<String, crate::manifest::UserMaterial>,
+    /// The canonical roots of the datasets the variant was found in: what every delete of
+    /// [`super::remove_broken`] is made relative to.
+    #[serde(skip)]
+    pub roots: Vec<PathBuf>,
+}
+
+impl VariantReport {
+    /// Whether the variant is whole: every expected index once, intact, no temporary files,
+    /// nothing skipped, no manifest problems (every planned run finished).
+    pub fn is_whole(&self) -> bool {
+        self.missing_count == 0
+            && self.duplicates.is_empty()
+            && self.broken.is_empty()
+            && self.temp_files.is_empty()
+            && self.skipped.is_empty()
+            && self.manifest_problems.is_empty()
+    }
+}
+
+/// Options of a verification.
+#[derive(Debug, Clone, Default)]
+pub struct VerifyOptions {
+    /// Only this variant.
+    pub variant: Option<String>,
+}
+
+/// A manifest read: its path, its contents and the folder its run's rerun writes into.
+pub(super) type ReadManifest = (PathBuf, Manifest, PathBuf);
+
+/// Manifest entries by (variant folder, stem): file name -> the entries of every finished
+/// manifest that lists it (a later run with `--overwrite` may have changed the bytes).
+pub(super) type Entries = BTreeMap<(PathBuf, String), BTreeMap<String, Vec<FileEntry>>>;

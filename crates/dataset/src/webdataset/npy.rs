@@ -1,0 +1,107 @@
+//! A pass's PNG decoded into its NumPy `.npy` array ([`pass_npy`], [`npy_header`]).
+
+use clevrtex_scene::passes::WebdatasetForm;
+use clevrtex_scene::Pass;
+
+/// The `.npy` of a pass's PNG `bytes` (of the layout and encoding of the pass table:
+/// [`clevrtex_scene::passes`]): the mask's ids as `uint8 (H, W)` (a palette's indices, or an
+/// 8-bit grey image's values: the published ClevrTex's masks); depth in metres as `float32
+/// (H, W)`, background `+inf`; normals as `float32 (H, W, 3)` unit vectors, background
+/// `(0, 0, 0)`; the shadow amount as `float32 (H, W)` in `[0, 1]`. `Err` says why not, one line.
+pub fn pass_npy(pass: Pass, bytes: &[u8]) -> Result<Vec<u8>, String> {
+    use clevrtex_scene::passes::{DEPTH_BACKGROUND, DEPTH_SCALE_M, NORMAL_BACKGROUND};
+    let png = crate::png::decode(bytes)?;
+    let WebdatasetForm::Npy { descr, channels } = pass.spec().webdataset_form else {
+        return Err(format!(
+            "the {} pass is not stored as an array",
+            pass.name()
+        ));
+    };
+    let (w, h) = (png.width as usize, png.height as usize);
+    let layout = |bits: u8, ch: usize| -> Result<(), String> {
+        if png.bits == bits && png.channels == ch {
+            Ok(())
+        } else {
+            Err(format!(
+                "is a {}-bit {}-channel PNG, not the {bits}-bit {ch}-channel {} pass",
+                png.bits,
+                png.channels,
+                pass.name()
+            ))
+        }
+    };
+    let mut out = npy_header(
+        descr,
+        &[h, w, usize::from(channels)][..if channels == 1 { 2 } else { 3 }],
+    );
+    match pass {
+        Pass::Mask => {
+            layout(8, 1)?;
+            out.extend(png.data.iter().map(|&v| v as u8));
+        }
+        Pass::Depth => {
+            layout(16, 1)?;
+            for &v in &png.data {
+                let m = if v == DEPTH_BACKGROUND {
+                    f32::INFINITY
+                } else {
+                    (f64::from(v) * DEPTH_SCALE_M) as f32
+                };
+                out.extend(m.to_le_bytes());
+            }
+        }
+        Pass::Normal => {
+            layout(16, 3)?;
+            for px in png.data.chunks_exact(3) {
+                let n = if px == NORMAL_BACKGROUND {
+                    [0.0; 3]
+                } else {
+                    let v = [0, 1, 2].map(|i| f64::from(px[i]) / 65535.0 * 2.0 - 1.0);
+                    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                    if len > 0.0 {
+                        v.map(|c| c / len)
+                    } else {
+                        [0.0; 3]
+                    }
+                };
+                for c in n {
+                    out.extend((c as f32).to_le_bytes());
+                }
+            }
+        }
+        Pass::Shadow => {
+            layout(8, 1)?;
+            for &v in &png.data {
+                out.extend((f32::from(v) / 255.0).to_le_bytes());
+            }
+        }
+        Pass::Rgb | Pass::Albedo => {
+            return Err(format!(
+                "the {} pass is not stored as an array",
+                pass.name()
+            ))
+        }
+    }
+    Ok(out)
+}
+
+/// The header of a NumPy `.npy` file (format version 1.0) of C-order `shape` and dtype
+/// `descr`, padded with spaces so the data starts at a multiple of 64 bytes (NumPy's
+/// `numpy.lib.format`). Nothing in it depends on the machine: the same array, the same bytes.
+pub fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(ToString::to_string).collect();
+    let shape = match dims.len() {
+        1 => format!("({},)", dims[0]),
+        _ => format!("({})", dims.join(", ")),
+    };
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
+    // magic (6) + version (2) + length (2) + dict + '\n', to a multiple of 64.
+    let pad = (64 - (10 + dict.len() + 1) % 64) % 64;
+    dict.push_str(&" ".repeat(pad));
+    dict.push('\n');
+    let mut out = Vec::with_capacity(10 + dict.len());
+    out.extend(b"\x93NUMPY\x01\x00");
+    out.extend((dict.len() as u16).to_le_bytes());
+    out.extend(dict.as_bytes());
+    out
+}
