@@ -35,7 +35,7 @@ fn every_builtin_variant_loads() {
 
 #[test]
 fn base_scene_overrides_merge_over_the_builtin() {
-    let text = include_str!("../../../configs/camo.json").replacen(
+    let text = include_str!("../../../../configs/camo.json").replacen(
         "{",
         r#"{"base_scene": {"render": {"samples": 7}, "placement": {"margin": 0.1}},"#,
         1,
@@ -50,7 +50,7 @@ fn base_scene_overrides_merge_over_the_builtin() {
 #[test]
 fn shadow_samples_come_from_the_config_and_zero_is_refused() {
     let with = |v: &str| {
-        include_str!("../../../configs/full.json").replacen(
+        include_str!("../../../../configs/full.json").replacen(
             "{",
             &format!(r#"{{"base_scene": {{"render": {{"shadow_samples": {v}}}}},"#),
             1,
@@ -70,7 +70,7 @@ fn shadow_samples_come_from_the_config_and_zero_is_refused() {
 
 #[test]
 fn unknown_key_names_file_and_key() {
-    let text = include_str!("../../../configs/full.json").replacen(
+    let text = include_str!("../../../../configs/full.json").replacen(
         "\"shapes\"",
         "\"shapez\": [], \"shapes\"",
         1,
@@ -79,7 +79,7 @@ fn unknown_key_names_file_and_key() {
     assert_eq!(e.file, "my.json");
     assert_eq!(e.key, "objects.shapez");
     assert!(e.problem.contains("shapez"), "{e}");
-    let text = include_str!("../../../configs/full.json").replacen(
+    let text = include_str!("../../../../configs/full.json").replacen(
         "{",
         r#"{"base_scene": {"camera": {"fov": 1}},"#,
         1,
@@ -91,7 +91,7 @@ fn unknown_key_names_file_and_key() {
 
 #[test]
 fn unknown_names_and_empty_lists_are_errors() {
-    let full = include_str!("../../../configs/full.json");
+    let full = include_str!("../../../../configs/full.json");
     let e =
         Config::from_json_str(&full.replacen("\"monkey\"", "\"donkey\"", 1), "f.json").unwrap_err();
     assert_eq!(e.key, "objects.shapes[3]");
@@ -120,7 +120,7 @@ fn unknown_names_and_empty_lists_are_errors() {
 /// Including one names the built-in that plays its part.
 #[test]
 fn the_generators_clevr_base_names_may_be_excluded_not_included() {
-    let full = include_str!("../../../configs/full.json");
+    let full = include_str!("../../../../configs/full.json");
     let main = "\"sets\": [\n        \"main\"\n      ]";
     let with = |sel: &str| full.replacen(main, sel, 1);
     let c = Config::from_json_str(

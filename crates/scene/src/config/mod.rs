@@ -12,267 +12,29 @@ use std::collections::BTreeSet;
 use std::sync::OnceLock;
 
 use clevrtex_materials::Catalogue;
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 use serde_json::Value;
 
 use crate::bounds::{self, OutOfBounds};
 pub use crate::names::{Splits, KNOWN_SHAPES};
-use crate::scene_file::{Pass, RenderSettings};
+
+mod types;
+pub use types::*;
 
 /// The built-in base scene (the values of the public generator's `clevrtex-gen/generate.py`
 /// and `data/scene.blend`, karazijal/clevrtex-generation).
-pub const BASE_SCENE_JSON: &str = include_str!("../../../configs/base-scene.json");
+pub const BASE_SCENE_JSON: &str = include_str!("../../../../configs/base-scene.json");
 
 /// Built-in variants: name and file text, in the order `variant_names` lists them.
 const BUILTIN: [(&str, &str); 7] = [
-    ("full", include_str!("../../../configs/full.json")),
-    ("pbg", include_str!("../../../configs/pbg.json")),
-    ("vbg", include_str!("../../../configs/vbg.json")),
-    ("grassbg", include_str!("../../../configs/grassbg.json")),
-    ("camo", include_str!("../../../configs/camo.json")),
-    ("outd", include_str!("../../../configs/outd.json")),
-    ("clevr", include_str!("../../../configs/clevr.json")),
+    ("full", include_str!("../../../../configs/full.json")),
+    ("pbg", include_str!("../../../../configs/pbg.json")),
+    ("vbg", include_str!("../../../../configs/vbg.json")),
+    ("grassbg", include_str!("../../../../configs/grassbg.json")),
+    ("camo", include_str!("../../../../configs/camo.json")),
+    ("outd", include_str!("../../../../configs/outd.json")),
+    ("clevr", include_str!("../../../../configs/clevr.json")),
 ];
-
-/// A config that failed to load: the file, the key and the value at fault, and what to do.
-///
-/// An unknown `--variant` (file `--variant`) reads `unknown variant `x``; an error in the whole
-/// document (key `.`, e.g. bad JSON) names no key.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ConfigError {
-    /// The file (or built-in name) the config came from.
-    pub file: String,
-    /// Dotted path of the offending key (`.` for the whole document).
-    pub key: String,
-    /// The offending value, when there is one.
-    pub value: Option<String>,
-    /// What is wrong.
-    pub problem: String,
-    /// What to do about it.
-    pub hint: String,
-}
-
-impl std::fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let value = self
-            .value
-            .as_ref()
-            .map(|v| format!(" (value `{v}`)"))
-            .unwrap_or_default();
-        let (file, key, problem, hint) = (&self.file, &self.key, &self.problem, &self.hint);
-        match (file.as_str(), key.as_str()) {
-            ("--variant", _) => write!(
-                f,
-                "{problem} `{}`",
-                self.value.as_deref().unwrap_or_default()
-            )?,
-            (_, ".") => write!(f, "invalid config `{file}`: {problem}")?,
-            _ => write!(f, "invalid config `{file}`: key `{key}`{value}: {problem}")?,
-        }
-        write!(f, "\nhint: {hint}")
-    }
-}
-
-impl std::error::Error for ConfigError {}
-
-/// A size class: name and the scale applied to the unit mesh.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SizeRule {
-    /// `large`, `medium`, `small` or any name.
-    pub name: String,
-    /// Scale factor (also the object's radius in the spacing rule).
-    pub scale: f64,
-}
-
-/// A named colour in sRGB 0-255, as CLEVR lists them.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ColorRule {
-    /// Colour name recorded in metadata.
-    pub name: String,
-    /// sRGB components, 0-255.
-    pub srgb: [u8; 3],
-}
-
-impl ColorRule {
-    /// The colour in linear RGB (the sRGB transfer function undone), as Blender wants it.
-    pub fn linear(&self) -> [f64; 3] {
-        self.srgb.map(clevrtex_materials::srgb_to_linear)
-    }
-}
-
-/// Object rules of a variant, with the material list resolved to names.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ObjectRules {
-    /// Inclusive range of the object count, drawn uniformly once per image.
-    pub count: [u32; 2],
-    /// Shapes, drawn uniformly.
-    pub shapes: Vec<String>,
-    /// Sizes, drawn uniformly.
-    pub sizes: Vec<SizeRule>,
-    /// Material names, drawn uniformly (sorted, no duplicates).
-    pub materials: Vec<String>,
-    /// Colours, drawn uniformly; empty when the variant does not colour objects.
-    pub colors: Vec<ColorRule>,
-    /// Displacement strength recorded on object materials that displace (`objects.displacement`);
-    /// `None` (the default) = objects use bump only.
-    pub displacement: Option<f64>,
-    /// Catalogue materials that set up true displacement; filled only when `displacement` is
-    /// set.
-    pub displacing: BTreeSet<String>,
-}
-
-impl ObjectRules {
-    /// The displacement strength to record on an object instance of material `name`.
-    pub fn displacement_for(&self, name: &str) -> Option<f64> {
-        self.displacement.filter(|_| self.displacing.contains(name))
-    }
-}
-
-/// Background rules of a variant.
-#[derive(Debug, Clone, PartialEq)]
-pub struct BackgroundRules {
-    /// Material names, drawn uniformly (the object's material when `same_material`).
-    pub materials: Vec<String>,
-    /// Displacement strength of the backdrop material, if it displaces.
-    pub displacement: Option<f64>,
-    /// Texture scale of the backdrop material, if set.
-    pub scale: Option<f64>,
-}
-
-/// Camera of the base scene before jitter.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CameraRig {
-    /// Location before jitter.
-    pub location: [f64; 3],
-    /// Point tracked.
-    pub look_at: [f64; 3],
-    /// Each coordinate of `location` moves by Uniform(-jitter, jitter).
-    pub jitter: f64,
-    /// Focal length, mm.
-    pub focal_length_mm: f64,
-    /// Sensor width, mm (sensor fit `AUTO`).
-    pub sensor_width_mm: f64,
-    /// Near clip.
-    pub clip_start: f64,
-    /// Far clip.
-    pub clip_end: f64,
-}
-
-/// An area light of the base scene before jitter.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct LightRig {
-    /// `key`, `fill`, `back`.
-    pub name: String,
-    /// Location before jitter.
-    pub location: [f64; 3],
-    /// Point tracked.
-    pub look_at: [f64; 3],
-    /// Each coordinate of `location` moves by Uniform(-jitter, jitter).
-    pub jitter: f64,
-    /// Side of the square, m.
-    pub size: f64,
-    /// Power, W.
-    pub energy: f64,
-    /// Linear RGB.
-    pub color: [f64; 3],
-}
-
-/// The sun of the base scene.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SunRig {
-    /// Direction the light travels (normalised by the sampler).
-    pub direction: [f64; 3],
-    /// Strength.
-    pub strength: f64,
-    /// Angular diameter, rad.
-    pub angle: f64,
-}
-
-/// The backdrop's shape.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct BackdropShape {
-    /// `[x, height]` profile points, x increasing.
-    pub profile: Vec<[f64; 2]>,
-    /// Extent along the backdrop's y.
-    pub y_range: [f64; 2],
-    /// Rotation about world z, rad.
-    pub rotation_z: f64,
-}
-
-/// Placement rules (as the public generator's `clevrtex-gen/generate.py` places objects,
-/// karazijal/clevrtex-generation; Karazija et al., NeurIPS 2021 Datasets and Benchmarks).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Placement {
-    /// Object centres are drawn from `[area.0, area.1]^2`.
-    pub area: [f64; 2],
-    /// Minimum gap between two objects' radii.
-    pub min_dist: f64,
-    /// Projected offsets along left/right/front/behind must not fall in `(0, margin)`.
-    pub margin: f64,
-    /// Position draws per object before the whole layout restarts.
-    pub tries_per_object: u32,
-    /// Layout restarts before giving up with an error.
-    pub max_restarts: u32,
-    /// Divide a placed cube's recorded radius by sqrt(2), as CLEVR does.
-    pub cube_radius_quirk: bool,
-}
-
-/// The base scene: everything that is the same for every variant.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct BaseScene {
-    /// Render defaults.
-    pub render: RenderSettings,
-    /// Passes requested by default.
-    pub passes: Vec<Pass>,
-    /// Camera.
-    pub camera: CameraRig,
-    /// Area lights.
-    pub lights: Vec<LightRig>,
-    /// Sun.
-    pub sun: SunRig,
-    /// Backdrop.
-    pub backdrop: BackdropShape,
-    /// Placement rules.
-    pub placement: Placement,
-}
-
-/// A loaded and validated config.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Config {
-    /// Variant name, used in file names (`[A-Za-z0-9_-]+`).
-    pub name: String,
-    /// One line saying what the variant is.
-    pub description: String,
-    /// Split rule.
-    pub splits: Splits,
-    /// One material per scene, on every object and the background (CAMO).
-    pub same_material: bool,
-    /// Object rules.
-    pub objects: ObjectRules,
-    /// Background rules.
-    pub background: BackgroundRules,
-    /// Base scene.
-    pub base: BaseScene,
-}
-
-impl Config {
-    /// Whether the variant's objects are plain-coloured (its config lists `objects.colors`, as
-    /// `vbg` and `clevr` do): their colour is then a property worth scoring by, so `eval` and
-    /// the Python `Dataset` break results down and report metadata by colour.
-    pub fn colour_breakdown(&self) -> bool {
-        !self.objects.colors.is_empty()
-    }
-}
-
-// ---- file shapes -------------------------------------------------------------------------
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -862,5 +624,4 @@ fn resolve(
 }
 
 #[cfg(test)]
-#[path = "config_tests.rs"]
 mod tests;
