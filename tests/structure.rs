@@ -83,7 +83,6 @@ fn long_files(root: &Path) -> (Vec<(PathBuf, usize)>, usize) {
 }
 
 #[test]
-#[ignore = "issue 36: enabled once the dataset crate lands"]
 fn no_source_file_over_700_lines() {
     let (long, counted) = long_files(&repo_root());
     eprintln!("{counted} source files counted (tests and dev/ probes left out)");
@@ -636,7 +635,6 @@ fn crate_circles(crates_dir: &Path) -> (Vec<String>, Vec<(PathBuf, usize)>) {
 }
 
 #[test]
-#[ignore = "issue 36: enabled once the dataset crate lands"]
 fn no_circle_of_files_inside_a_crate() {
     let crates_dir = repo_root().join("crates");
     let (found, sizes) = crate_circles(&crates_dir);
