@@ -84,6 +84,23 @@ def _coords(g, recipe, instance):
     return p, tc.outputs["Normal"]
 
 
+def _principled(g, color, rough, metal, specular, albedo):
+    """The Principled BSDF of a material (recipe or PBR folder) with its base colour, roughness,
+    metallic and specular set, and, where the albedo pass is asked for, the albedo AOV fed the
+    same base colour (the pass is the material's base colour)."""
+    bsdf = g.node("ShaderNodeBsdfPrincipled")
+    compat.setup_principled(bsdf)
+    _set_bsdf(g, bsdf, "Base Color", color)
+    if albedo:
+        aov = g.node("ShaderNodeOutputAOV")
+        compat.set_aov_name(aov, ALBEDO_AOV)
+        g.set(aov.inputs["Color"], color)
+    _set_bsdf(g, bsdf, "Roughness", rough)
+    _set_bsdf(g, bsdf, "Metallic", metal)
+    _set_bsdf(g, bsdf, "Specular", specular)
+    return bsdf
+
+
 def _set_bsdf(g, bsdf, name, value):
     """Set a Principled BSDF input named as in Blender 3.x (`compat.principled_input`);
     skipped where this Blender has no such input."""
@@ -116,16 +133,7 @@ def _build_layers(nt, out, recipe, instance, displace, albedo=False):
 
     color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"))
     surf = recipe.get("surface") or {}
-    bsdf = g.node("ShaderNodeBsdfPrincipled")
-    compat.setup_principled(bsdf)
-    _set_bsdf(g, bsdf, "Base Color", color)
-    if albedo:
-        aov = g.node("ShaderNodeOutputAOV")
-        compat.set_aov_name(aov, ALBEDO_AOV)
-        g.set(aov.inputs["Color"], color)
-    _set_bsdf(g, bsdf, "Roughness", rough)
-    _set_bsdf(g, bsdf, "Metallic", metal)
-    _set_bsdf(g, bsdf, "Specular", surf.get("specular", 0.5))
+    bsdf = _principled(g, color, rough, metal, surf.get("specular", 0.5), albedo)
     if surf.get("sheen", 0.0) > 0:
         _set_bsdf(g, bsdf, "Sheen", surf["sheen"])
     if surf.get("coat", 0.0) > 0:
@@ -546,16 +554,7 @@ def _build_pbr(nt, out, name, recipe, instance, displace, albedo=False):
     rough = rough[0] if rough else (arm[1] if arm else 0.5)
     metal = metal[0] if metal else (arm[2] if arm else 0.0)
 
-    bsdf = g.node("ShaderNodeBsdfPrincipled")
-    compat.setup_principled(bsdf)
-    _set_bsdf(g, bsdf, "Base Color", color)
-    if albedo:
-        aov = g.node("ShaderNodeOutputAOV")
-        compat.set_aov_name(aov, ALBEDO_AOV)
-        g.set(aov.inputs["Color"], color)
-    _set_bsdf(g, bsdf, "Roughness", rough)
-    _set_bsdf(g, bsdf, "Metallic", metal)
-    _set_bsdf(g, bsdf, "Specular", 0.5)
+    bsdf = _principled(g, color, rough, metal, 0.5, albedo)
     if maps.get("normal"):
         img = _pbr_image(name, maps["normal"], True)
         dx = recipe.get("normal_convention") == "dx"
