@@ -282,7 +282,7 @@ fn png_header(w: u32, h: u32) -> Vec<u8> {
         body.extend(data);
         let mut out = (data.len() as u32).to_be_bytes().to_vec();
         out.extend(&body);
-        out.extend(crc32(&body).to_be_bytes());
+        out.extend(crc32fast::hash(&body).to_be_bytes());
         out
     };
     let mut ihdr = w.to_be_bytes().to_vec();
@@ -293,21 +293,6 @@ fn png_header(w: u32, h: u32) -> Vec<u8> {
     out.extend(chunk(b"IDAT", &[0x78, 0x9c, 0x63, 0x60]));
     out.extend(chunk(b"IEND", &[]));
     out
-}
-
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut c = 0xffff_ffffu32;
-    for &b in bytes {
-        c ^= u32::from(b);
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                0xedb8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
 }
 
 /// Every bad input of the issue is refused before rendering, naming material and file.

@@ -32,21 +32,6 @@ fn seed(name: &str) -> Vec<u8> {
     corpus().into_iter().find(|(n, _)| n == name).unwrap().1
 }
 
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            crc = if crc & 1 != 0 {
-                (crc >> 1) ^ 0xEDB8_8320
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    !crc
-}
-
 /// Recompute the CRC of every PNG chunk whose length still fits.
 fn fix_png_crcs(b: &mut [u8]) {
     let mut pos = 8;
@@ -56,7 +41,7 @@ fn fix_png_crcs(b: &mut [u8]) {
             Some(e) if e + 4 <= b.len() => e,
             _ => break,
         };
-        let crc = crc32(&b[pos + 4..end]);
+        let crc = crc32fast::hash(&b[pos + 4..end]);
         b[end..end + 4].copy_from_slice(&crc.to_be_bytes());
         pos = end + 4;
     }
