@@ -269,8 +269,29 @@ fn hand_sample(out: &std::path::Path, index: u64, meta: serde_json::Value, png_b
     }
     std::fs::write(sub.join(format!("{stem}.json")), meta.to_string()).unwrap();
     if png_bytes > 0 {
-        std::fs::write(sub.join(format!("{stem}.png")), vec![7u8; png_bytes]).unwrap();
+        std::fs::write(sub.join(format!("{stem}.png")), noise_png(png_bytes)).unwrap();
     }
+}
+
+/// An RGB PNG of noise, about `bytes` long (noise does not compress): export checks every
+/// pass as the readers do, so a stand-in image must be a real one.
+fn noise_png(bytes: usize) -> Vec<u8> {
+    let h = (bytes / 96).max(1) as u32;
+    let mut x = 0x2545_f491_u32;
+    let img = image::RgbImage::from_fn(32, h, |_, _| {
+        let mut px = [0u8; 3];
+        for c in &mut px {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            *c = x as u8;
+        }
+        image::Rgb(px)
+    });
+    let mut out = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+        .unwrap();
+    out
 }
 
 /// `clevrtex export DIR OUT extra...`, killed (a failure) after a minute.

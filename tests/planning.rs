@@ -185,7 +185,7 @@ fn estimate_refuses_bad_input_before_writing_anything() {
         text(&o)
     );
     // Calibration that cannot render (every worker crashes): a clear error, not a guess.
-    let o = run(&["-n", "10", "--calibrate", "1", "--retries", "0"]);
+    let o = run(&["-n", "10", "--calibrate", "2", "--retries", "0"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(
         text(&o)
