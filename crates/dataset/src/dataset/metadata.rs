@@ -286,6 +286,15 @@ pub fn check_metadata(meta: &Value, file: &str) -> Result<(), MetadataError> {
     Ok(())
 }
 
+/// [`check_metadata`] of a metadata file's `bytes` (the file `file`, for messages): JSON first
+/// (serde_json's: no NaN, nesting bounded), then the checks every reader makes. For readers
+/// that hand the bytes on (the Python `Dataset`): the CLI's rules, not a second copy of them.
+pub fn check_metadata_bytes(bytes: &[u8], file: &str) -> Result<(), String> {
+    let meta: Value = serde_json::from_slice(bytes)
+        .map_err(|e| format!("`{file}` is not valid metadata: {e}"))?;
+    check_metadata(&meta, file).map_err(|e| e.to_string())
+}
+
 /// The passes whose `*_filename` key ([`Pass::metadata_key`], the pass table's) the metadata `meta` of
 /// `stem` sets, in pass-table order: each must name the layout's file (or be null, absent:
 /// not written). File names come from the layout, never from the metadata.
