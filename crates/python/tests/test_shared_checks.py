@@ -55,7 +55,7 @@ def test_tuple_form_refuses_a_mask_id_past_the_objects_as_the_dict_form_does(tmp
     mask = gt / "clevrtex_vbg" / "0" / "CLEVRTEX_vbg_000001_flat.png"
     im = Image.open(mask)
     a = np.array(im)
-    a[0, 0] = 200
+    a[a.shape[0] // 2 - 2 : a.shape[0] // 2 + 2, a.shape[1] // 2 - 2 : a.shape[1] // 2 + 2] = 200  # kept by the crop
     out = Image.fromarray(a)
     if im.mode == "P":
         out = out.convert("P")
@@ -63,7 +63,7 @@ def test_tuple_form_refuses_a_mask_id_past_the_objects_as_the_dict_form_does(tmp
     out.save(mask)
     for crop in (False, True):
         for as_dict in (False, True):
-            ds = clevrtex.Dataset(str(gt), "vbg", split="all", crop=crop, as_dict=as_dict, max_objects=10 if as_dict else None, return_metadata=False)
+            ds = clevrtex.Dataset(str(gt), "vbg", split="all", crop=crop, resize=(128, 128) if crop else None, as_dict=as_dict, max_objects=10 if as_dict else None, return_metadata=False)
             with pytest.raises(ValueError, match=r"holds id 200 but the metadata lists 2 objects"):
                 ds[1]
 
