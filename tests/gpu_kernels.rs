@@ -374,8 +374,9 @@ fn setup_refuses_a_malformed_cuda_arch_list_and_cuda_arch_without_bpy_up_front()
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
     let t = text(&o);
     assert!(
-        t.contains("`--cuda-arch` prepares the kernels of PyPI's bpy, and there is none in .venv-bpy")
-            && t.contains("hint: add `--bpy 4.5`"),
+        t.contains(
+            "`--cuda-arch` prepares the kernels of PyPI's bpy, and there is none in .venv-bpy"
+        ) && t.contains("hint: add `--bpy 4.5`"),
         "{t}"
     );
     assert!(!t.contains("apt"), "refused after the apt step: {t}");
