@@ -50,7 +50,18 @@ class Refused(Exception):
 def parse_archs(text):
     """`80,90`, `8.0,9.0` or `sm_80,sm_90` -> [80, 90]; anything else is refused (exit 2)."""
     out = []
-    for tok in [t.strip() for t in text.split(",") if t.strip()]:
+    if not text.strip():
+        raise Refused("`--cuda-arch` is empty", "hint: e.g. `--cuda-arch 80,90`", code=2)
+    for tok in text.split(","):
+        # Every entry as given: an empty one (`80,,90`, `,80`, `80,`) or one with spaces
+        # (`" 80"`) is a typo, refused like any other, not passed over.
+        if not tok or tok != tok.strip():
+            raise Refused(
+                f"`--cuda-arch {text}` has an empty entry" if not tok
+                else f"`--cuda-arch {text}` has an entry with spaces (`{tok}`)",
+                "hint: pass compute capabilities separated by commas alone, e.g. `--cuda-arch 80,90`",
+                code=2,
+            )
         m = re.fullmatch(r"(?:sm_|compute_)?(\d{1,2})(?:\.(\d))?", tok)
         cc = None
         if m:

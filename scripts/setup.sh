@@ -56,6 +56,13 @@ while [ $# -gt 0 ]; do
   esac
   shift
 done
+# Refused up front (exit 2), before the apt step: `--cuda-arch` prepares the kernels of
+# PyPI's bpy, which must be there or come with `--bpy`.
+if [ -n "$cuda_arch" ] && [ -z "$bpy" ] && [ ! -x .venv-bpy/bin/python ]; then
+  echo "setup.sh: \`--cuda-arch\` prepares the kernels of PyPI's bpy, and there is none in .venv-bpy" >&2
+  echo "hint: add \`--bpy 4.5\`" >&2
+  exit 2
+fi
 
 # Every Debian package in one apt run.
 need=()
@@ -130,11 +137,6 @@ if [ "$ptxas" = 1 ]; then
   python3 scripts/cuda_kernels.py --install-ptxas --cuda-venv .venv-cuda
 fi
 if [ -n "$cuda_arch" ]; then
-  if [ -z "$bpy" ] && [ ! -x .venv-bpy/bin/python ]; then
-    echo "setup.sh: \`--cuda-arch\` prepares the kernels of PyPI's bpy, and there is none in .venv-bpy" >&2
-    echo "hint: add \`--bpy 4.5\`" >&2
-    exit 1
-  fi
   python3 scripts/cuda_kernels.py --cuda-arch "$cuda_arch" --bpy-python .venv-bpy/bin/python --cuda-venv .venv-cuda
 fi
 echo "blender: $(blender --version 2>/dev/null | head -n 1)"

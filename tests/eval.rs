@@ -340,6 +340,19 @@ fn eval_corrupt_and_unsupported_predictions() {
         text(&out)
     );
 
+    // A 0-d array (issue 42): its shape is named, and the ground truth's is not made up from
+    // it (it said "ground truth is (0, 128, 128)").
+    std::fs::write(&bad, npy_i32(&[], &[5])).unwrap();
+    let out = run(&["eval", s(dir.path()), s(&gt()), "--split", "all"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(
+        stderr(&out).contains(
+            "prediction is (), ground truth is (K, 128, 128) soft masks or (128, 128) segment ids"
+        ),
+        "{}",
+        text(&out)
+    );
+
     // An RGB PNG is not a segment-id mask.
     std::fs::remove_file(&bad).unwrap();
     std::fs::copy(
@@ -1283,6 +1296,8 @@ fn eval_names_a_ground_truth_sample_without_its_image() {
         let t = text(&out);
         assert_eq!(out.status.code(), Some(1), "{how}: {t}");
         assert!(t.contains("CLEVRTEX_vbg_000009.png"), "{how}: {t}");
+        // Issue 42: a FIFO was called "skipped" by a run that stopped (exit 1) over it.
+        assert!(!t.contains("skipped"), "{how}: {t}");
     }
 }
 

@@ -269,8 +269,29 @@ fn hand_sample(out: &std::path::Path, index: u64, meta: serde_json::Value, png_b
     }
     std::fs::write(sub.join(format!("{stem}.json")), meta.to_string()).unwrap();
     if png_bytes > 0 {
-        std::fs::write(sub.join(format!("{stem}.png")), vec![7u8; png_bytes]).unwrap();
+        std::fs::write(sub.join(format!("{stem}.png")), noise_png(png_bytes)).unwrap();
     }
+}
+
+/// An RGB PNG of noise, about `bytes` long (noise does not compress): export checks every
+/// pass as the readers do, so a stand-in image must be a real one.
+fn noise_png(bytes: usize) -> Vec<u8> {
+    let h = (bytes / 96).max(1) as u32;
+    let mut x = 0x2545_f491_u32;
+    let img = image::RgbImage::from_fn(32, h, |_, _| {
+        let mut px = [0u8; 3];
+        for c in &mut px {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            *c = x as u8;
+        }
+        image::Rgb(px)
+    });
+    let mut out = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+        .unwrap();
+    out
 }
 
 /// `clevrtex export DIR OUT extra...`, killed (a failure) after a minute.
@@ -497,4 +518,220 @@ fn export_refuses_an_out_inside_the_dataset() {
     }
     let (code, t) = export(&data, &dir.path().join("wds"), &[]);
     assert_eq!(code, Some(0), "{t}");
+}
+
+/// A sample of our layout written by hand: metadata with the size 32x24, `n` objects and the
+/// passes of `files` (suffix, PNG bytes, pass name), so that every reader types it whole.
+fn checked_sample(out: &std::path::Path, index: u64, n: usize, files: &[(&str, Vec<u8>, &str)]) {
+    let sub = out.join(format!("clevrtex_clevr/{}", index / 1000));
+    std::fs::create_dir_all(&sub).unwrap();
+    let stem = format!("CLEVRTEX_clevr_{index:06}");
+    let mut meta = serde_json::json!({
+        "image_index": index, "variant": "clevr", "split": "train",
+        "render": {"width": 32, "height": 24}, "num_objects": n,
+        "objects": vec![serde_json::json!({}); n], "passes": {},
+    });
+    for (suffix, bytes, pass) in files {
+        let name = format!("{stem}{suffix}.png");
+        std::fs::write(sub.join(&name), bytes).unwrap();
+        let key = if *pass == "rgb" {
+            "image_filename".to_string()
+        } else {
+            format!("{pass}_filename")
+        };
+        meta[key] = name.into();
+        meta["passes"][*pass] = serde_json::json!({});
+    }
+    std::fs::write(sub.join(format!("{stem}.json")), meta.to_string()).unwrap();
+}
+
+fn png_of(img: impl Into<image::DynamicImage>) -> Vec<u8> {
+    let mut out = Vec::new();
+    img.into()
+        .write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+        .unwrap();
+    out
+}
+
+/// Issue 42, finding 7: `export` packed what every other reader refuses. Its passes now go
+/// through the checks of `verify` (`check_pass_png`): each refused sample is left out by name,
+/// exit 3, and the others are packed.
+#[test]
+fn export_leaves_out_the_samples_every_reader_refuses() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let rgb = || {
+        png_of(image::RgbImage::from_pixel(
+            32,
+            24,
+            image::Rgb([90, 120, 150]),
+        ))
+    };
+    let mask = |w, h, id| png_of(image::GrayImage::from_pixel(w, h, image::Luma([id])));
+    let depth = |w, h| {
+        png_of(
+            image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(
+                w,
+                h,
+                image::Luma([900u16]),
+            ),
+        )
+    };
+    checked_sample(
+        &data,
+        0,
+        4,
+        &[
+            ("", rgb(), "rgb"),
+            ("_flat", mask(32, 24, 4), "mask"),
+            ("_depth_0001", depth(32, 24), "depth"),
+        ],
+    );
+    checked_sample(
+        &data,
+        1,
+        4,
+        &[("", rgb(), "rgb"), ("_flat", mask(4096, 4096, 1), "mask")],
+    );
+    checked_sample(
+        &data,
+        2,
+        4,
+        &[("", rgb(), "rgb"), ("_depth_0001", depth(33, 24), "depth")],
+    );
+    // A header declaring 100000x100000 (never decoded).
+    let mut huge = rgb();
+    huge[16..20].copy_from_slice(&100_000u32.to_be_bytes());
+    huge[20..24].copy_from_slice(&100_000u32.to_be_bytes());
+    checked_sample(&data, 3, 4, &[("", huge, "rgb")]);
+    checked_sample(
+        &data,
+        4,
+        4,
+        &[("", rgb(), "rgb"), ("_flat", mask(32, 24, 200), "mask")],
+    );
+    let albedo = rgb();
+    checked_sample(
+        &data,
+        5,
+        4,
+        &[
+            ("", rgb(), "rgb"),
+            (
+                "_albedo_0001",
+                albedo[..albedo.len() / 2].to_vec(),
+                "albedo",
+            ),
+        ],
+    );
+    let out = dir.path().join("wds");
+    let (code, t) = export(&data, &out, &[]);
+    assert_eq!(code, Some(3), "{t}");
+    for (index, what) in [
+        (
+            1,
+            "CLEVRTEX_clevr_000001_flat.png` is 4096x4096 (the metadata says 32x24)",
+        ),
+        (
+            2,
+            "CLEVRTEX_clevr_000002_depth_0001.png` is 33x24 (the metadata says 32x24)",
+        ),
+        (
+            3,
+            "CLEVRTEX_clevr_000003.png` is 100000x100000 (the metadata says 32x24)",
+        ),
+        (4, "mask has id 200 but the metadata has 4 objects"),
+        (
+            5,
+            "CLEVRTEX_clevr_000005_albedo_0001.png`: cannot decode PNG",
+        ),
+    ] {
+        assert!(t.contains(what), "sample {index}: {t}");
+        assert!(
+            t.contains(&format!("(sample `CLEVRTEX_clevr_{index:06}` left out)")),
+            "{index}: {t}"
+        );
+    }
+    assert_eq!(
+        members(&out.join("clevr-train-000000.tar")),
+        [
+            "CLEVRTEX_clevr_000000.png",
+            "CLEVRTEX_clevr_000000.mask.npy",
+            "CLEVRTEX_clevr_000000.depth.npy",
+            "CLEVRTEX_clevr_000000.json"
+        ]
+    );
+}
+
+/// Issue 42, minor: a killed `export` left its temporary shard, which the rerun kept. The rerun
+/// removes the temporaries it can prove are a dead export's (a shard's name, this host, a dead
+/// owner, a tar), and nothing else.
+#[test]
+fn export_removes_the_temporary_shards_of_killed_exports_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    hand_sample(&data, 0, serde_json::json!({}), 100);
+    let out = dir.path().join("wds");
+    std::fs::create_dir_all(&out).unwrap();
+    let mut tar = tar::Builder::new(Vec::new());
+    let mut h = tar::Header::new_ustar();
+    h.set_size(4);
+    h.set_cksum();
+    tar.append_data(&mut h, "x.png", &b"half"[..]).unwrap();
+    let tar = tar.into_inner().unwrap();
+    let mut gone = std::process::Command::new("true").spawn().unwrap();
+    let dead = gone.id();
+    gone.wait().unwrap();
+    let me = std::process::id();
+    let my_start = {
+        let stat = std::fs::read_to_string("/proc/self/stat").unwrap();
+        let rest = stat[stat.rfind(')').unwrap() + 1..].to_string();
+        rest.split_whitespace().nth(19).unwrap().to_string()
+    };
+    let killed = out.join(format!("clevr-train-000003.tar.h42.{dead}.1.clevrtex-tmp"));
+    let live = out.join(format!(
+        "clevr-train-000004.tar.h42.{me}.{my_start}.clevrtex-tmp"
+    ));
+    let other_host = out.join(format!(
+        "clevr-train-000005.tar.elsewhere.{dead}.1.clevrtex-tmp"
+    ));
+    let not_a_shard = out.join(format!("notes.tar.h42.{dead}.1.clevrtex-tmp"));
+    let not_a_tar = out.join(format!("clevr-train-000006.tar.h42.{dead}.1.clevrtex-tmp"));
+    for p in [&killed, &live, &other_host, &not_a_shard] {
+        std::fs::write(p, &tar).unwrap();
+    }
+    std::fs::write(&not_a_tar, vec![7u8; 1024]).unwrap();
+    let o = clevrtex()
+        .arg("export")
+        .arg(&data)
+        .arg(&out)
+        .env("CLEVRTEX_HOST", "h42")
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(!killed.exists(), "{t}");
+    assert!(
+        t.contains("removed 1 temporary shard(s) of killed exports: clevr-train-000003.tar."),
+        "{t}"
+    );
+    for p in [&live, &other_host, &not_a_shard, &not_a_tar] {
+        assert!(p.is_file(), "`{}` was removed: {t}", p.display());
+    }
+}
+
+/// Issue 42, minor: `--shard-size 1` was accepted by `--help`'s range and refused by the
+/// command with another one. One range, 10240 to 10^12, in both (and in README.md).
+#[test]
+fn shard_size_has_one_range() {
+    let o = clevrtex()
+        .args(["export", "--shard-size", "10239", "a", "b"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("10240..=1000000000000"), "{}", text(&o));
+    let help = clevrtex().args(["export", "--help"]).output().unwrap();
+    assert!(text(&help).contains("10240 to 10^12"), "{}", text(&help));
+    let readme = std::fs::read_to_string(crate::util::repo_root().join("README.md")).unwrap();
+    assert!(readme.contains("| `--shard-size` (`export`) | 10240 to 10^12 bytes |"));
 }

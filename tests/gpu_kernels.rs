@@ -340,3 +340,44 @@ write("gpu_mask", 4, 3, mask_flip=True)
         text(&o)
     );
 }
+
+/// Issue 42, minor: `setup.sh --cuda-arch 80,,90` (also `,80`, `80,`, `" 80"`) passed the
+/// up-front check, and `--cuda-arch` without `--bpy` (and no `.venv-bpy`) was refused only
+/// after the apt step. Both are refused first (exit 2), before anything is installed: run
+/// from a copy of `scripts/` in an empty folder, so no `.venv-bpy` of this checkout counts.
+#[test]
+fn setup_refuses_a_malformed_cuda_arch_list_and_cuda_arch_without_bpy_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let scripts = dir.path().join("scripts");
+    std::fs::create_dir_all(&scripts).unwrap();
+    for f in ["setup.sh", "cuda_kernels.py"] {
+        std::fs::copy(repo_root().join("scripts").join(f), scripts.join(f)).unwrap();
+    }
+    let setup = |args: &[&str]| {
+        Command::new("bash")
+            .arg(scripts.join("setup.sh"))
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    for (list, what) in [
+        ("80,,90", "has an empty entry"),
+        (",80", "has an empty entry"),
+        ("80,", "has an empty entry"),
+        (" 80", "has an entry with spaces (` 80`)"),
+    ] {
+        let o = setup(&["--bpy", "4.5", "--cuda-arch", list]);
+        assert_eq!(o.status.code(), Some(2), "{list:?}: {}", text(&o));
+        assert!(text(&o).contains(what), "{list:?}: {}", text(&o));
+    }
+    let o = setup(&["--cuda-arch", "80"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    let t = text(&o);
+    assert!(
+        t.contains(
+            "`--cuda-arch` prepares the kernels of PyPI's bpy, and there is none in .venv-bpy"
+        ) && t.contains("hint: add `--bpy 4.5`"),
+        "{t}"
+    );
+    assert!(!t.contains("apt"), "refused after the apt step: {t}");
+}

@@ -330,3 +330,142 @@ fn a_lock_holders_command_is_printed_escaped() {
     assert!(t.contains(r"elsewhere\u{1b}]0;title\u{7}"), "{t}");
     assert!(!t.contains('\x1b') && !t.contains('\x07'), "{t:?}");
 }
+
+/// The start time of process `pid` (field 22 of `/proc/<pid>/stat`, clock ticks since boot):
+/// the third part of an owner tag.
+fn start_time(pid: u32) -> u64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    let rest = &stat[stat.rfind(')').unwrap() + 1..];
+    rest.split_whitespace().nth(19).unwrap().parse().unwrap()
+}
+
+/// Issue 42, finding 1: `verify --remove-broken` during a live `generate` deleted the live
+/// writer's half-renamed sample (and listed the live pid among "killed runs"). Now every index
+/// in a live run's range lock and every temporary of a live owner is left alone, named; once
+/// the run is gone they are removed.
+#[test]
+fn remove_broken_leaves_a_live_run_s_samples_and_temporaries_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let live = Hanging(Some(
+        generate(&fake_blender(), &out, &["-n", "4"])
+            .env("FAKE_BLENDER_MODE", "hang")
+            .env("CLEVRTEX_HOST", "h42")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    wait_for(&lock(&out, ".clevrtex-run-0-4-0of1.lock"));
+    let pid = live.id();
+    let sub = out.join("clevrtex_clevr/0");
+    std::fs::create_dir_all(&sub).unwrap();
+    // Sample 1 as the live writer leaves it between two renames (its metadata comes last).
+    std::fs::write(sub.join("CLEVRTEX_clevr_000001.png"), b"being written").unwrap();
+    // A temporary of the live writer, and one of a dead one.
+    let live_tmp = sub.join(format!(
+        "CLEVRTEX_clevr_000002.png.h42.{pid}.{}.clevrtex-tmp",
+        start_time(pid)
+    ));
+    std::fs::write(&live_tmp, b"half").unwrap();
+    let mut gone = Command::new("true").spawn().unwrap();
+    let dead_pid = gone.id();
+    gone.wait().unwrap();
+    let dead_tmp = sub.join(format!(
+        "CLEVRTEX_clevr_000003.png.h42.{dead_pid}.1.clevrtex-tmp"
+    ));
+    std::fs::write(&dead_tmp, b"half").unwrap();
+    // Sample 4: broken, of a finished run whose writer is gone: removed.
+    std::fs::write(sub.join("CLEVRTEX_clevr_000004.png"), b"broken").unwrap();
+    let manifest = serde_json::json!({
+        "format": "clevrtex-manifest", "version": 1, "variant": "clevr", "seed": 4,
+        "config_hash": "0", "start": 4, "end": 6, "total": 6, "shard": [0, 1],
+        "passes": ["rgb", "mask"], "tool_version": "0", "blender_version": "",
+        "command": ["clevrtex", "generate", "--start", "4", "-n", "2"],
+        "finished": true, "files": {}
+    });
+    std::fs::write(lock(&out, "MANIFEST-4-6-0of1.json"), manifest.to_string()).unwrap();
+    let remove = || {
+        let o = clevrtex()
+            .args(["verify", "--remove-broken"])
+            .arg(&out)
+            .env("CLEVRTEX_HOST", "h42")
+            .output()
+            .unwrap();
+        (o.status.code(), text(&o))
+    };
+    let (code, t) = remove();
+    assert_eq!(code, Some(3), "{t}");
+    assert!(
+        sub.join("CLEVRTEX_clevr_000001.png").is_file(),
+        "a live run's sample was removed: {t}"
+    );
+    assert!(
+        live_tmp.is_file(),
+        "a live run's temporary was removed: {t}"
+    );
+    assert!(!dead_tmp.exists(), "{t}");
+    assert!(!sub.join("CLEVRTEX_clevr_000004.png").exists(), "{t}");
+    assert!(
+        t.contains(&format!(
+            "clevr: left alone sample(s) 1: a live run is writing them (pid {pid} on host `h42` (indices 0..4, shard 0/1))"
+        )),
+        "{t}"
+    );
+    assert!(
+        t.contains(
+            "temporary files of runs still writing (or of another host; never removed) (1):"
+        ),
+        "{t}"
+    );
+    assert!(
+        t.contains("temporary files left by killed runs (1):"),
+        "{t}"
+    );
+    // The run is gone (killed: its lock stays, stale): its leftovers are removed now.
+    signal(live, "KILL");
+    let (code, t) = remove();
+    assert_eq!(code, Some(3), "{t}");
+    assert!(!sub.join("CLEVRTEX_clevr_000001.png").exists(), "{t}");
+    assert!(!live_tmp.exists(), "{t}");
+}
+
+/// Issue 42, finding 1: a `generate` whose samples another process deleted while it ran said
+/// `[4/4] wrote`, exited 0 and wrote a manifest marked finished. It now checks its samples
+/// again before the manifest: it fails (exit 1) naming them, and the manifest is unfinished.
+#[test]
+fn generate_fails_when_its_samples_vanish_before_its_manifest() {
+    let Some(blender) =
+        blender_or_skip("generate_fails_when_its_samples_vanish_before_its_manifest")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let mut child = generate(&blender, &out, &["-n", "4"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let sub = out.join("clevrtex_clevr/0");
+    wait_for(&sub.join("CLEVRTEX_clevr_000000.json"));
+    for suffix in [".json", ".png", "_flat.png"] {
+        std::fs::remove_file(sub.join(format!("CLEVRTEX_clevr_000000{suffix}"))).unwrap();
+    }
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the run ended before the test removed its sample"
+    );
+    let o = child.wait_with_output().unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("1 sample(s) of this run are gone from") && t.contains("(index 0)"),
+        "{t}"
+    );
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(lock(&out, "MANIFEST-0-4-0of1.json")).unwrap())
+            .unwrap();
+    assert_eq!(m["finished"], false, "{m}");
+    assert!(sub.join("CLEVRTEX_clevr_000003.json").is_file(), "{t}");
+}

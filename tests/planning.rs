@@ -185,7 +185,7 @@ fn estimate_refuses_bad_input_before_writing_anything() {
         text(&o)
     );
     // Calibration that cannot render (every worker crashes): a clear error, not a guess.
-    let o = run(&["-n", "10", "--calibrate", "1", "--retries", "0"]);
+    let o = run(&["-n", "10", "--calibrate", "2", "--retries", "0"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(
         text(&o)
@@ -225,4 +225,51 @@ fn estimate_refuses_bad_input_before_writing_anything() {
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+}
+
+/// Issue 42, minor findings: `--tasks 100000000000` printed an array of 10^11 tasks for 10
+/// images, `--calibrate` had no range (1 gave a zero-width range, 100000 started 100,000
+/// renders), and an `--out` that is a regular file was accepted. Each is refused up front
+/// (exit 1, before Blender is looked for) with its range.
+#[test]
+fn estimate_refuses_numbers_out_of_range_and_an_out_that_is_a_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("a-file");
+    std::fs::write(&file, b"mine").unwrap();
+    let run = |out: &Path, extra: &[&str]| {
+        clevrtex()
+            .env_remove("CLEVRTEX_BLENDER")
+            .args(["generate", "--variant", "clevr", "--estimate", "-n", "10"])
+            .arg("--out")
+            .arg(out)
+            .args(["--blender", "/nonexistent/blender"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = tmp.path().join("out");
+    for (extra, want) in [
+        (
+            &["--tasks", "100000000000"][..],
+            "`--tasks 100000000000` is more tasks than the run's 10 image(s)",
+        ),
+        (&["--tasks", "11"][..], "hint: pass 1 to 10"),
+        (&["--calibrate", "1"][..], "`--calibrate 1` is out of range"),
+        (&["--calibrate", "101"][..], "hint: pass 2 to 100"),
+    ] {
+        let o = run(&out, extra);
+        assert_eq!(o.status.code(), Some(1), "{extra:?}: {}", text(&o));
+        assert!(text(&o).contains(want), "{extra:?}: {}", text(&o));
+    }
+    for out in [file.clone(), file.join("below")] {
+        let o = run(&out, &[]);
+        assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+        assert!(
+            text(&o).contains(&format!("`{}` is not a folder", file.display())),
+            "{}",
+            text(&o)
+        );
+    }
+    assert_eq!(std::fs::read(&file).unwrap(), b"mine");
+    assert!(!out.exists());
 }

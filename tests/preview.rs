@@ -326,3 +326,21 @@ fn preview_and_report_leave_out_a_broken_sample_and_say_so() {
         std::fs::rename(dir.path().join("orig"), &data).unwrap();
     }
 }
+
+/// Issue 42, minor: `preview --out out/x.png` into a missing folder failed where every other
+/// writer of an `--out` makes the folder.
+#[test]
+fn preview_makes_the_folder_of_its_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    crate::util::hand_png_sample(&data, "clevr", 0, (16, 12), (16, 12));
+    let sheet = dir.path().join("new/deeper/x.png");
+    let o = clevrtex()
+        .args(["preview", "--out"])
+        .arg(&sheet)
+        .arg(&data)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(image::image_dimensions(&sheet).is_ok(), "{}", text(&o));
+}

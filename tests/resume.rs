@@ -276,3 +276,59 @@ fn sigterm_stops_workers_and_leaves_no_partial_output() {
         }
     }
 }
+
+/// Issue 42, finding 9: `generate -n 100000000` (the cap) made one folder per 1,000 indices and
+/// checked every index's files before its first image, deaf to SIGTERM for 23 minutes. The
+/// indices are now walked lazily, as workers take them: a folder is made when an image is
+/// written, and SIGTERM stops the run at once (exit 143).
+#[test]
+fn a_run_at_the_index_cap_makes_no_folder_up_front_and_stops_on_sigterm() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let mut c =
+        crate::many_writers::generate(&crate::util::fake_blender(), &out, &["-n", "100000000"]);
+    let child = c
+        .env("FAKE_BLENDER_MODE", "hang")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let vdir = out.join("clevrtex_clevr");
+    let lock = vdir.join(".clevrtex-run-0-100000000-0of1.lock");
+    let t = Instant::now();
+    while !lock.exists() && t.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(lock.exists(), "the run never took its lock");
+    std::thread::sleep(Duration::from_secs(2));
+    let sent = Instant::now();
+    let st = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let pid = child.id();
+    let waiter = std::thread::spawn(move || child.wait_with_output().unwrap());
+    while !waiter.is_finished() && sent.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    if !waiter.is_finished() {
+        let _ = std::process::Command::new("kill")
+            .args(["-KILL", &pid.to_string()])
+            .status();
+        panic!("SIGTERM did not stop the run within 30 s");
+    }
+    let o = waiter.join().unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(143), "{t}");
+    let folders: Vec<_> = std::fs::read_dir(&vdir)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+        .map(|e| e.file_name())
+        .collect();
+    assert!(
+        folders.is_empty(),
+        "folders made before any image: {folders:?}"
+    );
+}

@@ -31,20 +31,14 @@ pub struct Args {
     /// Export only this variant (default: every variant found).
     #[arg(long)]
     variant: Option<String>,
-    /// Largest shard in bytes (a sample is never split), 1 to 10^12.
-    #[arg(long, default_value_t = 1_000_000_000, value_name = "BYTES", value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(1..=1_000_000_000_000))]
+    /// Largest shard in bytes (a sample is never split), 10240 to 10^12.
+    #[arg(long, default_value_t = 1_000_000_000, value_name = "BYTES", value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(10_240..=1_000_000_000_000))]
     shard_size: u64,
 }
 
 /// Run `clevrtex export`.
 pub fn run(args: Args) -> CmdResult {
     let Format::Webdataset = args.format;
-    if args.shard_size < 10_240 {
-        bail!(
-            "`--shard-size {}` is too small\nhint: give at least 10240 bytes (default 1000000000)",
-            args.shard_size
-        );
-    }
     if !args.dir.is_dir() {
         bail!(
             "`{}` is not a folder\nhint: pass the `--out` folder of `clevrtex generate`",
@@ -65,6 +59,13 @@ pub fn run(args: Args) -> CmdResult {
         Err(ExportError::Interrupted) => return Err(exit::Interrupted.into()),
         Err(e) => return Err(e.into()),
     };
+    if !r.dead_temps.is_empty() {
+        eprintln!(
+            "removed {} temporary shard(s) of killed exports: {}",
+            r.dead_temps.len(),
+            r.dead_temps.join(", ")
+        );
+    }
     if !r.stale.is_empty() {
         eprintln!(
             "removed {} shard(s) of an earlier export that this one did not write: {}",
@@ -84,7 +85,7 @@ pub fn run(args: Args) -> CmdResult {
     );
     if !r.skipped.is_empty() {
         eprintln!(
-            "warning: {} file(s) or folder(s) not followed or not read; their samples are not exported:",
+            "warning: {} file(s) or folder(s) not followed, not read or refused by the checks of every reader; their samples are not exported:",
             r.skipped.len()
         );
         for s in &r.skipped {

@@ -78,11 +78,11 @@ pub struct GenerateArgs {
     /// workers x threads (docs/performance.md, "Planning a run").
     #[arg(long)]
     estimate: bool,
-    /// With `--estimate`: calibration images [default: 2 per worker, at least 4].
+    /// With `--estimate`: calibration images, 2 to 100 [default: 2 per worker, at least 4].
     #[arg(long, value_name = "K", requires = "estimate")]
     calibrate: Option<u32>,
     /// With `--estimate`: also predict an array of this many tasks (SLURM `--array`, a
-    /// Kubernetes Job's `completions`), each on a machine like this one.
+    /// Kubernetes Job's `completions`), each on a machine like this one; 1 to `-n`.
     #[arg(long, value_name = "TASKS", requires = "estimate")]
     tasks: Option<u64>,
     #[command(flatten)]

@@ -108,13 +108,26 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
             index_ranges(&r.unexpected)
         );
     }
-    if !r.temp_files.is_empty() {
-        println!(
-            "  temporary files left by killed runs ({}):",
-            r.temp_files.len()
-        );
-        for t in r.temp_files.iter().take(10) {
-            println!("    {}", t.display());
+    // A temporary whose owner tag names a live process (or another host) is a file being
+    // written now, not one left by a killed run.
+    let (live, dead): (Vec<&PathBuf>, Vec<&PathBuf>) = r.temp_files.iter().partition(|t| {
+        t.file_name()
+            .and_then(|n| n.to_str())
+            .and_then(|n| n.strip_suffix(clevrtex_dataset::layout::TMP_SUFFIX))
+            .is_some_and(|stem| !clevrtex_dataset::atomic::tagged_name_is_stale(stem))
+    });
+    for (what, list) in [
+        ("temporary files left by killed runs", dead),
+        (
+            "temporary files of runs still writing (or of another host; never removed)",
+            live,
+        ),
+    ] {
+        if !list.is_empty() {
+            println!("  {what} ({}):", list.len());
+            for t in list.iter().take(10) {
+                println!("    {}", t.display());
+            }
         }
     }
     if !r.skipped.is_empty() {
@@ -216,6 +229,23 @@ pub fn run(args: Args) -> CmdResult {
         for r in &reports {
             let done = verify::remove_broken(r).context("cannot remove a broken sample's file")?;
             removed += done.files;
+            if !done.live.is_empty() {
+                let idx: Vec<u64> = done.live.iter().map(|(i, _)| *i).collect();
+                let mut runs: Vec<&str> = done.live.iter().map(|(_, h)| h.as_str()).collect();
+                runs.dedup();
+                println!(
+                    "{}: left alone sample(s) {}: a live run is writing them ({})\nhint: run `clevrtex verify --remove-broken` again once that run has ended",
+                    r.variant,
+                    index_ranges(&idx),
+                    runs.join("; ")
+                );
+            }
+            if done.live_temps > 0 {
+                println!(
+                    "{}: left alone {} temporary file(s) of runs still writing",
+                    r.variant, done.live_temps
+                );
+            }
             if !done.kept.is_empty() {
                 println!(
                     "{}: kept broken sample(s) {}: no run of the manifests covers them, so no known command remakes them\nhint: remove them by hand if they are not wanted, or remake them with `clevrtex generate --start I -n N --out DIR`",

@@ -17,6 +17,11 @@ use crate::interrupt::{self, OnInterrupt};
 use crate::run::{format_duration, pool_options};
 use crate::run_args::RunArgs;
 
+/// The fewest calibration images (`--calibrate`): one gives no spread, so a zero-width range.
+pub(crate) const MIN_CALIBRATE: u32 = 2;
+/// The most calibration images (`--calibrate`): more is a run, not a calibration.
+pub(crate) const MAX_CALIBRATE: u32 = 100;
+
 /// What the calibration measured.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Calibration {
@@ -135,11 +140,30 @@ pub(crate) struct Request<'a> {
 /// Run the planner: calibrate, then print the predictions.
 pub(crate) fn run(mut req: Request) -> CmdResult {
     let n = req.jobs.len();
-    if req.calibrate == Some(0) {
-        bail!("`--calibrate 0` renders nothing to estimate from\nhint: pass at least 1, e.g. `--calibrate 4`");
+    if let Some(c) = req.calibrate {
+        if !(MIN_CALIBRATE..=MAX_CALIBRATE).contains(&c) {
+            bail!("`--calibrate {c}` is out of range: the range of a prediction needs at least {MIN_CALIBRATE} images, and more than {MAX_CALIBRATE} is a run, not a calibration\nhint: pass {MIN_CALIBRATE} to {MAX_CALIBRATE}, e.g. `--calibrate 4` (default: 2 per worker, at least 4)");
+        }
     }
     if req.tasks == Some(0) {
         bail!("`--tasks 0` is no array\nhint: pass the array's number of tasks, e.g. `--tasks 10`");
+    }
+    if let Some(t) = req.tasks.filter(|&t| t > n) {
+        bail!("`--tasks {t}` is more tasks than the run's {n} image(s): the tasks past the {n}th would have nothing to do\nhint: pass 1 to {n}");
+    }
+    // Nothing is written into `--out`, but the run planned would be: a place it cannot make
+    // its folder (a file, or a file on the way) is refused here as `generate` refuses it.
+    let out = &req.run.out;
+    if let Some(file) = out
+        .ancestors()
+        .filter(|p| !p.as_os_str().is_empty())
+        .find(|p| std::fs::metadata(p).is_ok_and(|m| !m.is_dir()))
+    {
+        bail!(
+            "`--out {}`: `{}` is not a folder, so the run planned could not write there\nhint: pass a folder (missing ones are created) with `--out`",
+            out.display(),
+            file.display()
+        );
     }
     let blender = clevrtex_render::blender::locate(req.run.blender.as_deref())?;
     let scratch = clevrtex_render::tmp::scratch_dir()?;

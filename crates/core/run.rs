@@ -190,7 +190,19 @@ pub(crate) fn run_jobs(
             print_summary(&report, &args.out, &ledger);
             if let Some(plan) = manifest {
                 let seconds = seconds.into_inner().unwrap_or_else(|e| e.into_inner());
-                let path = plan.write(&args.out, &seconds)?;
+                let failed: std::collections::BTreeSet<u64> =
+                    report.failed.iter().map(|(i, _)| *i).collect();
+                let path = match plan.write(&args.out, &seconds, &failed, &opts.interrupt) {
+                    Ok(p) => p,
+                    Err(_) if opts.interrupt.load(Ordering::SeqCst) => {
+                        eprintln!(
+                            "error: {}\nhint: rerun the same command to go on; complete samples are skipped",
+                            exit::Interrupted
+                        );
+                        return Ok(crate::interrupt::exit_code());
+                    }
+                    Err(e) => return Err(e.into()),
+                };
                 write_card(&args.out);
                 println!(
                     "manifest: {} (check with `clevrtex verify {}`)",

@@ -152,6 +152,109 @@ fn is_stale(holder: &Holder, modified: Option<SystemTime>) -> bool {
         .is_some_and(|age| age > STALE_AFTER)
 }
 
+/// The range locks of live runs in `variant_dir` (stale ones left out), each with its file.
+/// Call it under the guard's `flock` ([`Quiet`], [`RunLock::acquire`]), so no run takes a
+/// lock meanwhile. `Err` when a lock file cannot be read: whether a run is writing is unknown.
+fn live_holders(variant_dir: &Path) -> Result<Vec<(PathBuf, Holder)>, String> {
+    let io = |p: &Path, e: std::io::Error| {
+        format!(
+            "cannot read `{}`: {e}\nhint: pass a readable folder",
+            p.display()
+        )
+    };
+    let root = crate::dataset::files::root(variant_dir).map_err(|e| io(variant_dir, e))?;
+    let entries =
+        crate::dataset::files::list(&root, variant_dir).map_err(|e| io(variant_dir, e))?;
+    let mut live = Vec::new();
+    for (name, path, _) in entries {
+        if !(name.starts_with(PREFIX) && name.ends_with(".lock")) {
+            continue;
+        }
+        let holder = crate::dataset::files::read(&root, &path, MAX_LOCK_BYTES)
+            .and_then(|b| serde_json::from_slice::<Holder>(&b).map_err(|e| e.to_string()));
+        let holder = match holder {
+            Ok(h) => h,
+            Err(why) => {
+                return Err(format!(
+                    "the run lock `{}` cannot be read ({why}), so this run cannot tell whether another run is writing here\nhint: if no `clevrtex generate` is writing into `{}`, delete `{}` and run again",
+                    path.display(),
+                    variant_dir.display(),
+                    path.display()
+                ))
+            }
+        };
+        let modified = std::fs::symlink_metadata(&path)
+            .and_then(|m| m.modified())
+            .ok();
+        if !is_stale(&holder, modified) {
+            live.push((path, holder));
+        }
+    }
+    Ok(live)
+}
+
+impl Holder {
+    /// Whether index `index` is one this holder's run writes (in its range and shard).
+    pub fn covers(&self, index: u64) -> bool {
+        index < u64::MAX
+            && overlaps(
+                (index, index + 1, [0, 1]),
+                (self.start, self.end, self.shard),
+            )
+    }
+
+    /// `pid P on host `H` (indices A..B, shard k/n)`, for messages.
+    pub fn describe(&self) -> String {
+        format!(
+            "pid {} on host `{}` (indices {}..{}, shard {}/{})",
+            self.pid,
+            printable(&self.host),
+            self.start,
+            self.end,
+            self.shard[0],
+            self.shard[1]
+        )
+    }
+}
+
+/// The live runs of a variant folder, held still: while a `Quiet` lives, the guard's `flock`
+/// is held, so no run can take a range lock (a `generate` starting meanwhile waits for it).
+/// What removes files from a folder a run may be writing into (`verify --remove-broken`)
+/// holds one, and leaves alone every index a live run [`Holder::covers`].
+#[derive(Debug)]
+pub struct Quiet {
+    _guard: std::fs::File,
+    /// The locks of live runs.
+    pub live: Vec<Holder>,
+}
+
+impl Quiet {
+    /// Hold `variant_dir` (an existing variant folder) still and read its live runs' locks.
+    pub fn hold(variant_dir: &Path) -> Result<Quiet, String> {
+        let guard_path = variant_dir.join(GUARD);
+        let guard = open_lock_file(&guard_path)?;
+        guard.lock().map_err(|e| {
+            format!(
+                "cannot lock `{}`: {e}\nhint: pass a writable folder",
+                guard_path.display()
+            )
+        })?;
+        let live = live_holders(variant_dir)?
+            .into_iter()
+            .map(|(_, h)| h)
+            .collect();
+        Ok(Quiet {
+            _guard: guard,
+            live,
+        })
+    }
+
+    /// The live run writing index `index`, if any.
+    pub fn writer_of(&self, index: u64) -> Option<&Holder> {
+        self.live.iter().find(|h| h.covers(index))
+    }
+}
+
 impl RunLock {
     /// Take the lock of shard `[k, n]` of `start..end` in `variant_dir` (created if missing).
     /// `Err` (a message with a `hint:` line) when a live run holds an overlapping range, naming
@@ -175,34 +278,7 @@ impl RunLock {
         let guard_path = variant_dir.join(GUARD);
         let guard = open_lock_file(&guard_path)?;
         guard.lock().map_err(|e| io("lock", &guard_path, e))?;
-        let root =
-            crate::dataset::files::root(variant_dir).map_err(|e| io("read", variant_dir, e))?;
-        let entries = crate::dataset::files::list(&root, variant_dir)
-            .map_err(|e| io("read", variant_dir, e))?;
-        let mine = file_name(start, end, shard[0], shard[1]);
-        for (name, path, _) in entries {
-            if !(name.starts_with(PREFIX) && name.ends_with(".lock")) {
-                continue;
-            }
-            let holder = crate::dataset::files::read(&root, &path, MAX_LOCK_BYTES)
-                .and_then(|b| serde_json::from_slice::<Holder>(&b).map_err(|e| e.to_string()));
-            let holder = match holder {
-                Ok(h) => h,
-                Err(why) => {
-                    return Err(format!(
-                        "the run lock `{}` cannot be read ({why}), so this run cannot tell whether another run is writing here\nhint: if no `clevrtex generate` is writing into `{}`, delete `{}` and run again",
-                        path.display(),
-                        variant_dir.display(),
-                        path.display()
-                    ))
-                }
-            };
-            let modified = std::fs::symlink_metadata(&path)
-                .and_then(|m| m.modified())
-                .ok();
-            if is_stale(&holder, modified) {
-                continue;
-            }
+        for (path, holder) in live_holders(variant_dir)? {
             if overlaps(
                 (start, end, shard),
                 (holder.start, holder.end, holder.shard),
@@ -233,7 +309,7 @@ impl RunLock {
             shard,
             command,
         };
-        let path = variant_dir.join(&mine);
+        let path = variant_dir.join(file_name(start, end, shard[0], shard[1]));
         let text = serde_json::to_string_pretty(&holder).expect("lock serialises") + "\n";
         crate::atomic::write(&path, text.as_bytes()).map_err(|e| io("write", &path, e))?;
         drop(guard);

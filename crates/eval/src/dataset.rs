@@ -296,6 +296,9 @@ pub fn discover_gt(
             }
             if std::fs::symlink_metadata(p).is_ok() {
                 if let clevrtex_dataset::dataset::Kind::Skipped(why) = ds.classify(p) {
+                    // The walk's reason ends in "skipped" where a reader goes on without the
+                    // file; the evaluation stops instead (exit 1), so it is not said here.
+                    let why = why.trim_end_matches("; skipped").to_string();
                     return Err(EvalError::GtNotRead {
                         stem,
                         path: p.clone(),

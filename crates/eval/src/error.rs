@@ -105,7 +105,7 @@ pub enum EvalError {
     },
     /// A ground-truth sample's file is not read: a link out of the ground-truth folder, a
     /// FIFO, a socket or a device.
-    #[error("ground-truth sample `{stem}`: `{}` {why}\nhint: every file of the ground truth must be a regular file inside its folder (a link only to a file inside it); copy the file in instead of linking it", path.display())]
+    #[error("ground-truth sample `{stem}`: `{}` {why}: it is not read, and nothing is scored without it\nhint: every file of the ground truth must be a regular file inside its folder (a link only to a file inside it); copy the file in instead of linking it", path.display())]
     GtNotRead {
         /// The sample's stem.
         stem: String,

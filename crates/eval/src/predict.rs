@@ -210,12 +210,19 @@ fn segmentation_from_array(
                 [k, hh, ww] if (*hh, *ww) == (h, w) => *k,
                 [k, 1, hh, ww] if (*hh, *ww) == (h, w) => *k,
                 _ => {
-                    let want = if s.len() == 4 {
-                        vec![s[0], 1, h, w]
+                    // K is the prediction's own: never made up from a shape that has none
+                    // (a 0-d array was reported as "ground truth is (0, 24, 32)").
+                    let truth = if s.len() == 4 {
+                        format!("(K, 1, {h}, {w}) soft masks")
                     } else {
-                        vec![s.first().copied().unwrap_or(0), h, w]
+                        format!("(K, {h}, {w}) soft masks or ({h}, {w}) segment ids")
                     };
-                    return Err(mismatch(path, s, &want));
+                    return Err(EvalError::ShapeMismatch {
+                        path: path.to_path_buf(),
+                        pred: shape_str(s),
+                        truth,
+                        hint: SHAPE_HINT.into(),
+                    });
                 }
             };
             let slots = k + usize::from(no_background);

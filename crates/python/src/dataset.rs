@@ -160,7 +160,9 @@ pub(crate) fn variant_names(
 /// A sample's metadata, read as every reader of a dataset reads it
 /// (`clevrtex_dataset::dataset`): checked again when read, so that a link swapped in after
 /// `discover` that leads out of the dataset `root` is not followed; a regular file opened
-/// non-blocking, at most 64 MiB. `ValueError` naming the file when it is not read, `OSError`
+/// non-blocking, at most 64 MiB, and checked as the CLI checks it
+/// (`clevrtex_dataset::dataset::check_metadata`). `ValueError` naming the file when it is not
+/// read or not valid, `OSError`
 /// (its subclass by errno: `FileNotFoundError`, `PermissionError`) when it cannot be opened.
 #[pyfunction]
 pub(crate) fn read_metadata<'py>(
@@ -174,19 +176,27 @@ pub(crate) fn read_metadata<'py>(
         let root = Path::new(root).canonicalize().map_err(ReadError::Io)?;
         if let Kind::Skipped(why) = classify(&root, p) {
             if !why.starts_with("cannot be read") {
-                return Ok(Err(why.replace("; skipped", "; not read")));
+                return Ok(Err(format!(
+                    "`{path}` {}",
+                    why.replace("; skipped", "; not read")
+                )));
             }
         }
         // Opened relative to the root's handle: a folder on the way swapped for a link out of
         // the dataset is not read through.
         match read_beneath(&root, p, clevrtex_eval::dataset::MAX_METADATA_BYTES) {
-            Err(ReadError::LeadsOut) => Ok(Err(ReadError::LeadsOut.to_string())),
-            r => r.map(Ok),
+            Err(ReadError::LeadsOut) => Ok(Err(format!("`{path}` {}", ReadError::LeadsOut))),
+            // The CLI's checks of a sample's metadata (types and bounds of `num_objects`,
+            // `objects`, `split`, the size, ...), one rule for every reader.
+            Ok(bytes) => {
+                Ok(clevrtex_dataset::dataset::check_metadata_bytes(&bytes, path).map(|()| bytes))
+            }
+            Err(e) => Err(e),
         }
     });
     match read {
         Ok(Ok(bytes)) => Ok(PyBytes::new(py, &bytes)),
-        Ok(Err(why)) => Err(value_error(format!("`{path}` {why}"))),
+        Ok(Err(why)) => Err(value_error(why)),
         // OSError(errno, message, filename) is the subclass of its errno.
         Err(ReadError::Io(e)) => Err(PyOSError::new_err((
             e.raw_os_error().unwrap_or(0),

@@ -506,9 +506,10 @@ def test_hostile_arrays_and_metadata_are_named(tmp_path):
     f = gt / "clevrtex_vbg" / "0" / "CLEVRTEX_vbg_000001.json"
     m = json.loads(f.read_text())
     ds = clevrtex.Dataset(str(gt), "vbg", split="all")
-    for objects, what in ((5, "not a list"), (None, "not a list"), ("abc", "not a list"), ([None], r"objects\[0\]` is a NoneType")):
+    # Refused by the CLI's check of the metadata (`check_metadata`), naming the file and key.
+    for objects in (5, None, "abc", [None]):
         f.write_text(json.dumps(dict(m, objects=objects)))
-        with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000001.json` key `" + ("objects` is a" if what == "not a list" else "") ):
+        with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000001.json` key `objects"):
             ds[1]
     f.write_text("[" * 200000 + "]" * 200000)
     with pytest.raises(ValueError, match=r"CLEVRTEX_vbg_000001.json` is not valid metadata"):

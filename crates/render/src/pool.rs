@@ -205,6 +205,9 @@ struct Shared<'a> {
     threads: u32,
     ledger: Mutex<Ledger>,
     failed_stems: Mutex<BTreeSet<String>>,
+    /// Sample folders already checked (not a link out of `--out`) and swept of dead runs'
+    /// temporaries.
+    swept: Mutex<std::collections::HashSet<PathBuf>>,
     on_event: &'a (dyn Fn(&PoolEvent) + Sync),
 }
 
@@ -221,38 +224,24 @@ pub fn run(
     let jobs: Jobs = jobs.into();
     let bridge = BridgeDir::create(&opts.materials_json)?;
     let ledger = Ledger::open(&opts.ledger)?;
-    let mut todo: VecDeque<std::ops::Range<u64>> = VecDeque::new();
-    let mut todo_count = 0u64;
-    let mut report = RunReport {
+    let report = RunReport {
         workers: opts.workers.max(1),
         ledger_unreadable: ledger.unreadable(),
         ..RunReport::default()
     };
-    let mut cleaned = BTreeSet::new();
-    for i in 0..jobs.len() {
-        let job = jobs.get(i);
-        let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
-        if cleaned.insert(dir.clone()) {
-            // Before a file in it is read, swept or skipped as complete: a folder of the
-            // layout that is a link out of `--out` (a dataset handed over) is refused.
-            layout::make_dir(&opts.out, &dir).map_err(RenderError::Refused)?;
-            output::remove_stale_temps(&dir);
-        }
-        if !opts.overwrite && output::is_complete(&dir, &job.stem, &job.passes, opts.keep_exr) {
-            report.skipped += 1;
-            on_event(&PoolEvent::Skipped { index: job.index });
-        } else {
-            todo_count += 1;
-            match todo.back_mut() {
-                Some(r) if r.end == i => r.end += 1,
-                _ => todo.push_back(i..i + 1),
-            }
-        }
+    // One lazy walk over the run's indices: a worker takes the next index, skips it when its
+    // sample is complete, renders it otherwise. Nothing is done per index up front (a run of
+    // 100 million images made 100,000 folders and checked as many files before its first
+    // image, deaf to SIGTERM); folders are made when an image is written
+    // (`output::Staged::new`).
+    let mut todo: VecDeque<std::ops::Range<u64>> = VecDeque::new();
+    if !jobs.is_empty() {
+        todo.push_back(0..jobs.len());
     }
     let n_workers = opts
         .workers
         .max(1)
-        .min(usize::try_from(todo_count).unwrap_or(usize::MAX).max(1));
+        .min(usize::try_from(jobs.len()).unwrap_or(usize::MAX).max(1));
     let shared = Shared {
         opts,
         bridge,
@@ -269,6 +258,7 @@ pub fn run(
         },
         ledger: Mutex::new(ledger),
         failed_stems: Mutex::new(BTreeSet::new()),
+        swept: Mutex::new(std::collections::HashSet::new()),
         on_event,
     };
     std::thread::scope(|s| {
@@ -298,6 +288,27 @@ pub fn run(
 }
 
 impl Shared<'_> {
+    /// Whether `job`'s sample is complete (to skip; never with `overwrite`). Its folder is
+    /// looked at when one of its jobs is first taken: a folder that does not exist holds no
+    /// complete sample (nothing is made here); one that does is refused when it is a link out
+    /// of `--out` (a dataset handed over) before a file in it is read, and swept of
+    /// temporaries that killed runs left.
+    fn is_complete(&self, job: &Job) -> Result<bool> {
+        let opts = self.opts;
+        let dir = layout::sample_dir(&opts.out, &job.variant, job.index);
+        let first = self.swept.lock().unwrap().insert(dir.clone());
+        if std::fs::symlink_metadata(&dir).is_err() {
+            // Not there yet: checked again when a later job of the folder is taken.
+            self.swept.lock().unwrap().remove(&dir);
+            return Ok(false);
+        }
+        if first {
+            layout::make_dir(&opts.out, &dir).map_err(RenderError::Refused)?;
+            output::remove_stale_temps(&dir);
+        }
+        Ok(!opts.overwrite && output::is_complete(&dir, &job.stem, &job.passes, opts.keep_exr))
+    }
+
     fn stopping(&self) -> bool {
         self.stop.load(Ordering::SeqCst) || self.opts.interrupt.load(Ordering::SeqCst)
     }
@@ -396,6 +407,18 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
             break;
         };
         let job = shared.jobs.get(i);
+        match shared.is_complete(&job) {
+            Ok(true) => {
+                shared.report.lock().unwrap().skipped += 1;
+                (shared.on_event)(&PoolEvent::Skipped { index: job.index });
+                continue;
+            }
+            Ok(false) => {}
+            Err(err) => {
+                shared.set_fatal(err);
+                break;
+            }
+        }
         match crate::job::run_job(&mut slot, &settings, &job) {
             Ok(stats) => {
                 shared.report.lock().unwrap().add(&stats);

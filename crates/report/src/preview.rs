@@ -564,6 +564,15 @@ pub fn save(sheet: &RgbImage, out: &Path) -> anyhow::Result<()> {
     sheet
         .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
         .context("cannot encode the sheet as PNG")?;
+    // A missing folder on the way is made, as every other writer of an `--out` makes it.
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).with_context(|| {
+            format!(
+                "cannot create the folder `{}`\nhint: pass a writable place with `--out`",
+                parent.display()
+            )
+        })?;
+    }
     clevrtex_dataset::atomic::write(out, &png)
         .with_context(|| format!("cannot write `{}`", out.display()))
 }

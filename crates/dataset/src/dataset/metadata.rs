@@ -60,6 +60,54 @@ pub fn png_mode_problem(bytes: &[u8], pass: Pass) -> Option<String> {
     ))
 }
 
+/// The checks every reader that packs or measures a pass applies to its PNG `bytes` (the file
+/// `name`, for messages) before using its pixels: the header's size against the metadata's
+/// `size` (before anything is decoded, so a header declaring 100000x100000 is never
+/// allocated), the mode ([`png_mode_problem`]), the decode itself (the side cap of
+/// [`crate::png::decode`], CRCs, truncation), the decoded size again, and for the mask no id
+/// past the metadata's `num_objects`. `size` is `None` for the downloaded ClevrTex (its
+/// metadata records none): the caller then compares the passes with each other. Used by
+/// `verify` and `export`. `Err` is one line naming the file.
+pub fn check_pass_png(
+    name: &str,
+    bytes: &[u8],
+    pass: Pass,
+    size: Option<(u32, u32)>,
+    num_objects: usize,
+) -> Result<crate::png::DecodedPng, String> {
+    if let (Some((w, h)), Some((pw, ph))) = (size, crate::png::size(bytes)) {
+        if (pw, ph) != (w, h) {
+            return Err(format!("`{name}` is {pw}x{ph} (the metadata says {w}x{h})"));
+        }
+    }
+    if let Some(problem) = png_mode_problem(bytes, pass) {
+        return Err(format!("`{name}` {problem}"));
+    }
+    let png = crate::png::decode(bytes).map_err(|problem| format!("`{name}`: {problem}"))?;
+    if let Some((w, h)) = size {
+        if (png.width, png.height) != (w, h) {
+            return Err(format!(
+                "`{name}` is {}x{} (the metadata says {w}x{h})",
+                png.width, png.height
+            ));
+        }
+    }
+    if pass == Pass::Mask {
+        if let Some(bad) = png
+            .data
+            .iter()
+            .map(|&v| usize::from(v))
+            .filter(|&v| v > num_objects)
+            .min()
+        {
+            return Err(format!(
+                "mask has id {bad} but the metadata has {num_objects} objects"
+            ));
+        }
+    }
+    Ok(png)
+}
+
 /// A value of a sample's metadata that is not what a reader needs: the file and the key.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("metadata `{file}` key `{key}` {what}")]
@@ -236,6 +284,15 @@ pub fn check_metadata(meta: &Value, file: &str) -> Result<(), MetadataError> {
         }
     }
     Ok(())
+}
+
+/// [`check_metadata`] of a metadata file's `bytes` (the file `file`, for messages): JSON first
+/// (serde_json's: no NaN, nesting bounded), then the checks every reader makes. For readers
+/// that hand the bytes on (the Python `Dataset`): the CLI's rules, not a second copy of them.
+pub fn check_metadata_bytes(bytes: &[u8], file: &str) -> Result<(), String> {
+    let meta: Value = serde_json::from_slice(bytes)
+        .map_err(|e| format!("`{file}` is not valid metadata: {e}"))?;
+    check_metadata(&meta, file).map_err(|e| e.to_string())
 }
 
 /// The passes whose `*_filename` key ([`Pass::metadata_key`], the pass table's) the metadata `meta` of

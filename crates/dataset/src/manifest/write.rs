@@ -159,8 +159,19 @@ impl Plan {
 
     /// Write the manifest of the run's complete samples (hashing their files).
     /// `seconds`: time per sample made by this run, by index; those of complete samples an
-    /// earlier run made are kept from its manifest.
-    pub fn write(&self, out: &Path, seconds: &BTreeMap<u64, f64>) -> Result<PathBuf> {
+    /// earlier run made are kept from its manifest. Every index of the run is checked again
+    /// on disk: one that is neither complete nor in `failed` (this run's failures, in its
+    /// ledger) lost its files after it was written or skipped as complete (deleted by
+    /// another process): the manifest is then written unfinished and `Err` names those
+    /// indices, so the run never calls a dataset finished that is not. `stop` (Ctrl-C, SIGTERM)
+    /// is checked at every index: `Err` when raised, nothing written.
+    pub fn write(
+        &self,
+        out: &Path,
+        seconds: &BTreeMap<u64, f64>,
+        failed: &std::collections::BTreeSet<u64>,
+        stop: &std::sync::atomic::AtomicBool,
+    ) -> Result<PathBuf> {
         use crate::layout;
         let vdir = self.variant_dir(out);
         let earlier = self
@@ -171,11 +182,20 @@ impl Plan {
         let mut files = Vec::new();
         let mut blender_version = String::new();
         let mut blender_compat = BTreeMap::new();
+        let mut lost = Vec::new();
         for index in self.run.indices() {
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err(Error::Refused(
+                    "interrupted while the manifest was written; nothing was written\nhint: rerun the same command: complete samples are skipped and the manifest is written".into(),
+                ));
+            }
             let stem = layout::stem(&self.run.variant, index);
             let dir = layout::sample_dir(out, &self.run.variant, index);
             let names = crate::layout::expected_files(&stem, &self.passes, self.keep_exr);
             if !names.iter().all(|n| dir.join(n).is_file()) {
+                if !failed.contains(&index) {
+                    lost.push(index);
+                }
                 continue;
             }
             if blender_version.is_empty() {
@@ -194,7 +214,26 @@ impl Plan {
             files.extend(names.into_iter().map(|n| format!("{sub}/{n}")));
         }
         let files = hash_files(&vdir, &files)?;
-        let manifest = self.manifest(true, blender_version, blender_compat, files, sample_seconds);
-        manifest.write(&vdir)
+        let finished = lost.is_empty();
+        let manifest = self.manifest(
+            finished,
+            blender_version,
+            blender_compat,
+            files,
+            sample_seconds,
+        );
+        let path = manifest.write(&vdir)?;
+        if !finished {
+            let shown: Vec<String> = lost.iter().take(20).map(ToString::to_string).collect();
+            return Err(Error::Refused(format!(
+                "{} sample(s) of this run are gone from `{}` since they were written or found complete (index {}{}): another process removed their files while the run was going (e.g. `clevrtex verify --remove-broken` of an older version, or a cleanup); the manifest `{}` is written as unfinished\nhint: rerun the same command to make them again (complete samples are skipped), then check with `clevrtex verify`",
+                lost.len(),
+                vdir.display(),
+                shown.join(", "),
+                if lost.len() > 20 { ", ..." } else { "" },
+                path.display()
+            )));
+        }
+        Ok(path)
     }
 }

@@ -227,41 +227,19 @@ pub(super) fn check_sample_files(
             problems.push(format!("`{name}` is missing"));
             continue;
         };
-        // The header's size before decoding: a PNG claiming a huge size is never allocated.
-        if let Some((pw, ph)) = crate::png::size(bytes) {
-            if (pw, ph) != (w, h) {
-                problems.push(format!("`{name}` is {pw}x{ph} (the metadata says {w}x{h})"));
-                continue;
-            }
-        }
-        // The mode from the header, by the readers' one rule: an RGB or 16-bit mask is named.
-        if let Some(problem) = dataset::png_mode_problem(bytes, pass) {
-            problems.push(format!("`{name}` {problem}"));
-            continue;
-        }
-        let png = match crate::png::decode(bytes) {
+        // The checks of every reader: size from the header before decoding, mode, decode,
+        // mask ids ([`dataset::check_pass_png`], also `export`'s).
+        let png = match dataset::check_pass_png(&name, bytes, pass, Some((w, h)), n) {
             Ok(p) => p,
             Err(problem) => {
-                problems.push(format!("`{name}`: {problem}"));
+                problems.push(problem);
                 continue;
             }
         };
-        if (png.width, png.height) != (w, h) {
-            problems.push(format!(
-                "`{name}` is {}x{} (the metadata says {w}x{h})",
-                png.width, png.height
-            ));
-            continue;
-        }
         if pass == Pass::Mask {
             let mut counts = vec![0u64; 256];
             for &v in &png.data {
                 counts[(v as usize).min(255)] += 1;
-            }
-            if let Some(bad) = (n + 1..256).find(|&i| counts[i] > 0) {
-                problems.push(format!(
-                    "mask has id {bad} but the metadata has {n} objects"
-                ));
             }
             for i in 1..=n {
                 let listed = visible[i - 1];

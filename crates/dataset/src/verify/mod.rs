@@ -108,6 +108,9 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
         if !rep.roots.contains(&ds.root) {
             rep.roots.push(ds.root.clone());
         }
+        if !rep.variant_dirs.contains(&vd.dir) {
+            rep.variant_dirs.push(vd.dir.clone());
+        }
         rep.skipped
             .extend(vd.skipped.iter().map(ToString::to_string));
         rep.skipped.extend(vd.misplaced.iter().map(|p| {

@@ -7,6 +7,7 @@ use clevrtex_scene::Pass;
 
 use crate::dataset::{self};
 use crate::layout::{self, TMP_SUFFIX};
+use crate::run_lock::{Holder, Quiet};
 
 use super::report::*;
 
@@ -18,11 +19,20 @@ pub struct Removal {
     /// Broken samples kept because no run of the manifests covers them (no known command
     /// remakes them).
     pub kept: Vec<u64>,
+    /// Samples left alone because a live run is writing them (in the range of its lock), with
+    /// that run ([`Holder::describe`]): what looks unfinished may be a sample being written.
+    pub live: Vec<(u64, String)>,
+    /// Temporary files left alone because their owner runs (on this host) or may run (on
+    /// another host).
+    pub live_temps: usize,
 }
 
 /// Remove the files of each broken sample that a rerun of a manifest's run remakes
 /// ([`Broken::rerun_remakes`]; metadata first, so an interrupted removal still leaves the
-/// sample incomplete), and the temporary files of dead writers. Only names of the layout
+/// sample incomplete), and the temporary files of dead writers. A live run's files are never
+/// touched: each variant folder is held still ([`Quiet`]: no run can start meanwhile) and a
+/// sample whose index is in the range lock of a live run is left alone, as is a temporary
+/// whose owner tag names a live process (or another host). Only names of the layout
 /// (every pass, the metadata, the EXRs) are removed, in the sample's folder found inside the
 /// dataset, and a link is removed as a link (its target is never touched). Each folder is
 /// opened once relative to its dataset's root ([`dataset::open_dir_beneath`]) and every
@@ -52,7 +62,24 @@ pub fn remove_broken_with(
             }
         })
     };
+    // Held for the whole removal: the live runs of each variant folder, none starting meanwhile.
+    let mut held: Vec<(&Path, Quiet)> = Vec::new();
+    if !report.broken.is_empty() || !report.temp_files.is_empty() {
+        for vd in &report.variant_dirs {
+            let quiet = Quiet::hold(vd).map_err(std::io::Error::other)?;
+            held.push((vd.as_path(), quiet));
+        }
+    }
+    let writer_of = |dir: &Path, index: u64| -> Option<&Holder> {
+        held.iter()
+            .filter(|(vd, _)| dir.starts_with(vd))
+            .find_map(|(_, q)| q.writer_of(index))
+    };
     for b in &report.broken {
+        if let Some(h) = writer_of(&b.dir, b.index) {
+            out.live.push((b.index, h.describe()));
+            continue;
+        }
         if !b.rerun_remakes {
             out.kept.push(b.index);
             continue;
@@ -79,6 +106,7 @@ pub fn remove_broken_with(
             .strip_suffix(TMP_SUFFIX)
             .is_some_and(|stem| !crate::atomic::tagged_name_is_stale(stem));
         if live {
+            out.live_temps += 1;
             continue;
         }
         let Some(dir) = t.parent() else { continue };

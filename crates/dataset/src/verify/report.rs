@@ -61,7 +61,8 @@ pub struct VariantReport {
     pub broken: Vec<Broken>,
     /// Samples whose index the run did not ask for.
     pub unexpected: Vec<u64>,
-    /// Temporary files left by killed runs.
+    /// Temporary files (of killed runs, and of live ones: [`crate::atomic::tagged_name_is_stale`]
+    /// tells them apart).
     pub temp_files: Vec<PathBuf>,
     /// Entries not followed or not read: links leading out of the dataset, FIFOs, devices,
     /// files over the size cap (one line each, naming the path).
@@ -88,6 +89,10 @@ pub struct VariantReport {
     /// [`super::remove_broken`] is made relative to.
     #[serde(skip)]
     pub roots: Vec<PathBuf>,
+    /// The variant folders read (`clevrtex_<variant>` of each dataset): where
+    /// [`super::remove_broken`] reads the range locks of live runs.
+    #[serde(skip)]
+    pub variant_dirs: Vec<PathBuf>,
 }
 
 impl VariantReport {

@@ -93,6 +93,8 @@ pub struct ExportReport {
     pub index: PathBuf,
     /// Shards of an earlier export that this one did not write, removed.
     pub stale: Vec<String>,
+    /// Temporary shards of killed exports removed ([`remove_dead_temporaries`]).
+    pub dead_temps: Vec<String>,
     /// Files or folders not followed or not read (their samples are left out), one line each.
     pub skipped: Vec<String>,
 }
@@ -105,6 +107,8 @@ struct Sample {
     stem: String,
     split: Split,
     files: Vec<SampleFile>,
+    /// What its passes are checked against.
+    check: PassCheck,
 }
 
 /// The samples of one variant folder of `ds` (found by [`Dataset::open`]), in index order,
@@ -163,30 +167,36 @@ fn samples(
         // Passes whose encoding the metadata describes (ours) become arrays by it; the mask's
         // ids are its pixels in any dataset. The published ClevrTex's other passes (another
         // encoding, not described) stay PNGs under `<pass>.png`.
-        let described = dataset::MetadataView::of(&meta, &file)
-            .map(|v| v.passes)
-            .unwrap_or_default();
+        let view = dataset::MetadataView::of(&meta, &file).ok();
+        let described = view.as_ref().map(|v| v.passes.clone()).unwrap_or_default();
+        // Ours give the size and objects every pass is checked against; the downloaded
+        // ClevrTex's metadata has no size (`check_metadata` typed its `num_objects`).
+        let check = PassCheck {
+            size: view.as_ref().map(|v| (v.width, v.height)),
+            num_objects: view.as_ref().map_or_else(
+                || meta["num_objects"].as_u64().unwrap_or(0).min(255) as usize,
+                |v| v.num_objects,
+            ),
+        };
         let mut files: Vec<SampleFile> = dataset::listed_passes(&meta, &file, &stem)
             .map_err(bad)?
             .into_iter()
             .map(|pass| {
                 let spec = pass.spec();
-                match spec.webdataset_form {
+                let (key, npy) = match spec.webdataset_form {
                     WebdatasetForm::Npy { .. }
                         if pass == Pass::Mask || described.contains(&pass) =>
                     {
-                        (
-                            spec.webdataset_key.to_string(),
-                            s.pass_path(pass),
-                            Some(pass),
-                        )
+                        (spec.webdataset_key.to_string(), true)
                     }
-                    WebdatasetForm::Npy { .. } => {
-                        (format!("{}.png", spec.name), s.pass_path(pass), None)
-                    }
-                    WebdatasetForm::Png => {
-                        (spec.webdataset_key.to_string(), s.pass_path(pass), None)
-                    }
+                    WebdatasetForm::Npy { .. } => (format!("{}.png", spec.name), false),
+                    WebdatasetForm::Png => (spec.webdataset_key.to_string(), false),
+                };
+                SampleFile {
+                    key,
+                    path: s.pass_path(pass),
+                    pass: Some(pass),
+                    npy,
                 }
             })
             .collect();
@@ -196,8 +206,13 @@ fn samples(
             )));
         }
         recorded[pos] = dataset::recorded_split(&meta["split"], &vd.variant, &file).map_err(bad)?;
-        files.push(("json".into(), meta_path, None));
-        for (_, p, _) in &files {
+        files.push(SampleFile {
+            key: "json".into(),
+            path: meta_path,
+            pass: None,
+            npy: false,
+        });
+        for SampleFile { path: p, .. } in &files {
             match ds.classify(p) {
                 Kind::File => {}
                 Kind::Skipped(why) => {
@@ -223,6 +238,7 @@ fn samples(
             split: Split::Train,
             stem,
             files,
+            check,
         });
     }
     // The one split rule of every reader: the recorded split, else by position.
@@ -296,6 +312,7 @@ pub fn export(
     }
     std::fs::create_dir_all(out).map_err(io_err(format!("cannot create `{}`", out.display())))?;
     refuse_foreign_shards(out)?;
+    let dead_temps = remove_dead_temporaries(out)?;
     let mut index = Vec::new();
     let mut total_bytes = 0u64;
     let mut total_samples = 0u64;
@@ -314,7 +331,15 @@ pub fn export(
                 if stop.load(Ordering::SeqCst) {
                     return Err(ExportError::Interrupted);
                 }
-                let entries = sample_entries(&ds.root, &s.files)?;
+                // A sample whose passes fail the checks of every reader is left out, named.
+                let entries = match sample_entries(&ds.root, &s.files, &s.check) {
+                    Ok(e) => e,
+                    Err(ShardError::Refused(why)) => {
+                        skipped.push(format!("{why} (sample `{}` left out)", s.stem));
+                        continue;
+                    }
+                    Err(e) => return Err(e.into()),
+                };
                 let size = tar_bytes(&entries);
                 if shard
                     .as_ref()
@@ -362,8 +387,48 @@ pub fn export(
         bytes: total_bytes,
         index: index_path,
         stale,
+        dead_temps,
         skipped,
     })
+}
+
+/// Remove the temporary shards that killed exports left in `out`, and only those it can prove
+/// are: a regular file named `<shard name>.<host>.<pid>.<start>.clevrtex-tmp` (the one atomic
+/// writer's owner tag, [`crate::atomic::owner_tag`]) whose host is this one and whose process
+/// is gone, empty or starting with a tar header. A live export's temporaries, another
+/// host's, untagged names and anything else are left alone.
+fn remove_dead_temporaries(out: &Path) -> Result<Vec<String>, ExportError> {
+    let mut removed = Vec::new();
+    for e in std::fs::read_dir(out)
+        .map_err(io_err(format!("cannot read `{}`", out.display())))?
+        .flatten()
+    {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some(stem) = name.strip_suffix(crate::layout::TMP_SUFFIX) else {
+            continue;
+        };
+        let mut parts = stem.rsplitn(4, '.');
+        let (Some(start), Some(pid), Some(host), Some(shard)) =
+            (parts.next(), parts.next(), parts.next(), parts.next())
+        else {
+            continue;
+        };
+        let proven = is_shard_name(shard)
+            && host == crate::atomic::hostname()
+            && start.parse::<u64>().is_ok()
+            && pid.parse::<u32>().is_ok()
+            && crate::atomic::tagged_name_is_stale(stem)
+            && e.file_type().is_ok_and(|t| t.is_file())
+            && (e.metadata().is_ok_and(|m| m.len() == 0) || is_tar(&e.path()));
+        if proven {
+            std::fs::remove_file(e.path()).map_err(io_err(format!(
+                "cannot remove `{}`, a temporary shard of a killed export\nhint: remove it by hand",
+                e.path().display()
+            )))?;
+            removed.push(name);
+        }
+    }
+    Ok(removed)
 }
 
 /// Files in `out` named like shards that no export wrote (not a tar file, or not a regular

@@ -9,8 +9,12 @@ use clevrtex_scene::Pass;
 /// (H, W)`, background `+inf`; normals as `float32 (H, W, 3)` unit vectors, background
 /// `(0, 0, 0)`; the shadow amount as `float32 (H, W)` in `[0, 1]`. `Err` says why not, one line.
 pub fn pass_npy(pass: Pass, bytes: &[u8]) -> Result<Vec<u8>, String> {
+    decoded_npy(pass, &crate::png::decode(bytes)?)
+}
+
+/// [`pass_npy`] of a PNG already decoded (and checked: [`crate::dataset::check_pass_png`]).
+pub fn decoded_npy(pass: Pass, png: &crate::png::DecodedPng) -> Result<Vec<u8>, String> {
     use clevrtex_scene::passes::{DEPTH_BACKGROUND, DEPTH_SCALE_M, NORMAL_BACKGROUND};
-    let png = crate::png::decode(bytes)?;
     let WebdatasetForm::Npy { descr, channels } = pass.spec().webdataset_form else {
         return Err(format!(
             "the {} pass is not stored as an array",

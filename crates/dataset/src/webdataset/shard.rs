@@ -11,11 +11,32 @@ use serde_json::{json, Value};
 
 use crate::dataset;
 
-use super::npy::pass_npy;
+use super::npy::decoded_npy;
 
-/// One file of a sample in a shard: its key (the extension after the stem), its path in the
-/// dataset, and the pass to decode it as when it becomes a `.npy` (`None`: the file's bytes).
-pub type SampleFile = (String, PathBuf, Option<Pass>);
+/// One file of a sample in a shard.
+#[derive(Debug, Clone)]
+pub struct SampleFile {
+    /// Its key (the extension after the stem).
+    pub key: String,
+    /// Its path in the dataset.
+    pub path: PathBuf,
+    /// The pass it is (a PNG checked by [`dataset::check_pass_png`] before it is packed);
+    /// `None`: the metadata.
+    pub pass: Option<Pass>,
+    /// Whether it becomes the pass's `.npy` array (else its bytes are packed).
+    pub npy: bool,
+}
+
+/// What a sample's passes are checked against ([`dataset::check_pass_png`]): the metadata's
+/// image size (`None` for the downloaded ClevrTex, whose metadata has none: the passes must
+/// then agree with each other) and number of objects.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PassCheck {
+    /// `render.width`, `render.height`.
+    pub size: Option<(u32, u32)>,
+    /// `num_objects`.
+    pub num_objects: usize,
+}
 
 /// What can go wrong while writing a shard. Shown as the command's error: the message, then
 /// (as the error's source) the OS error.
@@ -36,6 +57,10 @@ pub enum ShardError {
     /// A file of the dataset could not be read (the message says which and what to do).
     #[error("{0}")]
     Read(String),
+    /// A pass fails the checks of every reader ([`dataset::check_pass_png`]): the sample is
+    /// left out of the export (the message names the file and what is wrong).
+    #[error("{0}")]
+    Refused(String),
 }
 
 fn io(what: &str, path: &Path) -> impl FnOnce(std::io::Error) -> ShardError {
@@ -75,11 +100,14 @@ pub fn tar_bytes(entries: &[(String, Vec<u8>)]) -> u64 {
 }
 
 /// The entries of one sample in a shard: each file of `files` read from the dataset under its
-/// canonical `root` ([`dataset::read`]: no link out of it, only regular files, capped), a pass
-/// marked for it decoded into its `.npy` array ([`pass_npy`]).
+/// canonical `root` ([`dataset::read`]: no link out of it, only regular files, capped), each
+/// pass checked as every reader checks it ([`dataset::check_pass_png`] against `check`:
+/// [`ShardError::Refused`] when it fails), one marked for it decoded into its `.npy` array
+/// ([`decoded_npy`]).
 pub fn sample_entries(
     root: &Path,
     files: &[SampleFile],
+    check: &PassCheck,
 ) -> Result<Vec<(String, Vec<u8>)>, ShardError> {
     let unread = |path: &Path, why: String| {
         ShardError::Read(format!(
@@ -87,18 +115,29 @@ pub fn sample_entries(
             path.display()
         ))
     };
-    files
-        .iter()
-        .map(|(key, path, pass)| {
-            let bytes =
-                dataset::read(root, path, dataset::MAX_FILE_BYTES).map_err(|w| unread(path, w))?;
-            let data = match pass {
-                None => bytes,
-                Some(pass) => pass_npy(*pass, &bytes).map_err(|w| unread(path, w))?,
-            };
-            Ok((key.clone(), data))
-        })
-        .collect()
+    // Without a size in the metadata, the first pass's size is every pass's.
+    let mut size = check.size;
+    let mut out = Vec::with_capacity(files.len());
+    for f in files {
+        let bytes = dataset::read(root, &f.path, dataset::MAX_FILE_BYTES)
+            .map_err(|w| unread(&f.path, w))?;
+        let data = match f.pass {
+            None => bytes,
+            Some(pass) => {
+                let name = f.path.display().to_string();
+                let png = dataset::check_pass_png(&name, &bytes, pass, size, check.num_objects)
+                    .map_err(ShardError::Refused)?;
+                size.get_or_insert((png.width, png.height));
+                if f.npy {
+                    decoded_npy(pass, &png).map_err(|w| unread(&f.path, w))?
+                } else {
+                    bytes
+                }
+            }
+        };
+        out.push((f.key.clone(), data));
+    }
+    Ok(out)
 }
 
 /// A tar shard being written under a unique temporary name (an [`AtomicFile`]: removed if it

@@ -24,8 +24,13 @@ fn an_unfinished_shard_leaves_nothing_and_a_finished_one_is_reproducible() {
     std::fs::create_dir(&data).unwrap();
     std::fs::write(data.join("a.png"), b"not really a png").unwrap();
     let root = dataset::root(&data).unwrap();
-    let files = vec![("png".to_string(), data.join("a.png"), None)];
-    let entries = sample_entries(&root, &files).unwrap();
+    let files = vec![SampleFile {
+        key: "png".to_string(),
+        path: data.join("a.png"),
+        pass: None,
+        npy: false,
+    }];
+    let entries = sample_entries(&root, &files, &PassCheck::default()).unwrap();
     let out = dir.path().join("full-train-000000.tar");
     {
         let mut w = ShardWriter::create(out.clone()).unwrap();
@@ -46,7 +51,13 @@ fn an_unfinished_shard_leaves_nothing_and_a_finished_one_is_reproducible() {
         bytes.push(std::fs::read(&out).unwrap());
     }
     assert_eq!(bytes[0], bytes[1]);
-    let err = sample_entries(&root, &[("png".into(), data.join("missing.png"), None)]).unwrap_err();
+    let missing = SampleFile {
+        key: "png".into(),
+        path: data.join("missing.png"),
+        pass: None,
+        npy: false,
+    };
+    let err = sample_entries(&root, &[missing], &PassCheck::default()).unwrap_err();
     assert!(err.to_string().contains("missing.png"), "{err}");
     assert!(err.to_string().contains("hint:"), "{err}");
 }

@@ -318,8 +318,11 @@ def evaluate(
     `preds`: `(B, H, W)` integer segment ids, or `(B, K, H, W)` soft masks (argmax over K,
     first index on ties; `no_background`: the K masks are foreground only). `gt`: `(B, H, W)`
     true ids (0 = background). Returns `{metric: mean over the images where it is defined, or
-    None}` for the protocol's metrics (or `metrics`, any names from `METRICS`); with `per_image`
+    None}` for the protocol's metrics (or `metrics`, any names from `METRICS`, or one name); with `per_image`
     also `"per_image": {metric: [value or None, ...]}`."""
+    # One name is one metric, not a list of its characters ("mIoU" -> "m", "I", ...).
+    if isinstance(metrics, str):
+        metrics = [metrics]
     names = list(metrics) if metrics is not None else protocol_metrics(protocol)
     for n in names:
         if n not in _INDEX:

@@ -57,6 +57,12 @@ def _floats(v: Any, shape: Tuple[int, ...], path: str, key: str) -> np.ndarray:
     return a
 
 
+def _check_mask_ids(mask: np.ndarray, n: int, path: str) -> None:
+    """A ValueError when the mask holds an id past the `n` objects of the metadata `path`."""
+    if mask.size and int(mask.max()) > n:
+        raise ValueError(f"the mask of `{path}` holds id {int(mask.max())} but the metadata lists {n} objects")
+
+
 class Dataset:
     """A ClevrTex dataset in the published layout (made by `clevrtex generate` or downloaded).
 
@@ -186,15 +192,18 @@ class Dataset:
         img = np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).transpose(2, 0, 1).astype(np.float32) / np.float32(255)
         msk = np.frombuffer(labels, dtype="<u4").reshape(1, h, w)
         msk = msk.astype(np.uint8) if (msk.size == 0 or msk.max() < 256) else msk.astype(np.int64)
+        # Read (and checked as the CLI checks it) for every item: the tuple form refuses a
+        # mask id past the metadata's objects as the dict form does.
+        data = _read_json(meta, self._root)
         if not self.as_dict:
+            objects = data.get("objects", [])
+            _check_mask_ids(msk[0], len(objects) if isinstance(objects, list) else 0, meta)
             if not self.return_metadata:
                 return index, img, msk
-            data = _read_json(meta, self._root)
             return index, img, msk, self._format_metadata(data, meta)
         item: Dict[str, Any] = {"index": np.int64(index), "image": img, "mask": msk}
         for name, buf, c in decoded:
             item[name] = np.frombuffer(buf, dtype=np.float32).reshape(c, h, w).copy()
-        data = _read_json(meta, self._root)
         item.update(self._arrays(data, meta, msk[0], (h, w), size))
         if self.return_metadata:
             item["metadata"] = self._format_metadata(data, meta)
@@ -210,8 +219,7 @@ class Dataset:
         n = len(objects)
         if n > k:
             raise ValueError(f"`{path}` has {n} objects, more than `max_objects` = {k}: pass a larger `max_objects`")
-        if mask.size and int(mask.max()) > n:
-            raise ValueError(f"the mask of `{path}` holds id {int(mask.max())} but the metadata lists {n} objects")
+        _check_mask_ids(mask, n, path)
         shape = np.full(k, -1, np.int64)
         size = np.full(k, -1, np.int64)
         material = np.full(k, -1, np.int64)

@@ -41,7 +41,12 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
-__all__ = ["KEYS", "decode"]
+__all__ = ["KEYS", "MAX_SIDE", "decode"]
+
+#: The largest side of an image `decode` decodes from PNG bytes: clevrtex's own cap on an
+#: image's side (`MAX_IMAGE_SIDE`). A few hundred bytes of PNG can declare 12000x7000 pixels
+#: (833 MB decoded); the header is read first and such a PNG refused before any pixel.
+MAX_SIDE = 4096
 
 #: The keys of a sample in a shard -> the name `decode` gives them, the dtype and the
 #: number of channels of the array (`None`: not an array).
@@ -77,7 +82,17 @@ def _array(key: str, stem: Any, value: Any) -> np.ndarray:
                     "or read the shards with `.decode(\"rgb\")`"
                 ) from None
             try:
-                arr = np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
+                im = Image.open(io.BytesIO(data))
+                size = im.size
+            except Exception as e:
+                raise ValueError(f"{where} is not a PNG: {e}") from None
+            if max(size) > MAX_SIDE:
+                raise ValueError(
+                    f"{where} declares {size[0]}x{size[1]} pixels, more than the "
+                    f"{MAX_SIDE}x{MAX_SIDE} any clevrtex image has; not decoded"
+                )
+            try:
+                arr = np.asarray(im.convert("RGB"))
             except Exception as e:
                 raise ValueError(f"{where} is not a PNG: {e}") from None
     else:
@@ -124,8 +139,9 @@ def decode(sample: Mapping[str, Any]) -> Dict[str, Any]:
             if isinstance(value, (bytes, bytearray, memoryview, str)):
                 try:
                     value = json.loads(bytes(value) if not isinstance(value, str) else value)
-                except (UnicodeDecodeError, json.JSONDecodeError) as e:
-                    raise ValueError(f"sample `{stem}` key `json` is not JSON: {e}") from None
+                except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as e:
+                    # RecursionError: nested deeper than Python's parser goes.
+                    raise ValueError(f"sample `{stem}` key `json` is not JSON: {e or 'nested too deep'}") from None
             if not isinstance(value, dict):
                 raise ValueError(
                     f"sample `{stem}` key `json` is a {type(value).__name__}, not an object"
@@ -133,4 +149,12 @@ def decode(sample: Mapping[str, Any]) -> Dict[str, Any]:
             out[name] = value
         else:
             out[name] = _array(key, stem, value)
+    # Every pass is one image's: a mask or depth of another size than the image belongs to
+    # no pixel of it.
+    sizes = {
+        key: out[name].shape[:2] for key, (name, dtype, _) in KEYS.items() if dtype and name in out
+    }
+    if len(set(sizes.values())) > 1:
+        shown = ", ".join(f"`{k}` {h}x{w}" for k, (h, w) in sizes.items())
+        raise ValueError(f"sample `{stem}` has passes of different sizes ({shown}, as height x width): every pass is the image's size")
     return out
