@@ -112,8 +112,10 @@ if [ "$test_venv" = 1 ]; then
     .venv-test/bin/pip install --quiet --disable-pip-version-check numpy scipy scikit-learn pillow
   fi
   # The Python package (crates/python, PyO3 + maturin) and pytest for its tests; rebuilt each
-  # time so it follows the sources (cargo reuses crates/python/target).
-  .venv-test/bin/pip install --quiet --disable-pip-version-check pytest ./crates/python
+  # time so it follows the sources, with cargo's build folder outside the source tree (reused
+  # by the next build; scripts/build_wheel.sh builds a wheel to install elsewhere).
+  CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/clevrtex/python-target}" \
+    .venv-test/bin/pip install --quiet --disable-pip-version-check pytest ./crates/python
   if [ "$torch" = 1 ] && ! .venv-test/bin/python -c 'import torch' >/dev/null 2>&1; then
     # PyPI's wheel (no CPU-only index is reachable from CI); pip keeps its download cache, so
     # a rerun does not fetch it again.

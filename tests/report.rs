@@ -127,10 +127,24 @@ fn report_of_a_generated_and_a_published_layout_dataset_and_both_compared() {
     ] {
         assert!(html.contains(section), "missing `{section}`");
     }
-    // The lights of every image are recomputed from its seed (the built-in configs).
-    assert!(
-        html.contains("10 of 10 images recomputed"),
-        "lights not recomputed"
+    // Two variants in one folder: the scene statistics get one part per variant, not one
+    // pooled histogram (camo's objects beside clevr's).
+    for v in ["clevr", "camo"] {
+        for heading in ["Scenes", "Visibility", "Camera, lights and rendering"] {
+            assert_eq!(
+                html.matches(&format!("<h2>{v}: {heading}</h2>")).count(),
+                1,
+                "no `{v}: {heading}` part"
+            );
+        }
+    }
+    assert!(!html.contains("<h2>Scenes</h2>"), "a pooled scenes section");
+    // The lights of every image are recomputed from its seed (the built-in configs), counted
+    // per variant.
+    assert_eq!(
+        html.matches("5 of 5 images recomputed").count(),
+        2,
+        "lights not recomputed per variant"
     );
     // Camo objects are made to blend in: far less colour contrast than clevr's plain colours.
     let (clevr, camo) = (
@@ -138,9 +152,19 @@ fn report_of_a_generated_and_a_published_layout_dataset_and_both_compared() {
         median_delta_e(&html, "camo"),
     );
     assert!(camo < clevr, "camo ΔE {camo} >= clevr ΔE {clevr}");
-    // Our metadata has everything: nothing is "not in this dataset" but the colours of camo
-    // (the colour plot pools both variants, so not even that).
-    assert!(!html.contains("not in this dataset"), "something missing");
+    // Our metadata has everything: nothing is "not in this dataset" but the colours of camo,
+    // whose objects have none (the one figure in camo's part of the page that says so).
+    let camo_part = html
+        .split("<h2>camo: Scenes</h2>")
+        .nth(1)
+        .and_then(|t| t.split("<h2>clevr: Scenes</h2>").next())
+        .unwrap();
+    assert_eq!(
+        html.matches("not in this dataset").count(),
+        1,
+        "something missing"
+    );
+    assert_eq!(camo_part.matches("not in this dataset").count(), 1);
 
     // The published layout: no manifest, no visibility, no camera.
     let published = dir.path().join("clevrtex");

@@ -6,6 +6,9 @@
 //! `clevrtex verify` ([`verify`]), the WebDataset `export` ([`webdataset`]) and the dataset
 //! card ([`card`]).
 //!
+//! The feature `tools` (default) holds [`run_lock`], `verify`, `webdataset`, `card` and
+//! [`exr`]; the readers (`eval`, `report`, the Python package) build without it.
+//!
 //! Nothing here starts Blender: `clevrtex-render` writes samples through [`layout`],
 //! [`atomic`] and [`manifest`], and every reader (`verify`, `export`, `report`, `eval`, the
 //! Python `Dataset`) reads through [`dataset`].
@@ -22,15 +25,20 @@
 #![deny(missing_docs)]
 
 pub mod atomic;
+#[cfg(feature = "tools")]
 pub mod card;
 pub mod dataset;
 pub mod error;
+#[cfg(feature = "tools")]
 pub mod exr;
 pub mod layout;
 pub mod manifest;
 pub mod png;
+#[cfg(feature = "tools")]
 pub mod run_lock;
+#[cfg(feature = "tools")]
 pub mod verify;
+#[cfg(feature = "tools")]
 pub mod webdataset;
 
 pub use error::Error;

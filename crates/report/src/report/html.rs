@@ -76,11 +76,14 @@ pub(super) fn test_line(name: &str, t: Option<Test>) -> String {
 pub(super) struct Page {
     pub(super) html: String,
     pub(super) labels: Vec<String>,
+    /// Put before every section heading: the variant (`camo: `) in a part of the page about
+    /// one variant, else empty.
+    pub(super) prefix: String,
 }
 
 impl Page {
     pub(super) fn h2(&mut self, t: &str) {
-        let _ = write!(self.html, "<h2>{}</h2>", esc(t));
+        let _ = write!(self.html, "<h2>{}{}</h2>", esc(&self.prefix), esc(t));
     }
 
     /// A categorical statistic: one count map per dataset.

@@ -79,6 +79,25 @@ pub fn write_page(out: &Path, html: &str) -> anyhow::Result<()> {
     })
 }
 
+/// The variants to give a part of the page each, in order, when the datasets hold several
+/// (`None` when there is one, or two datasets of one variant each are compared, whatever
+/// their names).
+fn per_variant(sums: &[Summary]) -> Option<Vec<String>> {
+    let each: Vec<Vec<String>> = sums.iter().map(Summary::variants).collect();
+    if each.iter().all(|v| v.len() <= 1) {
+        return None;
+    }
+    let all: std::collections::BTreeSet<String> = each.into_iter().flatten().collect();
+    Some(all.into_iter().collect())
+}
+
+/// The sections about the scenes: objects, visibility, camera and lights.
+fn write_scenes(page: &mut html::Page, sums: &[Summary], labels: &[String]) -> anyhow::Result<()> {
+    section::scenes::write(page, sums, labels)?;
+    section::visibility::write(page, sums)?;
+    section::camera::write(page, sums, labels)
+}
+
 /// The page, and the problems met while drawing it (cells of the preview left empty).
 pub fn build(sums: &[Summary], options: &Options) -> anyhow::Result<(String, Vec<String>)> {
     let mut problems = Vec::new();
@@ -100,13 +119,32 @@ pub fn build(sums: &[Summary], options: &Options) -> anyhow::Result<(String, Vec
     let mut page = html::Page {
         html: String::new(),
         labels: labels.clone(),
+        prefix: String::new(),
     };
     section::overview::write(&mut page, sums, &labels, options)?;
     section::splits::write(&mut page, sums, &labels)?;
     section::failures::write(&mut page, sums, &labels)?;
-    section::scenes::write(&mut page, sums, &labels)?;
-    section::visibility::write(&mut page, sums)?;
-    section::camera::write(&mut page, sums, &labels)?;
+    match per_variant(sums) {
+        // One dataset (or two compared) of one variant each: the scenes as they are.
+        None => write_scenes(&mut page, sums, &labels)?,
+        // Several variants: pooling them would mix their distributions (`camo`'s objects
+        // with `clevr`'s), so the scene statistics get one part per variant.
+        Some(variants) => {
+            for v in variants {
+                let (subs, sub_labels): (Vec<Summary>, Vec<String>) = sums
+                    .iter()
+                    .zip(&labels)
+                    .filter(|(s, _)| s.data.samples.iter().any(|x| x.variant == v))
+                    .map(|(s, l)| (s.of_variant(&v), l.clone()))
+                    .unzip();
+                page.prefix = format!("{v}: ");
+                page.labels.clone_from(&sub_labels);
+                write_scenes(&mut page, &subs, &sub_labels)?;
+            }
+            page.prefix.clear();
+            page.labels.clone_from(&labels);
+        }
+    }
     section::contrast::write(&mut page, sums, &labels)?;
     section::preview::write(&mut page, sums, &labels, options, &mut problems)?;
     section::provenance::write(&mut page, sums, &labels)?;

@@ -31,6 +31,68 @@ pub struct Summary {
     pub light_offsets: Vec<f64>,
     /// Images whose scene was recomputed and matched, of those tried.
     pub lights_matched: (usize, usize),
+    /// Per sample (in the order of `data.samples`): its light offsets, when its scene was
+    /// recomputed and matched.
+    sample_lights: Vec<Option<Vec<f64>>>,
+}
+
+impl Summary {
+    /// The variants of the dataset's samples, in order.
+    pub fn variants(&self) -> Vec<String> {
+        let mut v: Vec<String> = self
+            .data
+            .samples
+            .iter()
+            .map(|s| s.variant.clone())
+            .collect();
+        v.dedup();
+        v
+    }
+
+    /// The part of this summary about variant `variant`: its samples, manifests, failures
+    /// and measurements. Problems stay with the whole dataset (they are reported once).
+    pub fn of_variant(&self, variant: &str) -> Summary {
+        let keep: Vec<usize> = (0..self.data.samples.len())
+            .filter(|&i| self.data.samples[i].variant == variant)
+            .collect();
+        let sample_lights: Vec<Option<Vec<f64>>> = keep
+            .iter()
+            .map(|&i| self.sample_lights[i].clone())
+            .collect();
+        let tried = keep
+            .iter()
+            .filter(|&&i| self.data.samples[i].seed.is_some())
+            .count();
+        Summary {
+            label: self.label.clone(),
+            data: Dataset {
+                root: self.data.root.clone(),
+                samples: keep.iter().map(|&i| self.data.samples[i].clone()).collect(),
+                manifests: (self.data.manifests.iter())
+                    .filter(|m| m.variant == variant)
+                    .cloned()
+                    .collect(),
+                failures: (self.data.failures.iter())
+                    .filter(|f| f.variant == variant)
+                    .cloned()
+                    .collect(),
+                bad_manifests: Vec::new(),
+                problems: Vec::new(),
+            },
+            problems: Vec::new(),
+            measures: (self.measures.iter())
+                .filter(|(v, _)| v == variant)
+                .cloned()
+                .collect(),
+            measured: (self.measured.iter())
+                .filter(|(v, _)| v.as_str() == variant)
+                .map(|(v, n)| (v.clone(), *n))
+                .collect(),
+            light_offsets: sample_lights.iter().flatten().flatten().copied().collect(),
+            lights_matched: (sample_lights.iter().filter(|l| l.is_some()).count(), tried),
+            sample_lights,
+        }
+    }
 }
 
 fn progress(len: u64, what: &str) -> ProgressBar {
@@ -152,8 +214,9 @@ pub fn summarise(dir: &Path, args: &Options) -> anyhow::Result<Summary> {
         .to_string();
     Ok(Summary {
         label,
-        light_offsets: lights.into_iter().flatten().flatten().collect(),
+        light_offsets: lights.iter().flatten().flatten().copied().collect(),
         lights_matched: (matched, tried),
+        sample_lights: lights,
         data,
         problems,
         measures,
