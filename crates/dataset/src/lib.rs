@@ -23,9 +23,11 @@
 
 pub mod atomic;
 pub mod card;
+mod card_parts;
 pub mod dataset;
 pub mod error;
 pub mod exr;
+pub mod fingerprint;
 pub mod layout;
 pub mod manifest;
 pub mod png;
