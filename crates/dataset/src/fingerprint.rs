@@ -5,6 +5,9 @@
 //! order), so a paper can name exactly the layouts it used and `verify --against` can compare
 //! two datasets made by one command.
 //!
+//! Also the user materials a dataset's runs record ([`user_materials`]): the names its
+//! samples may carry beyond the built-in catalogue, for every reader's name tables.
+//!
 //! Metadata is untrusted: it is read capped and beneath the dataset's root
 //! ([`crate::dataset::read`]), and a file that is not a JSON object has no layout hash.
 
@@ -14,7 +17,7 @@ use std::path::Path;
 use serde_json::Value;
 
 use crate::dataset;
-use crate::manifest::{hash_hex, Manifest};
+use crate::manifest::{hash_hex, Manifest, UserMaterial};
 
 /// Top-level metadata keys that say how and with what a sample was rendered, not what it
 /// holds: left out of its layout hash.
@@ -104,6 +107,26 @@ pub fn layouts(root: &Path, variant_dir: &Path, manifests: &[&Manifest]) -> Layo
         out.fingerprint = hash_hex(&all);
     }
     out
+}
+
+/// The user materials (`--materials DIR`) that the run manifests of `variant` under `root` (an
+/// output folder or a variant folder) record, by name: what a sample's material name may be
+/// beyond the built-in catalogue (the Python `Dataset`'s and the export's name tables).
+/// Unreadable manifests are left out (`verify` reports them).
+pub fn user_materials(
+    root: &Path,
+    variant: &str,
+) -> Result<BTreeMap<String, UserMaterial>, String> {
+    let ds = dataset::Dataset::open(root).map_err(|e| e.to_string())?;
+    let mut out = BTreeMap::new();
+    for vd in ds.variants.iter().filter(|vd| vd.variant == variant) {
+        for p in &vd.manifests {
+            if let Ok(m) = Manifest::read(p) {
+                out.extend(m.user_materials);
+            }
+        }
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -41,7 +41,12 @@ fn material_differences(a: &Manifest, b: &Manifest) -> Vec<String> {
 /// Every setting that differs between runs `a` and `b`, one phrase each.
 pub fn run_differences(a: &Manifest, b: &Manifest) -> Vec<String> {
     let mut d = a.settings_differ(b);
-    if a.config_hash != b.config_hash && !d.iter().any(|x| x.contains("config")) {
+    // The config hash covers the render settings: named only when they do not explain it.
+    if a.config_hash != b.config_hash
+        && !d
+            .iter()
+            .any(|x| x.contains("config") || x.starts_with("render "))
+    {
         d.push(format!(
             "config_hash {} vs {}",
             clevrtex_scene::text::printable(&a.config_hash),
