@@ -1,5 +1,5 @@
 //! Records the git commit the `clevrtex` binary is built from, for `--version`, `doctor`, the
-//! run manifests and the dataset card (docs/reproducibility.md, "Provenance").
+//! run manifests and the dataset card (docs/runs.md, "Provenance").
 //!
 //! Sets `CLEVRTEX_COMMIT` (40 hex digits, or `unknown`), `CLEVRTEX_TREE_MODIFIED` (`true`,
 //! `false` or `unknown`: whether a tracked source file differed from that commit) and

@@ -967,7 +967,7 @@ fn verify_against_another_dataset_of_the_same_command_compares_image_by_image() 
     std::fs::create_dir_all(&m).unwrap();
     let cm = c.join("clevrtex_clevr/MANIFEST-0-4-0of1.json");
     std::fs::copy(&cm, m.join("MANIFEST-0-4-0of1.json")).unwrap();
-    let (code, t) = against(&m.parent().unwrap().to_path_buf());
+    let (code, t) = against(m.parent().unwrap());
     assert_eq!(code, Some(0), "{t}");
 
     // OTHER's metadata with another Blender version (provenance): still the same; with

@@ -87,7 +87,7 @@ pub struct GenerateArgs {
     tasks: Option<u64>,
     /// Write this run into a folder of runs with other settings (image size, samples, seed,
     /// config, materials) on purpose: recorded in its manifest, so `verify` names the mix
-    /// without failing the dataset (docs/reproducibility.md, "One dataset, one set of settings").
+    /// without failing the dataset (docs/runs.md, "One dataset, one set of settings").
     #[arg(long)]
     mix_settings: bool,
     #[command(flatten)]

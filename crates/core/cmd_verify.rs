@@ -30,7 +30,7 @@ pub struct Args {
     /// Also compare with another dataset made by the same command (its `--out` folder, or a
     /// folder of just its `clevrtex_<variant>/MANIFEST-*.json`): whether the two hold the same
     /// layouts, masks and metadata, image by image; RGB and other rendered passes that differ
-    /// are counted as render noise, not failures (docs/reproducibility.md).
+    /// are counted as render noise, not failures (docs/runs.md, "Comparing two datasets").
     #[arg(long, value_name = "OTHER")]
     against: Option<PathBuf>,
     /// Threads, 1 to 1024 (default: all cores).

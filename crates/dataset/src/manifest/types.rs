@@ -84,7 +84,7 @@ pub struct Manifest {
     pub tool_version: String,
     /// The git commit `clevrtex` was built from (40 hex digits, `unknown` for a build outside
     /// git without `CLEVRTEX_BUILD_COMMIT`); absent in older manifests. Kept out of the
-    /// samples' metadata, which stays byte-identical across builds (docs/reproducibility.md).
+    /// samples' metadata, which stays byte-identical across builds (docs/runs.md, "Provenance").
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub tool_commit: String,
     /// Whether a tracked source differed from `tool_commit` when it was built; absent when
