@@ -486,4 +486,48 @@ mod tests {
             "{card}"
         );
     }
+
+    #[test]
+    fn the_card_describes_the_materials_used_and_the_runs_identity() {
+        let (name, mut m) = run(0, 4, 4, true);
+        m.tool_commit = "0123456789abcdef0123456789abcdef01234567".into();
+        m.tool_modified = Some(true);
+        m.user_materials.insert(
+            "Bricks01".into(),
+            crate::manifest::UserMaterial {
+                file: "Bricks01.blend".into(),
+                group: Some("Bricks01".into()),
+                textures: vec!["tex/b.png".into()],
+                xxh3: "00000000deadbeef".into(),
+            },
+        );
+        let layouts = Layouts {
+            fingerprint: "0123456789abcdef".into(),
+            samples: 4,
+            unread: 0,
+            materials: [("Bricks01".to_string(), 13)].into(),
+        };
+        let mut variants = BTreeMap::new();
+        variants.insert(
+            "full".to_string(),
+            VariantRuns {
+                manifests: vec![(name, m)],
+                render: BTreeMap::new(),
+                layouts,
+            },
+        );
+        let card = card_text("data", &variants, &BTreeSet::new());
+        for want in [
+            "| `Bricks01` | `Bricks01.blend` | `Bricks01` | 1 | `00000000deadbeef` | 13 |",
+            "0 built-in material(s) of clevrtex's catalogue, 1 user material(s)",
+            "- **Materials**: user materials given with `--materials`",
+            "- **Suite**: none",
+            "`0.1.0 @ 0123456789ab (modified)`",
+            "`full`: `0123456789abcdef` over 4 sample(s)",
+            "their licences apply",
+        ] {
+            assert!(card.contains(want), "{want:?} not in: {card}");
+        }
+        assert!(!card.contains("procedural Blender node recipes"), "{card}");
+    }
 }
