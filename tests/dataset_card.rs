@@ -50,6 +50,37 @@ fn shards_writing_at_once_leave_a_card_of_every_run() {
         card.contains("32x24 pixels, 1 Cycles samples per pixel"),
         "{card}"
     );
+    // Issue 41: what a paper names: the suite (none here), the tool's version and commit (as
+    // `--version` and the manifests give it), the layouts' fingerprint, the materials used,
+    // and a citation of the tool with its repository and year.
+    let version = text(&clevrtex().arg("--version").output().unwrap());
+    let commit = version
+        .split("commit ")
+        .nth(1)
+        .and_then(|r| r.get(..12))
+        .unwrap_or_else(|| panic!("no commit in `--version`: {version}"));
+    let manifest: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(out.join("clevrtex_clevr/MANIFEST-4-6-0of1.json")).unwrap(),
+    )
+    .unwrap();
+    assert!(
+        manifest["tool_commit"]
+            .as_str()
+            .is_some_and(|c| c.starts_with(commit)),
+        "{manifest}"
+    );
+    for want in [
+        "- **Suite**: none".to_string(),
+        format!("`0.1.0 @ {commit}"),
+        "over 6 sample(s)".to_string(),
+        "### Materials used".to_string(),
+        "- built-in: `metal`".to_string(),
+        "  url     = {https://".to_string(),
+        "  year    = {20".to_string(),
+    ] {
+        assert!(card.contains(&want), "{want:?} not in: {card}");
+    }
+    assert!(card.contains("- **Materials**: procedural"), "{card}");
     // No temporary is left, and the card is no file of the dataset to the readers.
     let names: Vec<String> = std::fs::read_dir(&out)
         .unwrap()

@@ -832,3 +832,185 @@ fn verify_names_a_sample_made_from_another_config_than_its_manifest() {
         "no `config_hash`: not compared: {t}"
     );
 }
+
+/// Issue 41: one dataset, one set of settings. A clevr set grown by a run of another image
+/// size and sample count (no index in common, so `generate` took it) fails `verify` (exit 3)
+/// naming both runs and each difference, and the card lists both settings; the same run
+/// redone with `generate --mix-settings` (recorded in its manifest) passes, the mix named.
+#[test]
+fn runs_of_other_settings_in_one_folder_fail_verify_unless_mixed_on_purpose() {
+    let Some(blender) = blender_or_skip("runs of other settings in one folder") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    let generate = |extra: &[&str]| {
+        clevrtex()
+            .args(["generate", "--variant", "clevr", "--total", "4"])
+            .args(["--passes", "rgb,mask", "--workers", "1", "--blender"])
+            .arg(&blender)
+            .arg("--out")
+            .arg(&out)
+            .args(extra)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .unwrap()
+    };
+    let o = generate(&[
+        "-n",
+        "2",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--samples",
+        "2",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let later = [
+        "--start",
+        "2",
+        "-n",
+        "2",
+        "--width",
+        "24",
+        "--height",
+        "18",
+        "--samples",
+        "1",
+    ];
+    let o = generate(&later);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let (o, t) = verify(&[&out]);
+    assert_eq!(o.status.code(), Some(3), "{t}");
+    for want in [
+        "MANIFEST-0-2-0of1.json",
+        "MANIFEST-2-4-0of1.json",
+        "differ in settings",
+        "render width 32 vs 24",
+        "render height 24 vs 18",
+        "render samples 2 vs 1",
+        "--mix-settings",
+    ] {
+        assert!(t.contains(want), "{want:?} not in: {t}");
+    }
+    let card = std::fs::read_to_string(out.join("DATASET_CARD.md")).unwrap();
+    for want in [
+        "**Mixed settings**",
+        "- 32x24 pixels, 2 Cycles samples per pixel: `clevr` 0..2",
+        "- 24x18 pixels, 1 Cycles samples per pixel: `clevr` 2..4",
+    ] {
+        assert!(card.contains(want), "{want:?} not in: {card}");
+    }
+
+    let mut mixed = later.to_vec();
+    mixed.push("--mix-settings");
+    let o = generate(&mixed);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let m: Value = serde_json::from_slice(
+        &std::fs::read(out.join("clevrtex_clevr/MANIFEST-2-4-0of1.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(m["mixed_settings"], true, "{m}");
+    let (o, t) = verify(&[&out]);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("settings mixed on purpose") && t.contains("render width 32 vs 24"),
+        "{t}"
+    );
+}
+
+/// Issue 41: `verify DIR --against OTHER` on the two-shard run and the same command run
+/// unsharded: same layouts, masks and metadata image by image (rendered passes that differ
+/// are render noise, not failures), also against OTHER's manifests alone; a mask or layout
+/// that differs is named, a Blender version that differs is not, and an OTHER of another
+/// seed or suite is named as another command, its images not compared.
+#[test]
+fn verify_against_another_dataset_of_the_same_command_compares_image_by_image() {
+    let Some((_dir, a, b)) = copy() else { return };
+    let blender = blender_or_skip("verify --against").unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let c = tmp.path().join("c");
+    let o = clevrtex()
+        .args(["generate", "--variant", "clevr", "-n", "4", "--seed", "3"])
+        .args(["--width", "48", "--height", "36", "--samples", "1"])
+        .args(["--passes", "rgb,mask,depth", "--workers", "1", "--blender"])
+        .arg(&blender)
+        .arg("--out")
+        .arg(&c)
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let against = |other: &Path| {
+        let o = clevrtex()
+            .arg("verify")
+            .args([&a, &b])
+            .arg("--against")
+            .arg(other)
+            .output()
+            .unwrap();
+        let t = text(&o);
+        (o.status.code(), t)
+    };
+    let (code, t) = against(&c);
+    assert_eq!(code, Some(0), "{t}");
+    assert!(
+        t.contains("4 of 4 image(s) in both hold the same layout, mask and metadata")
+            && t.contains("same layouts, masks and metadata"),
+        "{t}"
+    );
+    // Just the manifests of OTHER.
+    let m = tmp.path().join("m/clevrtex_clevr");
+    std::fs::create_dir_all(&m).unwrap();
+    let cm = c.join("clevrtex_clevr/MANIFEST-0-4-0of1.json");
+    std::fs::copy(&cm, m.join("MANIFEST-0-4-0of1.json")).unwrap();
+    let (code, t) = against(m.parent().unwrap());
+    assert_eq!(code, Some(0), "{t}");
+
+    // OTHER's metadata with another Blender version (provenance): still the same; with
+    // another object position, and a mask of other bytes: named.
+    let edit_meta = |index: u64, f: &dyn Fn(&mut Value)| {
+        let p = c.join(format!("clevrtex_clevr/0/CLEVRTEX_clevr_{index:06}.json"));
+        let mut meta: Value = serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap();
+        f(&mut meta);
+        std::fs::write(&p, serde_json::to_vec_pretty(&meta).unwrap()).unwrap();
+    };
+    edit_meta(0, &|m| m["blender_version"] = "9.9.9".into());
+    rehash_manifest(&c);
+    let (code, t) = against(&c);
+    assert_eq!(code, Some(0), "{t}");
+    edit_meta(1, &|m| m["objects"][0]["3d_coords"][0] = 99.0.into());
+    std::fs::write(
+        c.join("clevrtex_clevr/0/CLEVRTEX_clevr_000002_flat.png"),
+        std::fs::read(sample(&a, 0, "_flat.png")).unwrap(),
+    )
+    .unwrap();
+    rehash_manifest(&c);
+    let (code, t) = against(&c);
+    assert_eq!(code, Some(3), "{t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000001: metadata differs in objects"),
+        "{t}"
+    );
+    assert!(t.contains("CLEVRTEX_clevr_000002: mask differs"), "{t}");
+    assert!(t.contains("2 of 4 image(s)"), "{t}");
+
+    // Another seed and suite: another command, named.
+    let mut man: Value = serde_json::from_slice(&std::fs::read(&cm).unwrap()).unwrap();
+    man["seed"] = 4.into();
+    man["suite"] = "clevrtex".into();
+    std::fs::write(&cm, serde_json::to_vec_pretty(&man).unwrap()).unwrap();
+    let (code, t) = against(&c);
+    assert_eq!(code, Some(3), "{t}");
+    for want in [
+        "not comparable with",
+        "--seed 3 vs 4",
+        "suite (none) vs clevrtex",
+    ] {
+        assert!(t.contains(want), "{want:?} not in: {t}");
+    }
+    assert!(!t.contains("mask differs"), "images not compared: {t}");
+}

@@ -29,7 +29,7 @@ pub struct Args {
 
 /// Run `clevrtex doctor`.
 pub fn run(args: Args) -> CmdResult {
-    println!("clevrtex {}", env!("CARGO_PKG_VERSION"));
+    println!("clevrtex {}", crate::provenance::VERSION_LINE);
     let cores = clevrtex_render::pool::available_cores();
     let workers = clevrtex_render::pool::default_workers();
     println!(

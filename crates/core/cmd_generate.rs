@@ -85,6 +85,11 @@ pub struct GenerateArgs {
     /// Kubernetes Job's `completions`), each on a machine like this one; 1 to `-n`.
     #[arg(long, value_name = "TASKS", requires = "estimate")]
     tasks: Option<u64>,
+    /// Write this run into a folder of runs with other settings (image size, samples, seed,
+    /// config, materials) on purpose: recorded in its manifest, so `verify` names the mix
+    /// without failing the dataset (docs/runs.md, "One dataset, one set of settings").
+    #[arg(long)]
+    mix_settings: bool,
     #[command(flatten)]
     run: RunArgs,
 }
@@ -246,6 +251,9 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
             total,
             shard: [shard.k, shard.n],
             tool_version: env!("CARGO_PKG_VERSION").into(),
+            tool_commit: crate::provenance::COMMIT.into(),
+            tool_modified: crate::provenance::modified(),
+            mixed_settings: args.mix_settings,
             command: std::env::args().collect(),
             ..manifest::Manifest::unfinished()
         },

@@ -3,7 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use clevrtex_dataset::verify::{self, index_ranges, shell_words, VariantReport, VerifyOptions};
+use clevrtex_dataset::verify::{
+    self, index_ranges, shell_words, Comparison, VariantReport, VerifyOptions,
+};
 
 use crate::exit::{self, CmdResult};
 
@@ -25,6 +27,12 @@ pub struct Args {
     /// Write the full report as JSON to FILE.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
+    /// Also compare with another dataset made by the same command (its `--out` folder, or a
+    /// folder of just its `clevrtex_<variant>/MANIFEST-*.json`): whether the two hold the same
+    /// layouts, masks and metadata, image by image; RGB and other rendered passes that differ
+    /// are counted as render noise, not failures (docs/runs.md, "Comparing two datasets").
+    #[arg(long, value_name = "OTHER")]
+    against: Option<PathBuf>,
     /// Threads, 1 to 1024 (default: all cores).
     #[arg(long, value_name = "N", value_parser = crate::run_args::threads_range::<usize>())]
     jobs: Option<usize>,
@@ -139,6 +147,9 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
             println!("    ... {} more (see --json)", r.skipped.len() - 20);
         }
     }
+    for m in &r.mixed_on_purpose {
+        println!("  settings mixed on purpose (`--mix-settings`): {m}");
+    }
     for p in &r.manifest_problems {
         println!("  manifest: {p}");
     }
@@ -181,6 +192,80 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
     }
 }
 
+/// Print what `--against` found for one variant.
+fn print_comparison(c: &Comparison) {
+    let other = c.other.display();
+    if !c.settings.is_empty() {
+        println!(
+            "{}: not comparable with `{other}`: made by another command ({}; this dataset's value first)\nhint: compare datasets made by the same `clevrtex generate` command (same variant, seed, config, size, samples, passes, materials, suite and `--total`)",
+            c.variant,
+            c.settings.join(", ")
+        );
+        return;
+    }
+    let noise: Vec<String> = c
+        .render_noise
+        .iter()
+        .map(|(p, n)| format!("{p} {n}"))
+        .collect();
+    println!(
+        "{}: against `{other}`: {} of {} image(s) in both hold the same layout, mask and metadata{}",
+        c.variant,
+        c.identical,
+        c.compared,
+        if noise.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; rendered passes differ (render noise, not a failure): {}",
+                noise.join(", ")
+            )
+        }
+    );
+    if !c.fingerprints[0].is_empty() || !c.fingerprints[1].is_empty() {
+        let show = |f: &str| {
+            if f.is_empty() {
+                "(not read)".to_string()
+            } else {
+                f.to_string()
+            }
+        };
+        println!(
+            "  layout fingerprints: {} here, {} there",
+            show(&c.fingerprints[0]),
+            show(&c.fingerprints[1])
+        );
+    }
+    for d in &c.differ {
+        println!("  differs: {d}");
+    }
+    if c.differ_count as usize > c.differ.len() {
+        println!(
+            "  ... {} more differ (see --json)",
+            c.differ_count as usize - c.differ.len()
+        );
+    }
+    if !c.only_here.is_empty() {
+        println!(
+            "  only here ({}): {}",
+            c.only_here.len(),
+            index_ranges(&c.only_here)
+        );
+    }
+    if !c.only_there.is_empty() {
+        println!(
+            "  only in `{other}` ({}): {}",
+            c.only_there.len(),
+            index_ranges(&c.only_there)
+        );
+    }
+    if c.same() {
+        println!("  same layouts, masks and metadata");
+    } else if c.compared == 0 && c.only_here.is_empty() && c.only_there.is_empty() {
+        println!("  no finished image on either side to compare");
+    }
+}
+
 /// Run `clevrtex verify`.
 pub fn run(args: Args) -> CmdResult {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -219,8 +304,24 @@ pub fn run(args: Args) -> CmdResult {
         "checked {samples} samples in {secs:.1} s ({:.0} samples/s)",
         samples as f64 / secs.max(1e-9)
     );
+    let comparisons = match &args.against {
+        Some(other) => pool
+            .install(|| verify::against(&args.dirs, other, args.variant.as_deref()))
+            .map_err(|e| anyhow::anyhow!("--against: {e}"))?,
+        None => Vec::new(),
+    };
+    for c in &comparisons {
+        print_comparison(c);
+    }
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&reports)? + "\n";
+        let text = if args.against.is_some() {
+            serde_json::to_string_pretty(&serde_json::json!({
+                "variants": reports,
+                "against": comparisons,
+            }))?
+        } else {
+            serde_json::to_string_pretty(&reports)?
+        } + "\n";
         clevrtex_dataset::atomic::write(path, text.as_bytes())
             .with_context(|| format!("cannot write `{}`", path.display()))?;
     }
@@ -256,9 +357,11 @@ pub fn run(args: Args) -> CmdResult {
         }
         println!("removed {removed} file(s) of broken samples and temporary files");
     }
-    Ok(if reports.iter().all(VariantReport::is_whole) {
-        exit::OK
-    } else {
-        exit::PARTIAL
-    })
+    Ok(
+        if reports.iter().all(VariantReport::is_whole) && comparisons.iter().all(Comparison::same) {
+            exit::OK
+        } else {
+            exit::PARTIAL
+        },
+    )
 }

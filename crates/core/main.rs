@@ -23,6 +23,7 @@ mod estimate;
 mod exit;
 mod interrupt;
 mod materials_blender;
+mod provenance;
 mod run;
 mod run_args;
 mod user_materials;
@@ -30,7 +31,7 @@ mod user_materials;
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object
 /// segmentation, in the style of ClevrTex.
 #[derive(Debug, Parser)]
-#[command(name = "clevrtex", version, about, after_help = exit::EXIT_CODES_HELP)]
+#[command(name = "clevrtex", version = provenance::VERSION_LINE, about, after_help = exit::EXIT_CODES_HELP)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -14,7 +14,9 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
+use crate::card_parts::{self as parts, code, fenced, RenderSettings};
 use crate::dataset;
+use crate::fingerprint::{self, Layouts};
 use crate::layout::{self, Split};
 use crate::manifest::{merge_ranges, Manifest};
 use clevrtex_scene::Pass;
@@ -28,35 +30,11 @@ pub const CARD_LOCK: &str = ".clevrtex-card.lock";
 #[derive(Debug, Default)]
 struct VariantRuns {
     manifests: Vec<(String, Manifest)>,
-    /// `render.width`, `render.height`, `render.samples` of one sample's metadata.
-    render: Option<(u64, u64, u64)>,
-}
-
-/// `text` as a Markdown code span: control characters escaped, backticks and `|` replaced,
-/// at most 200 characters.
-fn code(text: &str) -> String {
-    let t: String = clevrtex_scene::text::printable(text)
-        .chars()
-        .map(|c| match c {
-            '`' => '\'',
-            '|' => '/',
-            c => c,
-        })
-        .take(200)
-        .collect();
-    format!("`{t}`")
-}
-
-/// A fenced block of `lines`, its fence longer than any run of backticks in them.
-fn fenced(lang: &str, lines: &[String]) -> String {
-    let longest = lines
-        .iter()
-        .flat_map(|l| l.split(|c| c != '`'))
-        .map(str::len)
-        .max()
-        .unwrap_or(0);
-    let fence = "`".repeat(longest.max(2) + 1);
-    format!("{fence}{lang}\n{}\n{fence}\n", lines.join("\n"))
+    /// Every run's `render.width`, `render.height`, `render.samples` (its manifest's, else
+    /// one of its samples' metadata), with the runs that used them.
+    render: RenderSettings,
+    /// The layouts of its finished runs' samples (fingerprint, materials used).
+    layouts: Layouts,
 }
 
 /// Samples of each split the runs planned (each index once, with the split the run that
@@ -112,8 +90,12 @@ fn size_category(n: u64) -> &'static str {
     }
 }
 
-/// The card's text for the runs found by variant.
-fn card_text(title: &str, variants: &BTreeMap<String, VariantRuns>) -> String {
+/// The card's text for the runs found by variant, and the suites their manifests name.
+fn card_text(
+    title: &str,
+    variants: &BTreeMap<String, VariantRuns>,
+    suites: &BTreeSet<String>,
+) -> String {
     use std::fmt::Write as _;
     let mut c = String::new();
     let mut planned_all = 0;
@@ -217,7 +199,7 @@ fn card_text(title: &str, variants: &BTreeMap<String, VariantRuns>) -> String {
                 m.total,
                 m.seed,
                 code(&m.config_hash),
-                code(&m.tool_version),
+                code(&parts::tool_of(m)),
                 if m.blender_version.is_empty() {
                     "(none yet)".to_string()
                 } else {
@@ -232,32 +214,61 @@ fn card_text(title: &str, variants: &BTreeMap<String, VariantRuns>) -> String {
             }
         }
     }
-    if let Some((w, h, s)) = variants.values().find_map(|r| r.render) {
-        let _ = writeln!(
-            c,
-            "\nRender settings (from a sample's metadata `render`): {w}x{h} pixels, {s} Cycles samples per pixel."
-        );
+    let mut render = RenderSettings::new();
+    for r in variants.values() {
+        for (k, runs) in &r.render {
+            render.entry(*k).or_default().extend(runs.iter().cloned());
+        }
     }
+    c += &parts::render_lines(&render);
     c += "\nThe commands of the runs (rerunning one resumes and repairs it):\n\n";
     c += &fenced("sh", &commands);
     c += "\n";
+    let used: BTreeMap<String, (Vec<&Manifest>, &Layouts)> = variants
+        .iter()
+        .map(|(v, r)| {
+            (
+                v.clone(),
+                (r.manifests.iter().map(|(_, m)| m).collect(), &r.layouts),
+            )
+        })
+        .collect();
+    c += &parts::identity_section(suites, &used);
+    c += &parts::materials_section(&used);
 
     c += "## Differences from the published ClevrTex\n\n";
-    c += "- **Materials**: procedural Blender node recipes of clevrtex's catalogue \
+    let builtin_text = "procedural Blender node recipes of clevrtex's catalogue \
            (`materials/` of the clevrtex repository), not the published set's materials, \
            which are made from Poliigon textures that the public generator \
            (karazijal/clevrtex-generation) cannot redistribute. Object and background \
-           materials look alike in kind (wood, stone, fabric, metal, ...), not texel for texel.\n";
+           materials look alike in kind (wood, stone, fabric, metal, ...), not texel for texel";
+    let user_text = "user materials given with `--materials` (listed with their content \
+           hashes under \"Materials used\"), not the published set's; their likeness to it \
+           is that of the files given";
+    let _ = writeln!(
+        c,
+        "- **Materials**: {}.",
+        match parts::all_user(&used) {
+            Some(true) => user_text.to_string(),
+            Some(false) => builtin_text.to_string(),
+            None => format!("some {user_text}; the others {builtin_text}"),
+        }
+    );
     let _ = writeln!(
         c,
         "- **Sample count**: {planned_all} planned here; the published main ClevrTex set has \
          50,000 images (Karazija et al., 2021)."
     );
-    if let Some((w, h, s)) = variants.values().find_map(|r| r.render) {
+    if !render.is_empty() {
+        let here: Vec<String> = render
+            .keys()
+            .map(|(w, h, s)| format!("{w}x{h} pixels and {s} samples per pixel"))
+            .collect();
         let _ = writeln!(
             c,
-            "- **Resolution and sampling**: {w}x{h} pixels and {s} samples per pixel here; the \
-             published set is 320x240, rendered with the public generator's 512 samples."
+            "- **Resolution and sampling**: {} here; the published set is 320x240, rendered \
+             with the public generator's 512 samples.",
+            here.join(", ")
         );
     }
     c += "- **Renderer**: the Blender versions in the table above; the published set was \
@@ -267,7 +278,7 @@ fn card_text(title: &str, variants: &BTreeMap<String, VariantRuns>) -> String {
     c += "clevrtex and its material catalogue are licensed under MIT OR Apache-2.0 \
            (`LICENSE-MIT`, `LICENSE-APACHE` of the clevrtex repository); the catalogue's \
            materials are procedural node recipes with no third-party texture. ";
-    if user_materials {
+    if user_materials || parts::all_user(&used) != Some(false) {
         c += "Some runs used user materials (`--materials`, see the commands above): their \
                licences apply to the images that show them. ";
     }
@@ -301,13 +312,9 @@ fn card_text(title: &str, variants: &BTreeMap<String, VariantRuns>) -> String {
         "  url       = {https://arxiv.org/abs/1612.06890}".into(),
         "}".into(),
         String::new(),
-        "@software{clevrtex_tool,".into(),
-        "  title   = {clevrtex: texture-rich synthetic benchmarks for unsupervised multi-object segmentation},".into(),
-        "  author  = {{The clevrtex contributors}},".into(),
-        format!("  version = {{{version}}},"),
-        "  note    = {See CITATION.cff of the clevrtex repository}".into(),
-        "}".into(),
     ];
+    let mut bib = bib.to_vec();
+    bib.extend(parts::tool_bibtex(version));
     c += &fenced("bibtex", &bib);
     c
 }
@@ -332,16 +339,27 @@ pub fn write_card(out: &Path) -> Result<PathBuf, String> {
     })?;
     let root = dataset::root(out).map_err(|e| format!("cannot read `{}`: {e}", out.display()))?;
     let mut variants: BTreeMap<String, VariantRuns> = BTreeMap::new();
+    let mut suites = BTreeSet::new();
+    let mut dirs: BTreeMap<String, PathBuf> = BTreeMap::new();
     for (v, path) in found {
         // A manifest that cannot be read is `verify`'s to report; the card shows the rest.
         let Ok(m) = Manifest::read(&path) else {
             continue;
         };
-        let runs = variants.entry(v).or_default();
-        if runs.render.is_none() && m.finished {
-            let vdir = path.parent().unwrap_or(Path::new("."));
-            runs.render = m
-                .files
+        // The suite a run was made for (`generate --suite`), when its manifest names one.
+        if let Some(suite) = dataset::read(&root, &path, dataset::MAX_FILE_BYTES)
+            .ok()
+            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+            .and_then(|j| j["suite"].as_str().map(str::to_string))
+        {
+            suites.insert(suite);
+        }
+        let vdir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        dirs.entry(v.clone()).or_insert_with(|| vdir.clone());
+        let runs = variants.entry(v.clone()).or_default();
+        // The run's render settings: its manifest's, else (older manifests) a sample's.
+        let render = parts::render_of(&m).or_else(|| {
+            m.files
                 .keys()
                 .filter(|f| f.ends_with(".json") && !f.contains(".."))
                 .find_map(|rel| {
@@ -354,7 +372,13 @@ pub fn write_card(out: &Path) -> Result<PathBuf, String> {
                         r["height"].as_u64()?,
                         r["samples"].as_u64()?,
                     ))
-                });
+                })
+        });
+        if let Some(r) = render {
+            runs.render
+                .entry(r)
+                .or_default()
+                .push(format!("{} {}..{}", code(&v), m.start, m.end));
         }
         let name = path
             .file_name()
@@ -362,12 +386,16 @@ pub fn write_card(out: &Path) -> Result<PathBuf, String> {
             .unwrap_or_default();
         runs.manifests.push((name, m));
     }
+    for (v, runs) in &mut variants {
+        let list: Vec<&Manifest> = runs.manifests.iter().map(|(_, m)| m).collect();
+        runs.layouts = fingerprint::layouts(&root, &dirs[v], &list);
+    }
     let title = out
         .canonicalize()
         .ok()
         .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         .unwrap_or_else(|| "clevrtex dataset".into());
-    let text = card_text(&title, &variants);
+    let text = card_text(&title, &variants, &suites);
     let path = out.join(CARD_FILE);
     // The one atomic writer: a unique temporary, no link followed, removed on every error.
     crate::atomic::write(&path, text.as_bytes())
@@ -419,10 +447,11 @@ mod tests {
             "full".to_string(),
             VariantRuns {
                 manifests: vec![run(0, 10, 10, true), run(10, 20, 20, true)],
-                render: Some((64, 48, 4)),
+                render: [((64, 48, 4), vec!["`full` 0..20".to_string()])].into(),
+                layouts: Layouts::default(),
             },
         );
-        let card = card_text("data", &variants);
+        let card = card_text("data", &variants, &BTreeSet::new());
         assert!(
             card.starts_with("---\npretty_name: \"data (clevrtex)\""),
             "{card}"
@@ -456,5 +485,49 @@ mod tests {
             card.contains("@inproceedings{karazija2021clevrtex"),
             "{card}"
         );
+    }
+
+    #[test]
+    fn the_card_describes_the_materials_used_and_the_runs_identity() {
+        let (name, mut m) = run(0, 4, 4, true);
+        m.tool_commit = "0123456789abcdef0123456789abcdef01234567".into();
+        m.tool_modified = Some(true);
+        m.user_materials.insert(
+            "Bricks01".into(),
+            crate::manifest::UserMaterial {
+                file: "Bricks01.blend".into(),
+                group: Some("Bricks01".into()),
+                textures: vec!["tex/b.png".into()],
+                xxh3: "00000000deadbeef".into(),
+            },
+        );
+        let layouts = Layouts {
+            fingerprint: "0123456789abcdef".into(),
+            samples: 4,
+            unread: 0,
+            materials: [("Bricks01".to_string(), 13)].into(),
+        };
+        let mut variants = BTreeMap::new();
+        variants.insert(
+            "full".to_string(),
+            VariantRuns {
+                manifests: vec![(name, m)],
+                render: BTreeMap::new(),
+                layouts,
+            },
+        );
+        let card = card_text("data", &variants, &BTreeSet::new());
+        for want in [
+            "| `Bricks01` | `Bricks01.blend` | `Bricks01` | 1 | `00000000deadbeef` | 13 |",
+            "0 built-in material(s) of clevrtex's catalogue, 1 user material(s)",
+            "- **Materials**: user materials given with `--materials`",
+            "- **Suite**: none",
+            "`0.1.0 @ 0123456789ab (modified)`",
+            "`full`: `0123456789abcdef` over 4 sample(s)",
+            "their licences apply",
+        ] {
+            assert!(card.contains(want), "{want:?} not in: {card}");
+        }
+        assert!(!card.contains("procedural Blender node recipes"), "{card}");
     }
 }

@@ -27,10 +27,12 @@
 pub mod atomic;
 #[cfg(feature = "tools")]
 pub mod card;
+mod card_parts;
 pub mod dataset;
 pub mod error;
 #[cfg(feature = "tools")]
 pub mod exr;
+pub mod fingerprint;
 pub mod layout;
 pub mod manifest;
 pub mod png;

@@ -132,20 +132,40 @@ pub(crate) fn pass_files() -> Vec<(&'static str, &'static str, &'static str)> {
         .collect()
 }
 
-/// The name tables of a built-in variant's config (`None` for another variant), for ids a
-/// model can use: `(shapes, sizes as (name, scale), materials of objects and ground, colours)`,
-/// in the config's order (materials sorted).
+/// The name tables of a variant for ids a model can use: `(shapes, sizes as (name, scale),
+/// materials of objects and ground, colours)`, in the built-in config's order (materials
+/// sorted), then the user materials (`--materials DIR`) that the run manifests of the dataset
+/// at `root` record, sorted, after the built-in ones (so built-in ids do not move). `None` for
+/// a variant that is not built in and records no user material.
 #[pyfunction]
+#[pyo3(signature = (variant, root=None))]
 #[allow(clippy::type_complexity)]
 pub(crate) fn variant_names(
+    py: Python<'_>,
     variant: &str,
-) -> Option<(Vec<String>, Vec<(String, f64)>, Vec<String>, Vec<String>)> {
-    let c = clevrtex_scene::config::Config::builtin(variant).ok()?;
+    root: Option<&str>,
+) -> PyResult<Option<(Vec<String>, Vec<(String, f64)>, Vec<String>, Vec<String>)>> {
+    let user: Vec<String> = match root {
+        Some(r) => py
+            .allow_threads(|| clevrtex_dataset::fingerprint::user_materials(Path::new(r), variant))
+            .map_err(|e| value_error(format!("`{r}`: {e}")))?
+            .into_keys()
+            .collect(),
+        None => Vec::new(),
+    };
+    let Ok(c) = clevrtex_scene::config::Config::builtin(variant) else {
+        return Ok((!user.is_empty()).then(|| (Vec::new(), Vec::new(), user, Vec::new())));
+    };
     let mut materials: Vec<String> = c.objects.materials.clone();
     materials.extend(c.background.materials.iter().cloned());
     materials.sort();
     materials.dedup();
-    Some((
+    for u in user {
+        if !materials.contains(&u) {
+            materials.push(u);
+        }
+    }
+    Ok(Some((
         c.objects.shapes.clone(),
         c.objects
             .sizes
@@ -154,7 +174,7 @@ pub(crate) fn variant_names(
             .collect(),
         materials,
         c.objects.colors.iter().map(|c| c.name.clone()).collect(),
-    ))
+    )))
 }
 
 /// A sample's metadata, read as every reader of a dataset reads it

@@ -210,3 +210,28 @@ def test_bad_input_is_named(data, tmp_path):
         _sample(str(small), i, total=4)
     with pytest.raises(ValueError, match=r"the `test` split of `.*small` is empty: it has 4 samples in all \(test 0, val 0, train 4\)"):
         clevrtex.Dataset(str(tmp_path / "small"), "clevr", split="test")
+
+
+def test_user_materials_of_the_manifest_are_in_the_material_name_table(data):
+    """Issue 41: a dataset rendered with `--materials DIR` names user materials its run
+    manifest records; `as_dict=True` gives them ids after the built-in ones (which keep
+    theirs) instead of refusing them as unknown."""
+    builtin = _ds(data).names["material"]
+    path = os.path.join(data, "clevrtex_clevr", "0", STEM.format(3) + ".json")
+    meta = json.load(open(path))
+    meta["objects"][1]["material"] = "Bricks01"
+    json.dump(meta, open(path, "w"))
+    with pytest.raises(ValueError, match=r"`objects\[1\].material` is 'Bricks01', not in the `material` name table"):
+        _ds(data)[3]
+    manifest = {
+        "format": "clevrtex-manifest", "version": 1, "variant": "clevr", "seed": 0, "config_hash": "0" * 16,
+        "start": 0, "end": N, "total": N, "shard": [0, 1], "passes": ["rgb", "mask"], "tool_version": "0.1.0",
+        "blender_version": "3.4.1", "command": ["clevrtex", "generate"], "finished": False, "files": {},
+        "user_materials": {"Bricks01": {"file": "Bricks01.blend", "group": "Bricks01", "xxh3": "0123456789abcdef"}},
+    }
+    json.dump(manifest, open(os.path.join(data, "clevrtex_clevr", f"MANIFEST-0-{N}-0of1.json"), "w"))
+    ds = _ds(data)
+    assert ds.names["material"] == builtin + ["Bricks01"]
+    it = ds[3]
+    assert ds.names["material"][it["material"][1]] == "Bricks01"
+    assert ds.names["material"][it["material"][0]] == "rubber"

@@ -82,6 +82,15 @@ pub struct Manifest {
     pub render: Option<serde_json::Value>,
     /// `clevrtex` version.
     pub tool_version: String,
+    /// The git commit `clevrtex` was built from (40 hex digits, `unknown` for a build outside
+    /// git without `CLEVRTEX_BUILD_COMMIT`); absent in older manifests. Kept out of the
+    /// samples' metadata, which stays byte-identical across builds (docs/runs.md, "Provenance").
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub tool_commit: String,
+    /// Whether a tracked source differed from `tool_commit` when it was built; absent when
+    /// not known (and in older manifests).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tool_modified: Option<bool>,
     /// Blender version of the samples (from their metadata).
     pub blender_version: String,
     /// The settings the bridge changed on that Blender to render as 3.4 does (the samples'
@@ -107,6 +116,11 @@ pub struct Manifest {
     /// drew only built-in ones (and in older manifests).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub user_materials: BTreeMap<String, UserMaterial>,
+    /// Whether the run was told to mix its settings with other runs' in one folder on purpose
+    /// (`generate --mix-settings`): `verify` then names the runs' differences without failing
+    /// the dataset. Absent (false) otherwise.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub mixed_settings: bool,
 }
 
 /// The render settings that differ between two `render` objects (a manifest's or a sample's
@@ -165,6 +179,8 @@ impl Manifest {
             passes: Vec::new(),
             render: None,
             tool_version: String::new(),
+            tool_commit: String::new(),
+            tool_modified: None,
             blender_version: String::new(),
             blender_compat: BTreeMap::new(),
             command: Vec::new(),
@@ -172,6 +188,7 @@ impl Manifest {
             files: BTreeMap::new(),
             sample_seconds: BTreeMap::new(),
             user_materials: BTreeMap::new(),
+            mixed_settings: false,
         }
     }
 

@@ -16,14 +16,18 @@
 //! commands it offers to rerun and how it prints them (`command.rs`), `--remove-broken`
 //! (`remove.rs`). Everything is re-exported here.
 
+pub(crate) mod against;
 pub(crate) mod checks;
 pub(crate) mod command;
+pub(crate) mod mixed;
 pub(crate) mod remove;
 pub(crate) mod report;
 #[cfg(test)]
 mod tests;
 
+pub use against::{against, Comparison};
 pub use command::{index_ranges, shell_words};
+pub use mixed::run_differences;
 pub use remove::*;
 pub use report::*;
 
@@ -244,6 +248,9 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
             }
             ranges.push((*start, *end));
         }
+        let (mixed, on_purpose) = mixed::mixed_runs(&manifests);
+        rep.manifest_problems.extend(mixed);
+        rep.mixed_on_purpose = on_purpose;
         let n_runs = runs.len();
         rep.expected_from = if n_runs == 1 {
             let ((start, end, n), list) = runs.iter().next().expect("one run");

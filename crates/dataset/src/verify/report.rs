@@ -85,6 +85,11 @@ pub struct VariantReport {
     /// different contents is a manifest problem. Left out of the JSON when empty.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub user_materials: BTreeMap<String, crate::manifest::UserMaterial>,
+    /// Runs whose settings differ from the first run's where one of them was made with
+    /// `generate --mix-settings` (mixed on purpose: named, not a problem); one line each.
+    /// Left out of the JSON when empty.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub mixed_on_purpose: Vec<String>,
     /// The canonical roots of the datasets the variant was found in: what every delete of
     /// [`super::remove_broken`] is made relative to.
     #[serde(skip)]

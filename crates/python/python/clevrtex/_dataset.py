@@ -130,7 +130,7 @@ class Dataset:
         self._by_colour = _native.colour_breakdown(self.dataset_variant)
         self._suffix = {name: suffix for name, suffix, _ in _native.pass_files()}
         self._pass_key = {name: key for name, _, key in _native.pass_files()}
-        known = _native.variant_names(self.dataset_variant)
+        known = _native.variant_names(self.dataset_variant, self._root)
         tables: Dict[str, List[str]] = {"shape": [], "size": [], "material": [], "color": []}
         self.scales: Dict[str, float] = {}
         if known is not None:
