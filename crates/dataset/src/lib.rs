@@ -27,6 +27,7 @@
 pub mod atomic;
 #[cfg(feature = "tools")]
 pub mod card;
+#[cfg(feature = "tools")]
 mod card_parts;
 pub mod dataset;
 pub mod error;
