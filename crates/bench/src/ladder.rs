@@ -104,9 +104,9 @@ pub fn lever_rungs(quick: bool) -> Vec<Setting> {
         ));
     }
     let denoised: &[u32] = if quick {
-        &[4, 8, 16, 64]
+        &[4, 8, 16, 32, 64]
     } else {
-        &[4, 8, 16, 64, 256]
+        &[4, 8, 16, 32, 64, 256]
     };
     for &s in denoised {
         out.push(lever(
