@@ -224,7 +224,16 @@ def apply_levers(cycles, r):
         cycles.denoiser = "OPENIMAGEDENOISE"
         cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
         if hasattr(cycles, "denoising_use_gpu"):
-            cycles.denoising_use_gpu = False
+            cycles.denoising_use_gpu = denoise_on_gpu()
+
+
+def denoise_on_gpu():
+    """Whether OpenImageDenoise runs on this worker's GPU (4.1+, `denoising_use_gpu`): on a
+    GPU worker yes, so the denoiser does not take the host cores its scene builds need (Cycles
+    falls back to the CPU where OIDN does not support the GPU); on a CPU worker no. OIDN on
+    either: the same denoiser as the CPU's, not OptiX's, so a GPU run's images match a CPU
+    run's within the denoiser's own rounding."""
+    return DEVICE[0] != "CPU"
 
 
 def set_cast_shadow(obj, enabled):

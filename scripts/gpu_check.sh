@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The GPU check of issue 35, prepared to run as one command on a machine with an NVIDIA GPU, in
-# about 5 minutes: `clevrtex doctor`; 16 images each of clevr, full and camo at 320x240, 64
+# about 8 minutes: `clevrtex doctor`; 16 images each of clevr, full and camo at 320x240, 64
 # samples on the GPU and 4 each on this machine's CPU (and the same 4 at 16 samples, the CPU's
 # own noise) with the same seed; masks byte-identical and RGB within the CPU's noise
-# (scripts/gpu_compare.py); images/hour per GPU and per CPU core; the first render's start-up.
+# (scripts/gpu_compare.py); images/hour per GPU and per CPU core; 32 `full` images with 4 and
+# with 8 workers per GPU (issue 40: 8 is allowed, not yet measured); the first render's start-up.
 #
 #   ./scripts/gpu_check.sh [WORK]     (WORK: a scratch folder, default a fresh one in $TMPDIR)
 #
@@ -63,6 +64,19 @@ for v in clevr full camo; do
     --out "$work/cpu16" > "$work/cpu16-$v.log" 2>&1
 done
 
+# Workers per GPU (issue 40): `full` with 4 (the default's most) and 8 (allowed, not yet
+# measured) workers per GPU, each with cores / workers Cycles threads.
+sweep=()
+for w in 4 8; do
+  ws=$((w * ngpu))
+  t=$((cores / ws)); [ "$t" -ge 1 ] || t=1
+  t0=$(now)
+  "$CLEVRTEX" generate --variant full -n 32 --samples 64 --device "$DEVICE" --workers "$ws" \
+    --threads "$t" "${common[@]}" --out "$work/sweep-$w" > "$work/sweep-$w.log" 2>&1
+  sweep+=("$(awk -v w="$w" -v t="$t" -v s="$(secs "$t0" "$(now)")" -v n="$ngpu" \
+    'BEGIN { printf "| full, %d workers per GPU x %d threads | 32 | %.1f | %.0f per GPU |", w, t, s, 32 / s * 3600 / n }')")
+done
+
 status=0
 "$PYTHON" scripts/gpu_compare.py --gpu "$work/gpu" --cpu "$work/cpu" --cpu-low "$work/cpu16" \
   clevr full camo || status=1
@@ -78,6 +92,7 @@ echo "| what | images | wall s | images/hour |"
 echo "|---|---|---|---|"
 printf '| GPU (%s, %s), 320x240, 64 spp, clevr+full+camo | 48 | %.1f | %.0f per GPU |\n' "$DEVICE" "$(printf '%s' "$gpus" | head -n 1)" "$gpu_s" "$gpu_rate"
 printf '| CPU (%s cores), same | 12 | %.1f | %.1f per core |\n' "$cores" "$cpu_s" "$cpu_rate"
+printf '%s\n' "${sweep[@]}"
 printf '| first render start-up (worker start, kernel load, one 64x48 image) | 1 | %.1f | |\n' "$startup"
 echo "command: ./scripts/gpu_check.sh (logs in $work)"
 exit $status

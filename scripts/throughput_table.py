@@ -12,7 +12,7 @@ single-threaded workers is about N x (CPU-s per image) / C.
         [--variants clevr,full,camo] [--presets draft,64] [--sizes 320x240] [-n 2]
         [--markdown FILE]
 
-A preset is a `--quality` name (draft, standard, high, reference) or a number of fixed
+A preset is a `--quality` name (draft, fast, standard, high, reference) or a number of fixed
 samples (`64`: the configs' default). "CPU-s per image" divides the whole run by N, so it
 includes one Blender start (given apart, from the run's own summary, as wall seconds) per N
 images. The load average is printed before and after: say it with the table.

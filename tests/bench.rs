@@ -308,7 +308,67 @@ fn generate_quality_preset_sets_samples_threshold_and_bounces() {
     assert_eq!(out.status.code(), Some(2), "{t}");
     assert!(t.contains("unknown quality `ultra`"), "{t}");
     assert!(
-        t.contains("hint: use one of draft, standard, high, reference"),
+        t.contains("hint: use one of draft, fast, standard, high, reference"),
         "{t}"
     );
+}
+
+/// `--quality fast` (issue 40): on a Blender with OpenImageDenoise (bpy 4.5) the images are
+/// rendered at the preset's samples with the RGB denoised, and say so in their metadata; on one
+/// without it (Debian's 3.4) the run is refused before anything is written, with a message
+/// naming OIDN and what to do, never rendered noisier than asked. Each Blender's OIDN is what
+/// `clevrtex doctor` reports of it.
+#[test]
+fn fast_preset_denoises_where_oidn_exists_and_is_refused_where_it_does_not() {
+    let fast = clevrtex_scene::quality::Quality::Fast.settings();
+    for blender in crate::util::test_blenders("fast_preset_denoises_where_oidn_exists") {
+        let doctor = clevrtex()
+            .arg("doctor")
+            .arg("--blender")
+            .arg(&blender)
+            .output()
+            .unwrap();
+        let d = text(&doctor);
+        let oidn = d.contains("oidn: yes");
+        assert!(oidn || d.contains("oidn: no"), "{d}");
+        let dir = tempfile::tempdir().unwrap();
+        let out = clevrtex()
+            .args(["generate", "--variant", "clevr", "-n", "1"])
+            .args(["--width", "32", "--height", "24", "--passes", "rgb,mask"])
+            .args(["--quality", "fast", "--workers", "1", "--blender"])
+            .arg(&blender)
+            .arg("--out")
+            .arg(dir.path())
+            .output()
+            .unwrap();
+        let t = text(&out);
+        let sample = dir
+            .path()
+            .join("clevrtex_clevr/0/CLEVRTEX_clevr_000000.json");
+        if oidn {
+            assert_eq!(out.status.code(), Some(0), "{}: {t}", blender.display());
+            let meta: Value =
+                serde_json::from_str(&std::fs::read_to_string(&sample).unwrap()).unwrap();
+            let r = &meta["render"];
+            assert_eq!(r["denoise"], Value::Bool(true), "{r}");
+            assert_eq!(r["samples"].as_u64(), Some(u64::from(fast.samples)), "{r}");
+        } else {
+            assert_ne!(out.status.code(), Some(0), "{}: {t}", blender.display());
+            assert!(
+                t.contains("asks for OpenImageDenoise") && t.contains("lacks"),
+                "{t}"
+            );
+            assert!(
+                t.contains("hint: render it with a Blender 4.x") && t.contains("--quality draft"),
+                "{t}"
+            );
+            assert!(!sample.exists(), "a sample was written: {t}");
+            assert!(
+                !dir.path()
+                    .join("clevrtex_clevr/0/CLEVRTEX_clevr_000000.png")
+                    .exists(),
+                "{t}"
+            );
+        }
+    }
 }

@@ -246,6 +246,56 @@ fn denoising_changes_the_rgb_only() {
     );
 }
 
+/// Denoising where a scene asks for it (`render.denoise`, the `fast` preset) runs OIDN on the
+/// worker's own device (issue 40): on a GPU worker (`compat.DEVICE` set from `--device CUDA:0`)
+/// on the GPU, on a CPU worker on the CPU. Checked on
+/// the settings the bridge makes (no GPU is needed to set them), on every Blender that has
+/// OIDN's GPU switch (`denoising_use_gpu`, 4.1+; 3.4 has neither it nor OIDN).
+#[test]
+fn denoising_runs_on_the_workers_own_device() {
+    for blender in crate::util::test_blenders("denoising_runs_on_the_workers_own_device") {
+        let dir = tempfile::tempdir().unwrap();
+        let script = dir.path().join("denoise.py");
+        std::fs::write(
+            &script,
+            format!(
+                r#"import sys
+sys.path.insert(0, {root:?})
+import bpy, compat
+c = bpy.context.scene.cycles
+if not (compat.features()["oidn"] and hasattr(c, "denoising_use_gpu")):
+    print("NO-OIDN-GPU-SWITCH")
+    sys.exit(0)
+for device, gpu in ((("CPU", 0), False), (("CUDA", 0), True), (("OPTIX", 1), True)):
+    compat.DEVICE = device
+    c.use_denoising = False
+    compat.apply_levers(c, {{"denoise": True}})
+    assert c.use_denoising and c.denoiser == "OPENIMAGEDENOISE", device
+    assert c.denoising_use_gpu == gpu, (device, c.denoising_use_gpu)
+print("DENOISE-DEVICE-OK")
+"#,
+                root = repo_root().join("blender_scripts").to_string_lossy()
+            ),
+        )
+        .unwrap();
+        let flavour = clevrtex_render::blender::flavour(&blender);
+        let out = clevrtex_render::blender::worker_command(&blender, flavour, &script, &[])
+            .output()
+            .unwrap();
+        let t = text(&out);
+        assert!(out.status.success(), "{}: {t}", blender.display());
+        // PyPI's bpy (4.5) has OIDN and the switch; Debian's 3.4.1 has no OIDN.
+        if flavour == clevrtex_render::blender::Flavour::PythonModule {
+            assert!(t.contains("DENOISE-DEVICE-OK"), "{t}");
+        } else {
+            assert!(
+                t.contains("DENOISE-DEVICE-OK") || t.contains("NO-OIDN-GPU-SWITCH"),
+                "{t}"
+            );
+        }
+    }
+}
+
 /// `compat.coat_gtr1_lobes` (the `coat_gtr1` parity switch): three GGX lobes whose weights sum
 /// to 1 and whose energy within each half-vector cone follows 3.4's GTR1 clearcoat closely,
 /// for the recipes' coat roughnesses; a mirror and a flat coat keep one lobe. The fit is pure

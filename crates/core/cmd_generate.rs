@@ -57,8 +57,10 @@ pub struct GenerateArgs {
     /// 1 to 65536.
     #[arg(long, value_name = "N")]
     shadow_samples: Option<u32>,
-    /// Quality preset: draft, standard, high or reference (samples, adaptive threshold,
-    /// bounces; see docs/performance.md). `--samples` still overrides the sample count.
+    /// Quality preset: draft, fast, standard, high or reference (samples, adaptive threshold,
+    /// bounces, denoising; see docs/performance.md). `fast` denoises the RGB with
+    /// OpenImageDenoise and needs a Blender 4.x (e.g. `--blender .venv-bpy/bin/python`).
+    /// `--samples` still overrides the sample count.
     #[arg(long, value_name = "PRESET")]
     quality: Option<clevrtex_scene::quality::Quality>,
     /// Draw the variant's textured materials (every material list of objects or backdrop

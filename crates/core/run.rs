@@ -282,7 +282,20 @@ pub(crate) fn pool_options(
         let names: Vec<String> = devices.iter().map(|d| d.describe()).collect();
         eprintln!("devices: {}", names.join(", "));
     }
-    if let Some(w) = clevrtex_render::device::kernel_compile_warning(&devices) {
+    let workers = args.workers.unwrap_or_else(|| {
+        clevrtex_render::device::default_workers(
+            &devices,
+            pool::default_workers(),
+            pool::available_cores(),
+        )
+    });
+    for w in [
+        clevrtex_render::device::kernel_compile_warning(&devices),
+        clevrtex_render::device::workers_per_gpu_warning(&devices, workers),
+    ]
+    .into_iter()
+    .flatten()
+    {
         eprintln!("{w}");
     }
     let opts = PoolOptions {
@@ -290,13 +303,7 @@ pub(crate) fn pool_options(
         materials_json,
         user_materials: user_materials::hashes(&user),
         config_hash: None,
-        workers: args.workers.unwrap_or_else(|| {
-            clevrtex_render::device::default_workers(
-                &devices,
-                pool::default_workers(),
-                pool::available_cores(),
-            )
-        }),
+        workers,
         threads: args.threads.unwrap_or(0),
         timeout,
         startup_timeout,

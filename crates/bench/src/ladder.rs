@@ -104,9 +104,9 @@ pub fn lever_rungs(quick: bool) -> Vec<Setting> {
         ));
     }
     let denoised: &[u32] = if quick {
-        &[4, 16, 64]
+        &[4, 8, 16, 32, 64]
     } else {
-        &[4, 16, 64, 256]
+        &[4, 8, 16, 32, 64, 256]
     };
     for &s in denoised {
         out.push(lever(
@@ -126,6 +126,10 @@ pub fn lever_rungs(quick: bool) -> Vec<Setting> {
                 ..Levers::NONE
             },
         ));
+    }
+    // The `fast` preset (denoised, Cycles 4.x only), unless a rung above has its settings.
+    if !out.iter().any(|s| s.sampling == Quality::Fast.settings()) {
+        out.push(preset(Quality::Fast));
     }
     out
 }
@@ -228,6 +232,13 @@ mod tests {
             for q in [Quality::Draft, Quality::Standard] {
                 assert!(l.iter().any(|s| s.sampling == q.settings()), "{q} missing");
             }
+            // `fast` denoises: a lever rung (Cycles 4.x), never in the ladder 3.4 renders,
+            // and measured beside the 64-sample default it is judged against.
+            assert!(!l.iter().any(|s| s.sampling.levers.denoise));
+            assert!(lever_rungs(quick)
+                .iter()
+                .any(|s| s.sampling == Quality::Fast.settings()));
+            assert!(l.iter().any(|s| s.label == "fixed-64"));
         }
     }
 }

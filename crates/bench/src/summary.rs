@@ -18,6 +18,8 @@ pub struct Agg {
     scenes: usize,
     wall_s: f64,
     cycles_s: f64,
+    /// CPU seconds of the render, all threads (NaN where the CSV lacks them).
+    cycles_cpu_s: f64,
     rmse_linear: f64,
     rel_error: f64,
     bias: f64,
@@ -50,6 +52,7 @@ pub fn aggregate(rows: &[Row]) -> Vec<Agg> {
                 scenes: rs.len(),
                 wall_s: m(&|r| r.wall_s),
                 cycles_s: m(&|r| r.cycles_s),
+                cycles_cpu_s: m(&|r| r.cycles_cpu_s),
                 rmse_linear: m(&|r| r.errors.rmse_linear),
                 rel_error: m(&|r| r.errors.rel_error),
                 bias: m(&|r| r.errors.bias),
@@ -149,6 +152,51 @@ pub fn summary(agg: &[Agg]) -> String {
 }
 
 fn summary_of(agg: &[&Agg]) -> String {
+    let mut s = against_original(agg);
+    s.push_str(&fast_against_default(agg));
+    s
+}
+
+/// The label of the 64-sample default's rung (`configs/base.json`'s samples, the original's
+/// light paths).
+pub const DEFAULT_RUNG: &str = "fixed-64";
+
+/// The `fast` preset against the 64-sample default ([`DEFAULT_RUNG`]), by CPU seconds (Cycles'
+/// time where a row lacks them), with its target: the default's error or less in at most half
+/// its CPU time. Empty without both rungs.
+fn fast_against_default(agg: &[&Agg]) -> String {
+    let mut s = String::new();
+    let fast = Quality::Fast.settings();
+    let (Some(base), Some(f)) = (
+        agg.iter().find(|a| a.setting.label == DEFAULT_RUNG),
+        agg.iter().find(|a| a.setting.sampling == fast),
+    ) else {
+        return s;
+    };
+    let (cost, by) = if f.cycles_cpu_s > 0.0 && base.cycles_cpu_s > 0.0 {
+        ((f.cycles_cpu_s, base.cycles_cpu_s), "CPU")
+    } else {
+        ((f.cycles_s, base.cycles_s), "Cycles")
+    };
+    let ratio = cost.0 / cost.1.max(1e-9);
+    let ok = f.rel_error <= base.rel_error && ratio <= 0.5;
+    let _ = writeln!(
+        s,
+        "preset fast (= {}) against {DEFAULT_RUNG} (the 64-sample default): {by} {:.2} s, x{ratio:.2} of its {:.2} s; rel error {:.4} vs {:.4}; bias {:+.4} (target: error <= {DEFAULT_RUNG}'s in <= 0.50 of its {by} time: {})",
+        f.setting.label,
+        cost.0,
+        cost.1,
+        f.rel_error,
+        base.rel_error,
+        f.bias,
+        if ok { "met" } else { "NOT met" }
+    );
+    s
+}
+
+/// The rungs at most as noisy as the original, and the presets against it (nothing without
+/// the `original-512` rung).
+fn against_original(agg: &[&Agg]) -> String {
     let mut s = String::new();
     let Some(orig) = agg.iter().find(|a| a.setting.label == "original-512") else {
         return s;
@@ -394,5 +442,36 @@ mod tests {
         // One Blender: nothing side by side, no Blender column.
         assert_eq!(side_by_side(&rows[..1]), "");
         assert!(!table(&aggregate(&rows[..1])).contains("blender"));
+    }
+
+    #[test]
+    fn fast_is_judged_against_the_64_sample_default_by_cpu_time() {
+        let fast = crate::ladder::lever_rungs(true)
+            .into_iter()
+            .find(|s| s.sampling == Quality::Fast.settings())
+            .expect("a rung with the fast preset's settings");
+        let default = crate::ladder::ladder(true)
+            .into_iter()
+            .find(|s| s.label == DEFAULT_RUNG)
+            .unwrap();
+        let at = |setting: &Setting, rel_error: f64, cpu: f64| Row {
+            setting: setting.clone(),
+            cycles_cpu_s: cpu,
+            ..row("4.5.15", "full#0", rel_error, 5.0, 0.5)
+        };
+        let verdict = |rows: &[Row]| summary(&aggregate(rows));
+        // Less error for 0.40 of the CPU: met (wall time equal, so CPU decides).
+        let s = verdict(&[at(&default, 0.10, 10.0), at(&fast, 0.08, 4.0)]);
+        assert!(
+            s.contains("x0.40 of its 10.00 s") && s.contains(": met)"),
+            "{s}"
+        );
+        // More error, or more than half the CPU: not met.
+        let s = verdict(&[at(&default, 0.10, 10.0), at(&fast, 0.11, 4.0)]);
+        assert!(s.contains("NOT met"), "{s}");
+        let s = verdict(&[at(&default, 0.10, 10.0), at(&fast, 0.05, 6.0)]);
+        assert!(s.contains("x0.60") && s.contains("NOT met"), "{s}");
+        // Without the default's rung: no line.
+        assert!(!verdict(&[at(&fast, 0.05, 4.0)]).contains("preset fast"));
     }
 }

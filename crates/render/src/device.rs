@@ -363,8 +363,43 @@ pub fn gpu_hardware_present() -> bool {
         .any(|p| std::path::Path::new(p).exists())
 }
 
-/// Most workers the default puts on one GPU.
+/// Most workers the default puts on one GPU: the most measured to pay (1, 2 and 4 workers on
+/// an H200 made 884, 1,689 and 2,574 `full` images/hour; docs/performance.md, "GPUs").
 pub const MAX_DEFAULT_WORKERS_PER_GPU: usize = 4;
+
+/// Most workers per GPU that `--workers` may ask for without a warning. More workers keep a GPU
+/// busier while each builds its scene on the CPU, but 8 per GPU has not been measured yet
+/// (`scripts/gpu_check.sh`'s sweep measures it): the default stays
+/// [`MAX_DEFAULT_WORKERS_PER_GPU`] until it measures faster.
+pub const MAX_WORKERS_PER_GPU: usize = 8;
+
+/// Cycles threads per worker when `--threads` is not given: the machine's `cores` shared evenly
+/// by the `workers` (at least 1), on GPUs as on the CPU. On a GPU the threads run each worker's
+/// host work (scene build, displacement, BVH, the visibility pass), so a worker given all the
+/// cores would contend with its neighbours for them.
+pub fn default_threads(cores: usize, workers: usize) -> u32 {
+    u32::try_from((cores / workers.max(1)).max(1)).unwrap_or(u32::MAX)
+}
+
+/// The warning `generate` and `render` print when `workers` put more than
+/// [`MAX_WORKERS_PER_GPU`] on one of the GPUs of `placements` (round robin,
+/// [`placement_for`]); `None` on the CPU or within the bound.
+pub fn workers_per_gpu_warning(placements: &[Placement], workers: usize) -> Option<String> {
+    let gpus = placements.iter().filter(|p| p.is_gpu()).count();
+    if gpus == 0 {
+        return None;
+    }
+    let most = workers.div_ceil(placements.len());
+    (most > MAX_WORKERS_PER_GPU).then(|| {
+        format!(
+            "warning: {workers} workers put {most} on one GPU; more than {MAX_WORKERS_PER_GPU} per \
+             GPU has never been measured to pay, and each worker holds its own scene in the \
+             GPU's memory\nhint: compare with `--workers {}` ({MAX_WORKERS_PER_GPU} per GPU) on a \
+             few images (`--estimate`)",
+            MAX_WORKERS_PER_GPU * placements.len()
+        )
+    })
+}
 
 /// The default number of workers for `placements` on a machine of `cores` cores: on GPUs,
 /// one per 4 cores per GPU, at least 1 and at most [`MAX_DEFAULT_WORKERS_PER_GPU`] per GPU;
@@ -468,6 +503,38 @@ mod tests {
         assert_eq!(on, [2, 2, 2]);
         assert_eq!(placement_for(&p, 4).index, 1);
         assert_eq!(placement_for(&[], 4), Placement::cpu());
+    }
+
+    #[test]
+    fn gpu_workers_share_the_cores_as_threads_and_up_to_8_per_gpu_pass_quietly() {
+        let one = plan(DeviceChoice::Cuda, &[gpu("CUDA", "H200")]).unwrap();
+        // 16 cores, one GPU: the default 4 workers get 4 threads each; 8 workers get 2.
+        let w = default_workers(&one, 2, 16);
+        assert_eq!((w, default_threads(16, w)), (4, 4));
+        assert_eq!(default_threads(16, 8), 2);
+        // Never 0 threads, however many workers; the CPU splits the cores the same way.
+        assert_eq!(default_threads(2, 4), 1);
+        assert_eq!(default_threads(0, 0), 1);
+        assert_eq!(default_threads(16, 2), 8);
+        // Up to 8 per GPU: no warning; 9 on one GPU (of 17 over two): a warning naming 8.
+        assert_eq!(workers_per_gpu_warning(&one, 8), None);
+        let w = workers_per_gpu_warning(&one, 9).unwrap();
+        assert!(
+            w.contains("9 workers put 9 on one GPU") && w.contains("--workers 8"),
+            "{w}"
+        );
+        let two = plan(DeviceChoice::Cuda, &[gpu("CUDA", "A"), gpu("CUDA", "B")]).unwrap();
+        assert_eq!(workers_per_gpu_warning(&two, 16), None);
+        let w = workers_per_gpu_warning(&two, 17).unwrap();
+        assert!(
+            w.contains("put 9 on one GPU") && w.contains("--workers 16"),
+            "{w}"
+        );
+        // The CPU has no such bound.
+        assert_eq!(workers_per_gpu_warning(&[Placement::cpu()], 64), None);
+        // The default never exceeds the measured 4 per GPU, even with many cores.
+        assert_eq!(default_workers(&one, 2, 256), MAX_DEFAULT_WORKERS_PER_GPU);
+        const { assert!(MAX_DEFAULT_WORKERS_PER_GPU <= MAX_WORKERS_PER_GPU) };
     }
 
     #[test]

@@ -272,6 +272,7 @@ pub(crate) fn run_job(
         if job.resample && opts.visibility_check {
             let t = Instant::now();
             let reply = slot.request(&mut |w| {
+                w.check_features(&scene.render)?;
                 w.render_labelled(&label, &scene_path, Mode::Visibility, &work, timeout)
             })?;
             stats.visibility_build_s += reply.timings.build_s;
@@ -292,6 +293,7 @@ pub(crate) fn run_job(
 
         let t = Instant::now();
         let reply = slot.request(&mut |w| {
+            w.check_features(&scene.render)?;
             w.render_labelled(&label, &scene_path, Mode::Final, &work, timeout)
         })?;
         let final_request_s = t.elapsed().as_secs_f64();

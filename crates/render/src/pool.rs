@@ -254,7 +254,7 @@ pub fn run(
         threads: if opts.threads > 0 {
             opts.threads
         } else {
-            (available_cores() / n_workers).max(1) as u32
+            crate::device::default_threads(available_cores(), n_workers)
         },
         ledger: Mutex::new(ledger),
         failed_stems: Mutex::new(BTreeSet::new()),

@@ -21,6 +21,10 @@ use crate::scene_file::RenderSettings;
 pub enum Quality {
     /// Previews and layout checks: visibly noisy.
     Draft,
+    /// Cycles 4.x only: few samples, the RGB denoised by OpenImageDenoise; the 64-sample
+    /// default's error for at most half its CPU time (measured, see `docs/performance.md`).
+    /// A Blender without OIDN (Debian's 3.4) refuses it rather than render noisy images.
+    Fast,
     /// Datasets: reaches the error of the original generator's 512 fixed samples in at
     /// most half its time (measured, see `docs/performance.md`).
     Standard,
@@ -133,8 +137,9 @@ impl Sampling {
 
 impl Quality {
     /// Every preset, cheapest first.
-    pub const ALL: [Quality; 4] = [
+    pub const ALL: [Quality; 5] = [
         Quality::Draft,
+        Quality::Fast,
         Quality::Standard,
         Quality::High,
         Quality::Reference,
@@ -144,6 +149,7 @@ impl Quality {
     pub fn name(self) -> &'static str {
         match self {
             Quality::Draft => "draft",
+            Quality::Fast => "fast",
             Quality::Standard => "standard",
             Quality::High => "high",
             Quality::Reference => "reference",
@@ -157,6 +163,17 @@ impl Quality {
             // Fixed: at 16 samples Cycles' automatic minimum keeps adaptive sampling from
             // stopping any pixel (measured: bit-identical images), so a threshold buys nothing.
             Quality::Draft => Sampling { samples: 16, ..o },
+            // OIDN on the RGB (albedo and normal as its guides); masks, depth, normals and the
+            // shadow pass are never denoised. Samples: the fewest whose denoised error stays at
+            // the 64-sample default's (`clevrtex bench render --levers`, docs/performance.md).
+            Quality::Fast => Sampling {
+                samples: FAST_SAMPLES,
+                levers: Levers {
+                    denoise: true,
+                    ..Levers::NONE
+                },
+                ..o
+            },
             // Adaptive sampling stops the quiet pixels (plain backdrops, CAMO) early; on
             // busy textures it changes little (measured in docs/notes/performance.md).
             Quality::Standard => Sampling {
@@ -173,6 +190,11 @@ impl Quality {
         }
     }
 
+    /// Whether the preset needs OpenImageDenoise (Cycles 4.x; Debian's Blender 3.4 lacks it).
+    pub fn needs_oidn(self) -> bool {
+        self.settings().levers.denoise
+    }
+
     /// Set the sampling and light-path fields of `render` to this preset's.
     pub fn apply(self, render: &mut RenderSettings) {
         self.settings().apply(render);
@@ -185,9 +207,12 @@ impl std::fmt::Display for Quality {
     }
 }
 
+/// Samples of the `fast` preset (denoised).
+const FAST_SAMPLES: u32 = 16;
+
 /// A quality name that is not a preset.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown quality `{0}`\nhint: use one of draft, standard, high, reference")]
+#[error("unknown quality `{0}`\nhint: use one of draft, fast, standard, high, reference")]
 pub struct UnknownQuality(pub String);
 
 impl std::str::FromStr for Quality {
@@ -213,7 +238,7 @@ mod tests {
         let e = "ultra".parse::<Quality>().unwrap_err();
         assert_eq!(
             e.to_string(),
-            "unknown quality `ultra`\nhint: use one of draft, standard, high, reference"
+            "unknown quality `ultra`\nhint: use one of draft, fast, standard, high, reference"
         );
     }
 
@@ -221,7 +246,9 @@ mod tests {
     fn presets_get_more_expensive_and_keep_the_original_light_paths() {
         let s: Vec<Sampling> = Quality::ALL.iter().map(|q| q.settings()).collect();
         for w in s.windows(2) {
-            assert!(w[0].samples < w[1].samples);
+            // `fast` denoises: dearer than `draft` at the same samples.
+            let denoise = |p: &Sampling| u32::from(p.levers.denoise);
+            assert!((w[0].samples, denoise(&w[0])) < (w[1].samples, denoise(&w[1])));
         }
         for p in &s {
             assert_eq!(p.max_bounces, Sampling::ORIGINAL.max_bounces);
@@ -229,6 +256,25 @@ mod tests {
             assert_eq!(p.clamp_indirect, 0.0);
         }
         assert_eq!(Quality::Reference.settings().adaptive_threshold, None);
+    }
+
+    #[test]
+    fn only_fast_denoises_and_it_uses_fewer_samples_than_the_default() {
+        let default = crate::Config::builtin("full").unwrap().base.render;
+        for q in Quality::ALL {
+            assert_eq!(q.needs_oidn(), q == Quality::Fast, "{q}");
+        }
+        let fast = Quality::Fast.settings();
+        assert!(fast.samples < default.samples / 2, "{fast:?}");
+        assert_eq!(fast.adaptive_threshold, None);
+        // Only denoising changes among the levers: the light tree stays at the parity default.
+        assert_eq!(
+            fast.levers,
+            Levers {
+                denoise: true,
+                ..Levers::NONE
+            }
+        );
     }
 
     #[test]

@@ -153,6 +153,22 @@ impl Worker {
         self.process.is_dead()
     }
 
+    /// Refuse a scene whose `render` settings this worker's Blender cannot honour
+    /// ([`protocol::Features::refusal`]: denoising without OIDN), before it renders anything.
+    pub fn check_features(
+        &self,
+        render: &clevrtex_scene::scene_file::RenderSettings,
+    ) -> Result<()> {
+        match self
+            .ready
+            .features
+            .refusal(render, &self.ready.blender_version)
+        {
+            Some(why) => Err(crate::RenderError::Refused(why)),
+            None => Ok(()),
+        }
+    }
+
     /// Ask the worker to render `scene` (a scene file path) in `mode` into `out_dir`, and
     /// wait at most `timeout` for the reply. On timeout, crash or garbage the worker is
     /// killed (see [`Worker::is_dead`]); a [`RenderError::Bridge`] error leaves it usable.

@@ -79,6 +79,27 @@ pub struct Features {
     pub sampling_patterns: Vec<String>,
 }
 
+impl Features {
+    /// Why a scene with these render settings cannot be rendered as asked on this build
+    /// (`None`: it can): `denoise` (the `fast` quality preset) on a build without
+    /// OpenImageDenoise (Debian's Blender 3.4) would give noisy images, not denoised ones.
+    pub fn refusal(
+        &self,
+        render: &clevrtex_scene::scene_file::RenderSettings,
+        blender_version: &str,
+    ) -> Option<String> {
+        (render.denoise && !self.oidn).then(|| {
+            format!(
+                "the scene asks for OpenImageDenoise (`render.denoise`, set by `--quality fast`), \
+                 which this Blender ({blender_version}) lacks: its images would be noisy, not \
+                 denoised\nhint: render it with a Blender 4.x that has OIDN (e.g. `--blender \
+                 .venv-bpy/bin/python`, PyPI's bpy 4.5; `clevrtex doctor` says `oidn: yes`), or \
+                 leave denoising out (`--quality draft`, or the default 64 samples)"
+            )
+        })
+    }
+}
+
 /// Render mode of a request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
