@@ -20,7 +20,7 @@ mod protocol;
 mod report;
 
 use process::Process;
-pub use protocol::BridgeTimings;
+pub use protocol::{BridgePhases, BridgeTimings, PhaseTime};
 use protocol::Unexpected;
 pub use protocol::{
     GroupImage, GroupSocket, InspectReply, MaterialMode, MaterialReply, MaterialSettings, Mode,
