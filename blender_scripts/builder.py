@@ -16,6 +16,7 @@ from mathutils import Matrix, Vector
 import compat
 import passes
 import shapes
+from shading import assign_materials, material_displaces  # noqa: F401
 
 SCENE_FORMAT = "clevrtex-scene"
 SCENE_VERSION = 1
@@ -101,8 +102,8 @@ def _matrix(rows):
 def clear():
     """Remove every object, camera, light, world and material, and orphaned data blocks.
 
-    Kept: the cached shape meshes, and anything with a fake user (the materials module may
-    mark node groups or images it caches across scenes that way).
+    Kept: the cached shape meshes, and anything with a fake user (the shared material trees,
+    and node groups or images the materials module caches across scenes).
     """
     for obj in list(bpy.data.objects):
         bpy.data.objects.remove(obj, do_unlink=True)
@@ -112,7 +113,8 @@ def clear():
             bpy.data.meshes.remove(me)
     for coll in (bpy.data.cameras, bpy.data.lights, bpy.data.materials, bpy.data.worlds):
         for block in list(coll):
-            coll.remove(block)
+            if not block.use_fake_user:  # the shared material trees (assign_materials)
+                coll.remove(block)
     # Orphans left by materials (node groups, textures, images) unless protected.
     for _ in range(3):
         removed = 0
@@ -282,7 +284,6 @@ def apply_render_settings(scene, spec, threads):
     # not: flipping it between scenes made Cycles start a new session (SessionParams).
     # Without adaptive subdivision on an object it changes nothing in the render.
     compat.set_experimental_features(scene, True)
-    scene[SHADOW_SWITCH] = 0.0
     c = scene.cycles
     c.samples = r["samples"]
     c.use_adaptive_sampling = r.get("adaptive_threshold") is not None
@@ -347,74 +348,6 @@ def build(spec, key, threads):
     apply_render_settings(scene, spec, threads)
     built.build_s = time.perf_counter() - t0
     return built
-
-
-# --- materials ---------------------------------------------------------------------------
-
-
-def material_displaces(mat):
-    """True if Cycles will displace geometry with `mat` (true displacement, not bump)."""
-    if mat is None or not mat.use_nodes:
-        return False
-    if compat.displacement_method(mat) not in ("DISPLACEMENT", "BOTH"):
-        return False
-    for node in mat.node_tree.nodes:
-        if node.type == "OUTPUT_MATERIAL" and node.is_active_output:
-            sock = node.inputs.get("Displacement")
-            return sock is not None and sock.is_linked
-    return False
-
-
-def _set_adaptive(obj, enabled, simple):
-    """Adaptive subdivision on `obj` (needs a subdivision modifier last in the stack)."""
-    mod = obj.modifiers.get("subdivision")
-    if enabled and mod is None:
-        mod = obj.modifiers.new("subdivision", "SUBSURF")
-        mod.subdivision_type = "SIMPLE" if simple else "CATMULL_CLARK"
-        mod.levels = 0
-        mod.render_levels = 0
-    compat.set_adaptive_subdivision(obj, mod, enabled)
-    if not enabled and simple and mod is not None:
-        obj.modifiers.remove(mod)
-
-
-def assign_materials(built, catalogue, build_material, displacement):
-    """Build (or rebuild for another context) every material the scene uses, and assign it."""
-    # The albedo pass's AOV output only when that pass is requested (the same in the
-    # visibility and the final context, so it never causes a rebuild of its own).
-    context = {"displacement": bool(displacement),
-               "albedo": "albedo" in built.spec.get("passes", [])}
-    if built.material_context == context:
-        return 0.0
-    t0 = time.perf_counter()
-    old = set(m.name for m in bpy.data.materials)
-    made = {}
-
-    def get(inst):
-        key = json.dumps(inst, sort_keys=True)
-        if key not in made:
-            name = inst["name"]
-            if catalogue is not None and name not in catalogue:
-                raise KeyError("material `%s` is not in the catalogue" % name)
-            recipe = catalogue[name] if catalogue is not None else {}
-            made[key] = build_material(name, recipe, dict(inst), dict(context))
-            add_shadow_switch(made[key])
-        return made[key]
-
-    pairs = [(built.backdrop, built.spec["backdrop"]["material"], True)]
-    pairs += [(o, s["material"], False) for o, s in zip(built.objects, built.spec["objects"])]
-    for obj, inst, simple in pairs:
-        mat = get(inst)
-        obj.material_slots[0].material = mat
-        displaces = displacement and material_displaces(mat)
-        _set_adaptive(obj, displaces, simple)
-    keep = set(m.name for m in made.values())
-    for name in old:
-        mat = bpy.data.materials.get(name)
-        if mat is not None and name not in keep:
-            bpy.data.materials.remove(mat)
-    built.material_context = context
-    return time.perf_counter() - t0
 
 
 # --- rendering ---------------------------------------------------------------------------
@@ -501,28 +434,11 @@ def render_visibility(built, out_dir, ph=None):
     return {"visibility": path}, {"render_s": render_s, "write_s": time.perf_counter() - t0}
 
 
-def _slot(index):
-    """Make render slot `index` of the Render Result the one renders go to and saves read
-    (the image exists after the first render)."""
-    img = bpy.data.images.get("Render Result")
-    if img is not None and len(img.render_slots) > index:
-        img.render_slots.active_index = index
-
-
 def render_final(built, out_dir, shadow_samples=None, ph=None):
-    """The final render, then the shadow pass's render when requested, and their files.
-
-    Both renders see the same scene: the same passes (a change of passes, or of any
-    `scene.render` setting such as the output format, makes Cycles sync the whole scene
-    again, displacement included), so the shadow render goes to render slot 1 and every
-    file is saved after both renders, the final render's from slot 0."""
     scene = bpy.context.scene
     view_layer = bpy.context.view_layer
     wanted = list(built.spec["passes"])
-    shadow = "shadow" in wanted
-    # Each file then holds the other render's layers too, which nothing reads.
-    passes.enable(view_layer, passes.final_passes(wanted) + (["shadow"] if shadow else []))
-    _slot(0)
+    passes.enable(view_layer, passes.final_passes(wanted))
     cpu0 = time.process_time()
     timings = {"render_s": _render(ph)}
     # CPU seconds of every thread of this process during the render (Cycles' threads, and any
@@ -530,17 +446,6 @@ def render_final(built, out_dir, shadow_samples=None, ph=None):
     # than the wall time on a loaded machine.
     timings["render_cpu_s"] = time.process_time() - cpu0
     files = {}
-    write_s = 0.0
-    if shadow:
-        samples = (shadow_samples or built.spec["render"].get("shadow_samples")
-                   or default_shadow_samples(scene.cycles.samples))
-        _slot(1)
-        try:
-            shadow_files, timings["shadow_render_s"], write_s = _render_shadow(
-                built, out_dir, samples, ph)
-        finally:
-            _slot(0)
-        files.update(shadow_files)
     t0 = time.perf_counter()
     if "rgb" in wanted:
         files["rgb"] = os.path.join(out_dir, "rgb.png")
@@ -548,7 +453,14 @@ def render_final(built, out_dir, shadow_samples=None, ph=None):
     if any(p in wanted for p in passes.EXR_PASSES):
         files["passes"] = os.path.join(out_dir, "passes.exr")
         _write(ph, lambda: _save(files["passes"], "EXR"))
-    timings["write_s"] = time.perf_counter() - t0 + write_s
+    timings["write_s"] = time.perf_counter() - t0
+    if "shadow" in wanted:
+        samples = (shadow_samples or built.spec["render"].get("shadow_samples")
+                   or default_shadow_samples(scene.cycles.samples))
+        shadow_files, timings["shadow_render_s"], write_s = _render_shadow(
+            built, out_dir, samples, ph)
+        files.update(shadow_files)
+        timings["write_s"] += write_s
     return files, timings
 
 
@@ -590,80 +502,47 @@ class WhiteSurfaces:
         return False
 
 
-# The scene property that switches every material to its shadow-render surface
-# (add_shadow_switch), read by an Attribute node of type VIEW_LAYER: Cycles resolves it to a
-# constant when it syncs a shader, so each render's shaders fold to one branch, and flipping
-# it re-syncs the shaders but neither the objects nor the displaced geometry (a material
-# edit tags every object using it, and Cycles re-tessellates and re-displaces an object with
-# adaptive subdivision on any update: "Computing Displacement" in both renders).
-SHADOW_SWITCH = "clevrtex_shadow"
-
-
-def add_shadow_switch(mat):
-    """Give `mat` its shadow-render surface, chosen by the scene property SHADOW_SWITCH (0:
-    its own surface, 1: OneRenderShadow's): white diffuse to camera rays; to shadow rays, on
-    objects (pass_index > 0), a transparent BSDF of colour (1, 0, 0). Its displacement is
-    untouched, so the shadow render's geometry is the final render's. Added once, when the
-    material is built."""
-    if mat is None or not mat.use_nodes:
-        return
-    nt = mat.node_tree
-    out = next((n for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output),
-               None)
-    if out is None:
-        return
-    sock = out.inputs["Surface"]
-    own = sock.links[0].from_socket if sock.is_linked else None
-    n = nt.nodes.new
-    switch = n("ShaderNodeAttribute")
-    switch.attribute_type = "VIEW_LAYER"
-    switch.attribute_name = SHADOW_SWITCH
-    diffuse = n("ShaderNodeBsdfDiffuse")
-    diffuse.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-    transparent = n("ShaderNodeBsdfTransparent")
-    transparent.inputs["Color"].default_value = (1.0, 0.0, 0.0, 1.0)
-    path = n("ShaderNodeLightPath")
-    info = n("ShaderNodeObjectInfo")
-    is_object = n("ShaderNodeMath")
-    is_object.operation = "GREATER_THAN"
-    is_object.inputs[1].default_value = 0.5
-    fac = n("ShaderNodeMath")
-    fac.operation = "MULTIPLY"
-    shadow = n("ShaderNodeMixShader")
-    pick = n("ShaderNodeMixShader")
-    nt.links.new(info.outputs["Object Index"], is_object.inputs[0])
-    nt.links.new(path.outputs["Is Shadow Ray"], fac.inputs[0])
-    nt.links.new(is_object.outputs["Value"], fac.inputs[1])
-    nt.links.new(fac.outputs["Value"], shadow.inputs["Fac"])
-    nt.links.new(diffuse.outputs["BSDF"], shadow.inputs[1])
-    nt.links.new(transparent.outputs["BSDF"], shadow.inputs[2])
-    nt.links.new(switch.outputs["Fac"], pick.inputs["Fac"])
-    if own is not None:
-        nt.links.new(own, pick.inputs[1])
-    nt.links.new(shadow.outputs["Shader"], pick.inputs[2])
-    nt.links.new(pick.outputs["Shader"], sock)
-
-
 class OneRenderShadow:
     """Within `with`: the shadow pass's light with and without object shadows come out of
-    ONE render, in two colour channels of its light. Every material shows its shadow surface
-    (SHADOW_SWITCH, add_shadow_switch: white diffuse to camera rays, objects transparent in
-    red to shadow rays, the backdrop opaque; displacement kept): a shadow ray an object
-    blocks carries its light in red only. Every light is made white, its power scaled by the
-    luminance of its colour, so each channel of the direct light is the luminance the pass
-    uses: red = without object shadows, green = with. Both channels come from the same
-    camera ray and light sample, so they differ exactly where an object blocks a sample. The
-    lights' multiple importance sampling is off: a BSDF-sampled ray that reaches a light
-    counts in both channels even where an object stands in the way of the red one (seen as
-    0.1% of the pixels with one sample), so the light comes from light samples alone
-    (unbiased either way). Restored on exit."""
+    ONE render, in two colour channels of its light. Every surface is white diffuse to
+    camera rays (displacement kept, as WhiteSurfaces); to shadow rays the objects
+    (pass_index > 0) are a transparent BSDF of colour (1, 0, 0), the backdrop stays opaque:
+    a shadow ray an object blocks carries its light in red only. Every light is made white,
+    its power scaled by the luminance of its colour, so each channel of the direct light is
+    the luminance the pass uses: red = without object shadows, green = with. Both channels
+    come from the same camera ray and light sample, so they differ exactly where an object
+    blocks a sample. The lights' multiple importance sampling is off: a BSDF-sampled ray
+    that reaches a light counts in both channels even where an object stands in the way of
+    the red one (seen as 0.1% of the pixels with one sample), so the light comes from light
+    samples alone (unbiased either way). Restored on exit."""
 
     def __init__(self, built):
-        self.built = built
+        self.surfaces = WhiteSurfaces(built)
+        self.added = []
         self.lights = []
 
     def __enter__(self):
-        bpy.context.scene[SHADOW_SWITCH] = 1.0
+        self.surfaces.__enter__()
+        for nt, sock, _old, diffuse in self.surfaces.swapped:
+            n = nt.nodes.new
+            transparent = n("ShaderNodeBsdfTransparent")
+            transparent.inputs["Color"].default_value = (1.0, 0.0, 0.0, 1.0)
+            path = n("ShaderNodeLightPath")
+            info = n("ShaderNodeObjectInfo")
+            is_object = n("ShaderNodeMath")
+            is_object.operation = "GREATER_THAN"
+            is_object.inputs[1].default_value = 0.5
+            fac = n("ShaderNodeMath")
+            fac.operation = "MULTIPLY"
+            mix = n("ShaderNodeMixShader")
+            nt.links.new(info.outputs["Object Index"], is_object.inputs[0])
+            nt.links.new(path.outputs["Is Shadow Ray"], fac.inputs[0])
+            nt.links.new(is_object.outputs["Value"], fac.inputs[1])
+            nt.links.new(fac.outputs["Value"], mix.inputs["Fac"])
+            nt.links.new(diffuse.outputs["BSDF"], mix.inputs[1])
+            nt.links.new(transparent.outputs["BSDF"], mix.inputs[2])
+            nt.links.new(mix.outputs["Shader"], sock)
+            self.added.append((nt, [transparent, path, info, is_object, fac, mix]))
         for obj in bpy.context.scene.objects:
             if obj.type == "LIGHT":
                 light = obj.data
@@ -679,8 +558,12 @@ class OneRenderShadow:
             light.color, light.energy = c, energy
             compat.light_mis(light, mis)
         self.lights = []
-        bpy.context.scene[SHADOW_SWITCH] = 0.0
-        return False
+        for nt, nodes in self.added:
+            for node in nodes:
+                nt.nodes.remove(node)
+        self.added = []
+        # WhiteSurfaces relinks the material's own surface (removing the diffuse).
+        return self.surfaces.__exit__(*exc)
 
 
 def _render_shadow(built, out_dir, samples, ph=None):
@@ -689,6 +572,7 @@ def _render_shadow(built, out_dir, samples, ph=None):
     transparent to shadow rays in red (OneRenderShadow). Returns (files, render seconds,
     write seconds)."""
     scene = bpy.context.scene
+    passes.enable(bpy.context.view_layer, ["shadow"])
     c = scene.cycles
     saved = (c.samples, c.max_bounces, c.use_adaptive_sampling, c.filter_width,
              c.transparent_max_bounces)

@@ -45,7 +45,59 @@ CELL_OFFSET = (31.7, 0.43, 0.29)
 ALBEDO_AOV = "BaseCol"
 
 
-def build_material(name, recipe, instance, context):
+# Per-object values of a shared material (one node tree per worker, `Values(shared=True)`)
+# are object custom properties named with this prefix, read by Attribute nodes of type
+# OBJECT; a material built for one instance (`shared=False`) has them as constants.
+VALUE_PREFIX = "clevrtex_"
+
+
+class Values:
+    """Where a material's per-object values (coordinate scale and offset, tint, displacement
+    strength, a user group's driven inputs) come from: constants of `instance` (the tree is
+    built for that instance), or, `shared`, object attributes (the tree serves every
+    instance; `assign(obj, instance)` sets the object's properties). Either way the value is
+    computed by the same Python expression and reaches Cycles as the same 32-bit float."""
+
+    def __init__(self, instance, shared=False):
+        self.instance = instance
+        self.shared = shared
+        self.fns = {}
+
+    def get(self, nt, name, fn, kind="FLOAT"):
+        """The value `fn(instance)`: a constant, or the output of an Attribute node reading
+        the object property VALUE_PREFIX + name (kind FLOAT, VECTOR or COLOR)."""
+        if not self.shared:
+            return fn(self.instance)
+        self.fns[name] = fn
+        attr = nt.nodes.new("ShaderNodeAttribute")
+        attr.attribute_type = "OBJECT"
+        attr.attribute_name = VALUE_PREFIX + name
+        return attr.outputs[{"FLOAT": "Fac", "VECTOR": "Vector", "COLOR": "Color"}[kind]]
+
+    def assign(self, obj, instance):
+        """Set `obj`'s properties for `instance` (shared trees)."""
+        for name, fn in self.fns.items():
+            obj[VALUE_PREFIX + name] = fn(instance)
+
+
+def shared_key(name, recipe, instance, context):
+    """What a shared tree of this material depends on besides values (None: values that
+    cannot be attributes, the tree is built per instance): the name, the context, and which
+    of the instance's optional values are present."""
+    for layer in (recipe or {}).get("layers") or []:
+        # A `graph` layer may feed `random` straight into Python-folded arithmetic.
+        if layer.get("block") == "graph" and any(
+                src == "random" for src, _dst in layer.get("links") or []):
+            return None
+    return (name, bool(context.get("displacement", True)), bool(context.get("albedo", False)),
+            instance.get("color") is not None, instance.get("scale") is not None,
+            (instance.get("displacement") or 0.0) > 0.0)
+
+
+def build_material(name, recipe, instance, context, values=None):
+    """The material; its per-object values from `values` (a Values; default: constants of
+    `instance`)."""
+    vals = values if values is not None else Values(instance)
     kind = recipe.get("kind", "layers") if recipe else "layers"
     if not recipe:
         recipe = {"kind": "layers", "layers": [], "surface": {}}
@@ -62,25 +114,26 @@ def build_material(name, recipe, instance, context):
     )
     albedo = bool(context.get("albedo", False))
     if kind == "blend":
-        _build_blend(nt, out, recipe, instance, displace, albedo)
+        _build_blend(nt, out, recipe, instance, displace, albedo, vals)
     elif kind == "pbr":
-        displace = _build_pbr(nt, out, name, recipe, instance, displace, albedo)
+        displace = _build_pbr(nt, out, name, recipe, instance, displace, albedo, vals)
     else:
-        displace = _build_layers(nt, out, recipe, instance, displace, albedo)
+        displace = _build_layers(nt, out, recipe, instance, displace, albedo, vals)
     compat.set_displacement_method(mat, "BOTH" if displace else "BUMP")
     return mat
 
 
-def _coords(g, recipe, instance):
+def _coords(g, recipe, vals):
     tc = g.node("ShaderNodeTexCoord")
     attr = g.node("ShaderNodeAttribute", attribute_type="OBJECT", attribute_name="scale")
     p = g.vmath("MULTIPLY", tc.outputs["Object"], attr.outputs["Vector"])
-    k = float(recipe.get("scale", 1.0)) * float(instance.get("scale") or 1.0)
-    r = float(instance.get("random") or 0.0)
-    off = tuple(r * o for o in RANDOM_OFFSET)
+    rscale = float(recipe.get("scale", 1.0))
+    k = vals.get(g.nt, "k", lambda i: rscale * float(i.get("scale") or 1.0))
+    off = vals.get(g.nt, "offset", lambda i: tuple(
+        float(i.get("random") or 0.0) * o for o in RANDOM_OFFSET), "VECTOR")
     # One node: p * k + off.
-    p = g.vmath("MULTIPLY_ADD", p, (k, k, k))
-    p.node.inputs[2].default_value = off
+    p = g.vmath("MULTIPLY_ADD", p, k if vals.shared else (k, k, k))
+    g.set(p.node.inputs[2], off)
     return p, tc.outputs["Normal"]
 
 
@@ -109,9 +162,9 @@ def _set_bsdf(g, bsdf, name, value):
         g.set(socket, compat.principled_value(name, value))
 
 
-def _build_layers(nt, out, recipe, instance, displace, albedo=False):
+def _build_layers(nt, out, recipe, instance, displace, albedo, vals):
     g = Graph(nt)
-    p, normal = _coords(g, recipe, instance)
+    p, normal = _coords(g, recipe, vals)
     ctx = {"normal": normal, "cell": None, "inside": None, "_normal_xyz": None}
     ctx["random"] = float(instance.get("random") or 0.0)
 
@@ -131,7 +184,7 @@ def _build_layers(nt, out, recipe, instance, displace, albedo=False):
     for L in layers:
         color, rough, metal, height = _layer(g, p, L, ctx, color, rough, metal, height)
 
-    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"))
+    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"), vals)
     surf = recipe.get("surface") or {}
     bsdf = _principled(g, color, rough, metal, surf.get("specular", 0.5), albedo)
     if surf.get("sheen", 0.0) > 0:
@@ -157,7 +210,8 @@ def _build_layers(nt, out, recipe, instance, displace, albedo=False):
         g.set(d.inputs["Height"], height)
         g.set(d.inputs["Midlevel"], 0.5)
         # Object space, so divide by the object's scale (read per object) to keep world units.
-        g.set(d.inputs["Scale"], relief * float(instance["displacement"]))
+        g.set(d.inputs["Scale"], vals.get(
+            nt, "displacement", lambda i: relief * float(i["displacement"])))
         nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
         return True
     return False
@@ -239,14 +293,18 @@ def _layer(g, p, L, ctx, color, rough, metal, height):
     return color, rough, metal, height
 
 
-def _tint(g, color, tint, inst_color):
+def _tint(g, color, tint, inst_color, vals):
     if inst_color is None or tint == "none":
         return color
-    c = tuple(float(x) for x in inst_color)
     if tint == "replace":
-        return c
-    m = max(max(c), 1e-6)
-    return g.mix(1.0, color, tuple(x / m for x in c), blend="MULTIPLY")
+        return vals.get(g.nt, "color", lambda i: tuple(float(x) for x in i["color"]), "COLOR")
+
+    def scaled(i):
+        c = tuple(float(x) for x in i["color"])
+        m = max(max(c), 1e-6)
+        return tuple(x / m for x in c)
+
+    return g.mix(1.0, color, vals.get(g.nt, "tint", scaled, "COLOR"), blend="MULTIPLY")
 
 
 # --- user node groups --------------------------------------------------------------------
@@ -420,30 +478,49 @@ def _add_base_output(ng):
         ng.links.new(rgb.outputs[0], target)
 
 
-def _build_blend(nt, out, recipe, instance, displace, albedo=False):
-    ng = _load_group(recipe["path"], recipe.get("group"), recipe.get("images"))
-    if albedo:
-        _add_base_output(ng)
-    node = nt.nodes.new("ShaderNodeGroup")
-    node.node_tree = ng
+def _socket_value(kind, v):
+    """A driven input's value for a socket of type `kind` (RGBA without its alpha 1.0)."""
+    if kind == "RGBA":
+        return v[:3] if isinstance(v, tuple) else (v, v, v)
+    if kind == "VECTOR":
+        return (v, v, v) if not isinstance(v, tuple) else v[:3]
+    return v if not isinstance(v, tuple) else v[0]
+
+
+def _driven(instance, displace):
+    """The group inputs the convention drives, name -> value, for `instance`."""
     values = {"Random": float(instance.get("random") or 0.0)}
     if instance.get("color") is not None:
-        values["Color"] = tuple(float(x) for x in instance["color"]) + (1.0,)
+        values["Color"] = tuple(float(x) for x in instance["color"])
     if instance.get("scale") is not None:
         values["Scale"] = float(instance["scale"])
     if displace:
         d = float(instance.get("displacement") or 0.0)
         values["Displacement"] = d
         values["Displacement Strength"] = d
-    for sock in node.inputs:
-        if sock.name in values:
-            v = values[sock.name]
-            if sock.type == "RGBA":
-                sock.default_value = v if isinstance(v, tuple) else (v, v, v, 1.0)
-            elif sock.type == "VECTOR":
-                sock.default_value = (v, v, v) if not isinstance(v, tuple) else v[:3]
-            else:
-                sock.default_value = v if not isinstance(v, tuple) else v[0]
+    return values
+
+
+def _build_blend(nt, out, recipe, instance, displace, albedo, vals):
+    ng = _load_group(recipe["path"], recipe.get("group"), recipe.get("images"))
+    if albedo:
+        _add_base_output(ng)
+    node = nt.nodes.new("ShaderNodeGroup")
+    node.node_tree = ng
+    for i, sock in enumerate(node.inputs):
+        if sock.name not in _driven(instance, displace):
+            continue
+        kind = sock.type
+
+        def fn(inst, name=sock.name, kind=kind):
+            return _socket_value(kind, _driven(inst, displace)[name])
+
+        v = vals.get(nt, "in%d" % i, fn,
+                     {"RGBA": "COLOR", "VECTOR": "VECTOR"}.get(kind, "FLOAT"))
+        if vals.shared:
+            nt.links.new(v, sock)
+        else:
+            sock.default_value = v + (1.0,) if kind == "RGBA" else v
     shader = next((node.outputs[n] for n in SURFACE_OUTPUTS if n in node.outputs), None)
     nt.links.new(shader, out.inputs["Surface"])
     # The base colour: the group's `Color` or `Base Color` output (added above when it had
@@ -533,9 +610,9 @@ def _pbr_normal(g, samples, w, normal, dx):
     return g.vmath("NORMALIZE", vt.outputs["Vector"])
 
 
-def _build_pbr(nt, out, name, recipe, instance, displace, albedo=False):
+def _build_pbr(nt, out, name, recipe, instance, displace, albedo, vals):
     g = Graph(nt)
-    p, normal = _coords(g, recipe, instance)
+    p, normal = _coords(g, recipe, vals)
     uvs, w = _triplanar(g, p, normal, float(recipe.get("tile") or 1.0))
     maps = recipe.get("maps") or {}
 
@@ -547,7 +624,7 @@ def _build_pbr(nt, out, name, recipe, instance, displace, albedo=False):
 
     color_img = _pbr_image(name, maps["color"], False)
     color = _blend3(g, _samples(g, color_img, uvs), w)
-    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"))
+    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"), vals)
     arm = channels("arm", True)
     rough = channels("roughness", True)
     metal = channels("metallic", True)
@@ -566,7 +643,8 @@ def _build_pbr(nt, out, name, recipe, instance, displace, albedo=False):
         d = g.node("ShaderNodeDisplacement", space="OBJECT")
         g.set(d.inputs["Height"], height)
         g.set(d.inputs["Midlevel"], 0.5)
-        g.set(d.inputs["Scale"], relief * float(instance["displacement"]))
+        g.set(d.inputs["Scale"], vals.get(
+            nt, "displacement", lambda i: relief * float(i["displacement"])))
         nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
         return True
     return False
