@@ -45,47 +45,41 @@ CELL_OFFSET = (31.7, 0.43, 0.29)
 ALBEDO_AOV = "BaseCol"
 
 
-# Per-object values of a shared material (one node tree per worker, `Values(shared=True)`)
-# are object custom properties named with this prefix, read by Attribute nodes of type
-# OBJECT; a material built for one instance (`shared=False`) has them as constants.
-VALUE_PREFIX = "clevrtex_"
-
-
 class Values:
-    """Where a material's per-object values (coordinate scale and offset, tint, displacement
-    strength, a user group's driven inputs) come from: constants of `instance` (the tree is
-    built for that instance), or, `shared`, object attributes (the tree serves every
-    instance; `assign(obj, instance)` sets the object's properties). Either way the value is
-    computed by the same Python expression and reaches Cycles as the same 32-bit float."""
+    """A material's per-object values (coordinate scale and offset, tint, displacement
+    strength, a user group's driven inputs): `put(socket, fn)` sets the constant
+    fn(instance) on an input socket and records where it went, so a tree built once (the
+    template, kept per worker: shading.assign_materials) serves another instance as a copy
+    with these inputs set again (`apply(material, instance)`). A copy is the tree a build for
+    that instance makes, constant for constant, so its renders are bit-identical."""
 
-    def __init__(self, instance, shared=False):
+    def __init__(self, instance):
         self.instance = instance
-        self.shared = shared
-        self.fns = {}
+        self.sites = []  # (node name, input index, fn)
 
-    def get(self, nt, name, fn, kind="FLOAT"):
-        """The value `fn(instance)`: a constant, or the output of an Attribute node reading
-        the object property VALUE_PREFIX + name (kind FLOAT, VECTOR or COLOR)."""
-        if not self.shared:
-            return fn(self.instance)
-        self.fns[name] = fn
-        attr = nt.nodes.new("ShaderNodeAttribute")
-        attr.attribute_type = "OBJECT"
-        attr.attribute_name = VALUE_PREFIX + name
-        return attr.outputs[{"FLOAT": "Fac", "VECTOR": "Vector", "COLOR": "Color"}[kind]]
+    def put(self, socket, fn):
+        node = socket.node
+        index = next(i for i, s in enumerate(node.inputs)
+                     if s.as_pointer() == socket.as_pointer())
+        self.sites.append((node.name, index, fn))
+        socket.default_value = fn(self.instance)
 
-    def assign(self, obj, instance):
-        """Set `obj`'s properties for `instance` (shared trees)."""
-        for name, fn in self.fns.items():
-            obj[VALUE_PREFIX + name] = fn(instance)
+    def apply(self, mat, instance):
+        """Set `mat` (a copy of the template) for `instance`."""
+        nodes = mat.node_tree.nodes
+        for name, index, fn in self.sites:
+            nodes[name].inputs[index].default_value = fn(instance)
 
 
 def shared_key(name, recipe, instance, context):
-    """What a shared tree of this material depends on besides values (None: values that
-    cannot be attributes, the tree is built per instance): the name, the context, and which
-    of the instance's optional values are present."""
-    for layer in (recipe or {}).get("layers") or []:
-        # A `graph` layer may feed `random` straight into Python-folded arithmetic.
+    """What a material's tree depends on besides its per-object values (Values): the name,
+    the context, and which optional values the instance has; None where a value does not
+    land on one socket as itself (the tree is built for the instance)."""
+    recipe = recipe or {}
+    if instance.get("color") is not None and recipe.get("tint", "multiply") == "replace":
+        return None  # the colour feeds several sockets, some through compat's conversions
+    for layer in recipe.get("layers") or []:
+        # A `graph` layer may feed `random` into Python-folded arithmetic.
         if layer.get("block") == "graph" and any(
                 src == "random" for src, _dst in layer.get("links") or []):
             return None
@@ -95,8 +89,8 @@ def shared_key(name, recipe, instance, context):
 
 
 def build_material(name, recipe, instance, context, values=None):
-    """The material; its per-object values from `values` (a Values; default: constants of
-    `instance`)."""
+    """The material for `instance`; `values` (a Values of `instance`) records where its
+    per-object values went."""
     vals = values if values is not None else Values(instance)
     kind = recipe.get("kind", "layers") if recipe else "layers"
     if not recipe:
@@ -128,12 +122,16 @@ def _coords(g, recipe, vals):
     attr = g.node("ShaderNodeAttribute", attribute_type="OBJECT", attribute_name="scale")
     p = g.vmath("MULTIPLY", tc.outputs["Object"], attr.outputs["Vector"])
     rscale = float(recipe.get("scale", 1.0))
-    k = vals.get(g.nt, "k", lambda i: rscale * float(i.get("scale") or 1.0))
-    off = vals.get(g.nt, "offset", lambda i: tuple(
-        float(i.get("random") or 0.0) * o for o in RANDOM_OFFSET), "VECTOR")
+
+    def k(i):
+        k = rscale * float(i.get("scale") or 1.0)
+        return (k, k, k)
+
     # One node: p * k + off.
-    p = g.vmath("MULTIPLY_ADD", p, k if vals.shared else (k, k, k))
-    g.set(p.node.inputs[2], off)
+    p = g.vmath("MULTIPLY_ADD", p, (1.0, 1.0, 1.0))
+    vals.put(p.node.inputs[1], k)
+    vals.put(p.node.inputs[2], lambda i: tuple(
+        float(i.get("random") or 0.0) * o for o in RANDOM_OFFSET))
     return p, tc.outputs["Normal"]
 
 
@@ -210,8 +208,7 @@ def _build_layers(nt, out, recipe, instance, displace, albedo, vals):
         g.set(d.inputs["Height"], height)
         g.set(d.inputs["Midlevel"], 0.5)
         # Object space, so divide by the object's scale (read per object) to keep world units.
-        g.set(d.inputs["Scale"], vals.get(
-            nt, "displacement", lambda i: relief * float(i["displacement"])))
+        vals.put(d.inputs["Scale"], lambda i: relief * float(i["displacement"]))
         nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
         return True
     return False
@@ -297,14 +294,16 @@ def _tint(g, color, tint, inst_color, vals):
     if inst_color is None or tint == "none":
         return color
     if tint == "replace":
-        return vals.get(g.nt, "color", lambda i: tuple(float(x) for x in i["color"]), "COLOR")
+        return tuple(float(x) for x in inst_color)  # never a template (shared_key)
 
     def scaled(i):
         c = tuple(float(x) for x in i["color"])
         m = max(max(c), 1e-6)
-        return tuple(x / m for x in c)
+        return tuple(x / m for x in c) + (1.0,)
 
-    return g.mix(1.0, color, vals.get(g.nt, "tint", scaled, "COLOR"), blend="MULTIPLY")
+    out = g.mix(1.0, color, (1.0, 1.0, 1.0), blend="MULTIPLY")
+    vals.put(out.node.inputs["Color2"], scaled)
+    return out
 
 
 # --- user node groups --------------------------------------------------------------------
@@ -515,12 +514,7 @@ def _build_blend(nt, out, recipe, instance, displace, albedo, vals):
         def fn(inst, name=sock.name, kind=kind):
             return _socket_value(kind, _driven(inst, displace)[name])
 
-        v = vals.get(nt, "in%d" % i, fn,
-                     {"RGBA": "COLOR", "VECTOR": "VECTOR"}.get(kind, "FLOAT"))
-        if vals.shared:
-            nt.links.new(v, sock)
-        else:
-            sock.default_value = v + (1.0,) if kind == "RGBA" else v
+        vals.put(sock, (lambda inst, fn=fn: fn(inst) + (1.0,)) if kind == "RGBA" else fn)
     shader = next((node.outputs[n] for n in SURFACE_OUTPUTS if n in node.outputs), None)
     nt.links.new(shader, out.inputs["Surface"])
     # The base colour: the group's `Color` or `Base Color` output (added above when it had
@@ -643,8 +637,7 @@ def _build_pbr(nt, out, name, recipe, instance, displace, albedo, vals):
         d = g.node("ShaderNodeDisplacement", space="OBJECT")
         g.set(d.inputs["Height"], height)
         g.set(d.inputs["Midlevel"], 0.5)
-        g.set(d.inputs["Scale"], vals.get(
-            nt, "displacement", lambda i: relief * float(i["displacement"])))
+        vals.put(d.inputs["Scale"], lambda i: relief * float(i["displacement"]))
         nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
         return True
     return False

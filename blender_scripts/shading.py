@@ -1,4 +1,4 @@
-"""Materials on a built scene: shared node trees per worker (assign_materials), adaptive
+"""Materials on a built scene: node-tree templates per worker (assign_materials), adaptive
 subdivision where a material displaces."""
 
 import json
@@ -36,30 +36,30 @@ def _set_adaptive(obj, enabled, simple):
         obj.modifiers.remove(mod)
 
 
-# Shared material trees of this worker, kept across scenes (a fake user keeps them through
-# clear()): materials.shared_key -> (material name, materials.Values). Bounded by the
+# The material templates of this worker, kept across scenes (a fake user keeps them through
+# builder.clear()): materials.shared_key -> (material name, materials.Values). Bounded by the
 # catalogue: one per material, context and set of optional values used.
-_SHARED = {}
+_TEMPLATES = {}
 
 
-def _shared_material(key, build):
-    """The shared tree of `key`, built by build() -> (material, Values) the first time (or
-    again after a factory reset removed it)."""
-    entry = _SHARED.get(key)
+def _template(key, build):
+    """The template of `key`, built by build() -> (material, Values) the first time (or again
+    after a factory reset removed it)."""
+    entry = _TEMPLATES.get(key)
     if entry is not None:
         mat = bpy.data.materials.get(entry[0])
         if mat is not None and mat.use_fake_user:
             return mat, entry[1]
     mat, values = build()
     mat.use_fake_user = True
-    _SHARED[key] = (mat.name, values)
+    _TEMPLATES[key] = (mat.name, values)
     return mat, values
 
 
 def assign_materials(built, catalogue, build_material, displacement):
-    """Assign every material the scene uses: a shared tree (built the first time a scene of
-    this worker uses it, materials.shared_key) with the object's values set as its custom
-    properties, or, where the values cannot be attributes, a tree built for the instance."""
+    """Assign every material the scene uses: a copy of its template (built the first time a
+    scene of this worker uses it, materials.shared_key) with the instance's values set, or,
+    where they cannot be set on a copy, a tree built for the instance."""
     # The albedo pass's AOV output only when that pass is requested (the same in the
     # visibility and the final context, so it never causes a rebuild of its own).
     context = {"displacement": bool(displacement),
@@ -70,29 +70,34 @@ def assign_materials(built, catalogue, build_material, displacement):
     old = set(m.name for m in bpy.data.materials if not m.use_fake_user)
     made = {}
 
-    def get(obj, inst):
+    def get(inst):
         name = inst["name"]
         if catalogue is not None and name not in catalogue:
             raise KeyError("material `%s` is not in the catalogue" % name)
         recipe = catalogue[name] if catalogue is not None else {}
-        key = materials.shared_key(name, recipe, inst, context)
-        if key is not None:
-            def build():
-                values = materials.Values(dict(inst), shared=True)
-                return build_material(name, recipe, dict(inst), dict(context), values), values
-
-            mat, values = _shared_material(key, build)
-            values.assign(obj, inst)
-            return mat
         key = json.dumps(inst, sort_keys=True)
-        if key not in made:
+        if key in made:
+            return made[key]
+        shared = materials.shared_key(name, recipe, inst, context)
+        if shared is None:
             made[key] = build_material(name, recipe, dict(inst), dict(context))
-        return made[key]
+            return made[key]
+
+        def build():
+            values = materials.Values(dict(inst))
+            return build_material(name, recipe, dict(inst), dict(context), values), values
+
+        template, values = _template(shared, build)
+        mat = template.copy()
+        mat.use_fake_user = False
+        values.apply(mat, inst)
+        made[key] = mat
+        return mat
 
     pairs = [(built.backdrop, built.spec["backdrop"]["material"], True)]
     pairs += [(o, s["material"], False) for o, s in zip(built.objects, built.spec["objects"])]
     for obj, inst, simple in pairs:
-        mat = get(obj, inst)
+        mat = get(inst)
         obj.material_slots[0].material = mat
         displaces = displacement and material_displaces(mat)
         _set_adaptive(obj, displaces, simple)
