@@ -265,9 +265,12 @@ def apply_render_settings(scene, spec, threads):
     scene.render.film_transparent = False
     scene.render.use_compositing = False
     scene.render.use_sequencer = False
-    # Keep Cycles' synced scene between renders: the shadow pass's second render then reuses
-    # the tessellated (displaced) geometry instead of redoing it (measured on full8 at 1 spp:
-    # 1.6 s instead of 3.7-4.6 s). Pixels are identical with and without (checked).
+    # Keep Cycles' session and synced scene between renders and requests (the worker frees it
+    # when idle: release_render). Pixels are identical with and without (checked). The shadow
+    # render still computes displacement again: its material edits update every object that
+    # uses them, and Cycles re-tessellates an object with adaptive subdivision on any update
+    # (so do a change of passes and of any `scene.render` setting; a VIEW_LAYER attribute
+    # switch is re-read by 3.4 only after a scene tag, which does the same).
     scene.render.use_persistent_data = True
     scene.render.dither_intensity = 0.0
     # No metadata (date, render time, file name...) in the files: identical renders give
@@ -355,7 +358,8 @@ def build(spec, key, threads):
 
 def release_render():
     """Free the Cycles session that persistent data keeps after a render (the worker calls
-    this after every request). Kept, it leaves one of the TBB worker threads of PyPI's bpy 4.5
+    this when no request came for worker.IDLE_RELEASE_S, and after a failure). Kept idle, it
+    leaves one of the TBB worker threads of PyPI's bpy 4.5
     spinning in sched_yield (measured: ~28000 context switches a second, a whole core when the
     machine is otherwise idle, mostly kernel time) and one of bpy 5.0's busy at 100% while the
     worker waits for its next request; freed, none (blender_scripts/dev/spin_probe.py,
