@@ -110,9 +110,9 @@ fn shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube() {
 
 /// Material templates (`shading.assign_materials`): a scene rendered by a worker whose
 /// templates were built for other instances of the same materials (other random values,
-/// other strengths) gives the same mask, depth, normal, albedo and shadow bytes as in a fresh
-/// worker, which builds every tree for the scene's own instances; checked to fail when a
-/// template copy kept the first instance's offset.
+/// other strengths) gives the same mask, depth, albedo and shadow bytes (the normal within
+/// its own run-to-run noise) as in a fresh worker, which builds every tree for the scene's
+/// own instances; checked to fail when a template copy kept the first instance's values.
 #[test]
 fn material_templates_render_as_trees_built_per_instance() {
     let Some(blender) = blender_or_skip("material_templates_render_as_trees_built_per_instance")
@@ -139,19 +139,30 @@ fn material_templates_render_as_trees_built_per_instance() {
     render_fixtures(blender.clone(), fresh.path(), vec![scene(7, 0.0)]);
     let reused = tempfile::tempdir().unwrap();
     render_fixtures(blender, reused.path(), vec![scene(6, 0.61), scene(7, 0.0)]);
+    let read = |dir: &std::path::Path, pass: &str| {
+        decode_png(&dir.join(format!("clevrtex_full/0/CLEVRTEX_full_000007{pass}"))).unwrap()
+    };
     for pass in [
         "_flat.png",
         "_depth_0001.png",
-        "_normal_0001.png",
         "_albedo_0001.png",
         "_shadow_0001.png",
     ] {
-        let read = |dir: &std::path::Path| {
-            decode_png(&dir.join(format!("clevrtex_full/0/CLEVRTEX_full_000007{pass}"))).unwrap()
-        };
-        assert!(
-            read(fresh.path()).data == read(reused.path()).data,
-            "{pass} differs"
-        );
+        let (a, b) = (read(fresh.path(), pass), read(reused.path(), pass));
+        assert!(a.data == b.data, "{pass} differs");
     }
+    // The 16-bit normal pass is not bit-reproducible even between two runs of one build (a
+    // few pixels by a few units of 65535: two `generate` runs of main, --threads 1): within 8.
+    let (a, b) = (
+        read(fresh.path(), "_normal_0001.png"),
+        read(reused.path(), "_normal_0001.png"),
+    );
+    let worst = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| x.abs_diff(*y))
+        .max()
+        .unwrap();
+    assert!(worst <= 8, "normal differs by {worst}/65535");
 }
