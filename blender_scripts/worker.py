@@ -97,6 +97,11 @@ class Worker:
         self.args = args
         self.replier = replier
         self.catalogue = _load_catalogue(args.materials)
+        # Keep Cycles' session between requests on a GPU (a new one means a new device
+        # context and kernel load); on the CPU a new one costs ~1-4 ms, while a kept one
+        # leaves a TBB thread of bpy 4.5/5.0 spinning through the build and material work
+        # between renders (measured: CPU seconds of `build` twice its wall time).
+        self.keep_session = compat.DEVICE[0] != "CPU"
         self.built = None
 
     def ready(self):
@@ -210,7 +215,9 @@ class Worker:
                 if req.get("type") == "quit":
                     return
                 reply = self.handle(req)
-                held = req.get("type") == "render"
+                held = self.keep_session and req.get("type") == "render"
+                if not held:
+                    self.builder.release_render()
             except Exception as exc:
                 self.built = None  # state after a failure is unknown: rebuild next time
                 self.builder.release_render()
@@ -223,11 +230,12 @@ class Worker:
             self.replier.send(reply)
 
 
-# Seconds without a request after which the worker frees Cycles' session
-# (builder.release_render). Kept while requests keep coming, the session (device, kernels,
-# synced scene) serves the next request; freed when idle, no TBB thread of bpy 4.5/5.0 spins
-# (docs/notes/performance.md, "Idle thread"). A busy worker's gap between requests is the
-# Rust side's post-processing, tens of milliseconds at 320x240.
+# Seconds without a request after which a GPU worker frees Cycles' session
+# (builder.release_render; a CPU worker frees it after every request: Worker.keep_session).
+# Kept while requests keep coming, the session (device, kernels, synced scene) serves the
+# next request; freed when idle, no TBB thread of bpy 4.5/5.0 spins (docs/notes/performance.md,
+# "Idle thread"). A busy worker's gap between requests is the Rust side's post-processing,
+# tens of milliseconds at 320x240.
 IDLE_RELEASE_S = 0.25
 
 
