@@ -498,3 +498,29 @@ pub(super) fn check_material_file(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bridge reports only the phases that took time; the rest read as zero, an older
+    /// bridge's reply (no `phases`) too, and a run's sums add phase by phase.
+    #[test]
+    fn phases_read_partial_replies_and_add_up() {
+        let t: BridgeTimings = serde_json::from_str(
+            r#"{"render_s": 1.0, "phases": {"sync": {"wall_s": 0.5, "cpu_s": 0.25},
+                "path_tracing": {"wall_s": 2.0, "cpu_s": 1.5}, "future": {"wall_s": 9.0}}}"#,
+        )
+        .unwrap();
+        assert_eq!(t.phases.sync.cpu_s, 0.25);
+        assert_eq!(t.phases.displacement, PhaseTime::default());
+        let old: BridgeTimings = serde_json::from_str(r#"{"render_s": 1.0}"#).unwrap();
+        assert_eq!(old.phases, BridgePhases::default());
+        let mut sum = BridgePhases::default();
+        sum.add(&t.phases);
+        sum.add(&t.phases);
+        assert_eq!(sum.path_tracing.wall_s, 4.0);
+        assert_eq!(sum.cpu_s(), 3.5);
+        assert_eq!(sum.named()[2].0, "sync");
+    }
+}
