@@ -16,6 +16,7 @@ from mathutils import Matrix, Vector
 import compat
 import passes
 import shapes
+from shading import assign_materials, material_displaces  # noqa: F401
 
 SCENE_FORMAT = "clevrtex-scene"
 SCENE_VERSION = 1
@@ -101,8 +102,8 @@ def _matrix(rows):
 def clear():
     """Remove every object, camera, light, world and material, and orphaned data blocks.
 
-    Kept: the cached shape meshes, and anything with a fake user (the materials module may
-    mark node groups or images it caches across scenes that way).
+    Kept: the cached shape meshes, and anything with a fake user (the shared material trees,
+    and node groups or images the materials module caches across scenes).
     """
     for obj in list(bpy.data.objects):
         bpy.data.objects.remove(obj, do_unlink=True)
@@ -112,7 +113,8 @@ def clear():
             bpy.data.meshes.remove(me)
     for coll in (bpy.data.cameras, bpy.data.lights, bpy.data.materials, bpy.data.worlds):
         for block in list(coll):
-            coll.remove(block)
+            if not block.use_fake_user:  # the shared material trees (assign_materials)
+                coll.remove(block)
     # Orphans left by materials (node groups, textures, images) unless protected.
     for _ in range(3):
         removed = 0
@@ -263,9 +265,12 @@ def apply_render_settings(scene, spec, threads):
     scene.render.film_transparent = False
     scene.render.use_compositing = False
     scene.render.use_sequencer = False
-    # Keep Cycles' synced scene between renders: the shadow pass's second render then reuses
-    # the tessellated (displaced) geometry instead of redoing it (measured on full8 at 1 spp:
-    # 1.6 s instead of 3.7-4.6 s). Pixels are identical with and without (checked).
+    # Keep Cycles' session and synced scene between renders and requests (the worker frees it
+    # when idle: release_render). Pixels are identical with and without (checked). The shadow
+    # render still computes displacement again: its material edits update every object that
+    # uses them, and Cycles re-tessellates an object with adaptive subdivision on any update
+    # (so do a change of passes and of any `scene.render` setting; a VIEW_LAYER attribute
+    # switch is re-read by 3.4 only after a scene tag, which does the same).
     scene.render.use_persistent_data = True
     scene.render.dither_intensity = 0.0
     # No metadata (date, render time, file name...) in the files: identical renders give
@@ -278,6 +283,10 @@ def apply_render_settings(scene, spec, threads):
         scene.render.threads = threads
     else:
         scene.render.threads_mode = "AUTO"
+    # The experimental feature set (adaptive subdivision, up to 4.5) always, displaced or
+    # not: flipping it between scenes made Cycles start a new session (SessionParams).
+    # Without adaptive subdivision on an object it changes nothing in the render.
+    compat.set_experimental_features(scene, True)
     c = scene.cycles
     c.samples = r["samples"]
     c.use_adaptive_sampling = r.get("adaptive_threshold") is not None
@@ -344,83 +353,13 @@ def build(spec, key, threads):
     return built
 
 
-# --- materials ---------------------------------------------------------------------------
-
-
-def material_displaces(mat):
-    """True if Cycles will displace geometry with `mat` (true displacement, not bump)."""
-    if mat is None or not mat.use_nodes:
-        return False
-    if compat.displacement_method(mat) not in ("DISPLACEMENT", "BOTH"):
-        return False
-    for node in mat.node_tree.nodes:
-        if node.type == "OUTPUT_MATERIAL" and node.is_active_output:
-            sock = node.inputs.get("Displacement")
-            return sock is not None and sock.is_linked
-    return False
-
-
-def _set_adaptive(obj, enabled, simple):
-    """Adaptive subdivision on `obj` (needs a subdivision modifier last in the stack)."""
-    mod = obj.modifiers.get("subdivision")
-    if enabled and mod is None:
-        mod = obj.modifiers.new("subdivision", "SUBSURF")
-        mod.subdivision_type = "SIMPLE" if simple else "CATMULL_CLARK"
-        mod.levels = 0
-        mod.render_levels = 0
-    compat.set_adaptive_subdivision(obj, mod, enabled)
-    if not enabled and simple and mod is not None:
-        obj.modifiers.remove(mod)
-
-
-def assign_materials(built, catalogue, build_material, displacement):
-    """Build (or rebuild for another context) every material the scene uses, and assign it."""
-    # The albedo pass's AOV output only when that pass is requested (the same in the
-    # visibility and the final context, so it never causes a rebuild of its own).
-    context = {"displacement": bool(displacement),
-               "albedo": "albedo" in built.spec.get("passes", [])}
-    if built.material_context == context:
-        return 0.0
-    t0 = time.perf_counter()
-    old = set(m.name for m in bpy.data.materials)
-    made = {}
-
-    def get(inst):
-        key = json.dumps(inst, sort_keys=True)
-        if key not in made:
-            name = inst["name"]
-            if catalogue is not None and name not in catalogue:
-                raise KeyError("material `%s` is not in the catalogue" % name)
-            recipe = catalogue[name] if catalogue is not None else {}
-            made[key] = build_material(name, recipe, dict(inst), dict(context))
-        return made[key]
-
-    any_displaced = False
-    pairs = [(built.backdrop, built.spec["backdrop"]["material"], True)]
-    pairs += [(o, s["material"], False) for o, s in zip(built.objects, built.spec["objects"])]
-    for obj, inst, simple in pairs:
-        mat = get(inst)
-        obj.material_slots[0].material = mat
-        displaces = displacement and material_displaces(mat)
-        any_displaced = any_displaced or displaces
-        _set_adaptive(obj, displaces, simple)
-    scene = bpy.context.scene
-    compat.set_experimental_features(scene, any_displaced)
-    keep = set(m.name for m in made.values())
-    for name in old:
-        mat = bpy.data.materials.get(name)
-        if mat is not None and name not in keep:
-            bpy.data.materials.remove(mat)
-    built.material_context = context
-    return time.perf_counter() - t0
-
-
 # --- rendering ---------------------------------------------------------------------------
 
 
 def release_render():
     """Free the Cycles session that persistent data keeps after a render (the worker calls
-    this after every request). Kept, it leaves one of the TBB worker threads of PyPI's bpy 4.5
+    this when no request came for worker.IDLE_RELEASE_S, and after a failure). Kept idle, it
+    leaves one of the TBB worker threads of PyPI's bpy 4.5
     spinning in sched_yield (measured: ~28000 context switches a second, a whole core when the
     machine is otherwise idle, mostly kernel time) and one of bpy 5.0's busy at 100% while the
     worker waits for its next request; freed, none (blender_scripts/dev/spin_probe.py,
@@ -443,10 +382,21 @@ def _save(path, fmt):
     bpy.data.images["Render Result"].save_render(path, scene=scene)
 
 
-def _render():
+def _render(ph=None):
+    """One render; its time split into phases on `ph` (phases.Phases) when given."""
     t0 = time.perf_counter()
-    bpy.ops.render.render(write_still=False)
+    if ph is None:
+        bpy.ops.render.render(write_still=False)
+    else:
+        ph.render(lambda: bpy.ops.render.render(write_still=False))
     return time.perf_counter() - t0
+
+
+def _write(ph, fn):
+    w0, c0 = time.perf_counter(), time.process_time()
+    fn()
+    if ph is not None:
+        ph.add("write", time.perf_counter() - w0, time.process_time() - c0)
 
 
 def data_block_counts():
@@ -469,7 +419,7 @@ def projected(built):
     return out
 
 
-def render_visibility(built, out_dir):
+def render_visibility(built, out_dir, ph=None):
     scene = bpy.context.scene
     view_layer = bpy.context.view_layer
     passes.enable(view_layer, ["mask"])
@@ -479,22 +429,22 @@ def render_visibility(built, out_dir):
     c.max_bounces = 0
     c.use_adaptive_sampling = False
     try:
-        render_s = _render()
+        render_s = _render(ph)
     finally:
         c.samples, c.max_bounces, c.use_adaptive_sampling = saved
     t0 = time.perf_counter()
     path = os.path.join(out_dir, "visibility.exr")
-    _save(path, "EXR")
+    _write(ph, lambda: _save(path, "EXR"))
     return {"visibility": path}, {"render_s": render_s, "write_s": time.perf_counter() - t0}
 
 
-def render_final(built, out_dir, shadow_samples=None):
+def render_final(built, out_dir, shadow_samples=None, ph=None):
     scene = bpy.context.scene
     view_layer = bpy.context.view_layer
     wanted = list(built.spec["passes"])
     passes.enable(view_layer, passes.final_passes(wanted))
     cpu0 = time.process_time()
-    timings = {"render_s": _render()}
+    timings = {"render_s": _render(ph)}
     # CPU seconds of every thread of this process during the render (Cycles' threads, and any
     # other thread that ran meanwhile): what `bench render` compares across Blenders, steadier
     # than the wall time on a loaded machine.
@@ -503,16 +453,16 @@ def render_final(built, out_dir, shadow_samples=None):
     t0 = time.perf_counter()
     if "rgb" in wanted:
         files["rgb"] = os.path.join(out_dir, "rgb.png")
-        _save(files["rgb"], "PNG")
+        _write(ph, lambda: _save(files["rgb"], "PNG"))
     if any(p in wanted for p in passes.EXR_PASSES):
         files["passes"] = os.path.join(out_dir, "passes.exr")
-        _save(files["passes"], "EXR")
+        _write(ph, lambda: _save(files["passes"], "EXR"))
     timings["write_s"] = time.perf_counter() - t0
     if "shadow" in wanted:
         samples = (shadow_samples or built.spec["render"].get("shadow_samples")
                    or default_shadow_samples(scene.cycles.samples))
         shadow_files, timings["shadow_render_s"], write_s = _render_shadow(
-            built, out_dir, samples)
+            built, out_dir, samples, ph)
         files.update(shadow_files)
         timings["write_s"] += write_s
     return files, timings
@@ -620,7 +570,7 @@ class OneRenderShadow:
         return self.surfaces.__exit__(*exc)
 
 
-def _render_shadow(built, out_dir, samples):
+def _render_shadow(built, out_dir, samples, ph=None):
     """The shadow pass's render (see the comment above SHADOW_SAMPLES_MAX): direct light on
     white surfaces, `samples` samples, every one through the pixel's centre, objects
     transparent to shadow rays in red (OneRenderShadow). Returns (files, render seconds,
@@ -642,10 +592,10 @@ def _render_shadow(built, out_dir, samples):
         c.use_light_tree = SHADOW_LIGHT_TREE
     try:
         with OneRenderShadow(built):
-            render_s = _render()
+            render_s = _render(ph)
         t0 = time.perf_counter()
         path = os.path.join(out_dir, "shadow.exr")
-        _save(path, "EXR")
+        _write(ph, lambda: _save(path, "EXR"))
         write_s = time.perf_counter() - t0
     finally:
         (c.samples, c.max_bounces, c.use_adaptive_sampling, c.filter_width,

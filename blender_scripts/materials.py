@@ -45,7 +45,53 @@ CELL_OFFSET = (31.7, 0.43, 0.29)
 ALBEDO_AOV = "BaseCol"
 
 
-def build_material(name, recipe, instance, context):
+class Values:
+    """A material's per-object values (coordinate scale and offset, tint, displacement
+    strength, a user group's driven inputs): `put(socket, fn)` sets the constant
+    fn(instance) on an input socket and records where it went, so a tree built once (the
+    template, kept per worker: shading.assign_materials) serves another instance as a copy
+    with these inputs set again (`apply(material, instance)`). A copy is the tree a build for
+    that instance makes, constant for constant, so its renders are bit-identical."""
+
+    def __init__(self, instance):
+        self.instance = instance
+        self.sites = []  # (node name, input index, fn)
+
+    def put(self, socket, fn):
+        node = socket.node
+        index = next(i for i, s in enumerate(node.inputs)
+                     if s.as_pointer() == socket.as_pointer())
+        self.sites.append((node.name, index, fn))
+        socket.default_value = fn(self.instance)
+
+    def apply(self, mat, instance):
+        """Set `mat` (a copy of the template) for `instance`."""
+        nodes = mat.node_tree.nodes
+        for name, index, fn in self.sites:
+            nodes[name].inputs[index].default_value = fn(instance)
+
+
+def shared_key(name, recipe, instance, context):
+    """What a material's tree depends on besides its per-object values (Values): the name,
+    the context, and which optional values the instance has; None where a value does not
+    land on one socket as itself (the tree is built for the instance)."""
+    recipe = recipe or {}
+    if instance.get("color") is not None and recipe.get("tint", "multiply") == "replace":
+        return None  # the colour feeds several sockets, some through compat's conversions
+    for layer in recipe.get("layers") or []:
+        # A `graph` layer may feed `random` into Python-folded arithmetic.
+        if layer.get("block") == "graph" and any(
+                src == "random" for src, _dst in layer.get("links") or []):
+            return None
+    return (name, bool(context.get("displacement", True)), bool(context.get("albedo", False)),
+            instance.get("color") is not None, instance.get("scale") is not None,
+            (instance.get("displacement") or 0.0) > 0.0)
+
+
+def build_material(name, recipe, instance, context, values=None):
+    """The material for `instance`; `values` (a Values of `instance`) records where its
+    per-object values went."""
+    vals = values if values is not None else Values(instance)
     kind = recipe.get("kind", "layers") if recipe else "layers"
     if not recipe:
         recipe = {"kind": "layers", "layers": [], "surface": {}}
@@ -62,25 +108,30 @@ def build_material(name, recipe, instance, context):
     )
     albedo = bool(context.get("albedo", False))
     if kind == "blend":
-        _build_blend(nt, out, recipe, instance, displace, albedo)
+        _build_blend(nt, out, recipe, instance, displace, albedo, vals)
     elif kind == "pbr":
-        displace = _build_pbr(nt, out, name, recipe, instance, displace, albedo)
+        displace = _build_pbr(nt, out, name, recipe, instance, displace, albedo, vals)
     else:
-        displace = _build_layers(nt, out, recipe, instance, displace, albedo)
+        displace = _build_layers(nt, out, recipe, instance, displace, albedo, vals)
     compat.set_displacement_method(mat, "BOTH" if displace else "BUMP")
     return mat
 
 
-def _coords(g, recipe, instance):
+def _coords(g, recipe, vals):
     tc = g.node("ShaderNodeTexCoord")
     attr = g.node("ShaderNodeAttribute", attribute_type="OBJECT", attribute_name="scale")
     p = g.vmath("MULTIPLY", tc.outputs["Object"], attr.outputs["Vector"])
-    k = float(recipe.get("scale", 1.0)) * float(instance.get("scale") or 1.0)
-    r = float(instance.get("random") or 0.0)
-    off = tuple(r * o for o in RANDOM_OFFSET)
+    rscale = float(recipe.get("scale", 1.0))
+
+    def k(i):
+        k = rscale * float(i.get("scale") or 1.0)
+        return (k, k, k)
+
     # One node: p * k + off.
-    p = g.vmath("MULTIPLY_ADD", p, (k, k, k))
-    p.node.inputs[2].default_value = off
+    p = g.vmath("MULTIPLY_ADD", p, (1.0, 1.0, 1.0))
+    vals.put(p.node.inputs[1], k)
+    vals.put(p.node.inputs[2], lambda i: tuple(
+        float(i.get("random") or 0.0) * o for o in RANDOM_OFFSET))
     return p, tc.outputs["Normal"]
 
 
@@ -109,9 +160,9 @@ def _set_bsdf(g, bsdf, name, value):
         g.set(socket, compat.principled_value(name, value))
 
 
-def _build_layers(nt, out, recipe, instance, displace, albedo=False):
+def _build_layers(nt, out, recipe, instance, displace, albedo, vals):
     g = Graph(nt)
-    p, normal = _coords(g, recipe, instance)
+    p, normal = _coords(g, recipe, vals)
     ctx = {"normal": normal, "cell": None, "inside": None, "_normal_xyz": None}
     ctx["random"] = float(instance.get("random") or 0.0)
 
@@ -131,7 +182,7 @@ def _build_layers(nt, out, recipe, instance, displace, albedo=False):
     for L in layers:
         color, rough, metal, height = _layer(g, p, L, ctx, color, rough, metal, height)
 
-    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"))
+    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"), vals)
     surf = recipe.get("surface") or {}
     bsdf = _principled(g, color, rough, metal, surf.get("specular", 0.5), albedo)
     if surf.get("sheen", 0.0) > 0:
@@ -157,7 +208,7 @@ def _build_layers(nt, out, recipe, instance, displace, albedo=False):
         g.set(d.inputs["Height"], height)
         g.set(d.inputs["Midlevel"], 0.5)
         # Object space, so divide by the object's scale (read per object) to keep world units.
-        g.set(d.inputs["Scale"], relief * float(instance["displacement"]))
+        vals.put(d.inputs["Scale"], lambda i: relief * float(i["displacement"]))
         nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
         return True
     return False
@@ -239,14 +290,20 @@ def _layer(g, p, L, ctx, color, rough, metal, height):
     return color, rough, metal, height
 
 
-def _tint(g, color, tint, inst_color):
+def _tint(g, color, tint, inst_color, vals):
     if inst_color is None or tint == "none":
         return color
-    c = tuple(float(x) for x in inst_color)
     if tint == "replace":
-        return c
-    m = max(max(c), 1e-6)
-    return g.mix(1.0, color, tuple(x / m for x in c), blend="MULTIPLY")
+        return tuple(float(x) for x in inst_color)  # never a template (shared_key)
+
+    def scaled(i):
+        c = tuple(float(x) for x in i["color"])
+        m = max(max(c), 1e-6)
+        return tuple(x / m for x in c) + (1.0,)
+
+    out = g.mix(1.0, color, (1.0, 1.0, 1.0), blend="MULTIPLY")
+    vals.put(out.node.inputs["Color2"], scaled)
+    return out
 
 
 # --- user node groups --------------------------------------------------------------------
@@ -420,30 +477,44 @@ def _add_base_output(ng):
         ng.links.new(rgb.outputs[0], target)
 
 
-def _build_blend(nt, out, recipe, instance, displace, albedo=False):
-    ng = _load_group(recipe["path"], recipe.get("group"), recipe.get("images"))
-    if albedo:
-        _add_base_output(ng)
-    node = nt.nodes.new("ShaderNodeGroup")
-    node.node_tree = ng
+def _socket_value(kind, v):
+    """A driven input's value for a socket of type `kind` (RGBA without its alpha 1.0)."""
+    if kind == "RGBA":
+        return v[:3] if isinstance(v, tuple) else (v, v, v)
+    if kind == "VECTOR":
+        return (v, v, v) if not isinstance(v, tuple) else v[:3]
+    return v if not isinstance(v, tuple) else v[0]
+
+
+def _driven(instance, displace):
+    """The group inputs the convention drives, name -> value, for `instance`."""
     values = {"Random": float(instance.get("random") or 0.0)}
     if instance.get("color") is not None:
-        values["Color"] = tuple(float(x) for x in instance["color"]) + (1.0,)
+        values["Color"] = tuple(float(x) for x in instance["color"])
     if instance.get("scale") is not None:
         values["Scale"] = float(instance["scale"])
     if displace:
         d = float(instance.get("displacement") or 0.0)
         values["Displacement"] = d
         values["Displacement Strength"] = d
-    for sock in node.inputs:
-        if sock.name in values:
-            v = values[sock.name]
-            if sock.type == "RGBA":
-                sock.default_value = v if isinstance(v, tuple) else (v, v, v, 1.0)
-            elif sock.type == "VECTOR":
-                sock.default_value = (v, v, v) if not isinstance(v, tuple) else v[:3]
-            else:
-                sock.default_value = v if not isinstance(v, tuple) else v[0]
+    return values
+
+
+def _build_blend(nt, out, recipe, instance, displace, albedo, vals):
+    ng = _load_group(recipe["path"], recipe.get("group"), recipe.get("images"))
+    if albedo:
+        _add_base_output(ng)
+    node = nt.nodes.new("ShaderNodeGroup")
+    node.node_tree = ng
+    for i, sock in enumerate(node.inputs):
+        if sock.name not in _driven(instance, displace):
+            continue
+        kind = sock.type
+
+        def fn(inst, name=sock.name, kind=kind):
+            return _socket_value(kind, _driven(inst, displace)[name])
+
+        vals.put(sock, (lambda inst, fn=fn: fn(inst) + (1.0,)) if kind == "RGBA" else fn)
     shader = next((node.outputs[n] for n in SURFACE_OUTPUTS if n in node.outputs), None)
     nt.links.new(shader, out.inputs["Surface"])
     # The base colour: the group's `Color` or `Base Color` output (added above when it had
@@ -533,9 +604,9 @@ def _pbr_normal(g, samples, w, normal, dx):
     return g.vmath("NORMALIZE", vt.outputs["Vector"])
 
 
-def _build_pbr(nt, out, name, recipe, instance, displace, albedo=False):
+def _build_pbr(nt, out, name, recipe, instance, displace, albedo, vals):
     g = Graph(nt)
-    p, normal = _coords(g, recipe, instance)
+    p, normal = _coords(g, recipe, vals)
     uvs, w = _triplanar(g, p, normal, float(recipe.get("tile") or 1.0))
     maps = recipe.get("maps") or {}
 
@@ -547,7 +618,7 @@ def _build_pbr(nt, out, name, recipe, instance, displace, albedo=False):
 
     color_img = _pbr_image(name, maps["color"], False)
     color = _blend3(g, _samples(g, color_img, uvs), w)
-    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"))
+    color = _tint(g, color, recipe.get("tint", "multiply"), instance.get("color"), vals)
     arm = channels("arm", True)
     rough = channels("roughness", True)
     metal = channels("metallic", True)
@@ -566,7 +637,7 @@ def _build_pbr(nt, out, name, recipe, instance, displace, albedo=False):
         d = g.node("ShaderNodeDisplacement", space="OBJECT")
         g.set(d.inputs["Height"], height)
         g.set(d.inputs["Midlevel"], 0.5)
-        g.set(d.inputs["Scale"], relief * float(instance["displacement"]))
+        vals.put(d.inputs["Scale"], lambda i: relief * float(i["displacement"]))
         nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
         return True
     return False

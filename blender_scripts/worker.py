@@ -16,6 +16,7 @@ import argparse
 import ctypes
 import json
 import os
+import select
 import sys
 import time
 import threading
@@ -85,6 +86,10 @@ class Worker:
         compat.DEVICE = (kind.upper(), int(index or 0))
         import builder
         import materials
+        import phases
+
+        phases.capture(2)
+        self.phases = phases
 
         self.builder = builder
         self.compat = compat
@@ -92,6 +97,11 @@ class Worker:
         self.args = args
         self.replier = replier
         self.catalogue = _load_catalogue(args.materials)
+        # Keep Cycles' session between requests on a GPU (a new one means a new device
+        # context and kernel load); on the CPU a new one costs ~1-4 ms, while a kept one
+        # leaves a TBB thread of bpy 4.5/5.0 spinning through the build and material work
+        # between renders (measured: CPU seconds of `build` twice its wall time).
+        self.keep_session = compat.DEVICE[0] != "CPU"
         self.built = None
 
     def ready(self):
@@ -121,22 +131,24 @@ class Worker:
             raise FileNotFoundError("output directory `%s` does not exist" % out_dir)
         key = self._scene_key(path)
         build_s = 0.0
+        ph = self.phases.Phases()
         if self.built is None or self.built.key != key:
             self.built = None  # a failed build must not be reused
             spec = b.load_scene_file(path)
-            built = b.build(spec, key, self.args.threads)
+            built = ph.timed("build", lambda: b.build(spec, key, self.args.threads))
             build_s += built.build_s
             self.built = built
         # The object-index pass does not depend on materials: the visibility check skips
         # them (2-3x cheaper per check, measured), `final` builds them with displacement.
         if mode == "final":
-            build_s += b.assign_materials(self.built, self.catalogue, self.materials.build_material,
-                                          displacement=True)
+            build_s += ph.timed("materials", lambda: b.assign_materials(
+                self.built, self.catalogue, self.materials.build_material, displacement=True))
         if mode == "visibility":
-            files, timings = b.render_visibility(self.built, out_dir)
+            files, timings = b.render_visibility(self.built, out_dir, ph)
         else:
-            files, timings = b.render_final(self.built, out_dir, req.get("shadow_samples"))
+            files, timings = b.render_final(self.built, out_dir, req.get("shadow_samples"), ph)
         timings["build_s"] = build_s
+        timings["phases"] = ph.report()
         return {
             "type": "done",
             "id": req.get("id"),
@@ -185,8 +197,10 @@ class Worker:
         raise ValueError("unknown request type `%s`" % kind)
 
     def loop(self, stdin):
+        held = False  # whether Cycles' session is kept from the last request
         while True:
-            raw = stdin.readline()
+            raw = stdin.next(IDLE_RELEASE_S if held else None, self.builder.release_render)
+            held = False
             if not raw:
                 return  # EOF: the parent is gone or done
             raw = raw.strip()
@@ -201,9 +215,12 @@ class Worker:
                 if req.get("type") == "quit":
                     return
                 reply = self.handle(req)
-                self.builder.release_render()
+                held = self.keep_session and req.get("type") == "render"
+                if not held:
+                    self.builder.release_render()
             except Exception as exc:
                 self.built = None  # state after a failure is unknown: rebuild next time
+                self.builder.release_render()
                 reply = {
                     "type": "error",
                     "id": req_id,
@@ -211,6 +228,40 @@ class Worker:
                     "traceback": traceback.format_exc(),
                 }
             self.replier.send(reply)
+
+
+# Seconds without a request after which a GPU worker frees Cycles' session
+# (builder.release_render; a CPU worker frees it after every request: Worker.keep_session).
+# Kept while requests keep coming, the session (device, kernels, synced scene) serves the
+# next request; freed when idle, no TBB thread of bpy 4.5/5.0 spins (docs/notes/performance.md,
+# "Idle thread"). A busy worker's gap between requests is the Rust side's post-processing,
+# tens of milliseconds at 320x240.
+IDLE_RELEASE_S = 0.25
+
+
+class Lines:
+    """Request lines from file descriptor `fd`; next(idle_s, on_idle) calls on_idle() once
+    when no line comes within idle_s seconds, then keeps waiting."""
+
+    def __init__(self, fd):
+        self.fd = fd
+        self.buf = b""
+
+    def next(self, idle_s=None, on_idle=None):
+        while b"\n" not in self.buf:
+            if idle_s is not None:
+                ready, _, _ = select.select([self.fd], [], [], idle_s)
+                if not ready:
+                    on_idle()
+                    idle_s = None
+                    continue
+            chunk = os.read(self.fd, 65536)
+            if not chunk:
+                rest, self.buf = self.buf, b""
+                return rest  # EOF: the rest, then b""
+            self.buf += chunk
+        line, self.buf = self.buf.split(b"\n", 1)
+        return line + b"\n"
 
 
 def _proc_stat(pid):
@@ -285,7 +336,7 @@ def main():
         raise
     worker.ready()
     print("clevrtex worker ready in %.2f s" % (time.perf_counter() - t0), file=sys.stderr)
-    worker.loop(sys.stdin.buffer)
+    worker.loop(Lines(0))
     sys.stderr.flush()
 
 

@@ -314,6 +314,7 @@ fn generate_writes_every_pass_with_exact_masks_and_resumes() {
         let t = text(&out);
         assert_eq!(out.status.code(), Some(0), "{t}");
         assert!(t.contains("time split"), "{t}");
+        assert!(t.contains("bridge phases"), "{t}");
         let sub = dir.path().join("clevrtex_camo/0");
         let mut expected = Vec::new();
         for i in 0..2 {

@@ -47,6 +47,12 @@ fn shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube() {
         vec![floor.clone(), cube.clone(), one.clone(), shared.clone()],
     );
     assert!(stats[0].render_s > 0.0 && stats[1].render_s > 0.0);
+    // The bridge's phases (docs/bridge-protocol.md): the displaced floor's material, its
+    // displacement and its path tracing are each reported.
+    let p = &stats[0].phases;
+    assert!(p.materials.cpu_s > 0.0, "{p:?}");
+    assert!(p.displacement.cpu_s > 0.0, "{p:?}");
+    assert!(p.path_tracing.cpu_s > 0.0 && p.write.wall_s > 0.0, "{p:?}");
     let sub = dir.path().join("clevrtex_full/0");
     let shadow = |stem: &str| decode_png(&sub.join(format!("{stem}_shadow_0001.png"))).unwrap();
 
@@ -100,4 +106,63 @@ fn shadow_pass_is_zero_on_an_open_floor_and_dark_beside_a_cube() {
         "partial shadow values with one sample ({between} with the default)"
     );
     assert!(single.data.contains(&255), "one sample: no shadow at all");
+}
+
+/// Material templates (`shading.assign_materials`): a scene rendered by a worker whose
+/// templates were built for other instances of the same materials (other random values,
+/// other strengths) gives the same mask, depth, albedo and shadow bytes (the normal within
+/// its own run-to-run noise) as in a fresh worker, which builds every tree for the scene's
+/// own instances; checked to fail when a template copy kept the first instance's values.
+#[test]
+fn material_templates_render_as_trees_built_per_instance() {
+    let Some(blender) = blender_or_skip("material_templates_render_as_trees_built_per_instance")
+    else {
+        return;
+    };
+    let scene = |index: u64, random: f64| {
+        let mut s = fixture("full8", 48, 36, 2);
+        s.index = index;
+        s.stem = format!("CLEVRTEX_full_{index:06}");
+        s.objects.truncate(3);
+        if random > 0.0 {
+            s.backdrop.material.random = random;
+            if let Some(d) = s.backdrop.material.displacement.as_mut() {
+                *d *= 0.5;
+            }
+            for o in &mut s.objects {
+                o.material.random = (o.material.random + random) % 1.0;
+            }
+        }
+        s
+    };
+    let fresh = tempfile::tempdir().unwrap();
+    render_fixtures(blender.clone(), fresh.path(), vec![scene(7, 0.0)]);
+    let reused = tempfile::tempdir().unwrap();
+    render_fixtures(blender, reused.path(), vec![scene(6, 0.61), scene(7, 0.0)]);
+    let read = |dir: &std::path::Path, pass: &str| {
+        decode_png(&dir.join(format!("clevrtex_full/0/CLEVRTEX_full_000007{pass}"))).unwrap()
+    };
+    for pass in [
+        "_flat.png",
+        "_depth_0001.png",
+        "_albedo_0001.png",
+        "_shadow_0001.png",
+    ] {
+        let (a, b) = (read(fresh.path(), pass), read(reused.path(), pass));
+        assert!(a.data == b.data, "{pass} differs");
+    }
+    // The 16-bit normal pass is not bit-reproducible even between two runs of one build (a
+    // few pixels by a few units of 65535: two `generate` runs of main, --threads 1): within 8.
+    let (a, b) = (
+        read(fresh.path(), "_normal_0001.png"),
+        read(reused.path(), "_normal_0001.png"),
+    );
+    let worst = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| x.abs_diff(*y))
+        .max()
+        .unwrap();
+    assert!(worst <= 8, "normal differs by {worst}/65535");
 }

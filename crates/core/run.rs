@@ -446,6 +446,25 @@ fn check_output_writable(out: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The bridge's phases (every request, rejects included), CPU and wall seconds; nothing from
+/// a bridge that does not report them.
+fn print_phases(p: &clevrtex_render::BridgePhases) {
+    if p.cpu_s() <= 0.0 {
+        return;
+    }
+    let parts: Vec<String> = p
+        .named()
+        .iter()
+        .filter(|(_, t)| t.cpu_s > 0.0 || t.wall_s > 0.0)
+        .map(|(name, t)| format!("{name} {:.1}/{:.1}", t.cpu_s, t.wall_s))
+        .collect();
+    println!(
+        "  bridge phases    {:>8.1} CPU-s  (CPU/wall s: {})",
+        p.cpu_s(),
+        parts.join(", ")
+    );
+}
+
 fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
     println!(
         "rendered {} images ({} already complete, {} failed) in {:.1} s with {} worker(s) x {} thread(s)",
@@ -479,6 +498,7 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
         (r.final_request_s - r.render_s - r.build_s).max(0.0)
     );
     println!("  post-processing  {:>8.1} s", r.post_s);
+    print_phases(&r.phases);
     println!(
         "  rejects          {:>8.1} s  ({} rejected layout(s); checked after the full render they would have cost ~{:.1} s)",
         r.reject_s,

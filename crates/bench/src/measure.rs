@@ -64,6 +64,8 @@ pub enum Event<'a> {
         wall_s: f64,
         /// Its relative error.
         rel_error: f64,
+        /// The bridge's phases of the render request (CPU seconds shown).
+        phases: clevrtex_render::BridgePhases,
     },
 }
 
@@ -94,10 +96,23 @@ impl std::fmt::Display for Event<'_> {
                 label,
                 wall_s,
                 rel_error,
-            } => write!(
-                f,
-                "[{done}/{total}] {label}: {wall_s:.2} s, rel error {rel_error:.4}"
-            ),
+                phases,
+            } => {
+                write!(
+                    f,
+                    "[{done}/{total}] {label}: {wall_s:.2} s, rel error {rel_error:.4}"
+                )?;
+                let parts: Vec<String> = phases
+                    .named()
+                    .iter()
+                    .filter(|(_, t)| t.cpu_s > 0.0)
+                    .map(|(name, t)| format!("{name} {:.2}", t.cpu_s))
+                    .collect();
+                if !parts.is_empty() {
+                    write!(f, "; bridge CPU s: {}", parts.join(", "))?;
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -234,6 +249,8 @@ struct Took {
     cycles_s: f64,
     /// CPU time of the Blender process during the render (NaN from older bridges).
     cycles_cpu_s: f64,
+    /// The bridge's phases of the request.
+    phases: clevrtex_render::BridgePhases,
 }
 
 /// Render `scene` into `dir` (created, emptied of old outputs); what it took.
@@ -263,6 +280,7 @@ fn render_into(
         wall_s: started.elapsed().as_secs_f64(),
         cycles_s: reply.timings.render_s,
         cycles_cpu_s: reply.timings.render_cpu_s.unwrap_or(f64::NAN),
+        phases: reply.timings.phases,
     })
 }
 
@@ -325,6 +343,7 @@ impl Bench<'_> {
                     label: &format!("{} {}", bs.label, setting.label),
                     wall_s,
                     rel_error: errors.rel_error,
+                    phases: took.phases,
                 });
                 rows.push(Row {
                     blender: self.blender_version.to_string(),

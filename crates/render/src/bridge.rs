@@ -81,6 +81,8 @@ mod tests {
             "passes.py",
             "materials.py",
             "material_tool.py",
+            "phases.py",
+            "shading.py",
         ] {
             assert!(file(name).is_some(), "`{name}` is not embedded");
         }

@@ -160,6 +160,9 @@ pub struct SampleStats {
     pub visibility_passes: u64,
     /// Wall time of the rejected attempts.
     pub reject_s: f64,
+    /// The bridge's phases of every request of this image (visibility and final, accepted
+    /// and rejected attempts).
+    pub phases: crate::worker::BridgePhases,
     /// Blender's projection of each object origin (`[x, y, depth]`).
     pub projected: Vec<[f64; 3]>,
     /// Per-object visibility in the final mask.
@@ -275,6 +278,7 @@ pub(crate) fn run_job(
                 w.check_features(&scene.render)?;
                 w.render_labelled(&label, &scene_path, Mode::Visibility, &work, timeout)
             })?;
+            stats.phases.add(&reply.timings.phases);
             stats.visibility_build_s += reply.timings.build_s;
             stats.visibility_render_s += reply.timings.render_s;
             stats.visibility_passes += 1;
@@ -297,6 +301,7 @@ pub(crate) fn run_job(
             w.render_labelled(&label, &scene_path, Mode::Final, &work, timeout)
         })?;
         let final_request_s = t.elapsed().as_secs_f64();
+        stats.phases.add(&reply.timings.phases);
         let t_post = Instant::now();
         let (facts_blender, facts_compat) = slot.blender();
         let dir = layout::sample_dir(&opts.out, &job.variant, job.index);

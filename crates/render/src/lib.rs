@@ -71,8 +71,9 @@ pub use error::{RenderError, Result, Tails};
 pub use pool::{Job, PoolEvent, PoolOptions, RunReport, SampleStats};
 pub use session::{Hooks, Session};
 pub use worker::{
-    BridgeTimings, GroupImage, GroupSocket, InspectReply, MaterialMode, MaterialReply,
-    MaterialSettings, Mode, Ready, RenderReply, Worker, WorkerOptions, STARTUP_TIMEOUT,
+    BridgePhases, BridgeTimings, GroupImage, GroupSocket, InspectReply, MaterialMode,
+    MaterialReply, MaterialSettings, Mode, PhaseTime, Ready, RenderReply, Worker, WorkerOptions,
+    STARTUP_TIMEOUT,
 };
 
 /// The resolved built-in material catalogue for the bridge (`materials.json`, see

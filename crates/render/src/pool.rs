@@ -144,6 +144,8 @@ pub struct RunReport {
     pub final_request_s: f64,
     /// Total post-processing time.
     pub post_s: f64,
+    /// The bridge's phases of every request (accepted and rejected attempts).
+    pub phases: crate::worker::BridgePhases,
     /// Total time of rejected attempts.
     pub reject_s: f64,
     /// Wall time of the run.
@@ -170,6 +172,7 @@ impl RunReport {
         self.render_s += s.render_s;
         self.final_request_s += s.final_request_s;
         self.post_s += s.post_s;
+        self.phases.add(&s.phases);
         self.reject_s += s.reject_s;
     }
 

@@ -20,8 +20,8 @@ mod protocol;
 mod report;
 
 use process::Process;
-pub use protocol::BridgeTimings;
 use protocol::Unexpected;
+pub use protocol::{BridgePhases, BridgeTimings, PhaseTime};
 pub use protocol::{
     GroupImage, GroupSocket, InspectReply, MaterialMode, MaterialReply, MaterialSettings, Mode,
     Ready, RenderReply,

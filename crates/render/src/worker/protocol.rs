@@ -30,6 +30,102 @@ pub struct BridgeTimings {
     /// The shadow pass's two direct-light renders, together (0 without the pass).
     #[serde(default)]
     pub shadow_render_s: f64,
+    /// Where the request's time went, phase by phase (zero from bridges older than this
+    /// field).
+    #[serde(default)]
+    pub phases: BridgePhases,
+}
+
+/// Wall and CPU seconds of one phase of a request.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Deserialize)]
+pub struct PhaseTime {
+    /// Wall-clock seconds.
+    #[serde(default)]
+    pub wall_s: f64,
+    /// CPU seconds of the whole Blender process (all threads).
+    #[serde(default)]
+    pub cpu_s: f64,
+}
+
+impl PhaseTime {
+    fn add(&mut self, other: &PhaseTime) {
+        self.wall_s += other.wall_s;
+        self.cpu_s += other.cpu_s;
+    }
+}
+
+/// The phases of a request as the bridge reports them (`blender_scripts/phases.py`; the
+/// render calls split by the Cycles status line in effect). Their sum is the request's time
+/// in the bridge.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Deserialize)]
+pub struct BridgePhases {
+    /// Building the Blender scene from the scene file (0 when reused).
+    #[serde(default)]
+    pub build: PhaseTime,
+    /// Building and assigning the materials' node trees.
+    #[serde(default)]
+    pub materials: PhaseTime,
+    /// Render start: depsgraph, Cycles session, scene sync (objects, shaders, images).
+    #[serde(default)]
+    pub sync: PhaseTime,
+    /// True displacement: tessellating and displacing.
+    #[serde(default)]
+    pub displacement: PhaseTime,
+    /// Building the BVH.
+    #[serde(default)]
+    pub bvh: PhaseTime,
+    /// Path tracing.
+    #[serde(default)]
+    pub path_tracing: PhaseTime,
+    /// Denoising.
+    #[serde(default)]
+    pub denoise: PhaseTime,
+    /// Writing the output files.
+    #[serde(default)]
+    pub write: PhaseTime,
+    /// Anything else (result readback, statuses Cycles adds later).
+    #[serde(default)]
+    pub other: PhaseTime,
+}
+
+impl BridgePhases {
+    /// Every phase with its name, in request order.
+    pub fn named(&self) -> [(&'static str, PhaseTime); 9] {
+        [
+            ("build", self.build),
+            ("materials", self.materials),
+            ("sync", self.sync),
+            ("displacement", self.displacement),
+            ("bvh", self.bvh),
+            ("path_tracing", self.path_tracing),
+            ("denoise", self.denoise),
+            ("write", self.write),
+            ("other", self.other),
+        ]
+    }
+
+    /// Adds `other`'s phases to these.
+    pub fn add(&mut self, other: &BridgePhases) {
+        let pairs = [
+            (&mut self.build, &other.build),
+            (&mut self.materials, &other.materials),
+            (&mut self.sync, &other.sync),
+            (&mut self.displacement, &other.displacement),
+            (&mut self.bvh, &other.bvh),
+            (&mut self.path_tracing, &other.path_tracing),
+            (&mut self.denoise, &other.denoise),
+            (&mut self.write, &other.write),
+            (&mut self.other, &other.other),
+        ];
+        for (a, b) in pairs {
+            a.add(b);
+        }
+    }
+
+    /// Total CPU seconds over every phase.
+    pub fn cpu_s(&self) -> f64 {
+        self.named().iter().map(|(_, p)| p.cpu_s).sum()
+    }
 }
 
 /// The worker's `ready` message.
@@ -422,4 +518,30 @@ pub(super) fn check_material_file(
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bridge reports only the phases that took time; the rest read as zero, an older
+    /// bridge's reply (no `phases`) too, and a run's sums add phase by phase.
+    #[test]
+    fn phases_read_partial_replies_and_add_up() {
+        let t: BridgeTimings = serde_json::from_str(
+            r#"{"render_s": 1.0, "phases": {"sync": {"wall_s": 0.5, "cpu_s": 0.25},
+                "path_tracing": {"wall_s": 2.0, "cpu_s": 1.5}, "future": {"wall_s": 9.0}}}"#,
+        )
+        .unwrap();
+        assert_eq!(t.phases.sync.cpu_s, 0.25);
+        assert_eq!(t.phases.displacement, PhaseTime::default());
+        let old: BridgeTimings = serde_json::from_str(r#"{"render_s": 1.0}"#).unwrap();
+        assert_eq!(old.phases, BridgePhases::default());
+        let mut sum = BridgePhases::default();
+        sum.add(&t.phases);
+        sum.add(&t.phases);
+        assert_eq!(sum.path_tracing.wall_s, 4.0);
+        assert_eq!(sum.cpu_s(), 3.5);
+        assert_eq!(sum.named()[2].0, "sync");
+    }
 }
