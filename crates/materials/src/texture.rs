@@ -106,10 +106,23 @@ pub fn bytes_problem(bytes: &[u8], expect: Expect) -> Option<String> {
             .expect("reading from memory")
     };
     let r = reader(bytes);
-    if !r.format().is_some_and(|f| formats.contains(&f)) {
+    let Some(format) = r.format().filter(|f| formats.contains(f)) else {
         return Some(format!(
             "is not {names} (the formats this material may read)"
         ));
+    };
+    // The JPEG decoder fills a truncated file's missing pixels in without an error, as
+    // Blender does (grey, silently): a whole JPEG has its end-of-image marker after its
+    // first scan (entropy-coded data never holds FF D9: an FF there is stuffed or a restart).
+    if format == F::Jpeg {
+        let scan = bytes.windows(2).position(|w| w == [0xff, 0xda]);
+        let end = bytes.windows(2).rposition(|w| w == [0xff, 0xd9]);
+        if !matches!((scan, end), (Some(s), Some(e)) if e > s) {
+            return Some(
+                "is truncated: a JPEG without its end-of-image marker after its pixel data; does not decode to the end"
+                    .into(),
+            );
+        }
     }
     let (w, h) = match r.into_dimensions() {
         Ok(d) => d,
