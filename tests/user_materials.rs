@@ -356,7 +356,7 @@ fn bad_user_materials_are_refused_before_rendering() {
     refused(
         &blender,
         &corrupt,
-        &["`broken`", "Broken_COL_3K.jpg", "decoding Jpeg"],
+        &["`broken`", "Broken_COL_3K.jpg", "does not decode"],
     );
     let big = fresh("big");
     make_blend(&blender, &big, "Vast", BLUE, "png", "ok");
