@@ -317,7 +317,8 @@ def _tint(g, color, tint, inst_color, vals):
 # and the `Displacement` output the material's displacement (true displacement only where the
 # scene displaces, otherwise bump). The Rust side first inspects every user group
 # (`inspect_blend`) and checks every texture it reads before any image is rendered; the recipe
-# then names the group and maps each texture to the checked file (`images`).
+# then names the group and maps each texture to the run-private copy of the checked file
+# (`images`); the `.blend` itself is such a copy.
 
 _GROUPS = {}
 # Inputs the convention drives; every other input keeps the `.blend`'s default.
@@ -335,11 +336,16 @@ def _stem(path):
 
 
 def _load_group(path, group, images=None):
+    """The node group of the `.blend` at `path` (`group`, its name in the file, else the one
+    named after the file, else the first with a surface output) and that name. Loaded once
+    per worker and held by reference: another file's group of the same name, loaded too, is
+    renamed `.001` by Blender and never confused with it."""
     key = (path, group)
     if key in _GROUPS:
         try:
-            if _GROUPS[key].name in bpy.data.node_groups:
-                return _GROUPS[key]
+            ng, name = _GROUPS[key]
+            if ng.name in bpy.data.node_groups:
+                return ng, name
         except ReferenceError:
             pass  # removed, e.g. by the factory reset of a `material` request: load again
     with bpy.data.libraries.load(path, link=False) as (src, dst):
@@ -347,24 +353,26 @@ def _load_group(path, group, images=None):
         # The group named after the file, as the public generator appends it; else all
         # (the first with a surface output is used).
         want = group if group is not None else (_stem(path) if _stem(path) in names else None)
-        dst.node_groups = [want] if want in names else names
-    candidates = [ng for ng in dst.node_groups if ng is not None]
+        requested = [want] if want in names else names
+        dst.node_groups = list(requested)
+    # The loaded groups beside their names in the file (the loaded ones may be renamed).
+    candidates = [(ng, n) for ng, n in zip(dst.node_groups, requested) if ng is not None]
     chosen = None
-    for ng in candidates:
+    for ng, n in candidates:
         outs = {s.name for s in _group_outputs(ng)}
-        if want is not None and ng.name != want:
+        if want is not None and n != want:
             continue
         if outs & set(SURFACE_OUTPUTS):
-            chosen = ng
+            chosen = (ng, n)
             break
     if chosen is None:
         raise ValueError(
             "no node group%s with a `Shader`, `BSDF` or `Surface` output in `%s`"
             % ("" if want is None else " named `%s`" % want, path))
-    for ng in candidates:
+    for ng, _ in candidates:
         ng.use_fake_user = True
     if images is not None:
-        _pin_images(chosen, images, path)
+        _pin_images(chosen[0], images, path)
     _GROUPS[key] = chosen
     return chosen
 
@@ -406,11 +414,27 @@ def _image_path(img):
     return bpy.path.abspath(img.filepath, library=img.library)
 
 
+def _packed_key(i):
+    """The key of the `i`-th image of a group (`_images` order) when it is packed."""
+    return "packed:%d" % i
+
+
 def _pin_images(ng, images, path):
-    """Point every texture of `ng` at the file the Rust side checked (`images`: path as
-    Blender resolves it -> checked path); a texture it did not check is an error."""
-    for img in _images(ng):
-        if img.packed_file is not None or img.source in ("GENERATED", "VIEWER"):
+    """Point every texture of `ng` at the copy of the file the Rust side checked (`images`:
+    path as Blender resolves it, or `packed:<n>` for a packed image -> the checked copy); a
+    texture it did not check is an error. A packed image is unpacked (its data dropped, no
+    file written) and read from the checked copy of its bytes instead."""
+    for i, img in enumerate(_images(ng)):
+        if img.source in ("GENERATED", "VIEWER"):
+            continue
+        if img.packed_file is not None:
+            key = _packed_key(i)
+            if key not in images:
+                raise ValueError("packed image `%s` of `%s` was not checked before the run"
+                                 % (img.name, path))
+            img.unpack(method="REMOVE")
+            img.source = "FILE"
+            img.filepath = images[key]
             continue
         p = _image_path(img)
         if p not in images:
@@ -418,20 +442,32 @@ def _pin_images(ng, images, path):
         img.filepath = images[p]
 
 
-def inspect_blend(path, group=None):
-    """What the Rust side checks before a run: the group used, its inputs and outputs, and
-    every image it reads (nothing is loaded but the data blocks: no pixels)."""
-    ng = _load_group(path, group)
+def inspect_blend(path, group=None, packed_dir=None):
+    """What the Rust side checks before a run: the group used (by its name in the file), its
+    inputs and outputs, and every image it reads (nothing is loaded but the data blocks: no
+    pixels). The bytes of each packed image are written into `packed_dir` for the Rust side
+    to check, as they are (no pixels decoded here); a generated image reports its size."""
+    ng, name = _load_group(path, group)
     images = []
-    for img in _images(ng):
-        images.append({
+    for i, img in enumerate(_images(ng)):
+        entry = {
             "name": img.name,
             "path": _image_path(img),
             "source": img.source,
             "packed": img.packed_file is not None,
-        })
+        }
+        if img.source == "GENERATED":
+            entry["width"] = int(img.generated_width)
+            entry["height"] = int(img.generated_height)
+        if img.packed_file is not None and packed_dir is not None:
+            f = os.path.join(packed_dir, str(i))
+            with open(f, "wb") as out:
+                out.write(img.packed_file.data)
+            entry["file"] = f
+            entry["key"] = _packed_key(i)
+        images.append(entry)
     return {
-        "group": ng.name,
+        "group": name,
         "inputs": [{"name": s.name, "type": _socket_type(s)} for s in _group_inputs(ng)],
         "outputs": [{"name": s.name, "type": _socket_type(s)} for s in _group_outputs(ng)],
         "images": images,
@@ -501,7 +537,7 @@ def _driven(instance, displace):
 
 
 def _build_blend(nt, out, recipe, instance, displace, albedo, vals):
-    ng = _load_group(recipe["path"], recipe.get("group"), recipe.get("images"))
+    ng, _ = _load_group(recipe["path"], recipe.get("group"), recipe.get("images"))
     if albedo:
         _add_base_output(ng)
     node = nt.nodes.new("ShaderNodeGroup")

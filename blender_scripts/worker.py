@@ -180,7 +180,8 @@ class Worker:
     def inspect(self, req):
         """A user `.blend` material's node group, inputs, outputs and textures
         (materials.inspect_blend), checked by the Rust side before a run."""
-        result = self.materials.inspect_blend(req["path"], req.get("group"))
+        result = self.materials.inspect_blend(req["path"], req.get("group"),
+                                              req.get("packed_dir"))
         result.update({"type": "done", "id": req.get("id")})
         return result
 

@@ -509,3 +509,107 @@ fn pbr_texture_density_is_invariant_across_object_sizes() {
         assert!((large - 0.1).abs() < 0.01, "{m:?}");
     }
 }
+
+/// The value of the header attribute `name` of type `kind` of the OpenEXR file `bytes`.
+fn exr_attribute<'a>(bytes: &'a mut [u8], name: &str, kind: &str) -> &'a mut [u8] {
+    let key = [name.as_bytes(), b"\0", kind.as_bytes(), b"\0"].concat();
+    let at = bytes
+        .windows(key.len())
+        .position(|w| w == key.as_slice())
+        .unwrap_or_else(|| panic!("no `{name}` in the EXR header"))
+        + key.len();
+    let size = u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+    &mut bytes[at + 4..at + 4 + size]
+}
+
+/// The 64 x 64 tiled OpenEXR file (one tile: what the `image` crate writes) `bytes` made to
+/// claim `side` x `side` pixels in one tile: the header and its table of chunks agree, the
+/// pixels do not.
+fn exr_claiming(bytes: &mut [u8], side: i32) {
+    for name in ["dataWindow", "displayWindow"] {
+        let v = exr_attribute(bytes, name, "box2i");
+        v[8..12].copy_from_slice(&(side - 1).to_le_bytes());
+        v[12..16].copy_from_slice(&(side - 1).to_le_bytes());
+    }
+    let tiles = exr_attribute(bytes, "tiles", "tiledesc");
+    tiles[0..4].copy_from_slice(&side.to_le_bytes());
+    tiles[4..8].copy_from_slice(&side.to_le_bytes());
+}
+
+/// Issue 42, 8: every map a PBR material uses is decoded before a run, not only its header
+/// read: a truncated JPEG colour map (which Blender renders silently) and an EXR
+/// displacement map whose header claims 2048 x 2048 pixels but holds 64 x 64 (which failed
+/// every image, exit 3, with a hint blaming `sample`) are refused before any image, naming
+/// the material and the file, with a hint.
+#[test]
+fn pbr_maps_are_decoded_before_a_run() {
+    let Some(blender) = crate::util::blender_or_skip("pbr_maps_are_decoded_before_a_run") else {
+        return;
+    };
+    let generate = |mats: &Path| {
+        let out = mats.parent().unwrap().join("out");
+        let o = run(&[
+            "generate",
+            "--variant",
+            "full",
+            "-n",
+            "1",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--samples",
+            "2",
+            "--workers",
+            "1",
+            "--blender",
+            blender.to_str().unwrap(),
+            "--materials",
+            mats.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let pngs = std::fs::read_dir(out.join("clevrtex_full/0"))
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter(|e| e.path().extension().is_some_and(|x| x == "png"))
+            .count();
+        (o, pngs)
+    };
+    let check = |o: &std::process::Output, pngs: usize, want: &[&str]| {
+        let t = text(o);
+        assert_eq!(o.status.code(), Some(1), "{t}");
+        assert_eq!(pngs, 0, "an image was rendered: {t}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        for w in want.iter().chain(&["does not decode", "\nhint: "]) {
+            assert!(err.contains(w), "`{w}` not in: {t}");
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    // A truncated JPEG: its header is whole, its pixels are not.
+    let mats = dir.path().join("jpeg").join("mats");
+    let wall = pbr_folder(&mats, "wall", PbrLayout::PolyHaven, [200, 40, 30]);
+    let jpg = wall.join("test_slug_diff_1k.jpg");
+    let mut bytes = std::fs::read(&jpg).unwrap();
+    // Cut a few bytes into the entropy-coded data (after the start-of-scan segment).
+    let sos = bytes.windows(2).position(|w| w == [0xff, 0xda]).unwrap();
+    let len = usize::from(u16::from_be_bytes([bytes[sos + 2], bytes[sos + 3]]));
+    bytes.truncate(sos + 2 + len + 8);
+    std::fs::write(&jpg, bytes).unwrap();
+    let (o, pngs) = generate(&mats);
+    check(&o, pngs, &["`wall`", "test_slug_diff_1k.jpg"]);
+    // An EXR whose header lies about its size.
+    let mats = dir.path().join("exr").join("mats");
+    let wall = pbr_folder(&mats, "wall", PbrLayout::PolyHaven, [200, 40, 30]);
+    std::fs::remove_file(wall.join("test_slug_disp_1k.png")).unwrap();
+    let exr = wall.join("test_slug_disp_1k.exr");
+    image::Rgb32FImage::from_pixel(64, 64, image::Rgb([0.5, 0.5, 0.5]))
+        .save(&exr)
+        .unwrap();
+    let mut bytes = std::fs::read(&exr).unwrap();
+    exr_claiming(&mut bytes, 2048);
+    std::fs::write(&exr, bytes).unwrap();
+    let (o, pngs) = generate(&mats);
+    check(&o, pngs, &["`wall`", "test_slug_disp_1k.exr"]);
+}

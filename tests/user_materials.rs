@@ -356,7 +356,7 @@ fn bad_user_materials_are_refused_before_rendering() {
     refused(
         &blender,
         &corrupt,
-        &["`broken`", "Broken_COL_3K.jpg", "decoding Jpeg"],
+        &["`broken`", "Broken_COL_3K.jpg", "does not decode"],
     );
     let big = fresh("big");
     make_blend(&blender, &big, "Vast", BLUE, "png", "ok");
@@ -564,4 +564,344 @@ fn bench_render_with_user_materials_end_to_end() {
     );
     let refs = std::fs::read_dir(out.join("references")).unwrap().count();
     assert_eq!(refs, 2);
+}
+
+/// Image `i` of `generate`'s `clevrtex_full` folder `vdir`: for the backdrop and each object
+/// (mask ids in metadata order), its material's name and the albedo pixels it covers.
+fn albedo_by_material(vdir: &Path, i: u64) -> Vec<(String, Vec<[u8; 3]>)> {
+    let stem = format!("CLEVRTEX_full_{i:06}");
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(vdir.join(format!("0/{stem}.json"))).unwrap())
+            .unwrap();
+    let mut names = vec![meta["ground_material"].as_str().unwrap().to_string()];
+    for obj in meta["objects"].as_array().unwrap() {
+        names.push(obj["material"].as_str().unwrap().to_string());
+    }
+    let albedo = png(&vdir.join(format!("0/{stem}_albedo_0001.png"))).to_rgb8();
+    let mask = png(&vdir.join(format!("0/{stem}_flat.png"))).to_luma8();
+    (0..)
+        .zip(names)
+        .map(|(id, name)| {
+            let px = mask
+                .enumerate_pixels()
+                .filter(|(_, _, m)| usize::from(m.0[0]) == id)
+                .map(|(x, y, _)| albedo.get_pixel(x, y).0)
+                .collect();
+            (name, px)
+        })
+        .collect()
+}
+
+/// Whether most of `px` show `want` (albedo within 8 levels).
+fn mostly(px: &[[u8; 3]], want: [u8; 3]) -> bool {
+    let close = px
+        .iter()
+        .filter(|p| (0..3).all(|c| p[c].abs_diff(want[c]) <= 8))
+        .count();
+    close * 2 > px.len()
+}
+
+/// Issue 42, 2: a user material's content hash is a setting of the run. A texture edited
+/// between a run and its resume into the same folder is refused like another `--seed`
+/// (before, the resume mixed two materials under one name and rewrote the manifest), and
+/// `verify` compares the hash each sample records with its manifest's.
+#[test]
+fn an_edited_user_material_is_a_setting_for_resume_and_verify() {
+    let Some(blender) =
+        blender_or_skip("an_edited_user_material_is_a_setting_for_resume_and_verify")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("lib");
+    library(&blender, &lib);
+    let out = dir.path().join("out");
+    let materials = ["--materials", lib.to_str().unwrap()];
+    let o = generate(&out, &blender, &[&["-n", "1"][..], &materials].concat());
+    assert!(o.status.success(), "{}", text(&o));
+    let vdir = out.join("clevrtex_full");
+    let first = std::fs::read(vdir.join("MANIFEST-0-1-0of1.json")).unwrap();
+
+    // The texture edited, then the run resumed and grown: refused before any image.
+    image::RgbImage::from_pixel(8, 8, image::Rgb([10, 200, 10]))
+        .save(lib.join("textures/RedStone_COL_3K.png"))
+        .unwrap();
+    let o = generate(&out, &blender, &[&["-n", "2"][..], &materials].concat());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        err.contains("with other settings") && err.contains("user material `redstone` hash"),
+        "{}",
+        text(&o)
+    );
+    assert!(!vdir.join("0/CLEVRTEX_full_000001.json").exists());
+    assert_eq!(
+        std::fs::read(vdir.join("MANIFEST-0-1-0of1.json")).unwrap(),
+        first
+    );
+
+    // A manifest whose user materials are not the ones its samples record: `verify` fails.
+    let v = run(&["verify", out.to_str().unwrap()]);
+    assert!(v.status.success(), "{}", text(&v));
+    let mut m: serde_json::Value = serde_json::from_slice(&first).unwrap();
+    for (_, u) in m["user_materials"].as_object_mut().unwrap() {
+        u["xxh3"] = "0123456789abcdef".into();
+    }
+    std::fs::write(
+        vdir.join("MANIFEST-0-1-0of1.json"),
+        serde_json::to_vec(&m).unwrap(),
+    )
+    .unwrap();
+    let v = run(&["verify", out.to_str().unwrap()]);
+    let shown = text(&v);
+    assert!(!v.status.success(), "{shown}");
+    assert!(
+        shown.contains("vs hash 0123456789abcdef") || shown.contains("hash 0123456789abcdef vs"),
+        "{shown}"
+    );
+}
+
+/// Issue 42, 3: Blender reads exactly the bytes that were checked. The texture is replaced
+/// by a link out of the folder (to an image of another colour) as soon as the run has
+/// checked its materials (its plan is written after the checks, before any worker renders):
+/// the images still show the checked texture, and the manifest's hash is the checked one.
+#[test]
+fn a_texture_swapped_after_the_check_never_reaches_blender() {
+    let Some(blender) = blender_or_skip("a_texture_swapped_after_the_check_never_reaches_blender")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("lib");
+    make_blend(&blender, &lib, "RedStone", RED, "png", "ok");
+    let outside = dir.path().join("outside.png");
+    image::RgbImage::from_pixel(8, 8, image::Rgb(BLUE))
+        .save(&outside)
+        .unwrap();
+    let out = dir.path().join("out");
+    let b = blender.to_str().unwrap();
+    let (o, l) = (out.to_str().unwrap(), lib.to_str().unwrap());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_clevrtex"))
+        .args([
+            "generate",
+            "--variant",
+            "full",
+            "--seed",
+            "3",
+            "-n",
+            "2",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--samples",
+            "2",
+            "--passes",
+            "rgb,mask,albedo",
+            "--workers",
+            "1",
+            "--blender",
+            b,
+            "--materials",
+            l,
+            "--out",
+            o,
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let plan = out.join("clevrtex_full/MANIFEST-0-2-0of1.json");
+    let start = std::time::Instant::now();
+    while !plan.exists() {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "generate ended before its plan"
+        );
+        assert!(start.elapsed().as_secs() < 300, "no plan written");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let tex = lib.join("textures/RedStone_COL_3K.png");
+    std::fs::remove_file(&tex).unwrap();
+    std::os::unix::fs::symlink(&outside, &tex).unwrap();
+    let done = child.wait_with_output().unwrap();
+    assert!(done.status.success(), "{}", text(&done));
+    let vdir = out.join("clevrtex_full");
+    for i in 0..2 {
+        for (name, px) in albedo_by_material(&vdir, i) {
+            assert!(
+                px.is_empty() || mostly(&px, RED),
+                "image {i}, {name}: the swapped texture was rendered"
+            );
+        }
+    }
+    let v = run(&["verify", o]);
+    assert!(v.status.success(), "{}", text(&v));
+}
+
+/// A JSON material of `layers` (one `image` layer reading `path`) in `lib`.
+fn json_image_material(lib: &Path, name: &str, path: &str) {
+    std::fs::create_dir_all(lib).unwrap();
+    let m = serde_json::json!({
+        "description": "an image layer",
+        "layers": [{"block": "image", "path": path}],
+    });
+    std::fs::write(lib.join(format!("{name}.json")), m.to_string()).unwrap();
+}
+
+/// Issue 42, 4: a JSON material's `image` layers pass the checks of a `.blend`'s textures
+/// (inside the folder, a regular file, a format, the side cap, decoding), and the manifest
+/// records the texture relative to the folder.
+#[test]
+fn json_material_images_pass_the_texture_checks() {
+    let Some(blender) = blender_or_skip("json_material_images_pass_the_texture_checks") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let fresh = |name: &str| {
+        let d = dir.path().join(name).join("lib");
+        std::fs::create_dir_all(d.join("tex")).unwrap();
+        d
+    };
+    let good = fresh("good");
+    image::RgbImage::from_pixel(8, 8, image::Rgb(RED))
+        .save(good.join("tex/ok.png"))
+        .unwrap();
+    json_image_material(&good, "Okimage", "tex/ok.png");
+    let out = good.parent().unwrap().join("out");
+    let o = generate(
+        &out,
+        &blender,
+        &["-n", "1", "--materials", good.to_str().unwrap()],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let manifest: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(out.join("clevrtex_full/MANIFEST-0-1-0of1.json")).unwrap(),
+    )
+    .unwrap();
+    let entry = &manifest["user_materials"]["okimage"];
+    assert_eq!(entry["file"], "Okimage.json", "{manifest}");
+    assert_eq!(
+        entry["textures"],
+        serde_json::json!(["tex/ok.png"]),
+        "{manifest}"
+    );
+
+    // Out of the folder by `..`, by a link, by an absolute path to a device.
+    let secret = dir.path().join("secret.png");
+    image::RgbImage::from_pixel(8, 8, image::Rgb(BLUE))
+        .save(&secret)
+        .unwrap();
+    let up = fresh("up");
+    json_image_material(&up, "Up", "../../secret.png");
+    refused(&blender, &up, &["`up`", "outside the material folder"]);
+    let link = fresh("link");
+    std::os::unix::fs::symlink(&secret, link.join("tex/in.png")).unwrap();
+    json_image_material(&link, "Linked", "tex/in.png");
+    refused(
+        &blender,
+        &link,
+        &["`linked`", "outside the material folder"],
+    );
+    let dev = fresh("dev");
+    json_image_material(&dev, "Zero", "/dev/zero");
+    refused(&blender, &dev, &["/dev/zero", "not a regular file"]);
+    let fifo = fresh("fifo");
+    let made = Command::new("mkfifo").arg(fifo.join("tex/f.png")).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+    json_image_material(&fifo, "Fifo", "tex/f.png");
+    refused(&blender, &fifo, &["tex/f.png", "not a regular file"]);
+    // Over the side cap, and not an image at all.
+    let big = fresh("big");
+    std::fs::write(big.join("tex/big.png"), png_header(16_384, 16_384)).unwrap();
+    json_image_material(&big, "Big", "tex/big.png");
+    refused(&blender, &big, &["`big`", "big.png", "16384x16384"]);
+    let text_file = fresh("text");
+    std::fs::write(text_file.join("tex/t.png"), b"hello").unwrap();
+    json_image_material(&text_file, "Words", "tex/t.png");
+    refused(
+        &blender,
+        &text_file,
+        &["`words`", "t.png", "is not a PNG, JPEG or TIFF"],
+    );
+}
+
+/// Issue 42, 5: an image packed into a `.blend` is checked like a file (its bytes written out
+/// by the bridge, no pixels decoded in Blender): a packed PNG claiming 16384 x 16384 pixels
+/// is refused before any image; a small packed texture renders, from the checked bytes.
+#[test]
+fn packed_images_are_checked_like_files() {
+    let Some(blender) = blender_or_skip("packed_images_are_checked_like_files") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let huge = dir.path().join("huge").join("lib");
+    make_blend(&blender, &huge, "Packedhuge", BLUE, "png", "packedhuge");
+    refused(
+        &blender,
+        &huge,
+        &["`packedhuge`", "packed into the `.blend`", "16384x16384"],
+    );
+    let lib = dir.path().join("ok").join("lib");
+    make_blend(&blender, &lib, "Packedred", RED, "png", "packed");
+    assert!(!lib.join("textures/Packedred_COL_3K.png").exists());
+    let out = dir.path().join("out");
+    let o = generate(
+        &out,
+        &blender,
+        &["-n", "1", "--materials", lib.to_str().unwrap()],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    for (name, px) in albedo_by_material(&out.join("clevrtex_full"), 0) {
+        assert!(px.is_empty() || mostly(&px, RED), "{name}");
+    }
+}
+
+/// Issue 42, 6: two `.blend` files whose node groups share a name (the public generator's
+/// files are often copies of one another) both render, each with its own group; identical
+/// files have the same hash (the name Blender gives a second group loaded, `Okmat.001`, is
+/// not part of it).
+#[test]
+fn groups_of_the_same_name_in_two_files_render_each_its_own() {
+    let Some(blender) = blender_or_skip("groups_of_the_same_name_in_two_files_render_each_its_own")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (red, blue) = (dir.path().join("red"), dir.path().join("blue"));
+    make_blend(&blender, &red, "Okmat", RED, "png", "ok");
+    make_blend(&blender, &blue, "Okmat", BLUE, "jpg", "ok");
+    let lib = dir.path().join("lib");
+    std::fs::create_dir_all(lib.join("textures")).unwrap();
+    std::fs::copy(red.join("Okmat.blend"), lib.join("Alpha.blend")).unwrap();
+    std::fs::copy(red.join("Okmat.blend"), lib.join("Alphacopy.blend")).unwrap();
+    std::fs::copy(blue.join("Okmat.blend"), lib.join("Beta.blend")).unwrap();
+    for (from, f) in [(&red, "Okmat_COL_3K.png"), (&blue, "Okmat_COL_3K.jpg")] {
+        std::fs::copy(from.join("textures").join(f), lib.join("textures").join(f)).unwrap();
+    }
+    let out = dir.path().join("out");
+    let o = generate(
+        &out,
+        &blender,
+        &["-n", "2", "--materials", lib.to_str().unwrap()],
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let vdir = out.join("clevrtex_full");
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(vdir.join("MANIFEST-0-2-0of1.json")).unwrap())
+            .unwrap();
+    let um = &manifest["user_materials"];
+    assert_eq!(um["alpha"]["group"], "Okmat", "{manifest}");
+    assert_eq!(um["beta"]["group"], "Okmat", "{manifest}");
+    assert_eq!(um["alpha"]["xxh3"], um["alphacopy"]["xxh3"], "{manifest}");
+    assert_ne!(um["alpha"]["xxh3"], um["beta"]["xxh3"], "{manifest}");
+    let mut seen = std::collections::BTreeSet::new();
+    for i in 0..2 {
+        for (name, px) in albedo_by_material(&vdir, i) {
+            let want = if name == "beta" { BLUE } else { RED };
+            assert!(px.is_empty() || mostly(&px, want), "image {i}, {name}");
+            seen.insert(name);
+        }
+    }
+    assert!(seen.contains("beta"), "{seen:?}");
 }

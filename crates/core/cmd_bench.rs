@@ -167,7 +167,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
                 .map(|m| m.name.clone())
         })
         .collect();
-    crate::user_materials::check_before_run(
+    let _user = crate::user_materials::check_before_run(
         &mut catalogue,
         &used,
         &blenders[0],

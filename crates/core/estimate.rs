@@ -174,7 +174,7 @@ pub(crate) fn run(mut req: Request) -> CmdResult {
         message: "stopping the calibration; nothing was written into `--out`",
     });
     let (catalogue, used) = &mut req.materials;
-    let (opts, _) = pool_options(
+    let (opts, _user) = pool_options(
         &args,
         blender,
         scratch.path().join("failures.jsonl"),

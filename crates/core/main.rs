@@ -22,6 +22,7 @@ mod cmd_verify;
 mod estimate;
 mod exit;
 mod interrupt;
+mod material_copies;
 mod materials_blender;
 mod provenance;
 mod run;

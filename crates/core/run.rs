@@ -52,7 +52,7 @@ pub(crate) fn run_jobs(
         (&mut catalogue, &used),
     )?;
     if let Some(plan) = manifest.as_mut() {
-        plan.run.user_materials = user;
+        plan.run.user_materials = user.entries.clone();
         // Each sample records the run's config hash, so `verify` can tell a sample made from
         // another config than the manifest claiming it.
         opts.config_hash = Some(plan.run.config_hash.clone());
@@ -257,10 +257,7 @@ pub(crate) fn pool_options(
         &mut clevrtex_materials::Catalogue,
         &std::collections::BTreeSet<String>,
     ),
-) -> anyhow::Result<(
-    PoolOptions,
-    std::collections::BTreeMap<String, clevrtex_dataset::manifest::UserMaterial>,
-)> {
+) -> anyhow::Result<(PoolOptions, user_materials::Checked)> {
     let (timeout, startup_timeout) = checked_numbers(args)?;
     let choice = run_args::device_choice(&args.device)?;
     let user = user_materials::check_before_run(
@@ -301,7 +298,7 @@ pub(crate) fn pool_options(
     let opts = PoolOptions {
         blender,
         materials_json,
-        user_materials: user_materials::hashes(&user),
+        user_materials: user_materials::hashes(&user.entries),
         config_hash: None,
         workers,
         threads: args.threads.unwrap_or(0),

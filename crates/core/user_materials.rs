@@ -12,10 +12,13 @@ use std::time::Duration;
 
 use anyhow::bail;
 use clevrtex_dataset::manifest::UserMaterial;
+use clevrtex_materials::texture::Expect;
 use clevrtex_materials::{Catalogue, Set};
 use clevrtex_render::RenderError;
+use serde_json::Value;
 
 use crate::blender_session::{command_error, BlenderSession, Settings};
+use crate::material_copies::Copies;
 
 /// Inputs of a ClevrTex node group that the instance drives (`blender_scripts/materials.py`
 /// `DRIVEN_INPUTS`); any other input keeps the `.blend`'s default, as in the public generator.
@@ -114,29 +117,94 @@ pub(crate) fn parse_set(name: &str) -> anyhow::Result<Set> {
     }
 }
 
-/// Check every user material of `cat` that `used` names before a run renders anything, with
-/// one Blender worker of `blender` that inspects each `.blend` node group: the group must
-/// have a surface output, no input the instance cannot drive and no default for (a shader
-/// input), and every image texture it reads must pass [`clevrtex_materials::texture`]'s
-/// checks. Fixes each `.blend` to its group and checked textures in `cat` and returns what
-/// the run's manifest records. No user material used: nothing started, empty map.
+/// The user materials of a run, checked ([`check_before_run`]): what its manifest records of
+/// them, and the private copies of their files that Blender reads (kept until it is dropped,
+/// so it must outlive the run).
+pub(crate) struct Checked {
+    /// Name -> manifest record.
+    pub(crate) entries: BTreeMap<String, UserMaterial>,
+    _copies: Option<Copies>,
+}
+
+/// Check every user material of `cat` that `used` names before a run renders anything, and
+/// point `cat` at private copies of exactly the bytes checked ([`Copies`]): every file a
+/// user material makes Blender read, whatever its kind (a `.blend` and the images its node
+/// group reads, files or packed, a JSON material's `image` layers, a PBR folder's maps), is
+/// read once from inside its material folder and checked by
+/// [`clevrtex_materials::texture::bytes_problem`]. One Blender worker of `blender` inspects
+/// each `.blend` copy's node group: it must have a surface output, no input the instance
+/// cannot drive and no default for (a shader input). No user material used: nothing
+/// started, nothing copied.
 pub(crate) fn check_before_run(
     cat: &mut Catalogue,
     used: &BTreeSet<String>,
     blender: &Path,
     startup_timeout: Duration,
     interrupt: Arc<AtomicBool>,
-) -> anyhow::Result<BTreeMap<String, UserMaterial>> {
+) -> anyhow::Result<Checked> {
     let user: Vec<String> = used
         .iter()
         .filter(|n| cat.get(n).is_some_and(|m| m.set == Set::User))
         .cloned()
         .collect();
-    let blends: Vec<String> = user
-        .iter()
-        .filter(|n| cat.get(n).is_some_and(|m| m.recipe["kind"] == "blend"))
-        .cloned()
-        .collect();
+    if user.is_empty() {
+        return Ok(Checked {
+            entries: BTreeMap::new(),
+            _copies: None,
+        });
+    }
+    let mut copies = Copies::new()?;
+    let mut entries = BTreeMap::new();
+    let mut blends = Vec::new();
+    for name in &user {
+        let m = cat.require(name)?.clone();
+        let Some(root) = cat.user_root(name).map(Path::to_path_buf) else {
+            bail!("user material `{name}` (`{}`) is not inside a `--materials` folder\nhint: put the material in the folder", m.file);
+        };
+        let mut recipe = m.recipe.clone();
+        let mut textures = Vec::new();
+        let mut copy = |p: &Value, expect: Expect| -> anyhow::Result<Value> {
+            let path = Path::new(p.as_str().unwrap_or(""));
+            let c = copies.copy(name, &m.file, &root, path, expect)?;
+            Ok(Value::String(c.copy.to_string_lossy().into_owned()))
+        };
+        let mut file = relative(&root, Path::new(&m.file));
+        match m.recipe["kind"].as_str() {
+            Some("blend") => {
+                let c = copies.copy(
+                    name,
+                    &m.file,
+                    &root,
+                    Path::new(m.recipe["path"].as_str().unwrap_or("")),
+                    Expect::Blend,
+                )?;
+                file = c.rel;
+                recipe["path"] = c.copy.to_string_lossy().into_owned().into();
+                blends.push(name.clone());
+            }
+            Some("pbr") => {
+                for (key, p) in recipe["maps"].as_object_mut().into_iter().flatten() {
+                    let channels = if ["color", "normal", "arm"].contains(&key.as_str()) {
+                        3
+                    } else {
+                        1
+                    };
+                    textures.push(relative(&root, Path::new(p.as_str().unwrap_or(""))));
+                    *p = copy(p, Expect::PbrMap { channels })?;
+                }
+            }
+            _ => {
+                for layer in recipe["layers"].as_array_mut().into_iter().flatten() {
+                    if let Some(p) = layer.get_mut("path") {
+                        textures.push(relative(&root, Path::new(p.as_str().unwrap_or(""))));
+                        *p = copy(p, Expect::Texture)?;
+                    }
+                }
+            }
+        }
+        cat.set_user_recipe(name, recipe)?;
+        entries.insert(name.clone(), (root, file, textures));
+    }
     if !blends.is_empty() {
         let mut session = BlenderSession::new(Settings {
             blender: blender.to_path_buf(),
@@ -148,44 +216,123 @@ pub(crate) fn check_before_run(
             startup_timeout,
         })?;
         for name in &blends {
-            let m = cat.require(name)?.clone();
-            let path = PathBuf::from(m.recipe["path"].as_str().unwrap_or(""));
-            let group = m.recipe["group"].as_str().map(String::from);
-            let reply = session.request(|w| w.inspect(&path, group.as_deref(), INSPECT_TIMEOUT));
-            let reply = match reply {
-                Ok(r) => r,
-                Err(RenderError::Bridge { message, .. }) => bail!(
-                    "user material `{name}` (`{}`): {}\nhint: save a node group named after the file with a `Shader` (or `BSDF`, `Surface`) output in it, as the public generator's `data/materials` files have (docs/materials.md)",
-                    m.file,
-                    clevrtex_scene::text::printable(&message)
-                ),
-                Err(e) => return Err(command_error(e)),
-            };
-            check_group(name, &m.file, &reply)?;
-            let mut refs = Vec::new();
-            for img in &reply.images {
-                if img.packed || img.source == "GENERATED" {
-                    continue;
-                }
-                if img.source != "FILE" {
-                    bail!(
-                        "user material `{name}` (`{}`): texture `{}` is a {} image; only single image files are read\nhint: replace it with one PNG or JPEG file",
-                        m.file,
-                        clevrtex_scene::text::printable(&img.path),
-                        clevrtex_scene::text::printable(&img.source.to_lowercase())
-                    );
-                }
-                refs.push(img.path.clone());
-            }
-            cat.resolve_blend(name, &reply.group, &refs)?;
+            let (root, _, textures) = entries.get_mut(name).expect("every user material");
+            inspect_blend(&mut session, cat, &mut copies, name, root, textures)?;
         }
         session.close();
     }
-    Ok(user
-        .iter()
-        .filter_map(|n| cat.get(n))
-        .map(|m| (m.name.clone(), manifest_entry(cat, m)))
-        .collect())
+    let entries = entries
+        .into_iter()
+        .map(|(name, (_, file, mut textures))| {
+            let m = cat.require(&name).expect("checked above");
+            textures.sort();
+            textures.dedup();
+            let entry = UserMaterial {
+                file,
+                group: m.recipe["group"].as_str().map(String::from),
+                textures,
+                xxh3: m.hash.clone(),
+            };
+            (name, entry)
+        })
+        .collect();
+    Ok(Checked {
+        entries,
+        _copies: Some(copies),
+    })
+}
+
+/// Inspect the copy of user `.blend` material `name` (its recipe's `path`) in `session`,
+/// check its group, copy every image file it reads from the material folder `root` (`//x`
+/// of the copy is `root/x`) and check every image packed into it (the bridge writes their
+/// bytes into the private folder, where they stay: the bridge then loads them from there);
+/// fix the recipe to the group and those files (`images`). `textures` gets what the
+/// manifest records of them.
+fn inspect_blend(
+    session: &mut BlenderSession,
+    cat: &mut Catalogue,
+    copies: &mut Copies,
+    name: &str,
+    root: &Path,
+    textures: &mut Vec<String>,
+) -> anyhow::Result<()> {
+    let m = cat.require(name)?.clone();
+    let path = PathBuf::from(m.recipe["path"].as_str().unwrap_or(""));
+    let group = m.recipe["group"].as_str().map(String::from);
+    let packed_dir = copies.base(name).join(".packed");
+    std::fs::create_dir_all(&packed_dir)?;
+    let reply =
+        session.request(|w| w.inspect(&path, group.as_deref(), Some(&packed_dir), INSPECT_TIMEOUT));
+    let reply = match reply {
+        Ok(r) => r,
+        Err(RenderError::Bridge { message, .. }) => bail!(
+            "user material `{name}` (`{}`): {}\nhint: save a node group named after the file with a `Shader` (or `BSDF`, `Surface`) output in it, as the public generator's `data/materials` files have (docs/materials.md)",
+            m.file,
+            clevrtex_scene::text::printable(&message)
+        ),
+        Err(e) => return Err(command_error(e)),
+    };
+    check_group(name, &m.file, &reply)?;
+    let base = copies.base(name);
+    let mut images = serde_json::Map::new();
+    for img in &reply.images {
+        let shown_name = clevrtex_scene::text::printable(&img.name);
+        if img.source == "GENERATED" {
+            if let Some(problem) = clevrtex_materials::texture::side_problem(img.width, img.height)
+            {
+                bail!(
+                    "user material `{name}` (`{}`): generated image `{shown_name}` {problem}\nhint: make the image smaller in the `.blend`",
+                    m.file
+                );
+            }
+            continue;
+        }
+        if img.source != "FILE" {
+            bail!(
+                "user material `{name}` (`{}`): texture `{}` is a {} image; only single image files are read\nhint: replace it with one PNG or JPEG file",
+                m.file,
+                clevrtex_scene::text::printable(&img.path),
+                clevrtex_scene::text::printable(&img.source.to_lowercase())
+            );
+        }
+        if img.packed {
+            let (Some(key), Some(file)) = (&img.key, &img.file) else {
+                bail!("user material `{name}` (`{}`): the bridge did not write packed image `{shown_name}`\nhint: this is a bug of clevrtex; please report it", m.file);
+            };
+            let what = format!("image `{shown_name}` packed into the `.blend`");
+            copies.check_own(name, &m.file, &what, Path::new(file), Expect::Texture)?;
+            images.insert(key.clone(), file.clone().into());
+            textures.push(format!("packed:{}", img.name));
+            continue;
+        }
+        // The copy's `//x` is the folder's `x`; any other path is taken as it is (and is
+        // refused unless it lies inside the folder).
+        let reported = Path::new(&img.path);
+        let source = match reported.strip_prefix(&base) {
+            Ok(rel) => root.join(rel),
+            Err(_) => reported.to_path_buf(),
+        };
+        let c = copies.copy(name, &m.file, root, &source, Expect::Texture)?;
+        textures.push(c.rel);
+        images.insert(
+            img.path.clone(),
+            c.copy.to_string_lossy().into_owned().into(),
+        );
+    }
+    let mut recipe = m.recipe.clone();
+    recipe["group"] = reply.group.clone().into();
+    recipe["images"] = Value::Object(images);
+    cat.set_user_recipe(name, recipe)?;
+    Ok(())
+}
+
+/// `path` relative to the material folder `root` (the folder's own location is not part of
+/// the dataset); as it is when it is not inside.
+fn relative(root: &Path, path: &Path) -> String {
+    clevrtex_dataset::dataset::relative_to_root(root, path)
+        .unwrap_or_else(|| path.to_path_buf())
+        .to_string_lossy()
+        .into_owned()
 }
 
 /// The group's sockets against the convention.
@@ -217,38 +364,6 @@ fn check_group(
         }
     }
     Ok(())
-}
-
-/// What the manifest records of user material `m`: its file and textures relative to the
-/// material folder (the folder's own location is not part of the dataset), group and hash.
-fn manifest_entry(cat: &Catalogue, m: &clevrtex_materials::Material) -> UserMaterial {
-    let root = cat.user_root(&m.name);
-    let rel = |p: &str| {
-        let p = Path::new(p);
-        root.and_then(|r| p.strip_prefix(r).ok())
-            .unwrap_or(p)
-            .to_string_lossy()
-            .into_owned()
-    };
-    let file = m.recipe["path"]
-        .as_str()
-        .map(rel)
-        .unwrap_or_else(|| rel(&m.file));
-    let images = m.recipe["images"].as_object().into_iter().flatten();
-    let layers = m.recipe["layers"].as_array().into_iter().flatten();
-    let mut textures: Vec<String> = images
-        .filter_map(|(_, p)| p.as_str())
-        .chain(layers.filter_map(|l| l["path"].as_str()))
-        .map(rel)
-        .collect();
-    textures.sort();
-    textures.dedup();
-    UserMaterial {
-        file,
-        group: m.recipe["group"].as_str().map(String::from),
-        textures,
-        xxh3: m.hash.clone(),
-    }
 }
 
 /// Name -> hash of the run's user materials, as each sample's metadata records them.

@@ -308,16 +308,18 @@ impl Material {
     fn from_recipe(name: String, set: Set, file: String, mut recipe: Value) -> Material {
         let obj = recipe.as_object_mut().expect("recipes are objects");
         obj.insert("set".into(), set.name().into());
-        // The recipe (for a `.blend`, its group's name instead, so the hash says what the
-        // material is made of wherever its folder lies: the run manifest's provenance) and the
-        // bytes of the files it references (a `.blend` and the images its group reads, images,
-        // the maps of a PBR folder), each file hashed as it is read: maps can be gigabytes.
+        // The recipe without the paths of its files (for a `.blend`, its group's name as the
+        // file names it instead), so the hash says what the material is made of wherever its
+        // folder lies or is copied to for a run (the run manifest's provenance, a resume's
+        // settings), and the bytes of the files it references (a `.blend` and the images its
+        // group reads, images, the maps of a PBR folder), each file hashed as it is read:
+        // maps can be gigabytes.
         let mut parts = match (recipe["kind"].as_str(), recipe["group"].as_str()) {
             (Some("blend"), group) => {
                 vec![xxhash_rust::xxh3::xxh3_64(group.unwrap_or("").as_bytes())]
             }
             _ => vec![xxhash_rust::xxh3::xxh3_64(
-                &serde_json::to_vec(&recipe).expect("json"),
+                &serde_json::to_vec(&without_paths(&recipe)).expect("json"),
             )],
         };
         let top = recipe.get("path").and_then(Value::as_str);
@@ -340,6 +342,33 @@ impl Material {
             hash: format!("{:016x}", hash::content_hash_of_parts(&parts)),
         }
     }
+}
+
+/// `recipe` with the paths of the files it references blanked (`path`, each layer's `path`,
+/// each value of `maps` and `images`): what of a recipe its hash covers beside the files.
+fn without_paths(recipe: &Value) -> Value {
+    let mut r = recipe.clone();
+    let blank = |v: &mut Value| {
+        if v.is_string() {
+            *v = Value::String(String::new());
+        }
+    };
+    if let Some(p) = r.get_mut("path") {
+        blank(p);
+    }
+    let layers = r.get_mut("layers").and_then(Value::as_array_mut);
+    for l in layers.into_iter().flatten() {
+        if let Some(p) = l.get_mut("path") {
+            blank(p);
+        }
+    }
+    for key in ["maps", "images"] {
+        let files = r.get_mut(key).and_then(Value::as_object_mut);
+        for (_, p) in files.into_iter().flatten() {
+            blank(p);
+        }
+    }
+    r
 }
 
 fn schema() -> Result<&'static Schema, Error> {

@@ -521,12 +521,22 @@ impl Ctx<'_> {
             ));
         };
         let p = base.join(s);
-        if !p.is_file() {
+        // Its bytes are checked before a run (`core/material_copies.rs`); here only whether
+        // it is a file at all, said as it is (a FIFO or device is not "missing").
+        let problem = match std::fs::metadata(&p) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Some("does not exist".into()),
+            Err(e) => Some(format!("cannot be read: {e}")),
+            Ok(m) if !m.is_file() => {
+                Some("is not a regular file (a folder, FIFO or device)".into())
+            }
+            Ok(_) => None,
+        };
+        if let Some(problem) = problem {
             return Err(self.err(
                 ErrorKind::BadValue,
                 field,
-                format!("file `{}` does not exist", p.display()),
-                "give a path relative to the material file",
+                format!("file `{}` {problem}", p.display()),
+                "give the path of a file inside the material folder, relative to the material file",
             ));
         }
         let abs = p.canonicalize().unwrap_or(p);

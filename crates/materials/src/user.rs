@@ -1,6 +1,7 @@
 //! User materials (`--materials DIR`): the folder's `.json`, `.blend` and PBR texture folders
-//! added to the catalogue ([`Catalogue::add_user_dir`]), a `.blend` material fixed to its node
-//! group and checked textures ([`Catalogue::resolve_blend`]), and where each came from.
+//! added to the catalogue ([`Catalogue::add_user_dir`]), a material's recipe replaced by one
+//! naming the checked copies of its files ([`Catalogue::set_user_recipe`]), and where each
+//! came from.
 
 use std::path::Path;
 
@@ -235,33 +236,12 @@ impl Catalogue {
         Ok(())
     }
 
-    /// Fix user `.blend` material `name` to node group `group` and the image textures it
-    /// reads (`references` as the `.blend` stores them, e.g. `//textures/x_COL_3K.jpg`,
-    /// as the Blender bridge reported them): each is checked ([`texture::check_texture`])
-    /// and recorded in the recipe (`group`, `images`: reference -> checked path) so the
-    /// bridge loads exactly those files; the hash then covers the `.blend` and every image.
-    pub fn resolve_blend(
-        &mut self,
-        name: &str,
-        group: &str,
-        references: &[String],
-    ) -> Result<(), Error> {
+    /// Replace the recipe of user material `name` by `recipe` (its files checked and copied
+    /// for a run: `core/material_copies.rs`; a `.blend` fixed to its node group and the
+    /// images it reads, `images`: the path the bridge sees -> the checked copy); the hash is
+    /// computed again from the files the new recipe names.
+    pub fn set_user_recipe(&mut self, name: &str, recipe: Value) -> Result<(), Error> {
         let m = self.require(name)?.clone();
-        let blend = std::path::PathBuf::from(m.recipe["path"].as_str().unwrap_or(""));
-        let root = self
-            .user_dirs
-            .iter()
-            .find(|d| blend.starts_with(d))
-            .cloned()
-            .unwrap_or_else(|| blend.parent().unwrap_or(Path::new("/")).to_path_buf());
-        let mut images = Map::new();
-        for r in references {
-            let path = texture::check_texture(name, &m.file, &blend, &root, r)?;
-            images.insert(r.clone(), path.to_string_lossy().into_owned().into());
-        }
-        let mut recipe = m.recipe.clone();
-        recipe["group"] = group.into();
-        recipe["images"] = Value::Object(images);
         let updated = Material::from_recipe(m.name.clone(), m.set, m.file.clone(), recipe);
         if let Some(slot) = self.materials.iter_mut().find(|x| x.name == name) {
             *slot = updated;
@@ -304,13 +284,6 @@ pub fn blend_file_problem(path: &Path) -> Option<String> {
         .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head).map(|()| head));
     match read {
         Err(e) => Some(format!("cannot read the `.blend` file: {e}")),
-        Ok(h)
-            if &h == b"BLENDER" || h[..2] == [0x1f, 0x8b] || h[..4] == [0x28, 0xb5, 0x2f, 0xfd] =>
-        {
-            None
-        }
-        Ok(_) => {
-            Some("not a Blender file (no `BLENDER` header, not gzip or zstd compressed)".into())
-        }
+        Ok(h) => texture::blend_header_problem(&h),
     }
 }

@@ -15,6 +15,8 @@ const PREFIXES: [&str; 3] = ["clevrtex-bridge-", "clevrtex-work-", "clevrtex-ble
 const OWNER: &str = "owner";
 
 use clevrtex_dataset::atomic::start_time;
+/// The folder type [`scratch_dir`] returns (removed when dropped).
+pub use tempfile::TempDir;
 
 use crate::error::{RenderError, Result};
 pub use clevrtex_dataset::atomic::{
@@ -46,7 +48,8 @@ pub(crate) fn private_dir(prefix: &str) -> Result<tempfile::TempDir> {
 
 /// A fresh private scratch folder `$TMPDIR/clevrtex-work-XXXXXX` owned by this process, removed
 /// when dropped (or by a later run's [`remove_stale`] after a `kill -9`): where `generate
-/// --estimate` renders its calibration images, so that nothing is written into `--out`.
+/// --estimate` renders its calibration images, so that nothing is written into `--out`, and
+/// where a run keeps the checked copies of its user materials' files (`core/material_copies.rs`).
 pub fn scratch_dir() -> Result<tempfile::TempDir> {
     private_dir("clevrtex-work-")
 }

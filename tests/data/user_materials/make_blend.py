@@ -2,7 +2,9 @@
 # Color, Random, Scale, Displacement; outputs Shader, Displacement) reading the image
 # texture //textures/<Name>_COL_3K.<ext> (an 8x8 image of one sRGB colour, written here).
 # Args after `--`: DIR NAME R G B [EXT] [MODE]; MODE: ok | nogroup (no node group) |
-# shaderinput (an extra shader input `Coat`, which the convention cannot drive).
+# shaderinput (an extra shader input `Coat`, which the convention cannot drive) | packed (the
+# texture packed into the `.blend`, its file removed) | packedhuge (packed: a PNG whose header
+# claims 16384 x 16384 pixels, a few bytes on paper).
 # Used by tests/user_materials.rs; runs in Blender 3.4 and in bpy 4.5.
 import sys
 import bpy
@@ -44,7 +46,20 @@ if mode != "nogroup":
     mp = ng.nodes.new("ShaderNodeMapping")
     ng.links.new(tc.outputs["Object"], mp.inputs["Vector"])
     it = ng.nodes.new("ShaderNodeTexImage")
+    if mode == "packedhuge":
+        import struct
+        import zlib
+
+        def chunk(kind, data):
+            body = kind + data
+            return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
+
+        with open(tex, "wb") as f:
+            f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 16384, 16384, 8, 2, 0, 0, 0))
+                    + chunk(b"IDAT", b"\x78\x9c\x63\x60") + chunk(b"IEND", b""))
     it.image = bpy.data.images.load(tex, check_existing=False)
+    if mode in ("packed", "packedhuge"):
+        it.image.pack()
     it.image.filepath = "//textures/" + os.path.basename(tex)
     ng.links.new(mp.outputs["Vector"], it.inputs["Vector"])
     bsdf = ng.nodes.new("ShaderNodeBsdfPrincipled")
@@ -56,3 +71,5 @@ if mode != "nogroup":
     ng.links.new(disp.outputs["Displacement"], go.inputs["Displacement"])
     ng.use_fake_user = True
 bpy.ops.wm.save_as_mainfile(filepath=blend, relative_remap=True)
+if mode in ("packed", "packedhuge"):
+    os.remove(tex)

@@ -274,6 +274,13 @@ impl Manifest {
                 self.config_hash, other.config_hash
             ));
         }
+        d.extend(user_materials_differ(
+            &self.user_materials,
+            other
+                .user_materials
+                .iter()
+                .map(|(n, u)| (n, u.xxh3.as_str())),
+        ));
         d
     }
 
@@ -303,6 +310,35 @@ impl Manifest {
         };
         (first..self.end).step_by(n as usize)
     }
+}
+
+/// The user materials whose content hash differs between a run's `mine` and `theirs` (another
+/// manifest's, or the name -> hash a sample's metadata records), one phrase each: a material
+/// edited between two runs into one folder (a texture changed before a resume) makes other
+/// images under the same name, so its hash is a setting like the seed. A name only one side
+/// has differs too.
+pub fn user_materials_differ<'a>(
+    mine: &BTreeMap<String, UserMaterial>,
+    theirs: impl IntoIterator<Item = (&'a String, &'a str)>,
+) -> Vec<String> {
+    let theirs: BTreeMap<&String, &str> = theirs.into_iter().collect();
+    let names: std::collections::BTreeSet<&String> =
+        mine.keys().chain(theirs.keys().copied()).collect();
+    let mut d = Vec::new();
+    for name in names {
+        let (a, b) = (
+            mine.get(name).map(|u| u.xxh3.as_str()),
+            theirs.get(name).copied(),
+        );
+        if a != b {
+            d.push(format!(
+                "user material `{name}` {} vs {}",
+                a.map_or("absent".into(), |h| format!("hash {h}")),
+                b.map_or("absent".into(), |h| format!("hash {h}"))
+            ));
+        }
+    }
+    d
 }
 
 /// Merge ranges `start..end` into sorted, disjoint ones (empty ones left out).

@@ -312,6 +312,28 @@ pub(super) fn differs_from_manifest(
     if let Some(render) = &m.render {
         d.extend(manifest::render_differences(render, &meta["render"]));
     }
+    // Each user material the sample records must be the manifest's, by content hash (absent
+    // from samples of built-in materials only: not compared).
+    match meta.get("user_materials") {
+        None => {}
+        Some(serde_json::Value::Object(um)) => {
+            let recorded: Vec<(&String, &str)> = um
+                .iter()
+                .map(|(n, h)| (n, h.as_str().unwrap_or("(not a string)")))
+                .collect();
+            let used: BTreeMap<String, manifest::UserMaterial> = m
+                .user_materials
+                .iter()
+                .filter(|(n, _)| um.contains_key(*n))
+                .map(|(n, u)| (n.clone(), u.clone()))
+                .collect();
+            d.extend(manifest::user_materials_differ(&used, recorded));
+        }
+        Some(other) => d.push(format!(
+            "user_materials {} is not an object",
+            dataset::short(other)
+        )),
+    }
     d
 }
 

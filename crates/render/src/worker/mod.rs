@@ -229,7 +229,8 @@ impl Worker {
     }
 
     /// Ask the worker which node group of the `.blend` at `path` it would use (`group`, or
-    /// the file's own as the public generator names it), with its sockets and textures.
+    /// the file's own as the public generator names it), with its sockets and textures; the
+    /// bytes of its packed images are written into `packed_dir`.
     /// A `.blend` without a usable group is a [`RenderError::Bridge`] error.
     ///
     /// [`RenderError::Bridge`]: crate::RenderError::Bridge
@@ -237,10 +238,11 @@ impl Worker {
         &mut self,
         path: &Path,
         group: Option<&str>,
+        packed_dir: Option<&Path>,
         timeout: Duration,
     ) -> Result<InspectReply> {
         let doing = format!("inspecting the user material `{}`", path.display());
-        let request = protocol::inspect_request(path, group);
+        let request = protocol::inspect_request(path, group, packed_dir);
         self.call(request, &doing, timeout)
     }
 

@@ -346,13 +346,27 @@ pub struct GroupImage {
     pub source: String,
     /// Packed into the `.blend` (then no file is read).
     pub packed: bool,
+    /// A packed image: the file the bridge wrote its bytes to (in the `packed_dir` of the
+    /// request), to be checked like any texture file.
+    #[serde(default)]
+    pub file: Option<String>,
+    /// A packed image: its key in the recipe's `images` (`packed:<n>`).
+    #[serde(default)]
+    pub key: Option<String>,
+    /// A generated image: its size in pixels (from its settings; no pixels made).
+    #[serde(default)]
+    pub width: u32,
+    /// See `width`.
+    #[serde(default)]
+    pub height: u32,
 }
 
 /// The reply to an `inspect` request: a user `.blend` material's node group as the bridge
 /// loads it, for the checks before a run (nothing rendered, no pixels loaded).
 #[derive(Debug, Clone, Deserialize)]
 pub struct InspectReply {
-    /// The node group used.
+    /// The node group used, by its name in the file (the name it has once loaded may carry
+    /// a `.001` when another file's group has the same name).
     pub group: String,
     /// Its inputs.
     pub inputs: Vec<GroupSocket>,
@@ -425,9 +439,13 @@ pub(super) fn material_request(
 }
 
 /// An `inspect` request of the `.blend` at `path` (its node group `group`, else the file's
-/// own).
-pub(super) fn inspect_request(path: &Path, group: Option<&str>) -> serde_json::Value {
-    serde_json::json!({"type": "inspect", "path": path, "group": group})
+/// own); the bytes of its packed images are written into `packed_dir`.
+pub(super) fn inspect_request(
+    path: &Path,
+    group: Option<&str>,
+    packed_dir: Option<&Path>,
+) -> serde_json::Value {
+    serde_json::json!({"type": "inspect", "path": path, "group": group, "packed_dir": packed_dir})
 }
 
 /// The `quit` request.
