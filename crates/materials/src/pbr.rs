@@ -373,24 +373,7 @@ fn check_map(name: &str, kind: Kind, path: &Path, root: &Path) -> Result<PathBuf
             "download the map again (PNG, JPEG or OpenEXR), or remove it from the folder",
         )
     };
-    let reader = image::ImageReader::open(&abs)
-        .map_err(|e| bad_image(e.to_string()))?
-        .with_guessed_format()
-        .map_err(|e| bad_image(e.to_string()))?;
-    let Some(format) = reader.format() else {
-        return Err(bad_image("unknown image format".into()));
-    };
-    if !matches!(
-        format,
-        image::ImageFormat::Png | image::ImageFormat::Jpeg | image::ImageFormat::OpenExr
-    ) {
-        return Err(bad_image(format!("{format:?} is not PNG, JPEG or OpenEXR")));
-    }
-    // Headers only: `into_decoder` reads the header, nothing is decoded.
-    let decoder = reader
-        .into_decoder()
-        .map_err(|e| bad_image(e.to_string()))?;
-    let (w, h) = image::ImageDecoder::dimensions(&decoder);
+    let (w, h, channels) = map_header(&abs).map_err(bad_image)?;
     if let Some(problem) = side_problem(w, h) {
         return Err(err(
             ErrorKind::BadValue,
@@ -398,7 +381,6 @@ fn check_map(name: &str, kind: Kind, path: &Path, root: &Path) -> Result<PathBuf
             &format!("use a download of {}K or less", MAX_TEXTURE_SIDE / 1024),
         ));
     }
-    let channels = image::ImageDecoder::color_type(&decoder).channel_count();
     if kind.needs_rgb() && channels < 3 {
         return Err(err(
             ErrorKind::BadValue,
@@ -409,6 +391,36 @@ fn check_map(name: &str, kind: Kind, path: &Path, root: &Path) -> Result<PathBuf
         ));
     }
     Ok(abs)
+}
+
+/// A map's width, height and channels from its header (nothing decoded), or why it cannot be
+/// read: PNG, JPEG or OpenEXR only.
+#[cfg(feature = "textures")]
+fn map_header(abs: &Path) -> Result<(u32, u32, u8), String> {
+    let reader = image::ImageReader::open(abs)
+        .map_err(|e| e.to_string())?
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?;
+    let Some(format) = reader.format() else {
+        return Err("unknown image format".into());
+    };
+    if !matches!(
+        format,
+        image::ImageFormat::Png | image::ImageFormat::Jpeg | image::ImageFormat::OpenExr
+    ) {
+        return Err(format!("{format:?} is not PNG, JPEG or OpenEXR"));
+    }
+    // Headers only: `into_decoder` reads the header, nothing is decoded.
+    let decoder = reader.into_decoder().map_err(|e| e.to_string())?;
+    let (w, h) = image::ImageDecoder::dimensions(&decoder);
+    let channels = image::ImageDecoder::color_type(&decoder).channel_count();
+    Ok((w, h, channels))
+}
+
+/// Without image decoders (the feature `textures`) no map can be read.
+#[cfg(not(feature = "textures"))]
+fn map_header(_abs: &Path) -> Result<(u32, u32, u8), String> {
+    Err(crate::texture::NO_DECODERS.into())
 }
 
 /// The optional `material.json` of a PBR folder: `description`, `tile` (world units per

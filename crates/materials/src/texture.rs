@@ -83,16 +83,9 @@ impl Expect {
 /// than the file holds, fails here, not as pink or a failed image in Blender); decoded once,
 /// with the allocation capped by the side cap.
 pub fn bytes_problem(bytes: &[u8], expect: Expect) -> Option<String> {
-    use image::ImageFormat as F;
-    let (formats, names, channels): (&[F], &str, u8) = match expect {
-        Expect::Blend => return blend_header_problem(bytes).map(|p| format!("is {p}")),
-        Expect::Texture => (&[F::Png, F::Jpeg, F::Tiff], "a PNG, JPEG or TIFF file", 1),
-        Expect::PbrMap { channels } => (
-            &[F::Png, F::Jpeg, F::OpenExr],
-            "a PNG, JPEG or OpenEXR file",
-            channels,
-        ),
-    };
+    if let Expect::Blend = expect {
+        return blend_header_problem(bytes).map(|p| format!("is {p}"));
+    }
     if bytes.len() as u64 > expect.max_bytes() {
         return Some(format!(
             "is {} bytes, more than the {} allowed",
@@ -100,6 +93,31 @@ pub fn bytes_problem(bytes: &[u8], expect: Expect) -> Option<String> {
             expect.max_bytes()
         ));
     }
+    image_problem(bytes, expect)
+}
+
+/// What a build without image decoders says of every image (the feature `textures`).
+#[cfg(not(feature = "textures"))]
+pub(crate) const NO_DECODERS: &str = "cannot be checked: this build of clevrtex-materials has no image decoders (its feature `textures`)";
+
+#[cfg(not(feature = "textures"))]
+fn image_problem(_bytes: &[u8], _expect: Expect) -> Option<String> {
+    Some(NO_DECODERS.into())
+}
+
+/// The image part of [`bytes_problem`]: format, JPEG end, header side, full decode, channels.
+#[cfg(feature = "textures")]
+fn image_problem(bytes: &[u8], expect: Expect) -> Option<String> {
+    use image::ImageFormat as F;
+    let (formats, names, channels): (&[F], &str, u8) = match expect {
+        Expect::Blend => return None,
+        Expect::Texture => (&[F::Png, F::Jpeg, F::Tiff], "a PNG, JPEG or TIFF file", 1),
+        Expect::PbrMap { channels } => (
+            &[F::Png, F::Jpeg, F::OpenExr],
+            "a PNG, JPEG or OpenEXR file",
+            channels,
+        ),
+    };
     let reader = |bytes| {
         image::ImageReader::new(std::io::Cursor::new(bytes))
             .with_guessed_format()
