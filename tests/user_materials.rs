@@ -905,3 +905,66 @@ fn groups_of_the_same_name_in_two_files_render_each_its_own() {
     }
     assert!(seen.contains("beta"), "{seen:?}");
 }
+
+/// Issue 43, 5: a `.blend` library whose textures are missing (the public generator's
+/// folder without its textures) is named whole before anything renders, by `generate` and
+/// `materials check` alike: the count and every missing texture, not the first alone (more
+/// than ten are cut to ten and counted: the unit test of `user_materials::summary`).
+#[test]
+fn every_missing_texture_of_a_library_is_named_at_once() {
+    let Some(blender) = blender_or_skip("every_missing_texture_of_a_library_is_named_at_once")
+    else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("lib");
+    std::fs::create_dir_all(&lib).unwrap();
+    let names = ["GoneA", "GoneB", "GoneC"];
+    for n in names {
+        make_blend(&blender, &lib, n, RED, "png", "ok");
+    }
+    std::fs::remove_dir_all(lib.join("textures")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_clevrtex"))
+        .args(["materials", "check", "--set", "user", "--materials"])
+        .arg(&lib)
+        .arg("--blender")
+        .arg(&blender)
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("3 files of user materials failed their checks"),
+        "{t}"
+    );
+    for n in names {
+        assert!(t.contains(&format!("{n}_COL_3K.png")), "{n} not named: {t}");
+    }
+    assert!(t.contains("hint: "), "{t}");
+    // `generate` refuses the same library with the same list, before any image.
+    let out = dir.path().join("out");
+    let o = generate(
+        &out,
+        &blender,
+        &[
+            "-n",
+            "1",
+            "--materials",
+            lib.to_str().unwrap(),
+            "--material-set",
+            "user",
+        ],
+    );
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("3 files of user materials failed their checks"),
+        "{t}"
+    );
+    assert!(
+        walk(&out)
+            .iter()
+            .all(|p| !p.to_string_lossy().ends_with(".png")),
+        "{t}"
+    );
+}

@@ -252,7 +252,7 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
         random: 0.37,
     };
     let opts = a.render_options();
-    let mut session = session(cat, &names, &opts)?;
+    let (mut session, _checked) = session(cat, &names, &opts)?;
     let outcomes = render_all_in_temp(&mut session, &opts, &settings, &names, &dir)?;
     session.close();
     let mut failed = 0;
@@ -302,7 +302,7 @@ fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
     });
     let mut feats = Vec::new();
     let opts = a.batch.render_options();
-    let mut session = session(cat, &names, &opts)?;
+    let (mut session, _checked) = session(cat, &names, &opts)?;
     for (i, random) in [0.37, 0.81].into_iter().enumerate() {
         let settings = MaterialSettings {
             mode: MaterialMode::Tile,
@@ -382,7 +382,7 @@ fn cost(cat: &Catalogue, a: CostArgs) -> CmdResult {
         random: 0.37,
     };
     let opts = a.batch.render_options();
-    let mut session = session(cat, &names, &opts)?;
+    let (mut session, _checked) = session(cat, &names, &opts)?;
     let outcomes = render_all_in_temp(&mut session, &opts, &settings, &names, &dir)?;
     session.close();
     // A material that failed to build has no time (NaN), so it shows as such in the table.

@@ -42,12 +42,15 @@ pub(crate) enum Outcome {
 }
 
 /// One Blender worker for the materials `names` of `cat`, started on the first render, with
-/// a Ctrl-C handler that stops it.
+/// a Ctrl-C handler that stops it. User materials among `names` are checked first, as for
+/// `generate` ([`crate::user_materials::check_before_run`]: every bad file named at once),
+/// and the worker reads only their checked copies, which live as long as the returned
+/// [`Checked`](crate::user_materials::Checked).
 pub(crate) fn session(
     cat: &Catalogue,
     names: &[&str],
     a: &RenderOptions,
-) -> anyhow::Result<BlenderSession> {
+) -> anyhow::Result<(BlenderSession, crate::user_materials::Checked)> {
     if let Some(t) = a.timeout {
         crate::run_args::seconds("--timeout", t)?;
     }
@@ -55,7 +58,17 @@ pub(crate) fn session(
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping Blender",
     });
-    BlenderSession::new(Settings {
+    let startup_timeout = crate::run_args::seconds("--startup-timeout", a.startup_timeout)?;
+    let mut cat = cat.clone();
+    let used = names.iter().map(|n| n.to_string()).collect();
+    let checked = crate::user_materials::check_before_run(
+        &mut cat,
+        &used,
+        &blender,
+        startup_timeout,
+        interrupt.clone(),
+    )?;
+    let session = BlenderSession::new(Settings {
         blender,
         materials_json: cat.resolved_json_for(names.iter().copied()),
         threads: a.threads,
@@ -66,8 +79,9 @@ pub(crate) fn session(
             .is_none()
             .then_some(clevrtex_render::pool::IDLE_TIMEOUT),
         interrupt,
-        startup_timeout: crate::run_args::seconds("--startup-timeout", a.startup_timeout)?,
-    })
+        startup_timeout,
+    })?;
+    Ok((session, checked))
 }
 
 /// The time limit of one render: `--timeout`, else 600 s + 8 s per sample at 320x240 (the
@@ -130,7 +144,7 @@ pub(crate) fn render_into_cache(
     key: &dyn Fn(&str) -> String,
 ) -> anyhow::Result<Vec<String>> {
     let tmp = cache.join(format!("tmp-{}", std::process::id()));
-    let mut session = session(cat, missing, a)?;
+    let (mut session, _checked) = session(cat, missing, a)?;
     let result = render_all(&mut session, a, settings, missing, &tmp).and_then(|outcomes| {
         session.close();
         let mut failed = Vec::new();

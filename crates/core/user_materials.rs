@@ -156,6 +156,9 @@ pub(crate) fn check_before_run(
     let mut copies = Copies::new()?;
     let mut entries = BTreeMap::new();
     let mut blends = Vec::new();
+    // Every file that fails its check, over all materials: a library with many missing
+    // textures is named whole, not one texture per run.
+    let mut problems = Problems::default();
     for name in &user {
         let m = cat.require(name)?.clone();
         let Some(root) = cat.user_root(name).map(Path::to_path_buf) else {
@@ -163,10 +166,12 @@ pub(crate) fn check_before_run(
         };
         let mut recipe = m.recipe.clone();
         let mut textures = Vec::new();
-        let mut copy = |p: &Value, expect: Expect| -> anyhow::Result<Value> {
+        let mut copy = |p: &mut Value, expect: Expect| {
             let path = Path::new(p.as_str().unwrap_or(""));
-            let c = copies.copy(name, &m.file, &root, path, expect)?;
-            Ok(Value::String(c.copy.to_string_lossy().into_owned()))
+            match copies.copy(name, &m.file, &root, path, expect) {
+                Ok(c) => *p = Value::String(c.copy.to_string_lossy().into_owned()),
+                Err(e) => problems.push(e),
+            }
         };
         let mut file = relative(&root, Path::new(&m.file));
         match m.recipe["kind"].as_str() {
@@ -177,7 +182,14 @@ pub(crate) fn check_before_run(
                     &root,
                     Path::new(m.recipe["path"].as_str().unwrap_or("")),
                     Expect::Blend,
-                )?;
+                );
+                let c = match c {
+                    Ok(c) => c,
+                    Err(e) => {
+                        problems.push(e);
+                        continue;
+                    }
+                };
                 file = c.rel;
                 recipe["path"] = c.copy.to_string_lossy().into_owned().into();
                 blends.push(name.clone());
@@ -190,14 +202,14 @@ pub(crate) fn check_before_run(
                         1
                     };
                     textures.push(relative(&root, Path::new(p.as_str().unwrap_or(""))));
-                    *p = copy(p, Expect::PbrMap { channels })?;
+                    copy(p, Expect::PbrMap { channels });
                 }
             }
             _ => {
                 for layer in recipe["layers"].as_array_mut().into_iter().flatten() {
                     if let Some(p) = layer.get_mut("path") {
                         textures.push(relative(&root, Path::new(p.as_str().unwrap_or(""))));
-                        *p = copy(p, Expect::Texture)?;
+                        copy(p, Expect::Texture);
                     }
                 }
             }
@@ -217,10 +229,19 @@ pub(crate) fn check_before_run(
         })?;
         for name in &blends {
             let (root, _, textures) = entries.get_mut(name).expect("every user material");
-            inspect_blend(&mut session, cat, &mut copies, name, root, textures)?;
+            inspect_blend(
+                &mut session,
+                cat,
+                &mut copies,
+                name,
+                root,
+                textures,
+                &mut problems,
+            )?;
         }
         session.close();
     }
+    problems.into_result()?;
     let entries = entries
         .into_iter()
         .map(|(name, (_, file, mut textures))| {
@@ -255,6 +276,7 @@ fn inspect_blend(
     name: &str,
     root: &Path,
     textures: &mut Vec<String>,
+    problems: &mut Problems,
 ) -> anyhow::Result<()> {
     let m = cat.require(name)?.clone();
     let path = PathBuf::from(m.recipe["path"].as_str().unwrap_or(""));
@@ -300,7 +322,11 @@ fn inspect_blend(
                 bail!("user material `{name}` (`{}`): the bridge did not write packed image `{shown_name}`\nhint: this is a bug of clevrtex; please report it", m.file);
             };
             let what = format!("image `{shown_name}` packed into the `.blend`");
-            copies.check_own(name, &m.file, &what, Path::new(file), Expect::Texture)?;
+            if let Err(e) = copies.check_own(name, &m.file, &what, Path::new(file), Expect::Texture)
+            {
+                problems.push(e);
+                continue;
+            }
             images.insert(key.clone(), file.clone().into());
             textures.push(format!("packed:{}", img.name));
             continue;
@@ -312,7 +338,13 @@ fn inspect_blend(
             Ok(rel) => root.join(rel),
             Err(_) => reported.to_path_buf(),
         };
-        let c = copies.copy(name, &m.file, root, &source, Expect::Texture)?;
+        let c = match copies.copy(name, &m.file, root, &source, Expect::Texture) {
+            Ok(c) => c,
+            Err(e) => {
+                problems.push(e);
+                continue;
+            }
+        };
         textures.push(c.rel);
         images.insert(
             img.path.clone(),
@@ -324,6 +356,54 @@ fn inspect_blend(
     recipe["images"] = Value::Object(images);
     cat.set_user_recipe(name, recipe)?;
     Ok(())
+}
+
+/// The files of user materials that failed their checks, over a whole `--materials` folder.
+#[derive(Default)]
+struct Problems(Vec<anyhow::Error>);
+
+/// Problems named one per line before the rest are only counted; all of them with
+/// `CLEVRTEX_LIST_ALL=1`.
+const PROBLEMS_SHOWN: usize = 10;
+
+impl Problems {
+    fn push(&mut self, e: anyhow::Error) {
+        self.0.push(e);
+    }
+
+    /// One problem as it was (its message and hint); several as a count, one line each
+    /// (the first [`PROBLEMS_SHOWN`], all with `CLEVRTEX_LIST_ALL=1`) and the first's hint.
+    fn into_result(self) -> anyhow::Result<()> {
+        let all = std::env::var_os("CLEVRTEX_LIST_ALL").is_some_and(|v| v == "1");
+        match self.0.len() {
+            0 => Ok(()),
+            1 => Err(self.0.into_iter().next().expect("one")),
+            n => Err(anyhow::anyhow!("{}", summary(&self.0, n, all))),
+        }
+    }
+}
+
+/// The message of `n` problems: a count, a line each (the first [`PROBLEMS_SHOWN`] unless
+/// `all`), and the first one's hint.
+fn summary(problems: &[anyhow::Error], n: usize, all: bool) -> String {
+    let texts: Vec<String> = problems.iter().map(|e| format!("{e:#}")).collect();
+    let first_line = |t: &String| t.lines().next().unwrap_or("").to_string();
+    let shown = if all { n } else { n.min(PROBLEMS_SHOWN) };
+    let mut out = format!("{n} files of user materials failed their checks:\n");
+    for t in &texts[..shown] {
+        out += &format!("  {}\n", first_line(t));
+    }
+    if shown < n {
+        out += &format!(
+            "  ... and {} more (all of them: rerun with CLEVRTEX_LIST_ALL=1)\n",
+            n - shown
+        );
+    }
+    match texts[0].lines().find(|l| l.starts_with("hint: ")) {
+        Some(hint) => out += hint,
+        None => out += "hint: fix or remove these files, then run again",
+    }
+    out
 }
 
 /// `path` relative to the material folder `root` (the folder's own location is not part of
@@ -394,4 +474,35 @@ pub(crate) fn used_by_scenes<'a>(
         }
     }
     Ok(used)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn many_problems_are_counted_and_the_first_ten_named() {
+        let problems: Vec<anyhow::Error> = (0..12)
+            .map(|i| {
+                anyhow::anyhow!(
+                    "user material `m{i}`: texture `t{i}.png` cannot be read\nhint: put it back"
+                )
+            })
+            .collect();
+        let short = summary(&problems, 12, false);
+        assert!(
+            short.starts_with("12 files of user materials failed their checks:"),
+            "{short}"
+        );
+        assert_eq!(short.matches("cannot be read").count(), 10, "{short}");
+        assert!(
+            short.contains("t9.png") && !short.contains("t10.png"),
+            "{short}"
+        );
+        assert!(short.contains("... and 2 more"), "{short}");
+        assert!(short.ends_with("hint: put it back"), "{short}");
+        let all = summary(&problems, 12, true);
+        assert_eq!(all.matches("cannot be read").count(), 12, "{all}");
+        assert!(!all.contains("more"), "{all}");
+    }
 }
