@@ -25,6 +25,7 @@ pub mod atomic;
 pub mod card;
 pub mod dataset;
 pub mod error;
+pub mod export;
 pub mod exr;
 pub mod layout;
 pub mod manifest;

@@ -1,0 +1,252 @@
+//! What every export (`webdataset`, `coco`) reads of a dataset, through the one dataset
+//! reader ([`crate::dataset`]): the dataset opened and the variants chosen, an output folder
+//! inside the dataset refused ([`open_source`]); the samples of one variant in index order with
+//! their split (the one rule, [`dataset::splits`]) and the files they become ([`samples`]); and
+//! the errors of an export ([`ExportError`]).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use crate::dataset::{self, Dataset, DatasetError, Kind, SampleRef, VariantDir};
+use crate::layout::Split;
+use crate::webdataset::{SampleFile, ShardError};
+use clevrtex_scene::passes::WebdatasetForm;
+use clevrtex_scene::Pass;
+use serde_json::Value;
+
+/// What can go wrong in an export. Shown as the command's error: the message, then (as the
+/// error's source) the cause.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// A file or folder could not be read, created, written or removed.
+    #[error("{what}")]
+    Io {
+        /// What failed and what to do.
+        what: String,
+        /// The OS error.
+        #[source]
+        cause: std::io::Error,
+    },
+    /// A sample's metadata is not JSON.
+    #[error("{what}")]
+    Json {
+        /// Which file, and what to do.
+        what: String,
+        /// The parser's error.
+        #[source]
+        cause: serde_json::Error,
+    },
+    /// Anything else, with the file and what to do.
+    #[error("{0}")]
+    Message(String),
+    /// A shard could not be written.
+    #[error(transparent)]
+    Shard(#[from] ShardError),
+    /// The dataset could not be opened.
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
+    /// The stop flag was raised (Ctrl-C, SIGTERM): the shard being written was removed.
+    #[error("interrupted")]
+    Interrupted,
+}
+
+/// One sample to export: its metadata and the files it becomes.
+pub struct Sample {
+    /// The sample's index.
+    pub index: u64,
+    /// Its position among the variant's samples with metadata (for [`dataset::splits`]).
+    pub(crate) pos: usize,
+    /// Its stem.
+    pub stem: String,
+    /// Its split (the one rule).
+    pub split: Split,
+    /// The files it becomes: the key, the file, the pass decoded into an array (if any).
+    pub files: Vec<SampleFile>,
+}
+
+/// The samples of one variant folder of `ds` (found by [`Dataset::open`]), in index order,
+/// and what was not followed or not read (samples with such files are left out).
+/// File names come from the layout and the pass table, never from the metadata: a
+/// `*_filename` key only says whether the pass was written, and must name the layout's file
+/// ([`dataset::listed_passes`]).
+pub fn samples(
+    ds: &Dataset,
+    vd: &VariantDir,
+    skipped: &mut Vec<String>,
+) -> Result<Vec<Sample>, ExportError> {
+    if let Some((dir, e)) = vd.unreadable.first() {
+        return Err(ExportError::Message(format!(
+            "cannot read `{}`: {e}",
+            dir.display()
+        )));
+    }
+    skipped.extend(vd.skipped_for_metadata().map(ToString::to_string));
+    let found: BTreeMap<u64, &SampleRef> = vd
+        .samples
+        .iter()
+        .filter(|s| s.has_metadata())
+        .map(|s| (s.index, s))
+        .collect();
+    let mut out = Vec::new();
+    let mut recorded = vec![None; found.len()];
+    'samples: for (pos, (index, s)) in found.into_iter().enumerate() {
+        let stem = s.stem.clone();
+        let meta_path = s.metadata_path();
+        let bytes = match ds.read(&meta_path, dataset::MAX_METADATA_BYTES) {
+            Ok(b) => b,
+            Err(why) => {
+                skipped.push(format!("`{}` {why}", meta_path.display()));
+                continue;
+            }
+        };
+        let meta: Value = serde_json::from_slice(&bytes).map_err(|cause| ExportError::Json {
+            what: format!(
+                "`{}` is not valid metadata\nhint: check the dataset with `clevrtex verify`",
+                meta_path.display()
+            ),
+            cause,
+        })?;
+        dataset::check_metadata(&meta, &meta_path.display().to_string()).map_err(|e| {
+            ExportError::Message(format!(
+                "{e}\nhint: check the dataset with `clevrtex verify`"
+            ))
+        })?;
+        let bad = |e: dataset::MetadataError| {
+            ExportError::Message(format!(
+                "{e}\nhint: check the dataset with `clevrtex verify`; export takes file names from the layout, not from the metadata"
+            ))
+        };
+        let file = meta_path.display().to_string();
+        // Passes whose encoding the metadata describes (ours) become arrays by it; the mask's
+        // ids are its pixels in any dataset. The published ClevrTex's other passes (another
+        // encoding, not described) stay PNGs under `<pass>.png`.
+        let described = dataset::MetadataView::of(&meta, &file)
+            .map(|v| v.passes)
+            .unwrap_or_default();
+        let mut files: Vec<SampleFile> = dataset::listed_passes(&meta, &file, &stem)
+            .map_err(bad)?
+            .into_iter()
+            .map(|pass| {
+                let spec = pass.spec();
+                match spec.webdataset_form {
+                    WebdatasetForm::Npy { .. }
+                        if pass == Pass::Mask || described.contains(&pass) =>
+                    {
+                        (
+                            spec.webdataset_key.to_string(),
+                            s.pass_path(pass),
+                            Some(pass),
+                        )
+                    }
+                    WebdatasetForm::Npy { .. } => {
+                        (format!("{}.png", spec.name), s.pass_path(pass), None)
+                    }
+                    WebdatasetForm::Png => {
+                        (spec.webdataset_key.to_string(), s.pass_path(pass), None)
+                    }
+                }
+            })
+            .collect();
+        if files.is_empty() {
+            return Err(ExportError::Message(format!(
+                "`{file}` lists no pass (no `*_filename` key names a file): the sample has nothing to export\nhint: check the dataset with `clevrtex verify`"
+            )));
+        }
+        recorded[pos] = dataset::recorded_split(&meta["split"], &vd.variant, &file).map_err(bad)?;
+        files.push(("json".into(), meta_path, None));
+        for (_, p, _) in &files {
+            match ds.classify(p) {
+                Kind::File => {}
+                Kind::Skipped(why) => {
+                    skipped.push(format!("`{}` {why}", p.display()));
+                    continue 'samples;
+                }
+                Kind::Dir => {
+                    skipped.push(format!("`{}` is a folder", p.display()));
+                    continue 'samples;
+                }
+            }
+            std::fs::metadata(p).map_err(|cause| ExportError::Io {
+                what: format!(
+                    "`{}` (a pass the metadata of `{stem}` lists) is missing\nhint: check the dataset with `clevrtex verify`",
+                    p.display()
+                ),
+                cause,
+            })?;
+        }
+        out.push(Sample {
+            index,
+            pos,
+            split: Split::Train,
+            stem,
+            files,
+        });
+    }
+    // The one split rule of every reader: the recorded split, else by position.
+    let splits = dataset::splits(&vd.variant, &recorded);
+    for s in &mut out {
+        s.split = splits[s.pos];
+    }
+    Ok(out)
+}
+
+pub(crate) fn io_err(what: String) -> impl FnOnce(std::io::Error) -> ExportError {
+    move |cause| ExportError::Io { what, cause }
+}
+
+/// The dataset under `dir` opened for an export into `out`: the indices (into
+/// `Dataset::variants`) of the variant `variant` only or of every variant found, and what was
+/// not followed (one line each). Refused before anything is written: `out` inside the dataset,
+/// no variant folder (for `variant`).
+pub fn open_source(
+    dir: &Path,
+    out: &Path,
+    variant: Option<&str>,
+) -> Result<(Dataset, Vec<usize>, Vec<String>), ExportError> {
+    let ds = Dataset::open(dir).map_err(|e| match e {
+        DatasetError::Unreadable { cause, .. } => ExportError::Io {
+            what: format!("cannot read `{}`", dir.display()),
+            cause,
+        },
+        other => other.into(),
+    })?;
+    // Files written into the dataset would become stray files of it (and a later export of
+    // it would pack them): refused, as `preview` and `report` refuse an `--out` there.
+    let existing = out
+        .ancestors()
+        .find(|p| p.exists())
+        .unwrap_or(Path::new("."));
+    if existing
+        .canonicalize()
+        .is_ok_and(|o| o.starts_with(&ds.root))
+    {
+        return Err(ExportError::Message(format!(
+            "`{}` is inside the dataset `{}`: what export writes would become files of the dataset\nhint: export into a folder outside the dataset",
+            out.display(),
+            dir.display()
+        )));
+    }
+    let mut skipped = Vec::new();
+    let wanted = |v: &str| variant.is_none_or(|want| want == v);
+    // A `clevrtex_<variant>` folder given itself is not an output folder: nothing under it.
+    let variants: Vec<usize> = if ds.is_variant_dir {
+        Vec::new()
+    } else {
+        for (v, skip) in &ds.skipped {
+            if wanted(v) {
+                skipped.push(skip.to_string());
+            }
+        }
+        (0..ds.variants.len())
+            .filter(|&i| wanted(&ds.variants[i].variant))
+            .collect()
+    };
+    if variants.is_empty() {
+        return Err(ExportError::Message(format!(
+            "no `clevrtex_<variant>` folder{} in `{}`\nhint: pass the `--out` folder of `clevrtex generate`",
+            variant.map(|v| format!(" for `{v}`")).unwrap_or_default(),
+            dir.display()
+        )));
+    }
+    Ok((ds, variants, skipped))
+}
