@@ -140,21 +140,10 @@ pub(crate) fn pass_files() -> Vec<(&'static str, &'static str, &'static str)> {
 pub(crate) fn variant_names(
     variant: &str,
 ) -> Option<(Vec<String>, Vec<(String, f64)>, Vec<String>, Vec<String>)> {
-    let c = clevrtex_scene::config::Config::builtin(variant).ok()?;
-    let mut materials: Vec<String> = c.objects.materials.clone();
-    materials.extend(c.background.materials.iter().cloned());
-    materials.sort();
-    materials.dedup();
-    Some((
-        c.objects.shapes.clone(),
-        c.objects
-            .sizes
-            .iter()
-            .map(|s| (s.name.clone(), s.scale))
-            .collect(),
-        materials,
-        c.objects.colors.iter().map(|c| c.name.clone()).collect(),
-    ))
+    let t = clevrtex_scene::config::Config::builtin(variant)
+        .ok()?
+        .name_tables();
+    Some((t.shape, t.size, t.material, t.color))
 }
 
 /// A sample's metadata, read as every reader of a dataset reads it
