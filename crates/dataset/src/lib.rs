@@ -23,6 +23,7 @@
 
 pub mod atomic;
 pub mod card;
+pub mod coco;
 pub mod dataset;
 pub mod error;
 pub mod export;

@@ -25,22 +25,24 @@
 //! (`shard.rs`), a pass decoded into its `.npy` array (`npy.rs`). Everything is re-exported here.
 
 pub(crate) mod npy;
+pub(crate) mod record;
 pub(crate) mod shard;
 #[cfg(test)]
 mod tests;
 
 pub use npy::*;
+pub use record::*;
 pub use shard::*;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::dataset::VariantDir;
+use crate::dataset::{self, Dataset, VariantDir};
 pub use crate::export::ExportError;
 use crate::export::{io_err, samples, Sample};
 use clevrtex_scene::Pass;
-use serde_json::json;
+use serde_json::{json, Value};
 
 /// What [`export`] did.
 #[derive(Debug)]
@@ -61,17 +63,21 @@ pub struct ExportReport {
 
 /// Export the dataset under `dir` (an output folder of `clevrtex generate`) as WebDataset
 /// shards of at most `shard_size` bytes into `out` (created if missing), the variant `variant`
-/// only or every variant found. Stops between samples when `stop` is raised
+/// only or every variant found, with the per-object arrays padded to `objects` when given
+/// ([`object_arrays`]). Stops between samples when `stop` is raised
 /// ([`ExportError::Interrupted`]; the shard being written is removed).
 pub fn export(
     dir: &Path,
     out: &Path,
     variant: Option<&str>,
     shard_size: u64,
+    objects: Option<usize>,
     stop: &AtomicBool,
 ) -> Result<ExportReport, ExportError> {
     let (ds, chosen, mut skipped) = crate::export::open_source(dir, out, variant)?;
     let variants: Vec<&VariantDir> = chosen.iter().map(|&i| &ds.variants[i]).collect();
+    let names: Vec<&str> = variants.iter().map(|v| v.variant.as_str()).collect();
+    let mut tables = NameTables::of(&names);
     std::fs::create_dir_all(out).map_err(io_err(format!("cannot create `{}`", out.display())))?;
     refuse_foreign_shards(out)?;
     let mut index = Vec::new();
@@ -92,7 +98,9 @@ pub fn export(
                 if stop.load(Ordering::SeqCst) {
                     return Err(ExportError::Interrupted);
                 }
-                let entries = sample_entries(&ds.root, &s.files)?;
+                let mut entries = sample_entries(&ds.root, &s.files)?;
+                let extra = sample_record(&ds, s, variant, &mut entries, objects, &mut tables)?;
+                entries.extend(extra);
                 let size = tar_bytes(&entries);
                 if shard
                     .as_ref()
@@ -120,15 +128,23 @@ pub fn export(
     }
     let stale = remove_stale(out, &written)?;
     let shards = index.len();
+    let mut keys: Vec<Value> = std::iter::once(json!({"key": "__key__", "holds": "the sample's stem"}))
+        .chain(Pass::ALL.map(|p| json!({"key": p.spec().webdataset_key, "holds": p.spec().webdataset_doc})))
+        .chain([json!({"key": "json", "holds": "the sample's record, one schema for every variant: stem, variant, split, index, num_objects, ground_material, objects (shape, size, material, color, rotation, coords_3d, pixel_coords, visible_pixels, bbox; \"\", -1 or [] where a sample lacks one), intrinsics, extrinsics, and `metadata`: the metadata file's text (docs/output-format.md)"})])
+        .collect();
+    if let Some(k) = objects {
+        keys.extend(OBJECT_KEYS.iter().map(
+            |(key, holds)| json!({"key": key, "holds": holds.replace("K", &format!("K = {k}"))}),
+        ));
+    }
     let doc = json!({
         "format": "webdataset",
         "source": dir.display().to_string(),
         "samples": total_samples,
         "shards": index,
-        "keys": std::iter::once(json!({"key": "__key__", "holds": "the sample's stem"}))
-            .chain(Pass::ALL.map(|p| json!({"key": p.spec().webdataset_key, "holds": p.spec().webdataset_doc})))
-            .chain([json!({"key": "json", "holds": "the sample's metadata (docs/output-format.md)"})])
-            .collect::<Vec<_>>(),
+        "keys": keys,
+        "objects": objects,
+        "names": objects.map(|_| json!(tables.0)),
     });
     let index_path = out.join("index.json");
     let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise") + "\n";
@@ -141,6 +157,63 @@ pub fn export(
         index: index_path,
         stale,
         skipped,
+    })
+}
+
+/// The per-object keys of `--objects K` and what each holds.
+pub const OBJECT_KEYS: [(&str, &str); 7] = [
+    ("shape.npy", "int64 (K,) shape ids into `names.shape`; -1 for padding"),
+    ("size.npy", "int64 (K,) size ids into `names.size`; -1 for padding"),
+    ("material.npy", "int64 (K,) material ids into `names.material`; -1 for padding"),
+    ("color.npy", "int64 (K,) colour ids into `names.color`; -1 for padding and where the variant has no colours"),
+    ("bbox.npy", "float32 (K, 4) [x_min, y_min, x_max, y_max], inclusive pixels of the object in mask.npy; 0 where not visible"),
+    ("visibility.npy", "bool (K,) the object has a pixel in mask.npy"),
+    ("valid.npy", "bool (K,) slot k holds an object (k < num_objects)"),
+];
+
+/// The sample's `json` in `entries` replaced by its [`record`]; with `objects` = `Some(K)`,
+/// its per-object arrays ([`object_arrays`]), returned to be added.
+fn sample_record(
+    ds: &Dataset,
+    s: &Sample,
+    variant: &str,
+    entries: &mut [(String, Vec<u8>)],
+    objects: Option<usize>,
+    tables: &mut NameTables,
+) -> Result<Vec<(String, Vec<u8>)>, ExportError> {
+    let Some(json) = entries.iter_mut().find(|(k, _)| k == "json") else {
+        return Ok(Vec::new());
+    };
+    let meta_bytes = std::mem::take(&mut json.1);
+    json.1 = record(&meta_bytes, variant, s.split, s.index, &s.stem);
+    let Some(k) = objects else {
+        return Ok(Vec::new());
+    };
+    let bad = |p: &Path, why: String| {
+        ExportError::Message(format!(
+            "`{}` {why}\nhint: check the dataset with `clevrtex verify`",
+            p.display()
+        ))
+    };
+    let Some((_, mask, _)) = s.files.iter().find(|(k, _, _)| k == "mask.npy") else {
+        return Err(ExportError::Message(format!(
+            "sample `{}` has no mask pass: `--objects` needs the mask\nhint: generate with `--passes` including mask, or leave `--objects` out",
+            s.stem
+        )));
+    };
+    let png = ds
+        .read(mask, dataset::MAX_FILE_BYTES)
+        .and_then(|b| crate::png::decode(&b))
+        .map_err(|w| bad(mask, w))?;
+    let meta: Value = serde_json::from_slice(&meta_bytes).unwrap_or(Value::Null);
+    object_arrays(&meta, &png.data, png.width as usize, k, tables).map_err(|w| {
+        let meta_path = s
+            .files
+            .iter()
+            .find(|(k, _, _)| k == "json")
+            .map(|f| f.1.clone())
+            .unwrap_or_default();
+        bad(&meta_path, w)
     })
 }
 
