@@ -31,6 +31,7 @@ pub mod exr;
 pub mod layout;
 pub mod manifest;
 pub mod png;
+pub mod resize;
 pub mod run_lock;
 pub mod verify;
 pub mod webdataset;
