@@ -545,6 +545,27 @@ fn python_check(
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
+/// A check script of `tests/export_pipelines/` run with `paths` then `args`; its stdout.
+fn python_check_args(
+    python: &std::path::Path,
+    script: &str,
+    paths: &[&std::path::Path],
+    args: &[&str],
+) -> String {
+    let o = std::process::Command::new(python)
+        .arg(
+            crate::util::repo_root()
+                .join("tests/export_pipelines")
+                .join(script),
+        )
+        .args(paths)
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{script}:\n{}", text(&o));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
 /// Issue 43: `export --format coco` gives one COCO file per variant and split that pycocotools
 /// reads with every object's mask, box, area, category and attributes exact (images in place,
 /// and copied with `--split`); a sample the reader refuses is left out by name (exit 3); an
@@ -684,7 +705,8 @@ fn coco_export_reads_back_exactly_through_pycocotools() {
 /// Issue 43: shards of two variants (`color` null on `camo`, a string on `clevr`; a key on some
 /// samples only) load together with Hugging Face `datasets`, with `--objects K` per-object
 /// arrays whose ids index `index.json`'s name tables; ids and metres exact through
-/// `clevrtex.wds.decode`, also as torch tensors.
+/// `clevrtex.wds.decode`, also as torch tensors; `--crop --resize 16` gives the Python
+/// `Dataset`'s (the public loader's) cropped and resized items.
 #[test]
 fn webdataset_shards_of_several_variants_load_together_in_hugging_face() {
     let test = "webdataset_shards_of_several_variants_load_together_in_hugging_face";
@@ -714,7 +736,24 @@ fn webdataset_shards_of_several_variants_load_together_in_hugging_face() {
             "run `./scripts/setup.sh --torch`",
         );
     }
-    // More objects than K: named, nothing of the variant's shard left.
+    // `--crop --resize N`: the public loader's items, as the Python `Dataset` gives them.
+    let cropped = dir.path().join("wds-cropped");
+    let (code, t) = export(
+        &data,
+        &cropped,
+        &["--crop", "--resize", "16", "--objects", "6"],
+    );
+    assert_eq!(code, Some(0), "{t}");
+    let stdout = python_check_args(&python, "crop_check.py", &[&cropped, &data], &["16", "6"]);
+    assert_eq!(stdout.trim(), "samples: 20", "{stdout}");
+    let (code, t) = export(&data, &dir.path().join("not-written"), &["--resize", "16"]);
+    assert_eq!(code, Some(1), "{t}");
+    assert!(
+        t.contains("`--resize` resizes the centre crop") && t.contains("add `--crop`"),
+        "{t}"
+    );
+    assert!(!dir.path().join("not-written").exists());
+    // More objects than K: named.
     let fresh = dir.path().join("too-few");
     let (code, t) = export(&data, &fresh, &["--objects", "3"]);
     assert_eq!(code, Some(1), "{t}");

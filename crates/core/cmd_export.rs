@@ -55,6 +55,14 @@ pub struct Args {
     /// material, colour; boxes; visibility), 1 to 255.
     #[arg(long, value_name = "K", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=255))]
     objects: Option<usize>,
+    /// `--format webdataset`: crop every image and pass to the centre square of side
+    /// int(0.8 min(W, H)), as the public loader does (`crop=True`).
+    #[arg(long)]
+    crop: bool,
+    /// `--format webdataset`, with `--crop`: resize the crop to N x N (the public loader's
+    /// 128), Pillow-exact bilinear for the image and albedo, nearest for the mask and data passes.
+    #[arg(long, value_name = "N", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096))]
+    resize: Option<usize>,
     /// `--format coco`: export only this split (default: every split, one file each).
     #[arg(long, value_enum)]
     split: Option<SplitArg>,
@@ -67,13 +75,16 @@ pub struct Args {
 /// Run `clevrtex export`.
 pub fn run(args: Args) -> CmdResult {
     if let Format::Coco = args.format {
-        if args.objects.is_some() {
-            bail!("`--objects` is an option of `--format webdataset`: COCO has one annotation per object\nhint: leave it out");
+        if args.objects.is_some() || args.crop || args.resize.is_some() {
+            bail!("`--objects`, `--crop` and `--resize` are options of `--format webdataset`: COCO has one annotation per object at the image's own size\nhint: leave them out");
         }
         return run_coco(args);
     }
     if args.split.is_some() || args.copy_images {
         bail!("`--split` and `--copy-images` are options of `--format coco`\nhint: leave them out, or add `--format coco`");
+    }
+    if args.resize.is_some() && !args.crop {
+        bail!("`--resize` resizes the centre crop, as the public loader does\nhint: add `--crop`");
     }
     if args.shard_size < 10_240 {
         bail!(
@@ -96,6 +107,7 @@ pub fn run(args: Args) -> CmdResult {
         args.variant.as_deref(),
         args.shard_size,
         args.objects,
+        args.crop.then_some(args.resize),
         &stop,
     ) {
         Ok(r) => r,

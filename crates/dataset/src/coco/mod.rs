@@ -48,8 +48,20 @@ pub struct CocoReport {
 /// One image's entry and its objects' annotations (ids and categories not yet given).
 struct Image {
     entry: Value,
-    objects: Vec<(usize, String, rle::ObjectRle, Value)>,
+    split: Split,
+    objects: Vec<Object>,
     image: Option<(PathBuf, PathBuf)>,
+}
+
+/// One object's annotation before its id and category: its place in the metadata, shape,
+/// compressed RLE, area, extent and attributes.
+struct Object {
+    index: usize,
+    shape: String,
+    counts: String,
+    area: u64,
+    extent: [u32; 4],
+    attributes: Value,
 }
 
 /// Export the dataset under `dir` (an output folder of `clevrtex generate`, or the published
@@ -94,28 +106,29 @@ pub fn export_coco(
                 image(&ds, dir, out, s, opts.copy_images)
             })
             .collect::<Result<_, _>>()?;
-        for split in Split::ALL {
-            let of_split: Vec<&Image> = list
+        let mut by_split: Vec<Vec<Image>> = vec![Vec::new(), Vec::new(), Vec::new()];
+        for im in images {
+            let at = Split::ALL
                 .iter()
-                .zip(&images)
-                .filter(|(s, _)| s.split == split)
-                .map(|(_, im)| im)
-                .collect();
+                .position(|x| *x == im.split)
+                .expect("a split");
+            by_split[at].push(im);
+        }
+        for (split, of_split) in Split::ALL.into_iter().zip(by_split) {
             if of_split.is_empty() {
                 continue;
             }
             if stop.load(Ordering::SeqCst) {
                 return Err(ExportError::Interrupted);
             }
-            let path = out.join(format!("{variant}-{}.json", split.name()));
-            let (doc, n_img, n_ann) = document(dir, variant, split, &of_split);
             for im in &of_split {
                 if let Some((from, to)) = &im.image {
                     copy_image(&ds, from, to)?;
                 }
             }
-            let text = serde_json::to_string(&doc).expect("JSON values serialise") + "\n";
-            crate::atomic::write(&path, text.as_bytes())
+            let path = out.join(format!("{variant}-{}.json", split.name()));
+            let (doc, n_img, n_ann) = document(dir, variant, split, of_split);
+            write_json(&path, &doc)
                 .map_err(io_err(format!("cannot write `{}`", path.display())))?;
             files.push((path, n_img, n_ann));
         }
@@ -198,7 +211,14 @@ fn image(
         })?;
         let mut attributes = obj.as_object().cloned().unwrap_or_default();
         attributes.remove("shape");
-        objs.push((i, shape.to_string(), r, Value::Object(attributes)));
+        objs.push(Object {
+            index: i,
+            shape: shape.to_string(),
+            counts: rle::compress(&r.counts),
+            area: r.area,
+            extent: r.extent,
+            attributes: Value::Object(attributes),
+        });
     }
     let (file_name, image) = if copy {
         let name = format!("images/{}.png", s.stem);
@@ -208,6 +228,7 @@ fn image(
         (ds.root.join(rel).display().to_string(), None)
     };
     Ok(Image {
+        split: s.split,
         entry: json!({
             "id": s.index,
             "file_name": file_name,
@@ -220,6 +241,16 @@ fn image(
         objects: objs,
         image,
     })
+}
+
+/// `doc` written as `path`, streamed through an atomic file (nothing left on an error).
+fn write_json(path: &Path, doc: &Value) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut w =
+        std::io::BufWriter::with_capacity(1 << 20, crate::atomic::AtomicFile::create(path)?);
+    serde_json::to_writer(&mut w, doc)?;
+    w.write_all(b"\n")?;
+    w.into_inner().map_err(|e| e.into_error())?.commit()
 }
 
 /// The image `from` of the dataset copied to `to` (written atomically; folders made).
@@ -240,37 +271,40 @@ fn copy_image(ds: &Dataset, from: &Path, to: &Path) -> Result<(), ExportError> {
 /// The COCO document of one variant's split: images, annotations (ids from 1 in image order),
 /// categories (the variant's shapes, then any other found, sorted), and what the ids and
 /// attributes mean. Returns it with its image and annotation counts.
-fn document(dir: &Path, variant: &str, split: Split, images: &[&Image]) -> (Value, usize, usize) {
+fn document(dir: &Path, variant: &str, split: Split, images: Vec<Image>) -> (Value, usize, usize) {
     let tables = clevrtex_scene::config::Config::builtin(variant)
         .ok()
         .map(|c| c.name_tables());
     let mut shapes: Vec<String> = tables.as_ref().map(|t| t.shape.clone()).unwrap_or_default();
     let mut extra: Vec<&String> = images
         .iter()
-        .flat_map(|im| im.objects.iter().map(|(_, s, _, _)| s))
+        .flat_map(|im| im.objects.iter().map(|o| &o.shape))
         .filter(|s| !shapes.contains(s))
         .collect();
     extra.sort();
     extra.dedup();
     shapes.extend(extra.into_iter().cloned());
     let category = |s: &str| shapes.iter().position(|x| x == s).expect("listed") + 1;
+    let n_img = images.len();
     let mut annotations = Vec::new();
+    let mut entries = Vec::with_capacity(n_img);
     for im in images {
-        for (object_index, shape, r, attributes) in &im.objects {
-            let [x0, y0, x1, y1] = r.extent;
-            let (h, w) = (im.entry["height"].clone(), im.entry["width"].clone());
+        let (h, w) = (im.entry["height"].clone(), im.entry["width"].clone());
+        for o in im.objects {
+            let [x0, y0, x1, y1] = o.extent;
             annotations.push(json!({
                 "id": annotations.len() + 1,
                 "image_id": im.entry["id"],
-                "category_id": category(shape),
-                "segmentation": {"size": [h, w], "counts": rle::compress(&r.counts)},
-                "area": r.area,
+                "category_id": category(&o.shape),
+                "segmentation": {"size": [h, w], "counts": o.counts},
+                "area": o.area,
                 "bbox": [x0, y0, x1 - x0 + 1, y1 - y0 + 1],
                 "iscrowd": 0,
-                "object_index": object_index,
-                "attributes": attributes,
+                "object_index": o.index,
+                "attributes": o.attributes,
             }));
         }
+        entries.push(im.entry);
     }
     let n_ann = annotations.len();
     let names = tables.map(|t| {
@@ -290,9 +324,9 @@ fn document(dir: &Path, variant: &str, split: Split, images: &[&Image]) -> (Valu
             "attribute_names": names,
         },
         "licenses": [],
-        "images": images.iter().map(|im| im.entry.clone()).collect::<Vec<_>>(),
+        "images": entries,
         "annotations": annotations,
         "categories": shapes.iter().enumerate().map(|(i, s)| json!({"id": i + 1, "name": s, "supercategory": "shape"})).collect::<Vec<_>>(),
     });
-    (doc, images.len(), n_ann)
+    (doc, n_img, n_ann)
 }

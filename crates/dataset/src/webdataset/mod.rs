@@ -29,16 +29,18 @@ pub(crate) mod record;
 pub(crate) mod shard;
 #[cfg(test)]
 mod tests;
+pub(crate) mod transform;
 
 pub use npy::*;
 pub use record::*;
 pub use shard::*;
+pub use transform::*;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::dataset::{self, Dataset, VariantDir};
+use crate::dataset::VariantDir;
 pub use crate::export::ExportError;
 use crate::export::{io_err, samples, Sample};
 use clevrtex_scene::Pass;
@@ -64,7 +66,8 @@ pub struct ExportReport {
 /// Export the dataset under `dir` (an output folder of `clevrtex generate`) as WebDataset
 /// shards of at most `shard_size` bytes into `out` (created if missing), the variant `variant`
 /// only or every variant found, with the per-object arrays padded to `objects` when given
-/// ([`object_arrays`]). Stops between samples when `stop` is raised
+/// ([`object_arrays`]), cropped (and resized) as the public loader does with `crop`
+/// ([`crop_resize`]: `Some(None)` the crop, `Some(Some(side))` the crop resized). Stops between samples when `stop` is raised
 /// ([`ExportError::Interrupted`]; the shard being written is removed).
 pub fn export(
     dir: &Path,
@@ -72,6 +75,7 @@ pub fn export(
     variant: Option<&str>,
     shard_size: u64,
     objects: Option<usize>,
+    crop: Option<Option<usize>>,
     stop: &AtomicBool,
 ) -> Result<ExportReport, ExportError> {
     let (ds, chosen, mut skipped) = crate::export::open_source(dir, out, variant)?;
@@ -99,7 +103,16 @@ pub fn export(
                     return Err(ExportError::Interrupted);
                 }
                 let mut entries = sample_entries(&ds.root, &s.files)?;
-                let extra = sample_record(&ds, s, variant, &mut entries, objects, &mut tables)?;
+                let frame = match crop {
+                    None => None,
+                    Some(side) => Some(crop_resize(&mut entries, &s.files, side).map_err(|w| {
+                        ExportError::Message(format!(
+                            "sample `{}`: {w}\nhint: check the dataset with `clevrtex verify`",
+                            s.stem
+                        ))
+                    })?),
+                };
+                let extra = sample_record(s, variant, &mut entries, objects, frame, &mut tables)?;
                 entries.extend(extra);
                 let size = tar_bytes(&entries);
                 if shard
@@ -145,6 +158,8 @@ pub fn export(
         "keys": keys,
         "objects": objects,
         "names": objects.map(|_| json!(tables.0)),
+        "crop": crop.is_some(),
+        "resize": crop.flatten(),
     });
     let index_path = out.join("index.json");
     let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise") + "\n";
@@ -171,50 +186,48 @@ pub const OBJECT_KEYS: [(&str, &str); 7] = [
     ("valid.npy", "bool (K,) slot k holds an object (k < num_objects)"),
 ];
 
-/// The sample's `json` in `entries` replaced by its [`record`]; with `objects` = `Some(K)`,
-/// its per-object arrays ([`object_arrays`]), returned to be added.
+/// The sample's `json` in `entries` replaced by its [`record`] (in the crop's `frame` when
+/// cropped); with `objects` = `Some(K)`, its per-object arrays ([`object_arrays`], from the
+/// entries' `mask.npy`), returned to be added.
 fn sample_record(
-    ds: &Dataset,
     s: &Sample,
     variant: &str,
     entries: &mut [(String, Vec<u8>)],
     objects: Option<usize>,
+    frame: Option<Frame>,
     tables: &mut NameTables,
 ) -> Result<Vec<(String, Vec<u8>)>, ExportError> {
     let Some(json) = entries.iter_mut().find(|(k, _)| k == "json") else {
         return Ok(Vec::new());
     };
     let meta_bytes = std::mem::take(&mut json.1);
-    json.1 = record(&meta_bytes, variant, s.split, s.index, &s.stem);
+    json.1 = record(&meta_bytes, variant, s.split, s.index, &s.stem, frame);
     let Some(k) = objects else {
         return Ok(Vec::new());
     };
-    let bad = |p: &Path, why: String| {
+    let meta_path = s
+        .files
+        .iter()
+        .find(|(k, _, _)| k == "json")
+        .map(|f| f.1.clone())
+        .unwrap_or_default();
+    let bad = |why: String| {
         ExportError::Message(format!(
             "`{}` {why}\nhint: check the dataset with `clevrtex verify`",
-            p.display()
+            meta_path.display()
         ))
     };
-    let Some((_, mask, _)) = s.files.iter().find(|(k, _, _)| k == "mask.npy") else {
+    let Some((_, mask)) = entries.iter().find(|(k, _)| k == "mask.npy") else {
         return Err(ExportError::Message(format!(
             "sample `{}` has no mask pass: `--objects` needs the mask\nhint: generate with `--passes` including mask, or leave `--objects` out",
             s.stem
         )));
     };
-    let png = ds
-        .read(mask, dataset::MAX_FILE_BYTES)
-        .and_then(|b| crate::png::decode(&b))
-        .map_err(|w| bad(mask, w))?;
+    let (shape, start) =
+        npy_shape(mask).ok_or_else(|| bad("has a mask that is not an array".into()))?;
+    let ids: Vec<u16> = mask[start..].iter().map(|&v| u16::from(v)).collect();
     let meta: Value = serde_json::from_slice(&meta_bytes).unwrap_or(Value::Null);
-    object_arrays(&meta, &png.data, png.width as usize, k, tables).map_err(|w| {
-        let meta_path = s
-            .files
-            .iter()
-            .find(|(k, _, _)| k == "json")
-            .map(|f| f.1.clone())
-            .unwrap_or_default();
-        bad(&meta_path, w)
-    })
+    object_arrays(&meta, &ids, shape[1], k, tables).map_err(bad)
 }
 
 /// Files in `out` named like shards that no export wrote (not a tar file, or not a regular

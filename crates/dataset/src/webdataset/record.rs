@@ -13,13 +13,34 @@ use std::collections::BTreeMap;
 
 use serde_json::{json, Value};
 
-use super::npy_header;
+use super::{npy_header, Frame};
 use crate::layout::Split;
 
 /// The shard's `json` of a sample (of `variant`, split `split`, index `index`, stem `stem`)
-/// whose metadata file holds `bytes` (already checked to be JSON by the export's reader).
-pub fn record(bytes: &[u8], variant: &str, split: Split, index: u64, stem: &str) -> Vec<u8> {
+/// whose metadata file holds `bytes` (already checked to be JSON by the export's reader);
+/// `intrinsics` and the objects' `pixel_coords` in the crop's `frame` when cropped (as the
+/// Python `Dataset` gives them), the `metadata` text as it is.
+pub fn record(
+    bytes: &[u8],
+    variant: &str,
+    split: Split,
+    index: u64,
+    stem: &str,
+    frame: Option<Frame>,
+) -> Vec<u8> {
     let meta: Value = serde_json::from_slice(bytes).unwrap_or(Value::Null);
+    let f = frame.unwrap_or(Frame {
+        x0: 0.0,
+        y0: 0.0,
+        scale: 1.0,
+    });
+    let to_frame = |mut p: Vec<f64>| {
+        if p.len() == 3 {
+            p[0] = (p[0] - f.x0) * f.scale;
+            p[1] = (p[1] - f.y0) * f.scale;
+        }
+        p
+    };
     let text = |v: &Value| v.as_str().unwrap_or("").to_string();
     let num = |v: &Value| v.as_f64().filter(|x| x.is_finite()).unwrap_or(f64::NAN);
     let nums = |v: &Value, n: usize| -> Vec<f64> {
@@ -47,7 +68,7 @@ pub fn record(bytes: &[u8], variant: &str, split: Split, index: u64, stem: &str)
                 "color": text(&o["color"]),
                 "rotation": num(&o["rotation"]),
                 "coords_3d": nums(&o["3d_coords"], 3),
-                "pixel_coords": nums(&o["pixel_coords"], 3),
+                "pixel_coords": to_frame(nums(&o["pixel_coords"], 3)),
                 "visible_pixels": o["visible_pixels"].as_i64().unwrap_or(-1),
                 "bbox": o["bbox"].as_array().map(|b| b.iter().map(|x| x.as_i64().unwrap_or(-1)).collect()).unwrap_or_else(Vec::new),
             })
@@ -61,13 +82,31 @@ pub fn record(bytes: &[u8], variant: &str, split: Split, index: u64, stem: &str)
         "num_objects": objects.len(),
         "ground_material": text(&meta["ground_material"]),
         "objects": objects,
-        "intrinsics": matrix(&meta["camera"]["intrinsics"], 3),
+        "intrinsics": intrinsics(matrix(&meta["camera"]["intrinsics"], 3), f),
         "extrinsics": matrix(&meta["camera"]["extrinsics"], 4),
         "metadata": String::from_utf8_lossy(bytes),
     });
     // NaN is not JSON: a number a sample lacks is written as null by serde_json; there is none
     // in a checked sample of ours (rotation and coordinates are always numbers).
     serde_json::to_vec(&doc).expect("JSON values serialise")
+}
+
+/// `K` of the full image as the crop's `frame` sees it: `[[s, 0, -x0 s], [0, s, -y0 s], [0, 0,
+/// 1]] @ K` (empty stays empty).
+fn intrinsics(k: Vec<Vec<f64>>, f: Frame) -> Vec<Vec<f64>> {
+    if k.len() != 3 || k.iter().any(|r| r.len() != 3) {
+        return k;
+    }
+    let row = |i: usize| -> Vec<f64> {
+        (0..3)
+            .map(|j| match i {
+                0 => f.scale * k[0][j] - f.x0 * f.scale * k[2][j],
+                1 => f.scale * k[1][j] - f.y0 * f.scale * k[2][j],
+                _ => k[2][j],
+            })
+            .collect()
+    };
+    vec![row(0), row(1), row(2)]
 }
 
 /// The export's name tables: every exported variant's built-in tables (in the order of the
