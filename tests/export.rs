@@ -521,12 +521,12 @@ fn python_fixture(
     data
 }
 
-/// A check script of `tests/export_pipelines/` run on `out` and `data`; its stdout.
+/// A check script of `tests/export_pipelines/` run with `args` (Hugging Face's cache in `hf`,
+/// offline); its stdout.
 fn python_check(
     python: &std::path::Path,
     script: &str,
-    out: &std::path::Path,
-    data: &std::path::Path,
+    args: &[&std::ffi::OsStr],
     hf: &std::path::Path,
 ) -> String {
     let o = std::process::Command::new(python)
@@ -535,31 +535,9 @@ fn python_check(
                 .join("tests/export_pipelines")
                 .join(script),
         )
-        .arg(out)
-        .arg(data)
+        .args(args)
         .env("HF_HOME", hf)
         .env("HF_DATASETS_OFFLINE", "1")
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{script}:\n{}", text(&o));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-/// A check script of `tests/export_pipelines/` run with `paths` then `args`; its stdout.
-fn python_check_args(
-    python: &std::path::Path,
-    script: &str,
-    paths: &[&std::path::Path],
-    args: &[&str],
-) -> String {
-    let o = std::process::Command::new(python)
-        .arg(
-            crate::util::repo_root()
-                .join("tests/export_pipelines")
-                .join(script),
-        )
-        .args(paths)
-        .args(args)
         .output()
         .unwrap();
     assert!(o.status.success(), "{script}:\n{}", text(&o));
@@ -583,7 +561,12 @@ fn coco_export_reads_back_exactly_through_pycocotools() {
     let (code, t) = export(&data, &out, &["--format", "coco"]);
     assert_eq!(code, Some(0), "{t}");
     let hf = dir.path().join("hf");
-    let stdout = python_check(&python, "coco_check.py", &out, &data, &hf);
+    let stdout = python_check(
+        &python,
+        "coco_check.py",
+        &[out.as_os_str(), data.as_os_str()],
+        &hf,
+    );
     // 10 samples: test 1, val 1, train 8; 2-4 objects each, object 0 hidden in every fourth.
     assert_eq!(
         stdout.lines().collect::<Vec<_>>(),
@@ -625,7 +608,12 @@ fn coco_export_reads_back_exactly_through_pycocotools() {
     );
     assert_eq!(code, Some(0), "{t}");
     assert!(copied.join("images/CLEVRTEX_clevr_000001.png").is_file());
-    let stdout = python_check(&python, "coco_check.py", &copied, &data, &hf);
+    let stdout = python_check(
+        &python,
+        "coco_check.py",
+        &[copied.as_os_str(), data.as_os_str()],
+        &hf,
+    );
     assert_eq!(
         stdout.lines().collect::<Vec<_>>(),
         ["camo val 1 3", "clevr val 1 3"]
@@ -722,7 +710,12 @@ fn webdataset_shards_of_several_variants_load_together_in_hugging_face() {
         serde_json::from_slice(&std::fs::read(out.join("index.json")).unwrap()).unwrap();
     assert_eq!(index["objects"], 6, "{index}");
     assert_eq!(index["names"]["shape"][0], "cube", "{index}");
-    let stdout = python_check(&python, "hf_check.py", &out, &data, &dir.path().join("hf"));
+    let stdout = python_check(
+        &python,
+        "hf_check.py",
+        &[out.as_os_str(), data.as_os_str()],
+        &dir.path().join("hf"),
+    );
     let last = stdout.lines().last().unwrap_or_default();
     assert!(
         last.starts_with("variants: camo clevr samples: 20 torch: "),
@@ -744,7 +737,17 @@ fn webdataset_shards_of_several_variants_load_together_in_hugging_face() {
         &["--crop", "--resize", "16", "--objects", "6"],
     );
     assert_eq!(code, Some(0), "{t}");
-    let stdout = python_check_args(&python, "crop_check.py", &[&cropped, &data], &["16", "6"]);
+    let stdout = python_check(
+        &python,
+        "crop_check.py",
+        &[
+            cropped.as_os_str(),
+            data.as_os_str(),
+            "16".as_ref(),
+            "6".as_ref(),
+        ],
+        &dir.path().join("hf"),
+    );
     assert_eq!(stdout.trim(), "samples: 20", "{stdout}");
     let (code, t) = export(&data, &dir.path().join("not-written"), &["--resize", "16"]);
     assert_eq!(code, Some(1), "{t}");
