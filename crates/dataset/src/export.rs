@@ -9,7 +9,6 @@ use std::path::Path;
 
 use crate::dataset::{self, Dataset, DatasetError, Kind, SampleRef, VariantDir};
 use crate::layout::Split;
-use crate::webdataset::{SampleFile, ShardError};
 use clevrtex_scene::passes::WebdatasetForm;
 use clevrtex_scene::Pass;
 use serde_json::Value;
@@ -39,9 +38,9 @@ pub enum ExportError {
     /// Anything else, with the file and what to do.
     #[error("{0}")]
     Message(String),
-    /// A shard could not be written.
+    /// A shard could not be written (a `webdataset::ShardError`, kept as the source chain).
     #[error(transparent)]
-    Shard(#[from] ShardError),
+    Shard(Box<dyn std::error::Error + Send + Sync>),
     /// The dataset could not be opened.
     #[error(transparent)]
     Dataset(#[from] DatasetError),
@@ -49,6 +48,10 @@ pub enum ExportError {
     #[error("interrupted")]
     Interrupted,
 }
+
+/// One file of a sample in an export: its key (the extension after the stem), its path in the
+/// dataset, and the pass to decode it as when it becomes a `.npy` (`None`: the file's bytes).
+pub type SampleFile = (String, std::path::PathBuf, Option<Pass>);
 
 /// One sample to export: its metadata and the files it becomes.
 pub struct Sample {

@@ -175,6 +175,12 @@ pub fn export(
     })
 }
 
+impl From<ShardError> for ExportError {
+    fn from(e: ShardError) -> ExportError {
+        ExportError::Shard(Box::new(e))
+    }
+}
+
 /// The per-object keys of `--objects K` and what each holds.
 pub const OBJECT_KEYS: [(&str, &str); 7] = [
     ("shape.npy", "int64 (K,) shape ids into `names.shape`; -1 for padding"),

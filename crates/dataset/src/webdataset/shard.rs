@@ -6,16 +6,13 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic::AtomicFile;
 use crate::layout::Split;
-use clevrtex_scene::Pass;
 use serde_json::{json, Value};
 
 use crate::dataset;
 
 use super::npy::pass_npy;
 
-/// One file of a sample in a shard: its key (the extension after the stem), its path in the
-/// dataset, and the pass to decode it as when it becomes a `.npy` (`None`: the file's bytes).
-pub type SampleFile = (String, PathBuf, Option<Pass>);
+pub use crate::export::SampleFile;
 
 /// What can go wrong while writing a shard. Shown as the command's error: the message, then
 /// (as the error's source) the OS error.
