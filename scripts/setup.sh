@@ -107,6 +107,10 @@ if [ "$test_venv" = 1 ]; then
   if ! .venv-test/bin/python -c 'import datasets' >/dev/null 2>&1; then
     .venv-test/bin/pip install --quiet --disable-pip-version-check 'datasets>=2.16,<5'
   fi
+  # pycocotools: tests/export.rs reads `export --format coco` files with it (and docs/output-format.md).
+  if ! .venv-test/bin/python -c 'import pycocotools' >/dev/null 2>&1; then
+    .venv-test/bin/pip install --quiet --disable-pip-version-check 'pycocotools>=2.0.7,<3'
+  fi
   # tests/eval_reference/harness.py (the public evaluators in numpy; see docs/eval.md).
   if ! .venv-test/bin/python -c 'import numpy, scipy, sklearn, PIL' >/dev/null 2>&1; then
     .venv-test/bin/pip install --quiet --disable-pip-version-check numpy scipy scikit-learn pillow

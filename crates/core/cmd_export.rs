@@ -1,10 +1,14 @@
 //! `clevrtex export --format webdataset DIR OUT`: the dataset as WebDataset tar shards, to
-//! stream into training. The export is `clevrtex_dataset::webdataset::export` (the layout of
-//! the shards is documented there and in docs/output-format.md); this parses and prints.
+//! stream into training; `--format coco`: COCO instances JSON per variant and split, for
+//! detection and instance-segmentation code. The exports are
+//! `clevrtex_dataset::webdataset::export` and `clevrtex_dataset::coco::export_coco` (their
+//! layouts are documented there and in docs/output-format.md); this parses and prints.
 
 use std::path::PathBuf;
 
 use anyhow::bail;
+use clevrtex_dataset::coco::{export_coco, CocoOptions};
+use clevrtex_dataset::layout::Split;
 use clevrtex_dataset::webdataset::{export, ExportError};
 
 use crate::exit::{self, CmdResult};
@@ -14,6 +18,19 @@ use crate::exit::{self, CmdResult};
 pub enum Format {
     /// Tar shards for the `webdataset` library.
     Webdataset,
+    /// COCO instances JSON (RLE masks, boxes), one file per variant and split.
+    Coco,
+}
+
+/// The splits `--split` takes.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum SplitArg {
+    /// The test split.
+    Test,
+    /// The validation split.
+    Val,
+    /// The training split.
+    Train,
 }
 
 /// Arguments of `clevrtex export`.
@@ -34,11 +51,41 @@ pub struct Args {
     /// Largest shard in bytes (a sample is never split), 10240 to 10^12.
     #[arg(long, default_value_t = 1_000_000_000, value_name = "BYTES", value_parser = clap::builder::RangedU64ValueParser::<u64>::new().range(10_240..=1_000_000_000_000))]
     shard_size: u64,
+    /// `--format webdataset`: add per-object arrays padded to K objects (ids of shape, size,
+    /// material, colour; boxes; visibility), 1 to 255.
+    #[arg(long, value_name = "K", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=255))]
+    objects: Option<usize>,
+    /// `--format webdataset`: crop every image and pass to the centre square of side
+    /// int(0.8 min(W, H)), as the public loader does (`crop=True`).
+    #[arg(long)]
+    crop: bool,
+    /// `--format webdataset`, with `--crop`: resize the crop to N x N (the public loader's
+    /// 128), Pillow-exact bilinear for the image and albedo, nearest for the mask and data passes.
+    #[arg(long, value_name = "N", value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096))]
+    resize: Option<usize>,
+    /// `--format coco`: export only this split (default: every split, one file each).
+    #[arg(long, value_enum)]
+    split: Option<SplitArg>,
+    /// `--format coco`: copy the images to `OUT/images/` (default: `file_name` is the image
+    /// where it lies, an absolute path).
+    #[arg(long)]
+    copy_images: bool,
 }
 
 /// Run `clevrtex export`.
 pub fn run(args: Args) -> CmdResult {
-    let Format::Webdataset = args.format;
+    if let Format::Coco = args.format {
+        if args.objects.is_some() || args.crop || args.resize.is_some() {
+            bail!("`--objects`, `--crop` and `--resize` are options of `--format webdataset`: COCO has one annotation per object at the image's own size\nhint: leave them out");
+        }
+        return run_coco(args);
+    }
+    if args.split.is_some() || args.copy_images {
+        bail!("`--split` and `--copy-images` are options of `--format coco`\nhint: leave them out, or add `--format coco`");
+    }
+    if args.resize.is_some() && !args.crop {
+        bail!("`--resize` resizes the centre crop, as the public loader does\nhint: add `--crop`");
+    }
     if !args.dir.is_dir() {
         bail!(
             "`{}` is not a folder\nhint: pass the `--out` folder of `clevrtex generate`",
@@ -53,6 +100,8 @@ pub fn run(args: Args) -> CmdResult {
         &args.out,
         args.variant.as_deref(),
         args.shard_size,
+        args.objects,
+        args.crop.then_some(args.resize),
         &stop,
     ) {
         Ok(r) => r,
@@ -86,6 +135,57 @@ pub fn run(args: Args) -> CmdResult {
     if !r.skipped.is_empty() {
         eprintln!(
             "warning: {} file(s) or folder(s) not followed, not read or refused by the checks of every reader; their samples are not exported:",
+            r.skipped.len()
+        );
+        for s in &r.skipped {
+            eprintln!("  {s}");
+        }
+        eprintln!("hint: check the dataset with `clevrtex verify`");
+        return Ok(exit::PARTIAL);
+    }
+    Ok(exit::OK)
+}
+
+/// `clevrtex export --format coco`.
+fn run_coco(args: Args) -> CmdResult {
+    if !args.dir.is_dir() {
+        bail!(
+            "`{}` is not a folder\nhint: pass the `--out` folder of `clevrtex generate`",
+            args.dir.display()
+        );
+    }
+    let opts = CocoOptions {
+        variant: args.variant.clone(),
+        split: args.split.map(|s| match s {
+            SplitArg::Test => Split::Test,
+            SplitArg::Val => Split::Val,
+            SplitArg::Train => Split::Train,
+        }),
+        copy_images: args.copy_images,
+    };
+    let stop = crate::interrupt::flag(crate::interrupt::OnInterrupt::FlagOnly);
+    let started = std::time::Instant::now();
+    let r = match export_coco(&args.dir, &args.out, &opts, &stop) {
+        Ok(r) => r,
+        Err(ExportError::Interrupted) => return Err(exit::Interrupted.into()),
+        Err(e) => return Err(e.into()),
+    };
+    let secs = started.elapsed().as_secs_f64();
+    for (path, images, annotations) in &r.files {
+        println!(
+            "wrote `{}`: {images} images, {annotations} annotations",
+            path.display()
+        );
+    }
+    println!(
+        "exported {} images into {} COCO file(s) under `{}` in {secs:.1} s",
+        r.files.iter().map(|f| f.1).sum::<usize>(),
+        r.files.len(),
+        args.out.display()
+    );
+    if !r.skipped.is_empty() {
+        eprintln!(
+            "warning: {} file(s) or folder(s) not followed or not read; their samples are not exported:",
             r.skipped.len()
         );
         for s in &r.skipped {

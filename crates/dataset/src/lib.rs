@@ -3,11 +3,12 @@
 //! reader of a dataset folder ([`dataset`]: the walk, capped reads beneath the root, the typed
 //! metadata view, the splits), the run manifests ([`manifest`]: types, reading, writing), the
 //! one atomic writer ([`atomic`]), the range lock of a dataset folder ([`run_lock`]),
-//! `clevrtex verify` ([`verify`]), the WebDataset `export` ([`webdataset`]) and the dataset
-//! card ([`card`]).
+//! `clevrtex verify` ([`verify`]), what every export reads ([`export`]), the WebDataset
+//! `export` ([`webdataset`]), the COCO export ([`coco`]), the public loader's crop and resize
+//! ([`resize`]) and the dataset card ([`card`]).
 //!
-//! The feature `tools` (default) holds [`run_lock`], `verify`, `webdataset`, `card` and
-//! [`exr`]; the readers (`eval`, `report`, the Python package) build without it.
+//! The feature `tools` (default) holds [`run_lock`], `verify`, `export`, `webdataset`, `coco`,
+//! `card` and [`exr`]; the readers (`eval`, `report`, the Python package) build without it.
 //!
 //! Nothing here starts Blender: `clevrtex-render` writes samples through [`layout`],
 //! [`atomic`] and [`manifest`], and every reader (`verify`, `export`, `report`, `eval`, the
@@ -29,14 +30,19 @@ pub mod atomic;
 pub mod card;
 #[cfg(feature = "tools")]
 mod card_parts;
+#[cfg(feature = "tools")]
+pub mod coco;
 pub mod dataset;
 pub mod error;
+#[cfg(feature = "tools")]
+pub mod export;
 #[cfg(feature = "tools")]
 pub mod exr;
 pub mod fingerprint;
 pub mod layout;
 pub mod manifest;
 pub mod png;
+pub mod resize;
 #[cfg(feature = "tools")]
 pub mod run_lock;
 #[cfg(feature = "tools")]

@@ -79,3 +79,17 @@ pub fn decode(bytes: &[u8]) -> Result<DecodedPng, String> {
         data,
     })
 }
+
+/// An 8-bit RGB PNG of `width x height` interleaved `rgb` (the export's cropped images).
+pub fn encode_rgb8(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, png::EncodingError> {
+    let mut bytes = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut bytes, width, height);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc.write_header()?;
+        w.write_image_data(rgb)?;
+        w.finish()?;
+    }
+    Ok(bytes)
+}

@@ -29,7 +29,8 @@ pub mod output;
 pub mod predict;
 mod protocol;
 pub mod read;
-pub mod resize;
+/// The benchmark's crop and resize (in `clevrtex-dataset`, which the export shares it with).
+pub use clevrtex_dataset::resize;
 
 pub use dataset::Split;
 pub use error::EvalError;

@@ -156,25 +156,14 @@ pub(crate) fn variant_names(
     let Ok(c) = clevrtex_scene::config::Config::builtin(variant) else {
         return Ok((!user.is_empty()).then(|| (Vec::new(), Vec::new(), user, Vec::new())));
     };
-    let mut materials: Vec<String> = c.objects.materials.clone();
-    materials.extend(c.background.materials.iter().cloned());
-    materials.sort();
-    materials.dedup();
+    let t = c.name_tables();
+    let mut materials = t.material;
     for u in user {
         if !materials.contains(&u) {
             materials.push(u);
         }
     }
-    Ok(Some((
-        c.objects.shapes.clone(),
-        c.objects
-            .sizes
-            .iter()
-            .map(|s| (s.name.clone(), s.scale))
-            .collect(),
-        materials,
-        c.objects.colors.iter().map(|c| c.name.clone()).collect(),
-    )))
+    Ok(Some((t.shape, t.size, materials, t.color)))
 }
 
 /// A sample's metadata, read as every reader of a dataset reads it

@@ -273,7 +273,8 @@ def test_dataset_equals_the_public_loader():
         assert img.dtype == np.float32 and img.shape == (3, 128, 128)
         assert np.array_equal(img, want_img), f"image {index}"
         assert np.array_equal(msk[0], want_msk), f"mask {index}"
-        assert set(meta) == {"ground_material", "objects"}
+        assert set(meta) == {"ground_material", "objects", "stem"}
+        assert meta["stem"] == f"CLEVRTEX_vbg_{index:06}"  # issue 43: predictions are named by it
         assert all("color" in o for o in meta["objects"])  # vbg keeps colours
     # Splits as the public loader: test is the first int(0.1 N).
     assert len(clevrtex.Dataset(GT, "vbg", split="test")) == 1

@@ -235,3 +235,55 @@ def test_user_materials_of_the_manifest_are_in_the_material_name_table(data):
     it = ds[3]
     assert ds.names["material"][it["material"][1]] == "Bricks01"
     assert ds.names["material"][it["material"][0]] == "rubber"
+
+
+def _eval(preds, data):
+    """`clevrtex eval PREDS DATA --protocol native` (the CLI of this build) as its JSON."""
+    import subprocess
+    import tempfile
+
+    exe = os.environ.get("CLEVRTEX_BIN")
+    if not exe:
+        pytest.skip("CLEVRTEX_BIN is not set (tests/python_package.rs sets it)")
+    with tempfile.TemporaryDirectory() as d:
+        j = os.path.join(d, "r.json")
+        r = subprocess.run([exe, "eval", preds, data, "--variant", "clevr", "--split", "all", "--protocol", "native", "--bootstrap", "0", "--json", j], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        with open(j) as f:
+            return json.load(f)
+
+
+def test_stems_and_predictions_clevrtex_eval_reads(data, tmp_path):
+    # Issue 43: every item carries its stem, and `write_predictions` writes a batch under the
+    # names `clevrtex eval` reads: the true masks and images score perfectly.
+    ds = clevrtex.Dataset(data, "clevr", split="all", crop=False, resize=None)
+    index, img, msk, meta = ds[3]
+    assert meta["stem"] == ds.stem(3) == STEM.format(index)
+    item = _ds(data)[5]
+    assert item["stem"] == STEM.format(5) and item["metadata"]["stem"] == STEM.format(5)
+    batch = clevrtex.collate([_ds(data)[0], _ds(data)[1]], tensors=False)
+    assert batch["stem"] == [STEM.format(0), STEM.format(1)] and batch["mask"].shape[0] == 2
+    stems = [ds.stem(i) for i in range(len(ds))]
+    masks = np.stack([ds[i][2] for i in range(len(ds))])  # (B, 1, H, W) ids
+    images = np.stack([ds[i][1] for i in range(len(ds))])  # (B, 3, H, W) in [0, 1]
+    png = str(tmp_path / "png")
+    written = clevrtex.write_predictions(png, stems, masks, recon=images)
+    assert sorted(os.listdir(png)) == sorted(written_name for s in stems for written_name in (s + "_mask.png", s + "_recon.png"))
+    assert written[:2] == [os.path.join(png, stems[0] + "_mask.png"), os.path.join(png, stems[0] + "_recon.png")]
+    # Soft masks (B, K, H, W), argmax over K, as a model gives them; `.npz` with the recon.
+    soft = (masks == np.arange(4)[None, :, None, None]).astype(np.float32)
+    npz = str(tmp_path / "npz")
+    clevrtex.write_predictions(npz, stems, soft, recon=images.transpose(0, 2, 3, 1), format="npz")
+    for preds in (png, npz):
+        r = _eval(preds, data)
+        assert r["metrics"]["mIoU"] == 1.0 and r["metrics"]["ARI"] == 1.0, (preds, r["metrics"])
+        assert r["metrics"]["MSE"] < 1e-9, (preds, r["metrics"])  # 8-bit PNG: exact; float32: rounding
+    with pytest.raises(ValueError, match="stem '../x' is not a plain file name"):
+        clevrtex.write_predictions(png, ["../x"], masks[:1])
+    with pytest.raises(ValueError, match="2 stems for 10 masks"):
+        clevrtex.write_predictions(png, stems[:2], masks)
+    with pytest.raises(ValueError, match="unknown format `jpg`"):
+        clevrtex.write_predictions(png, stems, masks, format="jpg")
+    with pytest.raises(ValueError, match="`recon` is"):
+        clevrtex.write_predictions(str(tmp_path / "none"), stems, masks, recon=images[:, :2])
+    assert not os.path.exists(tmp_path / "none")

@@ -78,3 +78,29 @@ def test_decode_names_the_sample_and_key_of_what_is_wrong(sample, message):
         wds.decode({"__key__": "S", **sample})
     with pytest.raises(TypeError):
         wds.decode([1, 2])
+
+
+def test_decode_reads_the_record_and_the_per_object_arrays():
+    # Issue 43: the shard's `json` is a record of one schema holding the metadata file's text;
+    # `--objects K` adds per-object arrays. HF widens ints to int64: decode gives the dtypes back.
+    meta = {"stem": "CLEVRTEX_camo_000004", "num_objects": 1, "objects": [{"color": None}]}
+    record = {"stem": meta["stem"], "objects": [{"color": ""}], "metadata": json.dumps(meta)}
+    shape = np.array([2, -1, -1], np.int64)
+    bbox = np.array([[0, 1, 1, 1], [0, 0, 0, 0], [0, 0, 0, 0]], np.float32)
+    vis = np.array([True, False, False])
+    raw = {"__key__": meta["stem"], "json": json.dumps(record).encode(), "mask.npy": npy(MASK),
+           "shape.npy": npy(shape), "bbox.npy": npy(bbox), "visibility.npy": npy(vis)}
+    hf = {"__key__": meta["stem"], "json": record, "mask.npy": MASK.astype(np.int64),
+          "shape.npy": shape.tolist(), "bbox.npy": bbox.tolist(), "visibility.npy": vis.tolist()}
+    for form in (raw, hf):
+        s = wds.decode(form)
+        assert s["stem"] == s["key"] == meta["stem"] and s["metadata"] == meta and s["record"] == record
+        assert s["mask"].dtype == np.uint8 and np.array_equal(s["mask"], MASK)
+        assert s["shape"].dtype == np.int64 and np.array_equal(s["shape"], shape)
+        assert s["bbox"].dtype == np.float32 and np.array_equal(s["bbox"], bbox)
+        assert s["visibility"].dtype == bool and np.array_equal(s["visibility"], vis)
+        assert "color" not in s
+    with pytest.raises(ValueError, match="key `bbox.npy` is a float32 array of shape \\(3,\\)"):
+        wds.decode(dict(raw, **{"bbox.npy": npy(np.zeros(3, np.float32))}))
+    with pytest.raises(ValueError, match="holds `metadata` that is not JSON"):
+        wds.decode(dict(raw, json=json.dumps(dict(record, metadata="{nope")).encode()))

@@ -8,7 +8,7 @@
 //! shard a sample is `<stem>.<key>` for each pass it has, the key and form from the pass
 //! table (`webdataset_key`, `webdataset_form`): `png` and `albedo.png` the dataset's PNGs,
 //! `mask.npy` (uint8 ids), `depth.npy` (float32 metres, background +inf), `normal.npy` and
-//! `shadow.npy` arrays decoded from the PNGs ([`pass_npy`], so no colour decoder can take them
+//! `shadow.npy` arrays decoded from the PNGs ([`decoded_npy`], so no colour decoder can take them
 //! for colours), and `<stem>.json`, so WebDataset's key is the stem. Splits are each sample's recorded `split`
 //! (else, for the published ClevrTex, the public loader's position rule:
 //! [`crate::dataset::splits`], the rule of every reader). The files are those of
@@ -25,60 +25,26 @@
 //! (`shard.rs`), a pass decoded into its `.npy` array (`npy.rs`). Everything is re-exported here.
 
 pub(crate) mod npy;
+pub(crate) mod record;
 pub(crate) mod shard;
 #[cfg(test)]
 mod tests;
+pub(crate) mod transform;
 
 pub use npy::*;
+pub use record::*;
 pub use shard::*;
+pub use transform::*;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::dataset::{Dataset, DatasetError, Kind, SampleRef, VariantDir};
-use crate::layout::Split;
-use clevrtex_scene::passes::WebdatasetForm;
+use crate::dataset::VariantDir;
+pub use crate::export::ExportError;
+use crate::export::{io_err, samples, Sample};
 use clevrtex_scene::Pass;
 use serde_json::{json, Value};
-
-use crate::dataset;
-
-/// What can go wrong in an export. Shown as the command's error: the message, then (as the
-/// error's source) the cause.
-#[derive(Debug, thiserror::Error)]
-pub enum ExportError {
-    /// A file or folder could not be read, created, written or removed.
-    #[error("{what}")]
-    Io {
-        /// What failed and what to do.
-        what: String,
-        /// The OS error.
-        #[source]
-        cause: std::io::Error,
-    },
-    /// A sample's metadata is not JSON.
-    #[error("{what}")]
-    Json {
-        /// Which file, and what to do.
-        what: String,
-        /// The parser's error.
-        #[source]
-        cause: serde_json::Error,
-    },
-    /// Anything else, with the file and what to do.
-    #[error("{0}")]
-    Message(String),
-    /// A shard could not be written.
-    #[error(transparent)]
-    Shard(#[from] ShardError),
-    /// The dataset could not be opened.
-    #[error(transparent)]
-    Dataset(#[from] DatasetError),
-    /// The stop flag was raised (Ctrl-C, SIGTERM): the shard being written was removed.
-    #[error("interrupted")]
-    Interrupted,
-}
 
 /// What [`export`] did.
 #[derive(Debug)]
@@ -99,217 +65,25 @@ pub struct ExportReport {
     pub skipped: Vec<String>,
 }
 
-/// One sample to export: its metadata and the files it becomes.
-struct Sample {
-    index: u64,
-    /// Its position among the variant's samples with metadata (for [`dataset::splits`]).
-    pos: usize,
-    stem: String,
-    split: Split,
-    files: Vec<SampleFile>,
-    /// What its passes are checked against.
-    check: PassCheck,
-}
-
-/// The samples of one variant folder of `ds` (found by [`Dataset::open`]), in index order,
-/// and what was not followed or not read (samples with such files are left out).
-/// File names come from the layout and the pass table, never from the metadata: a
-/// `*_filename` key only says whether the pass was written, and must name the layout's file
-/// ([`dataset::listed_passes`]).
-fn samples(
-    ds: &Dataset,
-    vd: &VariantDir,
-    skipped: &mut Vec<String>,
-) -> Result<Vec<Sample>, ExportError> {
-    if let Some((dir, e)) = vd.unreadable.first() {
-        return Err(ExportError::Message(format!(
-            "cannot read `{}`: {e}",
-            dir.display()
-        )));
-    }
-    skipped.extend(vd.skipped_for_metadata().map(ToString::to_string));
-    let found: BTreeMap<u64, &SampleRef> = vd
-        .samples
-        .iter()
-        .filter(|s| s.has_metadata())
-        .map(|s| (s.index, s))
-        .collect();
-    let mut out = Vec::new();
-    let mut recorded = vec![None; found.len()];
-    'samples: for (pos, (index, s)) in found.into_iter().enumerate() {
-        let stem = s.stem.clone();
-        let meta_path = s.metadata_path();
-        let bytes = match ds.read(&meta_path, dataset::MAX_METADATA_BYTES) {
-            Ok(b) => b,
-            Err(why) => {
-                skipped.push(format!("`{}` {why}", meta_path.display()));
-                continue;
-            }
-        };
-        let meta: Value = serde_json::from_slice(&bytes).map_err(|cause| ExportError::Json {
-            what: format!(
-                "`{}` is not valid metadata\nhint: check the dataset with `clevrtex verify`",
-                meta_path.display()
-            ),
-            cause,
-        })?;
-        dataset::check_metadata(&meta, &meta_path.display().to_string()).map_err(|e| {
-            ExportError::Message(format!(
-                "{e}\nhint: check the dataset with `clevrtex verify`"
-            ))
-        })?;
-        let bad = |e: dataset::MetadataError| {
-            ExportError::Message(format!(
-                "{e}\nhint: check the dataset with `clevrtex verify`; export takes file names from the layout, not from the metadata"
-            ))
-        };
-        let file = meta_path.display().to_string();
-        // Passes whose encoding the metadata describes (ours) become arrays by it; the mask's
-        // ids are its pixels in any dataset. The published ClevrTex's other passes (another
-        // encoding, not described) stay PNGs under `<pass>.png`.
-        let view = dataset::MetadataView::of(&meta, &file).ok();
-        let described = view.as_ref().map(|v| v.passes.clone()).unwrap_or_default();
-        // Ours give the size and objects every pass is checked against; the downloaded
-        // ClevrTex's metadata has no size (`check_metadata` typed its `num_objects`).
-        let check = PassCheck {
-            size: view.as_ref().map(|v| (v.width, v.height)),
-            num_objects: view.as_ref().map_or_else(
-                || meta["num_objects"].as_u64().unwrap_or(0).min(255) as usize,
-                |v| v.num_objects,
-            ),
-        };
-        let mut files: Vec<SampleFile> = dataset::listed_passes(&meta, &file, &stem)
-            .map_err(bad)?
-            .into_iter()
-            .map(|pass| {
-                let spec = pass.spec();
-                let (key, npy) = match spec.webdataset_form {
-                    WebdatasetForm::Npy { .. }
-                        if pass == Pass::Mask || described.contains(&pass) =>
-                    {
-                        (spec.webdataset_key.to_string(), true)
-                    }
-                    WebdatasetForm::Npy { .. } => (format!("{}.png", spec.name), false),
-                    WebdatasetForm::Png => (spec.webdataset_key.to_string(), false),
-                };
-                SampleFile {
-                    key,
-                    path: s.pass_path(pass),
-                    pass: Some(pass),
-                    npy,
-                }
-            })
-            .collect();
-        if files.is_empty() {
-            return Err(ExportError::Message(format!(
-                "`{file}` lists no pass (no `*_filename` key names a file): the sample has nothing to export\nhint: check the dataset with `clevrtex verify`"
-            )));
-        }
-        recorded[pos] = dataset::recorded_split(&meta["split"], &vd.variant, &file).map_err(bad)?;
-        files.push(SampleFile {
-            key: "json".into(),
-            path: meta_path,
-            pass: None,
-            npy: false,
-        });
-        for SampleFile { path: p, .. } in &files {
-            match ds.classify(p) {
-                Kind::File => {}
-                Kind::Skipped(why) => {
-                    skipped.push(format!("`{}` {why}", p.display()));
-                    continue 'samples;
-                }
-                Kind::Dir => {
-                    skipped.push(format!("`{}` is a folder", p.display()));
-                    continue 'samples;
-                }
-            }
-            std::fs::metadata(p).map_err(|cause| ExportError::Io {
-                what: format!(
-                    "`{}` (a pass the metadata of `{stem}` lists) is missing\nhint: check the dataset with `clevrtex verify`",
-                    p.display()
-                ),
-                cause,
-            })?;
-        }
-        out.push(Sample {
-            index,
-            pos,
-            split: Split::Train,
-            stem,
-            files,
-            check,
-        });
-    }
-    // The one split rule of every reader: the recorded split, else by position.
-    let splits = dataset::splits(&vd.variant, &recorded);
-    for s in &mut out {
-        s.split = splits[s.pos];
-    }
-    Ok(out)
-}
-
-fn io_err(what: String) -> impl FnOnce(std::io::Error) -> ExportError {
-    move |cause| ExportError::Io { what, cause }
-}
-
 /// Export the dataset under `dir` (an output folder of `clevrtex generate`) as WebDataset
 /// shards of at most `shard_size` bytes into `out` (created if missing), the variant `variant`
-/// only or every variant found. Stops between samples when `stop` is raised
+/// only or every variant found, with the per-object arrays padded to `objects` when given
+/// ([`object_arrays`]), cropped (and resized) as the public loader does with `crop`
+/// ([`crop_resize`]: `Some(None)` the crop, `Some(Some(side))` the crop resized). Stops between samples when `stop` is raised
 /// ([`ExportError::Interrupted`]; the shard being written is removed).
 pub fn export(
     dir: &Path,
     out: &Path,
     variant: Option<&str>,
     shard_size: u64,
+    objects: Option<usize>,
+    crop: Option<Option<usize>>,
     stop: &AtomicBool,
 ) -> Result<ExportReport, ExportError> {
-    let ds = Dataset::open(dir).map_err(|e| match e {
-        DatasetError::Unreadable { cause, .. } => ExportError::Io {
-            what: format!("cannot read `{}`", dir.display()),
-            cause,
-        },
-        other => other.into(),
-    })?;
-    // Shards written into the dataset would become stray files of it (and a later export of
-    // it would pack nothing new): refused, as `preview` and `report` refuse an `--out` there.
-    let existing = out
-        .ancestors()
-        .find(|p| p.exists())
-        .unwrap_or(Path::new("."));
-    if existing
-        .canonicalize()
-        .is_ok_and(|o| o.starts_with(&ds.root))
-    {
-        return Err(ExportError::Message(format!(
-            "`{}` is inside the dataset `{}`: its shards would become files of the dataset\nhint: export into a folder outside the dataset",
-            out.display(),
-            dir.display()
-        )));
-    }
-    let mut skipped = Vec::new();
-    let wanted = |v: &str| variant.is_none_or(|want| want == v);
-    // A `clevrtex_<variant>` folder given itself is not an output folder: nothing under it.
-    let variants: Vec<&VariantDir> = if ds.is_variant_dir {
-        Vec::new()
-    } else {
-        for (v, skip) in &ds.skipped {
-            if wanted(v) {
-                skipped.push(skip.to_string());
-            }
-        }
-        ds.variants
-            .iter()
-            .filter(|vd| wanted(&vd.variant))
-            .collect()
-    };
-    if variants.is_empty() {
-        return Err(ExportError::Message(format!(
-            "no `clevrtex_<variant>` folder{} in `{}`\nhint: pass the `--out` folder of `clevrtex generate`",
-            variant.map(|v| format!(" for `{v}`")).unwrap_or_default(),
-            dir.display()
-        )));
-    }
+    let (ds, chosen, mut skipped) = crate::export::open_source(dir, out, variant)?;
+    let variants: Vec<&VariantDir> = chosen.iter().map(|&i| &ds.variants[i]).collect();
+    let names: Vec<&str> = variants.iter().map(|v| v.variant.as_str()).collect();
+    let mut tables = NameTables::of(&names);
     std::fs::create_dir_all(out).map_err(io_err(format!("cannot create `{}`", out.display())))?;
     refuse_foreign_shards(out)?;
     let dead_temps = remove_dead_temporaries(out)?;
@@ -332,7 +106,7 @@ pub fn export(
                     return Err(ExportError::Interrupted);
                 }
                 // A sample whose passes fail the checks of every reader is left out, named.
-                let entries = match sample_entries(&ds.root, &s.files, &s.check) {
+                let mut entries = match sample_entries(&ds.root, &s.files, &s.check) {
                     Ok(e) => e,
                     Err(ShardError::Refused(why)) => {
                         skipped.push(format!("{why} (sample `{}` left out)", s.stem));
@@ -340,6 +114,17 @@ pub fn export(
                     }
                     Err(e) => return Err(e.into()),
                 };
+                let frame = match crop {
+                    None => None,
+                    Some(side) => Some(crop_resize(&mut entries, &s.files, side).map_err(|w| {
+                        ExportError::Message(format!(
+                            "sample `{}`: {w}\nhint: check the dataset with `clevrtex verify`",
+                            s.stem
+                        ))
+                    })?),
+                };
+                let extra = sample_record(s, variant, &mut entries, objects, frame, &mut tables)?;
+                entries.extend(extra);
                 let size = tar_bytes(&entries);
                 if shard
                     .as_ref()
@@ -367,15 +152,25 @@ pub fn export(
     }
     let stale = remove_stale(out, &written)?;
     let shards = index.len();
+    let mut keys: Vec<Value> = std::iter::once(json!({"key": "__key__", "holds": "the sample's stem"}))
+        .chain(Pass::ALL.map(|p| json!({"key": p.spec().webdataset_key, "holds": p.spec().webdataset_doc})))
+        .chain([json!({"key": "json", "holds": "the sample's record, one schema for every variant: stem, variant, split, index, num_objects, ground_material, objects (shape, size, material, color, rotation, coords_3d, pixel_coords, visible_pixels, bbox; \"\", -1 or [] where a sample lacks one), intrinsics, extrinsics, and `metadata`: the metadata file's text (docs/output-format.md)"})])
+        .collect();
+    if let Some(k) = objects {
+        keys.extend(OBJECT_KEYS.iter().map(
+            |(key, holds)| json!({"key": key, "holds": holds.replace("K", &format!("K = {k}"))}),
+        ));
+    }
     let doc = json!({
         "format": "webdataset",
         "source": dir.display().to_string(),
         "samples": total_samples,
         "shards": index,
-        "keys": std::iter::once(json!({"key": "__key__", "holds": "the sample's stem"}))
-            .chain(Pass::ALL.map(|p| json!({"key": p.spec().webdataset_key, "holds": p.spec().webdataset_doc})))
-            .chain([json!({"key": "json", "holds": "the sample's metadata (docs/output-format.md)"})])
-            .collect::<Vec<_>>(),
+        "keys": keys,
+        "objects": objects,
+        "names": objects.map(|_| json!(tables.0)),
+        "crop": crop.is_some(),
+        "resize": crop.flatten(),
     });
     let index_path = out.join("index.json");
     let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise") + "\n";
@@ -429,6 +224,67 @@ fn remove_dead_temporaries(out: &Path) -> Result<Vec<String>, ExportError> {
         }
     }
     Ok(removed)
+}
+
+impl From<ShardError> for ExportError {
+    fn from(e: ShardError) -> ExportError {
+        ExportError::Shard(Box::new(e))
+    }
+}
+
+/// The per-object keys of `--objects K` and what each holds.
+pub const OBJECT_KEYS: [(&str, &str); 7] = [
+    ("shape.npy", "int64 (K,) shape ids into `names.shape`; -1 for padding"),
+    ("size.npy", "int64 (K,) size ids into `names.size`; -1 for padding"),
+    ("material.npy", "int64 (K,) material ids into `names.material`; -1 for padding"),
+    ("color.npy", "int64 (K,) colour ids into `names.color`; -1 for padding and where the variant has no colours"),
+    ("bbox.npy", "float32 (K, 4) [x_min, y_min, x_max, y_max], inclusive pixels of the object in mask.npy; 0 where not visible"),
+    ("visibility.npy", "bool (K,) the object has a pixel in mask.npy"),
+    ("valid.npy", "bool (K,) slot k holds an object (k < num_objects)"),
+];
+
+/// The sample's `json` in `entries` replaced by its [`record`] (in the crop's `frame` when
+/// cropped); with `objects` = `Some(K)`, its per-object arrays ([`object_arrays`], from the
+/// entries' `mask.npy`), returned to be added.
+fn sample_record(
+    s: &Sample,
+    variant: &str,
+    entries: &mut [(String, Vec<u8>)],
+    objects: Option<usize>,
+    frame: Option<Frame>,
+    tables: &mut NameTables,
+) -> Result<Vec<(String, Vec<u8>)>, ExportError> {
+    let Some(json) = entries.iter_mut().find(|(k, _)| k == "json") else {
+        return Ok(Vec::new());
+    };
+    let meta_bytes = std::mem::take(&mut json.1);
+    json.1 = record(&meta_bytes, variant, s.split, s.index, &s.stem, frame);
+    let Some(k) = objects else {
+        return Ok(Vec::new());
+    };
+    let meta_path = s
+        .files
+        .iter()
+        .find(|f| f.key == "json")
+        .map(|f| f.path.clone())
+        .unwrap_or_default();
+    let bad = |why: String| {
+        ExportError::Message(format!(
+            "`{}` {why}\nhint: check the dataset with `clevrtex verify`",
+            meta_path.display()
+        ))
+    };
+    let Some((_, mask)) = entries.iter().find(|(k, _)| k == "mask.npy") else {
+        return Err(ExportError::Message(format!(
+            "sample `{}` has no mask pass: `--objects` needs the mask\nhint: generate with `--passes` including mask, or leave `--objects` out",
+            s.stem
+        )));
+    };
+    let (shape, start) =
+        npy_shape(mask).ok_or_else(|| bad("has a mask that is not an array".into()))?;
+    let ids: Vec<u16> = mask[start..].iter().map(|&v| u16::from(v)).collect();
+    let meta: Value = serde_json::from_slice(&meta_bytes).unwrap_or(Value::Null);
+    object_arrays(&meta, &ids, shape[1], k, tables).map_err(bad)
 }
 
 /// Files in `out` named like shards that no export wrote (not a tar file, or not a regular

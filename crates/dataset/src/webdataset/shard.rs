@@ -6,37 +6,13 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic::AtomicFile;
 use crate::layout::Split;
-use clevrtex_scene::Pass;
 use serde_json::{json, Value};
 
 use crate::dataset;
 
 use super::npy::decoded_npy;
 
-/// One file of a sample in a shard.
-#[derive(Debug, Clone)]
-pub struct SampleFile {
-    /// Its key (the extension after the stem).
-    pub key: String,
-    /// Its path in the dataset.
-    pub path: PathBuf,
-    /// The pass it is (a PNG checked by [`dataset::check_pass_png`] before it is packed);
-    /// `None`: the metadata.
-    pub pass: Option<Pass>,
-    /// Whether it becomes the pass's `.npy` array (else its bytes are packed).
-    pub npy: bool,
-}
-
-/// What a sample's passes are checked against ([`dataset::check_pass_png`]): the metadata's
-/// image size (`None` for the downloaded ClevrTex, whose metadata has none: the passes must
-/// then agree with each other) and number of objects.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct PassCheck {
-    /// `render.width`, `render.height`.
-    pub size: Option<(u32, u32)>,
-    /// `num_objects`.
-    pub num_objects: usize,
-}
+pub use crate::export::{PassCheck, SampleFile};
 
 /// What can go wrong while writing a shard. Shown as the command's error: the message, then
 /// (as the error's source) the OS error.
@@ -116,7 +92,7 @@ pub fn sample_entries(
         ))
     };
     // Without a size in the metadata, the first pass's size is every pass's.
-    let mut size = check.size;
+    let mut check = *check;
     let mut out = Vec::with_capacity(files.len());
     for f in files {
         let bytes = dataset::read(root, &f.path, dataset::MAX_FILE_BYTES)
@@ -125,9 +101,9 @@ pub fn sample_entries(
             None => bytes,
             Some(pass) => {
                 let name = f.path.display().to_string();
-                let png = dataset::check_pass_png(&name, &bytes, pass, size, check.num_objects)
+                let png = check
+                    .check(&name, &bytes, pass)
                     .map_err(ShardError::Refused)?;
-                size.get_or_insert((png.width, png.height));
                 if f.npy {
                     decoded_npy(pass, &png).map_err(|w| unread(&f.path, w))?
                 } else {

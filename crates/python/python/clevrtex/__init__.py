@@ -25,7 +25,7 @@ import numpy as np
 from . import _native
 from . import wds
 
-__all__ = ["Evaluator", "evaluate", "Dataset", "collate", "PASSES", "METRICS", "protocol_metrics", "wds"]
+__all__ = ["Evaluator", "evaluate", "Dataset", "collate", "write_predictions", "PASSES", "METRICS", "protocol_metrics", "wds"]
 
 #: Every metric's name, in report order.
 METRICS: Tuple[str, ...] = tuple(_native.metric_names())
@@ -370,3 +370,4 @@ def _read_metadata(path: str, root: str) -> bytes:
 
 
 from ._dataset import PASSES, Dataset, collate  # noqa: E402
+from ._predictions import write_predictions  # noqa: E402

@@ -158,7 +158,12 @@ class Dataset:
     def __len__(self) -> int:
         return len(self._samples)
 
-    def _format_metadata(self, meta: dict, path: str) -> dict:
+    def stem(self, ind: int) -> str:
+        """The stem of item `ind` (`CLEVRTEX_<variant>_<index:06d>`): the name its predictions
+        take for `clevrtex eval` (`clevrtex.write_predictions`)."""
+        return os.path.basename(self._samples[ind][1])[: -len(".png")]
+
+    def _format_metadata(self, meta: dict, path: str, stem: str) -> dict:
         objects = meta.get("objects", [])
         if not isinstance(objects, list):
             raise ValueError(f"`{path}` key `objects` is a {type(objects).__name__}, not a list")
@@ -170,7 +175,7 @@ class Dataset:
             if self._by_colour:
                 o["color"] = obj.get("color")
             objs.append(o)
-        return {"ground_material": meta.get("ground_material"), "objects": objs}
+        return {"ground_material": meta.get("ground_material"), "objects": objs, "stem": stem}
 
     def _id(self, table: str, name: Any, path: str, key: str) -> int:
         ids = self._ids[table]
@@ -187,6 +192,7 @@ class Dataset:
             raise IndexError(f"index {ind} is out of range for a Dataset of {n} samples")
         index, image, mask, meta = self._samples[ind]
         stem_path = image[: -len(".png")]
+        stem = os.path.basename(stem_path)
         wanted = [(p, stem_path + self._suffix[p] + ".png") for p in self.passes]
         rgb, labels, h, w, size, decoded = _native.load_item(image, mask, wanted, self.crop, self.side, self._root)
         img = np.frombuffer(rgb, dtype=np.uint8).reshape(h, w, 3).transpose(2, 0, 1).astype(np.float32) / np.float32(255)
@@ -200,13 +206,13 @@ class Dataset:
             _check_mask_ids(msk[0], len(objects) if isinstance(objects, list) else 0, meta)
             if not self.return_metadata:
                 return index, img, msk
-            return index, img, msk, self._format_metadata(data, meta)
-        item: Dict[str, Any] = {"index": np.int64(index), "image": img, "mask": msk}
+            return index, img, msk, self._format_metadata(data, meta, stem)
+        item: Dict[str, Any] = {"index": np.int64(index), "stem": stem, "image": img, "mask": msk}
         for name, buf, c in decoded:
             item[name] = np.frombuffer(buf, dtype=np.float32).reshape(c, h, w).copy()
         item.update(self._arrays(data, meta, msk[0], (h, w), size))
         if self.return_metadata:
-            item["metadata"] = self._format_metadata(data, meta)
+            item["metadata"] = self._format_metadata(data, meta, stem)
         return item
 
     def _arrays(self, meta: dict, path: str, mask: np.ndarray, out_hw: Tuple[int, int], file_wh: Tuple[int, int]) -> Dict[str, np.ndarray]:
@@ -312,8 +318,8 @@ def collate(batch: Sequence[Any], tensors: Optional[bool] = None) -> Any:
     """Batch `Dataset` items for `DataLoader(ds, batch_size=B, collate_fn=clevrtex.collate)`.
 
     Arrays of one shape are stacked on a new first axis (numbers become `(B,)` arrays); dicts
-    and tuples are batched key by key; the metadata dicts (and strings) stay a list of one per
-    item, as `Evaluator.update` takes them. With torch installed (or `tensors=True`) the arrays
+    and tuples are batched key by key; the metadata dicts and strings (the stems) stay a list
+    of one per item, as `Evaluator.update` takes them. With torch installed (or `tensors=True`) the arrays
     are torch tensors (bool, uint8, int64, float32 kept), else numpy (`tensors=False`: always).
     """
     if tensors is None:
@@ -327,7 +333,7 @@ def _collate(batch: List[Any], tensors: bool) -> Any:
     if not batch:
         raise ValueError("`collate` got an empty batch")
     first = batch[0]
-    if isinstance(first, dict) and not any(isinstance(v, (list, str)) for v in first.values()) and "objects" not in first:
+    if isinstance(first, dict) and not any(isinstance(v, list) for v in first.values()) and "objects" not in first:
         return {k: _collate([b[k] for b in batch], tensors) for k in first}
     if isinstance(first, tuple):
         if any(len(b) != len(first) for b in batch):

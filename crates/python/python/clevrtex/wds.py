@@ -12,8 +12,13 @@ key           what it holds
 `normal.npy`  float32 (H, W, 3) world-space unit normals; background (0, 0, 0)
 `albedo.png`  8-bit PNG, (H, W, 3): the material's base colour
 `shadow.npy`  float32 (H, W) shadow amount in [0, 1]; 0 where undefined
-`json`        the sample's metadata (docs/output-format.md)
+`json`        the sample's record, one schema for every variant (stem, variant, split,
+              index, objects, camera; `metadata`: the metadata file's text)
 ============  =====================================================================
+
+With `clevrtex export --objects K`, per-object arrays padded to K: `shape.npy`, `size.npy`,
+`material.npy`, `color.npy` (int64 (K,) ids into `index.json`'s `names`, -1 for padding),
+`bbox.npy` (float32 (K, 4)), `visibility.npy` and `valid.npy` (bool (K,)).
 
 (A pass the dataset was made without is absent.) Ids, metres, vectors and fractions are NumPy
 arrays, never PNGs, so no colour decoder can turn them into colours: `webdataset`'s
@@ -41,7 +46,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 import numpy as np
 
-__all__ = ["KEYS", "MAX_SIDE", "decode"]
+__all__ = ["KEYS", "MAX_SIDE", "OBJECT_KEYS", "decode"]
 
 #: The largest side of an image `decode` decodes from PNG bytes: clevrtex's own cap on an
 #: image's side (`MAX_IMAGE_SIDE`). A few hundred bytes of PNG can declare 12000x7000 pixels
@@ -59,6 +64,35 @@ KEYS: Dict[str, Tuple[str, Optional[str], Optional[int]]] = {
     "shadow.npy": ("shadow", "float32", 1),
     "json": ("metadata", None, None),
 }
+
+#: The per-object keys of `clevrtex export --objects K` -> the name `decode` gives them, the
+#: dtype and the number of dimensions of the array.
+OBJECT_KEYS: Dict[str, Tuple[str, str, int]] = {
+    "shape.npy": ("shape", "int64", 1),
+    "size.npy": ("size", "int64", 1),
+    "material.npy": ("material", "int64", 1),
+    "color.npy": ("color", "int64", 1),
+    "bbox.npy": ("bbox", "float32", 2),
+    "visibility.npy": ("visibility", "bool", 1),
+    "valid.npy": ("valid", "bool", 1),
+}
+
+
+def _object_array(key: str, stem: Any, value: Any) -> np.ndarray:
+    name, dtype, ndim = OBJECT_KEYS[key]
+    where = f"sample `{stem}` key `{key}`"
+    if isinstance(value, (bytes, bytearray, memoryview)):
+        try:
+            value = np.lib.format.read_array(io.BytesIO(bytes(value)), allow_pickle=False)
+        except Exception as e:  # numpy raises ValueError or OSError for a bad file
+            raise ValueError(f"{where} is not a .npy array: {e}") from None
+    for step in ("detach", "cpu", "numpy"):
+        if hasattr(value, step):
+            value = getattr(value, step)()
+    arr = np.asarray(value)
+    if arr.ndim != ndim or (ndim == 2 and arr.shape[-1] != 4) or arr.dtype.kind not in "biuf":
+        raise ValueError(f"{where} is a {arr.dtype} array of shape {arr.shape}, not {dtype} {name}")
+    return np.ascontiguousarray(arr, dtype=dtype)
 
 
 def _array(key: str, stem: Any, value: Any) -> np.ndarray:
@@ -120,17 +154,19 @@ def _array(key: str, stem: Any, value: Any) -> np.ndarray:
 
 
 def decode(sample: Mapping[str, Any]) -> Dict[str, Any]:
-    """One sample of a `clevrtex export` shard as arrays: `key` (the stem), `image` uint8
+    """One sample of a `clevrtex export` shard as arrays: `key` and `stem` (the stem), `image` uint8
     (H, W, 3), `mask` uint8 (H, W) ids, `depth` float32 (H, W) metres (+inf background),
     `normal` float32 (H, W, 3), `albedo` uint8 (H, W, 3), `shadow` float32 (H, W) and
-    `metadata` (a dict); the passes the sample lacks are absent. `sample` is a dict as
+    `metadata` (the metadata file, a dict; `record`: the shard's `json` record), and the
+    per-object arrays of `--objects K` (`shape`, `size`, `material`, `color` int64, `bbox`
+    float32, `visibility`, `valid` bool); what the sample lacks is absent. `sample` is a dict as
     `webdataset` yields it (raw or after `.decode("rgb")`, `"torchrgb"`, ...) or a row of a
     Hugging Face `datasets` table. A value that is not what its key holds is a ValueError
     naming the sample and the key."""
     if not isinstance(sample, Mapping):
         raise TypeError(f"a sample is a dict of its keys, not {type(sample).__name__}")
     stem = sample.get("__key__")
-    out: Dict[str, Any] = {"key": stem}
+    out: Dict[str, Any] = {"key": stem, "stem": stem}
     for key, (name, _, _) in KEYS.items():
         if key not in sample or sample[key] is None:
             continue
@@ -146,6 +182,16 @@ def decode(sample: Mapping[str, Any]) -> Dict[str, Any]:
                 raise ValueError(
                     f"sample `{stem}` key `json` is a {type(value).__name__}, not an object"
                 )
+            # The record (one schema for every variant) holds the metadata file's text; the
+            # shards of earlier exports held the metadata itself.
+            if isinstance(value.get("metadata"), str):
+                out["record"] = value
+                try:
+                    value = json.loads(value["metadata"])
+                except (json.JSONDecodeError, RecursionError) as e:
+                    raise ValueError(f"sample `{stem}` key `json` holds `metadata` that is not JSON: {e or 'nested too deep'}") from None
+                if not isinstance(value, dict):
+                    raise ValueError(f"sample `{stem}` key `json` holds `metadata` that is not an object")
             out[name] = value
         else:
             out[name] = _array(key, stem, value)
@@ -157,4 +203,7 @@ def decode(sample: Mapping[str, Any]) -> Dict[str, Any]:
     if len(set(sizes.values())) > 1:
         shown = ", ".join(f"`{k}` {h}x{w}" for k, (h, w) in sizes.items())
         raise ValueError(f"sample `{stem}` has passes of different sizes ({shown}, as height x width): every pass is the image's size")
+    for key, (name, _, _) in OBJECT_KEYS.items():
+        if sample.get(key) is not None:
+            out[name] = _object_array(key, stem, sample[key])
     return out

@@ -247,3 +247,40 @@ impl Config {
 }
 
 // ---- file shapes -------------------------------------------------------------------------
+
+/// The name tables of a variant's config, for ids a model can use (the Python `Dataset`'s
+/// `names`, the COCO export's categories and attributes): shapes and sizes (with their scale)
+/// in the config's order, the materials of objects and ground sorted, the colours (empty when
+/// the variant does not colour objects).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NameTables {
+    /// Shape names.
+    pub shape: Vec<String>,
+    /// Size names with the unit mesh's scale.
+    pub size: Vec<(String, f64)>,
+    /// Material names of objects and ground, sorted, no duplicates.
+    pub material: Vec<String>,
+    /// Colour names.
+    pub color: Vec<String>,
+}
+
+impl Config {
+    /// The name tables of this config ([`NameTables`]).
+    pub fn name_tables(&self) -> NameTables {
+        let mut material: Vec<String> = self.objects.materials.clone();
+        material.extend(self.background.materials.iter().cloned());
+        material.sort();
+        material.dedup();
+        NameTables {
+            shape: self.objects.shapes.clone(),
+            size: self
+                .objects
+                .sizes
+                .iter()
+                .map(|s| (s.name.clone(), s.scale))
+                .collect(),
+            material,
+            color: self.objects.colors.iter().map(|c| c.name.clone()).collect(),
+        }
+    }
+}

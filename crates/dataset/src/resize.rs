@@ -1,6 +1,7 @@
 //! The benchmark's crop-and-resize protocol: a centred square crop of side
 //! `int(0.8 * min(W, H))`, then nearest resize for masks and Pillow's 8-bit `BILINEAR` resize
-//! (bit for bit) for images.
+//! (bit for bit) for images. Used by `eval` (the ground truth), the Python `Dataset` (items
+//! as the public loader gives them) and `export --crop-resize` (shards as the loader's items).
 
 /// Side of the evaluation images under the `clevrtex` protocol.
 pub const EVAL_SIDE: usize = 128;
