@@ -84,6 +84,16 @@ pub fn export(
     let variants: Vec<&VariantDir> = chosen.iter().map(|&i| &ds.variants[i]).collect();
     let names: Vec<&str> = variants.iter().map(|v| v.variant.as_str()).collect();
     let mut tables = NameTables::of(&names);
+    // The user materials the runs' manifests record, after the built-in names, as the Python
+    // `Dataset`'s tables have them (`fingerprint::user_materials`); other names as found.
+    for v in &names {
+        for m in crate::fingerprint::user_materials(dir, v)
+            .unwrap_or_default()
+            .into_keys()
+        {
+            tables.id("material", &m);
+        }
+    }
     std::fs::create_dir_all(out).map_err(io_err(format!("cannot create `{}`", out.display())))?;
     refuse_foreign_shards(out)?;
     let dead_temps = remove_dead_temporaries(out)?;
