@@ -29,6 +29,13 @@ pub struct GenerateArgs {
     /// Run seed: with the image index it fixes every random draw.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Draw layouts from this variant's stream instead of this variant's own (the default:
+    /// the same `--seed` gives unrelated layouts in every variant). `--layout-stream full`
+    /// gives e.g. `camo` the layouts of `full` (same seed): the controlled comparison of
+    /// materials on one set of layouts; `shared` is the one stream every variant drew from up
+    /// to clevrtex 0.1. Recorded in scene files, metadata and manifests (`layout_stream`).
+    #[arg(long, value_name = "VARIANT")]
+    layout_stream: Option<String>,
     /// First image index; images `START..START+N` are made.
     #[arg(long, default_value_t = 0, value_name = "I", value_parser = index_range())]
     start: u64,
@@ -36,6 +43,11 @@ pub struct GenerateArgs {
     /// train), at most 100000000 [default: START + N].
     #[arg(long, value_name = "T", value_parser = index_range())]
     total: Option<u64>,
+    /// Render into a folder whose runs have another `--total` although the dataset's recorded
+    /// splits then differ from the public loader's (refused by default: every run of a
+    /// dataset should pass the same `--total`).
+    #[arg(long)]
+    allow_split_mismatch: bool,
     /// Make only the images with `index % N == K` (0 <= K < N), as `clevrtex sample` does:
     /// N shards together make every image exactly once.
     #[arg(long, value_name = "K/N")]
@@ -113,6 +125,11 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         args.material_set.as_deref(),
         args.run.materials.materials.is_some() && args.config.is_none(),
     )?;
+    if let Some(stream) = &args.layout_stream {
+        config
+            .set_layout_stream(stream)
+            .map_err(anyhow::Error::msg)?;
+    }
     let used: std::collections::BTreeSet<String> = config
         .objects
         .materials
@@ -239,6 +256,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         run: manifest::Manifest {
             variant: variant.clone(),
             seed: args.seed,
+            layout_stream: Some(config.layout_stream().to_string()),
             config_hash: manifest::hash_hex(format!("{config:?}").as_bytes()),
             render: serde_json::to_value(&config.base.render).ok(),
             start: args.start,
@@ -252,6 +270,8 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         passes: passes.clone(),
         keep_exr: args.run.keep_exr,
     };
+    // Before anything is made: growing a dataset with another `--total` is refused.
+    plan.check_splits(&args.run.out, config.splits, args.allow_split_mismatch)?;
     crate::run::run_jobs(
         &args.run,
         jobs,

@@ -64,6 +64,9 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
             .collect();
         println!("  splits: {}", sizes.join(", "));
     }
+    if let Some(differ) = &r.loader_splits {
+        println!("  warning: {differ}: `clevrtex eval --split` and the public loader and evaluator would use other sets\n  hint: remake the variant with one `--total` for every run (`generate --total N`), in a new folder");
+    }
     if r.missing_count > 0 {
         // The list is capped (`verify::MAX_LISTED`); say where it stops.
         let more = match r.missing_count - r.missing.len() as u64 {

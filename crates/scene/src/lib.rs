@@ -38,6 +38,6 @@ pub use config::{Config, ConfigError};
 pub use json::to_pretty_json;
 pub use metadata::{metadata, ClevrMetadata};
 pub use names::stem;
-pub use rng::SceneRng;
+pub use rng::{SceneRng, SHARED_STREAM};
 pub use sample::{sample, SampleError, SampleRequest};
 pub use scene_file::{Pass, SceneFile};
