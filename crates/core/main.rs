@@ -25,6 +25,7 @@ mod interrupt;
 mod materials_blender;
 mod run;
 mod run_args;
+mod suite;
 mod user_materials;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object

@@ -30,6 +30,7 @@ pub mod layout;
 pub mod manifest;
 pub mod png;
 pub mod run_lock;
+pub mod suite;
 pub mod verify;
 pub mod webdataset;
 

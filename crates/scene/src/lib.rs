@@ -31,6 +31,7 @@ mod rng;
 pub mod sample;
 pub mod scene_file;
 pub mod shard;
+pub mod suite;
 pub mod text;
 
 pub use camera::{look_at_matrix, project, track_matrix};

@@ -145,7 +145,12 @@ impl Plan {
     /// over all its images, and `clevrtex eval --split test` and the public evaluator would
     /// score other test sets. `allow` (`--allow-split-mismatch`) renders anyway; `verify`,
     /// `report` and the card then say where the splits differ.
-    pub fn check_splits(&self, out: &Path, rule: clevrtex_scene::names::Splits, allow: bool) -> Result<()> {
+    pub fn check_splits(
+        &self,
+        out: &Path,
+        rule: clevrtex_scene::names::Splits,
+        allow: bool,
+    ) -> Result<()> {
         if allow || rule == clevrtex_scene::names::Splits::TestOnly {
             return Ok(());
         }
