@@ -17,18 +17,37 @@ use crate::run_args::{index_range, parse_passes, within, RunArgs, MAX_ATTEMPTS};
 #[derive(Debug, clap::Args)]
 #[command(after_help = clevrtex_scene::shard::SHARD_HELP)]
 pub struct GenerateArgs {
-    #[arg(long, default_value = "full", conflicts_with = "config",
+    #[arg(long, default_value = "full", conflicts_with_all = ["config", "suite"],
         help = format!("Built-in variant: {}", Config::variant_list()))]
     variant: String,
     /// A variant config file (JSON, like those in `configs/`) instead of `--variant`.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
     /// Number of images, 1 to 100000000 (with `--start`, indices stay below 100000000).
-    #[arg(short = 'n', long = "count", value_name = "N", value_parser = index_range())]
-    count: u64,
+    #[arg(short = 'n', long = "count", value_name = "N", value_parser = index_range(),
+        required_unless_present = "suite")]
+    count: Option<u64>,
+    /// Make a whole benchmark suite into `--out`: `clevrtex` is the published ClevrTex (full
+    /// 50,000 images; pbg, vbg, grassbg, camo 20,000 each; outd 10,000, test only), each
+    /// variant at its fixed total with its own layout stream; `--shard` splits the whole
+    /// suite. Recorded in `OUT/SUITE.json`; `clevrtex verify OUT` checks the suite.
+    #[arg(long, value_name = "NAME",
+        conflicts_with_all = ["config", "count", "start", "total", "layout_stream", "allow_split_mismatch"])]
+    suite: Option<String>,
+    /// With `--suite`: make every variant this fraction of its published size (rounded), e.g.
+    /// `--scale 0.001` for a try; a scale that empties a variant is refused.
+    #[arg(long, value_name = "F", requires = "suite")]
+    scale: Option<f64>,
     /// Run seed: with the image index it fixes every random draw.
     #[arg(long, default_value_t = 0)]
-    seed: u64,
+    pub(crate) seed: u64,
+    /// Draw layouts from this variant's stream instead of this variant's own (the default:
+    /// the same `--seed` gives unrelated layouts in every variant). `--layout-stream full`
+    /// gives e.g. `camo` the layouts of `full` (same seed): the controlled comparison of
+    /// materials on one set of layouts; `shared` is the one stream every variant drew from up
+    /// to clevrtex 0.1. Recorded in scene files, metadata and manifests (`layout_stream`).
+    #[arg(long, value_name = "VARIANT")]
+    layout_stream: Option<String>,
     /// First image index; images `START..START+N` are made.
     #[arg(long, default_value_t = 0, value_name = "I", value_parser = index_range())]
     start: u64,
@@ -36,13 +55,18 @@ pub struct GenerateArgs {
     /// train), at most 100000000 [default: START + N].
     #[arg(long, value_name = "T", value_parser = index_range())]
     total: Option<u64>,
+    /// Render into a folder whose runs have another `--total` although the dataset's recorded
+    /// splits then differ from the public loader's (refused by default: every run of a
+    /// dataset should pass the same `--total`).
+    #[arg(long)]
+    allow_split_mismatch: bool,
     /// Make only the images with `index % N == K` (0 <= K < N), as `clevrtex sample` does:
     /// N shards together make every image exactly once.
     #[arg(long, value_name = "K/N")]
-    shard: Option<String>,
+    pub(crate) shard: Option<String>,
     /// Number of shards when the shard index comes from JOB_COMPLETION_INDEX.
     #[arg(long, value_name = "N", env = "CLEVRTEX_SHARD_COUNT")]
-    shard_count: Option<u64>,
+    pub(crate) shard_count: Option<u64>,
     /// Image width in pixels, 1 to 4096 (default 320).
     #[arg(long)]
     width: Option<u32>,
@@ -79,7 +103,7 @@ pub struct GenerateArgs {
     /// predicted wall time, CPU core-hours or GPU hours and images/hour for `-n` with these
     /// workers x threads (docs/performance.md, "Planning a run").
     #[arg(long)]
-    estimate: bool,
+    pub(crate) estimate: bool,
     /// With `--estimate`: calibration images, 2 to 100 [default: 2 per worker, at least 4].
     #[arg(long, value_name = "K", requires = "estimate")]
     calibrate: Option<u32>,
@@ -93,14 +117,53 @@ pub struct GenerateArgs {
     #[arg(long)]
     mix_settings: bool,
     #[command(flatten)]
-    run: RunArgs,
+    pub(crate) run: RunArgs,
 }
 
 /// Layouts drawn by `generate` before any Blender starts, to refuse impossible configs.
 const PREFLIGHT_LAYOUTS: usize = 20;
 
+/// One variant's part of a `generate` run: its images `start..start + count` of `total`, the
+/// share `shard` of them, with `seed`.
+pub(crate) struct Part<'a> {
+    /// Built-in variant (when `config` is `None`).
+    pub variant: &'a str,
+    /// First index.
+    pub start: u64,
+    /// Images.
+    pub count: u64,
+    /// Size of the whole variant (fixes the splits); `None`: `start + count`.
+    pub total: Option<u64>,
+    /// This process's share.
+    pub shard: clevrtex_scene::shard::Shard,
+    /// Run seed.
+    pub seed: u64,
+}
+
 /// Run `clevrtex generate`.
 pub fn run_generate(args: GenerateArgs) -> CmdResult {
+    if let Some(name) = &args.suite {
+        return crate::suite::run(&args, name, args.scale.unwrap_or(1.0));
+    }
+    let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
+    let part = Part {
+        variant: &args.variant,
+        start: args.start,
+        count: args.count.unwrap_or(0),
+        total: args.total,
+        shard,
+        seed: args.seed,
+    };
+    run_part(&args, &part, None)
+}
+
+/// Make (or with `--estimate`, plan) one variant's `part`; `estimate_sum` adds the
+/// prediction's wall and held hours to a suite's.
+pub(crate) fn run_part(
+    args: &GenerateArgs,
+    part: &Part,
+    estimate_sum: Option<&std::cell::Cell<(f64, f64)>>,
+) -> CmdResult {
     let catalogue = args.run.materials.catalogue()?;
     let mut config = match &args.config {
         Some(path) => {
@@ -112,7 +175,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
             })?;
             Config::from_json_str_in(&text, &path.display().to_string(), &catalogue)?
         }
-        None => Config::builtin_in(&args.variant, &catalogue)?,
+        None => Config::builtin_in(part.variant, &catalogue)?,
     };
     crate::user_materials::apply_material_set(
         &mut config,
@@ -120,6 +183,11 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         args.material_set.as_deref(),
         args.run.materials.materials.is_some() && args.config.is_none(),
     )?;
+    if let Some(stream) = &args.layout_stream {
+        config
+            .set_layout_stream(stream)
+            .map_err(anyhow::Error::msg)?;
+    }
     let used: std::collections::BTreeSet<String> = config
         .objects
         .materials
@@ -151,25 +219,25 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         None => Pass::ALL.to_vec(),
     };
     config.base.passes = passes.clone();
-    if args.count == 0 {
+    if part.count == 0 {
         bail!("`-n 0` asks for no images\nhint: pass the number of images, e.g. `-n 100`");
     }
-    let end = args
+    let end = part
         .start
-        .checked_add(args.count)
+        .checked_add(part.count)
         .context("`--start` + `-n` overflows\nhint: pass smaller numbers")?;
-    crate::run_args::check_index_end(args.start, end)?;
-    let total = args.total.unwrap_or(end);
+    crate::run_args::check_index_end(part.start, end)?;
+    let total = part.total.unwrap_or(end);
     if total < end {
         bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset");
     }
-    let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
-    let start = args.start;
+    let shard = part.shard;
+    let start = part.start;
     // Draw the first layouts before starting Blender: a config whose objects can never be
     // placed fails here once (exit 1), as in `sample`, not once per image into the ledger.
     for index in shard.iter(start, end).take(PREFLIGHT_LAYOUTS) {
         let req = SampleRequest {
-            seed: args.seed,
+            seed: part.seed,
             index,
             attempt: 0,
             total,
@@ -180,7 +248,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
     let variant = config.name.clone();
     // Job `i` is made when a worker takes it: no list of the run's jobs is held, so
     // `-n 100000000` runs in bounded memory.
-    let seed = args.seed;
+    let seed = part.seed;
     let make = {
         let (config, variant, passes) = (Arc::clone(&config), variant.clone(), passes.clone());
         move |i: u64| {
@@ -239,16 +307,18 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
             tasks: args.tasks,
             max_attempts: args.max_attempts,
             materials: (catalogue, used),
+            sum: estimate_sum,
         });
     }
     let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
     let plan = manifest::Plan {
         run: manifest::Manifest {
             variant: variant.clone(),
-            seed: args.seed,
+            seed: part.seed,
+            layout_stream: Some(config.layout_stream().to_string()),
             config_hash: manifest::hash_hex(format!("{config:?}").as_bytes()),
             render: serde_json::to_value(&config.base.render).ok(),
-            start: args.start,
+            start: part.start,
             end,
             total,
             shard: [shard.k, shard.n],
@@ -262,6 +332,8 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         passes: passes.clone(),
         keep_exr: args.run.keep_exr,
     };
+    // Before anything is made: growing a dataset with another `--total` is refused.
+    plan.check_splits(&args.run.out, config.splits, args.allow_split_mismatch)?;
     crate::run::run_jobs(
         &args.run,
         jobs,

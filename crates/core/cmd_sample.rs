@@ -35,6 +35,13 @@ pub struct Args {
     /// Run seed; with the image index it fixes every random draw.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Draw layouts from this variant's stream instead of this variant's own (the default:
+    /// the same `--seed` gives unrelated layouts in every variant). `--layout-stream full`
+    /// gives e.g. `camo` the layouts of `full` (same seed): the controlled comparison of
+    /// materials on one set of layouts; `shared` is the one stream every variant drew from up
+    /// to clevrtex 0.1. Recorded in scene files, metadata and manifests (`layout_stream`).
+    #[arg(long, value_name = "VARIANT")]
+    pub layout_stream: Option<String>,
     /// Output root; files go to `<out>/clevrtex_<variant>/<index / 1000>/CLEVRTEX_<variant>_<index:06>.json`.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -71,6 +78,11 @@ fn load_config(args: &Args) -> anyhow::Result<Config> {
         args.material_set.as_deref(),
         args.materials.materials.is_some() && args.config.is_none(),
     )?;
+    if let Some(stream) = &args.layout_stream {
+        config
+            .set_layout_stream(stream)
+            .map_err(anyhow::Error::msg)?;
+    }
     Ok(config)
 }
 

@@ -72,6 +72,9 @@ fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
             .collect();
         println!("  splits: {}", sizes.join(", "));
     }
+    if let Some(differ) = &r.loader_splits {
+        println!("  warning: {differ}: `clevrtex eval --split` and the public loader and evaluator would use other sets\n  hint: remake the variant with one `--total` for every run (`generate --total N`), in a new folder");
+    }
     if r.missing_count > 0 {
         // The list is capped (`verify::MAX_LISTED`); say where it stops.
         let more = match r.missing_count - r.missing.len() as u64 {
@@ -266,6 +269,60 @@ fn print_comparison(c: &Comparison) {
     }
 }
 
+/// The suite of `dirs` (`generate --suite`: their `SUITE.json`) checked as a whole: which
+/// of its variants are incomplete or foreign; whether it is whole (`true` without a suite,
+/// or with `--variant`, which checks one variant only).
+fn check_suite(
+    dirs: &[PathBuf],
+    reports: &[VariantReport],
+    one_variant: bool,
+) -> anyhow::Result<bool> {
+    let mut plan: Option<clevrtex_scene::suite::SuitePlan> = None;
+    for d in dirs {
+        let found = clevrtex_dataset::suite::read(d).map_err(anyhow::Error::msg)?;
+        match (&plan, found) {
+            (Some(p), Some(f)) if p != &f => anyhow::bail!(
+                "the folders hold different suites (`{}` and `{}` at scales {} and {})\nhint: verify each suite's folders apart",
+                p.suite, f.suite, p.scale, f.scale
+            ),
+            (None, Some(f)) => plan = Some(f),
+            _ => {}
+        }
+    }
+    let Some(plan) = plan else {
+        return Ok(true);
+    };
+    if one_variant {
+        return Ok(true);
+    }
+    let lines = clevrtex_dataset::suite::check(&plan, reports);
+    if lines.is_empty() {
+        println!(
+            "suite `{}` at scale {}: whole ({} variants, {} images)",
+            plan.suite,
+            plan.scale,
+            plan.variants.len(),
+            plan.images()
+        );
+        return Ok(true);
+    }
+    println!(
+        "suite `{}` at scale {}: incomplete variants ({} of {}):",
+        plan.suite,
+        plan.scale,
+        lines.len(),
+        plan.variants.len()
+    );
+    for l in &lines {
+        println!("  {l}");
+    }
+    println!(
+        "  to repair: rerun `clevrtex generate --suite {} --scale {} --seed {} --out DIR` (complete samples are skipped)",
+        plan.suite, plan.scale, plan.seed
+    );
+    Ok(false)
+}
+
 /// Run `clevrtex verify`.
 pub fn run(args: Args) -> CmdResult {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -299,6 +356,7 @@ pub fn run(args: Args) -> CmdResult {
     for r in &reports {
         print_report(r, &args.dirs, args.remove_broken);
     }
+    let suite_whole = check_suite(&args.dirs, &reports, args.variant.is_some())?;
     let secs = started.elapsed().as_secs_f64();
     eprintln!(
         "checked {samples} samples in {secs:.1} s ({:.0} samples/s)",
@@ -358,7 +416,10 @@ pub fn run(args: Args) -> CmdResult {
         println!("removed {removed} file(s) of broken samples and temporary files");
     }
     Ok(
-        if reports.iter().all(VariantReport::is_whole) && comparisons.iter().all(Comparison::same) {
+        if suite_whole
+            && reports.iter().all(VariantReport::is_whole)
+            && comparisons.iter().all(Comparison::same)
+        {
             exit::OK
         } else {
             exit::PARTIAL

@@ -135,6 +135,8 @@ pub(crate) struct Request<'a> {
         clevrtex_materials::Catalogue,
         std::collections::BTreeSet<String>,
     ),
+    /// A suite's sum of predictions (wall seconds, held hours), this one added to it.
+    pub sum: Option<&'a std::cell::Cell<(f64, f64)>>,
 }
 
 /// Run the planner: calibrate, then print the predictions.
@@ -282,6 +284,10 @@ pub(crate) fn run(mut req: Request) -> CmdResult {
         "CPU core-hours (workers x threads held)"
     };
     let p = cal.predict(n);
+    if let Some(sum) = req.sum {
+        let (w, h) = sum.get();
+        sum.set((w + p.wall_s, h + p.held_hours));
+    }
     println!(
         "this machine: wall {} (range {} - {}), {:.0} images/hour, {:.2} {held}",
         format_duration(p.wall_s),

@@ -27,6 +27,7 @@ mod materials_blender;
 mod provenance;
 mod run;
 mod run_args;
+mod suite;
 mod user_materials;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object

@@ -46,6 +46,8 @@ pub mod resize;
 #[cfg(feature = "tools")]
 pub mod run_lock;
 #[cfg(feature = "tools")]
+pub mod suite;
+#[cfg(feature = "tools")]
 pub mod verify;
 #[cfg(feature = "tools")]
 pub mod webdataset;

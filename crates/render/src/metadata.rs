@@ -97,6 +97,9 @@ pub struct SampleMetadata {
     pub stem: String,
     /// Run seed.
     pub seed: u64,
+    /// The layout stream of the draws (the scene file's `layout_stream`: the variant's name
+    /// unless `--layout-stream` chose another).
+    pub layout_stream: String,
     /// The config hash of the `generate` run that made the sample (its manifest's
     /// `config_hash`), so `verify` can tell a sample made from another config; absent from
     /// `render` and in older datasets.
@@ -152,6 +155,7 @@ pub fn build(scene: &SceneFile, facts: &RenderFacts<'_>) -> SampleMetadata {
         variant: scene.variant.clone(),
         stem: scene.stem.clone(),
         seed: scene.seed,
+        layout_stream: scene.layout_stream.clone(),
         config_hash: facts.config_hash.map(str::to_string),
         attempt: scene.attempt,
         camera: CameraMetadata {

@@ -31,6 +31,7 @@ mod rng;
 pub mod sample;
 pub mod scene_file;
 pub mod shard;
+pub mod suite;
 pub mod text;
 
 pub use camera::{look_at_matrix, project, track_matrix};
@@ -38,6 +39,6 @@ pub use config::{Config, ConfigError};
 pub use json::to_pretty_json;
 pub use metadata::{metadata, ClevrMetadata};
 pub use names::stem;
-pub use rng::SceneRng;
+pub use rng::{SceneRng, SHARED_STREAM};
 pub use sample::{sample, SampleError, SampleRequest};
 pub use scene_file::{Pass, SceneFile};

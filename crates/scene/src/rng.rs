@@ -20,14 +20,40 @@ pub(crate) enum Purpose {
     Material = 3,
 }
 
-/// The RNG for one image: the key is (run seed, attempt, purpose), the stream is the image
-/// index, so image `index` gets the same draws whatever range, shard or thread made it.
-pub(crate) fn scene_rng(seed: u64, attempt: u32, purpose: Purpose, index: u64) -> SceneRng {
+/// The layout stream every variant shared up to clevrtex 0.1 (`--layout-stream shared`): the
+/// same seed gave every variant the same layouts. Any other stream name (by default the
+/// variant's own) gives its own draws.
+pub const SHARED_STREAM: &str = "shared";
+
+/// The part of the key that names the layout stream: clevrtex 0.1's constant for
+/// [`SHARED_STREAM`], else the content hash of the name and a version tag, so two names never
+/// share draws (and never the shared stream's).
+fn stream_tag(stream: &str) -> [u8; 16] {
+    if stream == SHARED_STREAM {
+        return *b"clevrtex-scene-1";
+    }
+    let mut tag = [0u8; 16];
+    let hash = clevrtex_materials::content_hash(&[b"clevrtex-layout-stream", stream.as_bytes()]);
+    tag[0..8].copy_from_slice(&hash.to_le_bytes());
+    tag[8..16].copy_from_slice(b"stream-2");
+    tag
+}
+
+/// The RNG for one image: the key is (run seed, attempt, purpose, layout stream), the ChaCha
+/// stream is the image index, so image `index` gets the same draws whatever range, shard or
+/// thread made it, and two layout streams (two variants, by default) unrelated ones.
+pub(crate) fn scene_rng(
+    seed: u64,
+    stream: &str,
+    attempt: u32,
+    purpose: Purpose,
+    index: u64,
+) -> SceneRng {
     let mut key = [0u8; 32];
     key[0..8].copy_from_slice(&seed.to_le_bytes());
     key[8..12].copy_from_slice(&attempt.to_le_bytes());
     key[12..16].copy_from_slice(&(purpose as u32).to_le_bytes());
-    key[16..32].copy_from_slice(b"clevrtex-scene-1");
+    key[16..32].copy_from_slice(&stream_tag(stream));
     let mut rng = SceneRng::from_seed(key);
     rng.set_stream(index);
     rng
@@ -69,20 +95,24 @@ mod tests {
     #[test]
     fn streams_are_independent_of_each_other_and_reproducible() {
         let a: Vec<u64> = (0..4)
-            .map(|_| scene_rng(7, 0, Purpose::Layout, 3).next_u64())
+            .map(|_| scene_rng(7, "full", 0, Purpose::Layout, 3).next_u64())
             .collect();
         assert!(a.iter().all(|&x| x == a[0]));
-        let b = scene_rng(7, 0, Purpose::Layout, 4).next_u64();
-        let c = scene_rng(7, 1, Purpose::Layout, 3).next_u64();
-        let d = scene_rng(7, 0, Purpose::Count, 3).next_u64();
+        let b = scene_rng(7, "full", 0, Purpose::Layout, 4).next_u64();
+        let c = scene_rng(7, "full", 1, Purpose::Layout, 3).next_u64();
+        let d = scene_rng(7, "full", 0, Purpose::Count, 3).next_u64();
         assert_ne!(a[0], b);
         assert_ne!(a[0], c);
         assert_ne!(a[0], d);
+        // Another stream, and the shared one, draw otherwise.
+        let e = scene_rng(7, "camo", 0, Purpose::Layout, 3).next_u64();
+        let f = scene_rng(7, SHARED_STREAM, 0, Purpose::Layout, 3).next_u64();
+        assert!(a[0] != e && a[0] != f && e != f);
     }
 
     #[test]
     fn unit_and_below_stay_in_range() {
-        let mut rng = scene_rng(1, 0, Purpose::Layout, 0);
+        let mut rng = scene_rng(1, "full", 0, Purpose::Layout, 0);
         for _ in 0..10_000 {
             let u = unit(&mut rng);
             assert!((0.0..1.0).contains(&u));

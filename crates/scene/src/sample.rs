@@ -72,7 +72,7 @@ pub enum SampleError {
 /// The object count of image `index`: drawn from its own stream, so it is the same for every
 /// visibility attempt (the reference keeps it across retries).
 pub fn object_count(config: &Config, seed: u64, index: u64) -> u32 {
-    let mut rng = scene_rng(seed, 0, Purpose::Count, index);
+    let mut rng = scene_rng(seed, config.layout_stream(), 0, Purpose::Count, index);
     let [lo, hi] = config.objects.count;
     lo + below(&mut rng, (hi - lo + 1) as usize) as u32
 }
@@ -155,7 +155,13 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
     let count = object_count(config, req.seed, req.index);
     count_fits(config, count)?;
 
-    let mut rng = scene_rng(req.seed, req.attempt, Purpose::Layout, req.index);
+    let mut rng = scene_rng(
+        req.seed,
+        config.layout_stream(),
+        req.attempt,
+        Purpose::Layout,
+        req.index,
+    );
     let base = &config.base;
 
     // Camera and lights first: the margin rule needs the jittered camera's directions.
@@ -195,7 +201,13 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
 
     // Materials of the scene: drawn from their own stream, so the layout (camera, lights,
     // shapes, sizes, positions, rotations) is the same whatever catalogue they come from.
-    let mut mrng = scene_rng(req.seed, req.attempt, Purpose::Material, req.index);
+    let mut mrng = scene_rng(
+        req.seed,
+        config.layout_stream(),
+        req.attempt,
+        Purpose::Material,
+        req.index,
+    );
     let scene_material = config
         .same_material
         .then(|| choose(&mut mrng, &config.objects.materials).clone());
@@ -276,6 +288,7 @@ pub fn sample(config: &Config, req: &SampleRequest) -> Result<SceneFile, SampleE
             .name()
             .to_string(),
         seed: req.seed,
+        layout_stream: config.layout_stream().to_string(),
         attempt: req.attempt,
         stem: stem(&config.name, req.index),
         render: base.render.clone(),

@@ -30,8 +30,14 @@ pub struct SceneFile {
     pub index: u64,
     /// `test`, `val` or `train`, from the index and the run size.
     pub split: String,
-    /// Run seed. Together with `index` and `attempt` it fixes every random draw.
+    /// Run seed. Together with `layout_stream`, `index` and `attempt` it fixes every random
+    /// draw.
     pub seed: u64,
+    /// The layout stream the draws came from: the variant's name unless `--layout-stream`
+    /// chose another (`shared`: clevrtex 0.1's one stream, also what a file without the key
+    /// was drawn from).
+    #[serde(default = "shared_stream")]
+    pub layout_stream: String,
     /// Visibility retry number: 0 for the first layout, +1 for each rejected one.
     pub attempt: u32,
     /// File stem shared by every output of this image, e.g. `CLEVRTEX_camo_000012`.
@@ -50,6 +56,10 @@ pub struct SceneFile {
     pub backdrop: Backdrop,
     /// Objects in metadata order: object `i` gets instance id `i + 1` in the mask.
     pub objects: Vec<SceneObject>,
+}
+
+fn shared_stream() -> String {
+    crate::rng::SHARED_STREAM.to_string()
 }
 
 /// Cycles and colour-management settings.
@@ -262,6 +272,12 @@ impl SceneFile {
         // a scene file ever names a folder outside the output (docs/security.md).
         if let Some(problem) = crate::names::variant_name_problem(&self.variant) {
             return Err(format!("`variant` = {:?}: {problem}", self.variant));
+        }
+        if let Some(problem) = crate::names::variant_name_problem(&self.layout_stream) {
+            return Err(format!(
+                "`layout_stream` = {:?}: {problem}",
+                self.layout_stream
+            ));
         }
         let stem = crate::names::stem(&self.variant, self.index);
         if self.stem != stem {

@@ -26,6 +26,28 @@ pub fn splits(variant: &str, recorded: &[Option<layout::Split>]) -> Vec<layout::
         .collect()
 }
 
+/// Where the splits every clevrtex reader gives (the recorded ones, [`splits`]) differ from
+/// what the public loader gives the same samples (its position rule over the samples found,
+/// ignoring what they record), in one sentence; `None` when they agree. They differ when a
+/// dataset was grown with another `--total` than its first runs (`generate` refuses that
+/// unless asked to) or is not complete: `clevrtex eval --split test` and the public evaluator
+/// would then score other test sets.
+pub fn loader_disagreement(variant: &str, recorded: &[Option<layout::Split>]) -> Option<String> {
+    let ours = splits(variant, recorded);
+    let theirs = splits(variant, &vec![None; recorded.len()]);
+    let differ: Vec<usize> = (0..ours.len()).filter(|&i| ours[i] != theirs[i]).collect();
+    let &first = differ.first()?;
+    Some(format!(
+        "the recorded splits ({}) differ from the public loader's position rule over these {} samples ({}) at {} position(s), e.g. position {first}: recorded `{}`, the loader `{}`",
+        split_sizes(&ours),
+        ours.len(),
+        split_sizes(&theirs),
+        differ.len(),
+        ours[first].name(),
+        theirs[first].name()
+    ))
+}
+
 /// How many of `splits` are in each split, for messages: `test 0, val 0, train 4`.
 pub fn split_sizes(splits: &[layout::Split]) -> String {
     layout::Split::ALL

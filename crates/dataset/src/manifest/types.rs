@@ -63,6 +63,11 @@ pub struct Manifest {
     pub variant: String,
     /// Run seed.
     pub seed: u64,
+    /// The layout stream of the run's draws (the variant's name unless `--layout-stream`
+    /// chose another); absent in manifests of clevrtex 0.1, whose every variant drew from the
+    /// one stream `shared` ([`Manifest::layout_stream`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub layout_stream: Option<String>,
     /// xxh3 of the resolved variant config (render settings and passes included), hex.
     pub config_hash: String,
     /// First index of the run.
@@ -171,6 +176,7 @@ impl Manifest {
             version: MANIFEST_VERSION,
             variant: String::new(),
             seed: 0,
+            layout_stream: None,
             config_hash: String::new(),
             start: 0,
             end: 0,
@@ -190,6 +196,14 @@ impl Manifest {
             user_materials: BTreeMap::new(),
             mixed_settings: false,
         }
+    }
+
+    /// The layout stream of the run's draws: the recorded one, else `shared` (a manifest of
+    /// clevrtex 0.1, when every variant drew from one stream).
+    pub fn layout_stream(&self) -> &str {
+        self.layout_stream
+            .as_deref()
+            .unwrap_or(clevrtex_scene::SHARED_STREAM)
     }
 
     /// This manifest's file name ([`file_name`]).
@@ -252,6 +266,13 @@ impl Manifest {
         }
         if self.seed != other.seed {
             d.push(format!("--seed {} vs {}", self.seed, other.seed));
+        }
+        if self.layout_stream() != other.layout_stream() {
+            d.push(format!(
+                "--layout-stream {} vs {}",
+                self.layout_stream(),
+                other.layout_stream()
+            ));
         }
         if !self.passes.is_empty() && !other.passes.is_empty() && self.passes != other.passes {
             d.push(format!(

@@ -138,6 +138,52 @@ impl Plan {
         Ok(())
     }
 
+    /// Refuse, before anything is made or written, a run whose `--total` differs from that of
+    /// a run already in the folder (under the split rule `rule`; a test-only variant has one
+    /// split whatever the total): each image records the split of its run's total, so the
+    /// grown dataset's recorded splits would differ from the public loader's position rule
+    /// over all its images, and `clevrtex eval --split test` and the public evaluator would
+    /// score other test sets. `allow` (`--allow-split-mismatch`) renders anyway; `verify`,
+    /// `report` and the card then say where the splits differ.
+    pub fn check_splits(
+        &self,
+        out: &Path,
+        rule: clevrtex_scene::names::Splits,
+        allow: bool,
+    ) -> Result<()> {
+        if allow || rule == clevrtex_scene::names::Splits::TestOnly {
+            return Ok(());
+        }
+        let vdir = self.variant_dir(out);
+        let Ok(root) = crate::dataset::files::root(&vdir) else {
+            return Ok(());
+        };
+        let Ok(entries) = crate::dataset::files::list(&root, &vdir) else {
+            return Ok(());
+        };
+        let total = self.run.total;
+        for (name, path, kind) in entries {
+            if kind != crate::dataset::files::Kind::File || !is_manifest_name(&name) {
+                continue;
+            }
+            let Ok(m) = Manifest::read(&path) else {
+                continue;
+            };
+            if m.variant != self.run.variant || m.total == total {
+                continue;
+            }
+            return Err(Error::Refused(format!(
+                "`{}` records a run of indices {}..{} for a dataset of {} images, and this run's total is {total}: each image records the split of its run's total, so the dataset's splits would differ from the public loader's position rule (test the first int(0.1 N) of all N images, val the next) and `clevrtex eval --split test` and the public evaluator would score other test sets\nhint: pass `--total {}` as the earlier runs did (the same `--total` for every run of a dataset), or make a dataset of {total} images in a new `--out` folder; `--allow-split-mismatch` renders anyway",
+                path.display(),
+                m.start,
+                m.end,
+                m.total,
+                m.total
+            )));
+        }
+        Ok(())
+    }
+
     /// Write the run's plan into the (existing) variant folder before the first image: its
     /// manifest with `finished: false` and no files, so `verify` knows what the run is to
     /// make even if it never ends. The seconds of samples an earlier run of this range made

@@ -77,6 +77,12 @@ pub struct VariantReport {
     /// Each split's samples (of those found once) as index ranges `[first, last]`, by the one
     /// split rule of every reader ([`crate::dataset::splits()`]: the recorded `split`, else by position).
     pub splits: BTreeMap<String, Vec<[u64; 2]>>,
+    /// Where those splits differ from the public loader's position rule over the samples
+    /// found ([`crate::dataset::loader_disagreement`]), one sentence; absent when they agree
+    /// (or an index is missing: the loader refuses gaps). Not a broken sample: the dataset
+    /// is whole, but the public evaluator would score another test set than `clevrtex eval`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub loader_splits: Option<String>,
     /// Commands to rerun after repair: those of the runs (from the manifests) whose indices
     /// are missing or broken or that did not finish, with `--out` set to the folder verified.
     pub commands: Vec<Vec<String>>,

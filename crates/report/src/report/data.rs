@@ -45,6 +45,9 @@ pub struct Sample {
     /// Accepted layout attempt = rejected layouts before it (ours only).
     pub attempt: Option<u32>,
     pub seed: Option<u64>,
+    /// The layout stream of the draws (`shared`, clevrtex 0.1's, when the metadata records
+    /// none; only a valid stream name is kept).
+    pub layout_stream: String,
     /// Camera position (ours only).
     pub camera_location: Option<[f64; 3]>,
     pub blender_version: Option<String>,
@@ -278,6 +281,11 @@ fn parse(
         objects,
         attempt: m["attempt"].as_u64().map(|a| a as u32),
         seed: m["seed"].as_u64(),
+        layout_stream: m["layout_stream"]
+            .as_str()
+            .filter(|s| clevrtex_scene::names::variant_name_problem(s).is_none())
+            .unwrap_or(clevrtex_scene::SHARED_STREAM)
+            .to_string(),
         camera_location: camera.as_ref().map(|c| c.location),
         blender_version: m["blender_version"].as_str().map(str::to_string),
         clevrtex_version: m["clevrtex_version"].as_str().map(str::to_string),

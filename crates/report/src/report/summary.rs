@@ -174,7 +174,9 @@ pub fn summarise(dir: &Path, args: &Options) -> anyhow::Result<Summary> {
         data.samples
             .par_iter()
             .map(|s| {
-                let config = configs.get(s.variant.as_str())?.as_ref()?;
+                let mut config = configs.get(s.variant.as_str())?.as_ref()?.clone();
+                config.set_layout_stream(&s.layout_stream).ok()?;
+                let config = &config;
                 let scene = clevrtex_scene::sample(
                     config,
                     &SampleRequest {

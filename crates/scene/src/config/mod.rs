@@ -488,6 +488,7 @@ fn validate(
             scale: file.background.scale,
         },
         base,
+        layout_stream: None,
     })
 }
 

@@ -235,9 +235,35 @@ pub struct Config {
     pub background: BackgroundRules,
     /// Base scene.
     pub base: BaseScene,
+    /// The layout stream the sampler draws from when it is not the variant's own (`None`, the
+    /// default: the same seed gives unrelated layouts in every variant). Set by
+    /// `--layout-stream` ([`Config::set_layout_stream`]), never by a config file.
+    pub layout_stream: Option<String>,
 }
 
 impl Config {
+    /// The layout stream the sampler draws from: `--layout-stream`'s, else the variant's
+    /// name. Two variants with one stream (and seed) get the same layouts where their rules
+    /// agree: the controlled comparison of materials; [`crate::rng::SHARED_STREAM`] is the one
+    /// stream every variant drew from up to clevrtex 0.1.
+    pub fn layout_stream(&self) -> &str {
+        self.layout_stream.as_deref().unwrap_or(&self.name)
+    }
+
+    /// Draw layouts from `stream` ([`Config::layout_stream`]); the variant's own name is the
+    /// default, recorded as no override (so the config hash stays that of the default run).
+    pub fn set_layout_stream(&mut self, stream: &str) -> Result<(), String> {
+        if let Some(problem) = crate::names::variant_name_problem(stream) {
+            return Err(format!(
+                "invalid `--layout-stream {}`: {problem}\nhint: name a variant whose layouts to share (e.g. `full`), or `{}` for the one stream of clevrtex 0.1",
+                crate::text::printable(stream),
+                crate::rng::SHARED_STREAM
+            ));
+        }
+        self.layout_stream = (stream != self.name).then(|| stream.to_string());
+        Ok(())
+    }
+
     /// Whether the variant's objects are plain-coloured (its config lists `objects.colors`, as
     /// `vbg` and `clevr` do): their colour is then a property worth scoring by, so `eval` and
     /// the Python `Dataset` break results down and report metadata by colour.

@@ -1,0 +1,76 @@
+//! `generate --suite`: a benchmark suite ([`clevrtex_scene::suite`]) made variant after
+//! variant into one folder, each variant's part of this shard of the whole suite made (or,
+//! with `--estimate`, planned) as one `generate` run, with the suite's plan recorded first
+//! (`clevrtex_dataset::suite`).
+
+use std::cell::Cell;
+
+use crate::cmd_generate::{run_part, GenerateArgs, Part};
+use crate::exit::{self, CmdResult};
+
+/// Make (or plan) suite `name` at `scale` as `args` say.
+pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
+    let suite = clevrtex_scene::suite::find(name).map_err(anyhow::Error::msg)?;
+    let plan = suite.plan(scale, args.seed).map_err(anyhow::Error::msg)?;
+    let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
+    let out = &args.run.out;
+    if !args.estimate {
+        // Nothing is written into a folder of another suite or with a foreign variant.
+        clevrtex_dataset::suite::check_folder(out, &plan)?;
+        clevrtex_dataset::suite::write(out, &plan)?;
+    }
+    println!(
+        "suite `{}` at scale {}: {} images ({}), seed {}, shard {}/{}",
+        plan.suite,
+        plan.scale,
+        plan.images(),
+        plan.variants
+            .iter()
+            .map(|v| format!("{} {}", v.variant, v.total))
+            .collect::<Vec<_>>()
+            .join(", "),
+        plan.seed,
+        shard.k,
+        shard.n
+    );
+    let sum = Cell::new((0.0, 0.0));
+    let mut code = exit::OK;
+    for v in &plan.variants {
+        let part = Part {
+            variant: &v.variant,
+            start: 0,
+            count: v.total,
+            total: Some(v.total),
+            shard: plan.variant_shard(v, shard),
+            seed: v.seed,
+        };
+        if part.shard.count(0, v.total) == 0 {
+            continue;
+        }
+        let c = run_part(args, &part, args.estimate.then_some(&sum))?;
+        if c != exit::OK && c != exit::PARTIAL {
+            // Interrupted: the later variants are not started.
+            return Ok(c);
+        }
+        code = code.max(c);
+    }
+    if args.estimate {
+        let (wall, held) = sum.get();
+        println!(
+            "suite `{}`, this shard's {} images on this machine: wall {}, {held:.2} hours held (the variants' predictions above, added)",
+            plan.suite,
+            plan.variants
+                .iter()
+                .map(|v| plan.variant_shard(v, shard).count(0, v.total))
+                .sum::<u64>(),
+            crate::run::format_duration(wall)
+        );
+    } else {
+        println!(
+            "suite `{}`: check the whole suite with `clevrtex verify {}`",
+            plan.suite,
+            out.display()
+        );
+    }
+    Ok(code)
+}
