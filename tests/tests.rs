@@ -33,4 +33,5 @@ mod structure;
 mod trust_paths;
 mod user_materials;
 mod verify;
+mod visibility_bound;
 mod workers;

@@ -497,9 +497,10 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
     println!("  post-processing  {:>8.1} s", r.post_s);
     print_phases(&r.phases);
     println!(
-        "  rejects          {:>8.1} s  ({} rejected layout(s); checked after the full render they would have cost ~{:.1} s)",
+        "  rejects          {:>8.1} s  ({} rejected layout(s), {} from the geometry without a visibility pass; checked after the full render they would have cost ~{:.1} s)",
         r.reject_s,
         r.rejects,
+        r.prerejects,
         r.rejects_cost_if_checked_after()
     );
     if let Some(ratio) = r.overhead_ratio() {

@@ -158,6 +158,9 @@ pub struct SampleStats {
     pub rejects: u32,
     /// Visibility passes of this image (accepted and rejected).
     pub visibility_passes: u64,
+    /// Rejected attempts of this image decided from the geometry alone
+    /// ([`clevrtex_scene::visibility`]), without a visibility render (counted in `rejects`).
+    pub prerejects: u32,
     /// Wall time of the rejected attempts.
     pub reject_s: f64,
     /// The bridge's phases of every request of this image (visibility and final, accepted
@@ -256,6 +259,14 @@ pub(crate) fn run_job(
         scene.passes = bridge_passes;
         threshold = post::visibility_threshold(scene.render.width, scene.render.height);
         size = (scene.render.width, scene.render.height);
+        // The geometric pre-reject: an object whose upper bound of visible pixels is at or
+        // under the threshold fails the visibility render for certain, so that render (and the
+        // scene build) is skipped; the attempts and accepted layouts are the same.
+        if job.resample && opts.visibility_check && prerejected(&scene, threshold) {
+            stats.prerejects += 1;
+            reject(slot, job, attempt, t_attempt, &mut stats, Path::new(""));
+            continue;
+        }
         let work = slot.scratch().join(format!("{}-{attempt}", job.stem));
         let _ = std::fs::remove_dir_all(&work);
         std::fs::create_dir_all(&work).map_err(|e| RenderError::write(&work, e))?;
@@ -365,6 +376,13 @@ pub(crate) fn run_job(
     })
 }
 
+/// Whether the geometry alone shows that some object of `scene` gets at most `threshold`
+/// pixels in the visibility render ([`clevrtex_scene::visibility::visible_pixel_bounds`]).
+fn prerejected(scene: &SceneFile, threshold: u64) -> bool {
+    clevrtex_scene::visibility::visible_pixel_bounds(scene)
+        .is_some_and(|b| b.iter().any(|&px| px <= threshold))
+}
+
 /// Count a rejected attempt and tell the run.
 fn reject(
     slot: &dyn JobHost,
@@ -377,6 +395,8 @@ fn reject(
     let cost = since.elapsed();
     stats.rejects += 1;
     stats.reject_s += cost.as_secs_f64();
-    let _ = std::fs::remove_dir_all(work);
+    if !work.as_os_str().is_empty() {
+        let _ = std::fs::remove_dir_all(work);
+    }
     slot.rejected(job.index, attempt, cost);
 }

@@ -138,6 +138,8 @@ pub struct RunReport {
     pub visibility_render_s: f64,
     /// Visibility passes run (accepted and rejected).
     pub visibility_passes: u64,
+    /// Rejected layouts decided from the geometry, without a visibility pass (of `rejects`).
+    pub prerejects: u64,
     /// Total Cycles time of final renders.
     pub render_s: f64,
     /// Total final-request time (build + render + bridge writing), accepted attempts.
@@ -169,6 +171,7 @@ impl RunReport {
         self.visibility_build_s += s.visibility_build_s;
         self.visibility_render_s += s.visibility_render_s;
         self.visibility_passes += s.visibility_passes;
+        self.prerejects += u64::from(s.prerejects);
         self.render_s += s.render_s;
         self.final_request_s += s.final_request_s;
         self.post_s += s.post_s;

@@ -67,10 +67,10 @@ pub fn object_pixels(ids: &[u8], width: usize, n_objects: usize) -> Vec<ObjectPi
     out
 }
 
-/// The visibility threshold at a resolution: an object needs MORE than this many pixels.
-/// 200 px at 320x240 (the reference), scaled by the pixel count.
+/// The visibility threshold at a resolution: an object needs MORE than this many pixels
+/// ([`clevrtex_scene::visibility::threshold`]).
 pub fn visibility_threshold(width: u32, height: u32) -> u64 {
-    (200.0 * (width as f64 * height as f64) / (320.0 * 240.0)).round() as u64
+    clevrtex_scene::visibility::threshold(width, height)
 }
 
 /// Depth in metres (Cycles' `Depth` pass: planar distance along the camera's view axis)

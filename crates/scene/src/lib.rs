@@ -33,6 +33,7 @@ pub mod scene_file;
 pub mod shard;
 pub mod suite;
 pub mod text;
+pub mod visibility;
 
 pub use camera::{look_at_matrix, project, track_matrix};
 pub use config::{Config, ConfigError};
