@@ -44,7 +44,7 @@ enum Command {
     /// Sample scene layouts (JSON scene files) without rendering.
     Sample(cmd_sample::Args),
     /// Sample and render a dataset through Blender.
-    Generate(cmd_generate::GenerateArgs),
+    Generate(Box<cmd_generate::GenerateArgs>),
     /// Render scene files made by `clevrtex sample`.
     Render(cmd_render::Args),
     /// Score predictions against a ground-truth dataset.
@@ -81,7 +81,7 @@ fn main() -> ExitCode {
     };
     let result = match cli.command {
         Command::Sample(args) => cmd_sample::run(args),
-        Command::Generate(args) => cmd_generate::run_generate(args),
+        Command::Generate(args) => cmd_generate::run_generate(*args),
         Command::Render(args) => cmd_render::run(args),
         Command::Eval(args) => cmd_eval::run(args),
         Command::Materials(args) => cmd_materials::run(args),
