@@ -33,11 +33,11 @@ pub struct GenerateArgs {
     /// suite. Recorded in `OUT/SUITE.json`; `clevrtex verify OUT` checks the suite.
     #[arg(long, value_name = "NAME",
         conflicts_with_all = ["config", "count", "start", "total", "layout_stream", "allow_split_mismatch"])]
-    suite: Option<String>,
+    pub(crate) suite: Option<String>,
     /// With `--suite`: make every variant this fraction of its published size (rounded), e.g.
     /// `--scale 0.001` for a try; a scale that empties a variant is refused.
     #[arg(long, value_name = "F", requires = "suite")]
-    scale: Option<f64>,
+    pub(crate) scale: Option<f64>,
     /// Run seed: with the image index it fixes every random draw.
     #[arg(long, default_value_t = 0)]
     pub(crate) seed: u64,
@@ -140,11 +140,9 @@ pub(crate) struct Part<'a> {
     pub seed: u64,
 }
 
-/// Run `clevrtex generate`.
+/// Run `clevrtex generate` (one variant; `--suite` is `crate::suite::run`, which `main.rs`
+/// calls instead, as it runs this file's [`run_part`] per variant).
 pub fn run_generate(args: GenerateArgs) -> CmdResult {
-    if let Some(name) = &args.suite {
-        return crate::suite::run(&args, name, args.scale.unwrap_or(1.0));
-    }
     let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
     let part = Part {
         variant: &args.variant,

@@ -81,7 +81,10 @@ fn main() -> ExitCode {
     };
     let result = match cli.command {
         Command::Sample(args) => cmd_sample::run(args),
-        Command::Generate(args) => cmd_generate::run_generate(*args),
+        Command::Generate(args) => match &args.suite {
+            Some(name) => suite::run(&args, name, args.scale.unwrap_or(1.0)),
+            None => cmd_generate::run_generate(*args),
+        },
         Command::Render(args) => cmd_render::run(args),
         Command::Eval(args) => cmd_eval::run(args),
         Command::Materials(args) => cmd_materials::run(args),
