@@ -161,7 +161,11 @@ fn a_grown_dataset_verifies_whole_and_repairs_in_the_folder_verified() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("first");
     run_ok(generate(&blender, &out, &["-n", "2"]));
-    run_ok(generate(&blender, &out, &["--start", "2", "-n", "2"]));
+    run_ok(generate(
+        &blender,
+        &out,
+        &["--start", "2", "-n", "2", "--allow-split-mismatch"],
+    ));
     let vdir = out.join("clevrtex_clevr");
     assert!(vdir.join("MANIFEST-0-2-0of1.json").is_file());
     assert!(vdir.join("MANIFEST-2-4-0of1.json").is_file());
@@ -192,7 +196,11 @@ fn a_grown_dataset_verifies_whole_and_repairs_in_the_folder_verified() {
             "{i}"
         );
     }
-    run_ok(generate(&blender, &moved, &["--start", "2", "-n", "2"]));
+    run_ok(generate(
+        &blender,
+        &moved,
+        &["--start", "2", "-n", "2", "--allow-split-mismatch"],
+    ));
     let (code, t) = verify(&[&moved], &[]);
     assert_eq!(code, Some(0), "{t}");
 }
@@ -206,8 +214,14 @@ fn interrupted_and_preempted_runs_are_incomplete() {
     let out = dir.path().join("data");
     run_ok(generate(&blender, &out, &["-n", "2"]));
     // A run of 0..6 in two shards (two SLURM tasks), both preempted before their first image.
-    let a = hanging(&out, &["-n", "6", "--shard", "0/2"]);
-    let b = hanging(&out, &["-n", "6", "--shard", "1/2"]);
+    let a = hanging(
+        &out,
+        &["-n", "6", "--shard", "0/2", "--allow-split-mismatch"],
+    );
+    let b = hanging(
+        &out,
+        &["-n", "6", "--shard", "1/2", "--allow-split-mismatch"],
+    );
     wait_for(&lock(&out, ".clevrtex-run-0-6-0of2.lock"));
     wait_for(&lock(&out, ".clevrtex-run-0-6-1of2.lock"));
     for c in [a, b] {
@@ -238,7 +252,11 @@ fn an_overlapping_run_refuses_while_the_range_is_held() {
     wait_for(&held);
     let o = output_within(
         {
-            let mut c = generate(&fake_blender(), &out, &["--start", "2", "-n", "4"]);
+            let mut c = generate(
+                &fake_blender(),
+                &out,
+                &["--start", "2", "-n", "4", "--allow-split-mismatch"],
+            );
             c.env("FAKE_BLENDER_MODE", "hang");
             c
         },

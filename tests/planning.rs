@@ -86,7 +86,11 @@ fn batch_logs_of_a_real_run_show_progress_and_skips() {
         .unwrap_or_else(|| panic!("no rate in {l}"));
     assert!(rate > 0.0, "{l}");
     // Grown to 3: two already complete, one made; the line says so.
-    let out = tiny(&blender, tmp.path(), &["-n", "3", "--workers", "1"]);
+    let out = tiny(
+        &blender,
+        tmp.path(),
+        &["-n", "3", "--workers", "1", "--allow-split-mismatch"],
+    );
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let lines = progress_lines(&out);
     assert!(

@@ -29,6 +29,8 @@ fn interrupted_run_leaves_no_partial_sample_and_resumes() {
                 "1",
             ])
             .args(["--passes", "rgb,mask,depth"])
+            // The resume below covers a part of the range (another --total).
+            .arg("--allow-split-mismatch")
             .arg("--blender")
             .arg(&blender)
             .arg("--out")

@@ -44,6 +44,7 @@ fn a_dataset_grown_in_two_runs_has_one_split_per_sample_in_every_tool() {
             os("generate"),
             os("--variant"),
             os("clevr"),
+            os("--allow-split-mismatch"),
             os("--start"),
             os(start),
             os("-n"),

@@ -626,7 +626,11 @@ fn an_edited_user_material_is_a_setting_for_resume_and_verify() {
     image::RgbImage::from_pixel(8, 8, image::Rgb([10, 200, 10]))
         .save(lib.join("textures/RedStone_COL_3K.png"))
         .unwrap();
-    let o = generate(&out, &blender, &[&["-n", "2"][..], &materials].concat());
+    let o = generate(
+        &out,
+        &blender,
+        &[&["-n", "2", "--allow-split-mismatch"][..], &materials].concat(),
+    );
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(
