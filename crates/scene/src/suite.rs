@@ -182,9 +182,10 @@ mod tests {
             e.contains("unknown suite `clevr`") && e.contains("clevrtex"),
             "{e}"
         );
+        // `full` keeps 50,000 x 0.00001 = 0.5 -> 1 image; `pbg` (0.2) is the first emptied.
         let e = s.plan(0.00001, 0).unwrap_err();
         assert!(
-            e.contains("`full`") && e.contains("empty") && e.contains("hint:"),
+            e.contains("`pbg`") && e.contains("empty") && e.contains("at least 0.00005"),
             "{e}"
         );
         let e = s.plan(5000.0, 0).unwrap_err();
