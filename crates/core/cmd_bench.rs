@@ -11,8 +11,9 @@ use clevrtex_bench::measure::{Bench, Plan};
 use clevrtex_bench::{csv, ladder, scenes, summary, Render, Row};
 use clevrtex_render::{RenderReply, Worker};
 
-use crate::blender_session::{command_error, BlenderSession, Settings};
-use crate::exit::{self, CmdResult};
+use clevrtex_render::command_session::{BlenderSession, Settings};
+
+use crate::exit::{self, command_error, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
 
 /// Arguments of `clevrtex bench`.
@@ -100,12 +101,14 @@ pub fn run(args: Args) -> CmdResult {
 
 /// The bench renders through the command's Blender session: restarts are warned about and
 /// Ctrl-C exits with 130, as in every command.
-impl Render for BlenderSession {
+struct BenchSession(BlenderSession);
+
+impl Render for BenchSession {
     fn request(
         &mut self,
         call: &mut dyn FnMut(&mut Worker) -> WorkerResult,
     ) -> anyhow::Result<RenderReply> {
-        BlenderSession::request(self, call).map_err(command_error)
+        self.0.request(call).map_err(command_error)
     }
 }
 
@@ -167,16 +170,17 @@ fn run_render(args: RenderArgs) -> CmdResult {
                 .map(|m| m.name.clone())
         })
         .collect();
-    let _user = crate::user_materials::check_before_run(
+    let _user = clevrtex_render::user_materials::check_before_run(
         &mut catalogue,
         &used,
         &blenders[0],
         startup_timeout,
         interrupt.clone(),
-    )?;
+    )
+    .map_err(command_error)?;
     let mut rows = Vec::new();
     for (i, blender) in blenders.into_iter().enumerate() {
-        let mut session = BlenderSession::new(Settings {
+        let mut session = BenchSession(BlenderSession::new(Settings {
             blender,
             materials_json: catalogue.resolved_json(),
             threads: args.threads,
@@ -184,8 +188,8 @@ fn run_render(args: RenderArgs) -> CmdResult {
             idle_timeout: None,
             interrupt: interrupt.clone(),
             startup_timeout,
-        })?;
-        let ready = session.ready()?;
+        })?);
+        let ready = session.0.ready().map_err(command_error)?;
         let blender_version = ready.blender_version;
         if args.levers && !ready.features.light_tree {
             anyhow::bail!(
@@ -216,7 +220,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
             }
             .measure(&plan, &scenes, &settings)?,
         );
-        session.close();
+        session.0.close();
     }
 
     csv::save(&rows, &args.out)?;

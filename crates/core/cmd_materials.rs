@@ -15,10 +15,12 @@ use clevrtex_render::{MaterialMode, MaterialSettings};
 
 use clevrtex_report::materials::{self, cost, figures, measure_output, sheet, stats};
 
-use crate::exit::{CmdResult, OK};
-use crate::materials_blender::{
+use clevrtex_render::material_renders::{
     render_all, render_all_in_temp, render_into_cache, session, Outcome, RenderOptions,
 };
+
+use crate::exit::{command_error, CmdResult, OK};
+use crate::interrupt::{self, OnInterrupt};
 
 /// Arguments of `clevrtex materials`.
 #[derive(Debug, clap::Args)]
@@ -119,15 +121,26 @@ struct BatchArgs {
 }
 
 impl BatchArgs {
-    /// What the material renders take of these arguments.
-    fn render_options(&self) -> RenderOptions {
-        RenderOptions {
-            blender: self.blender.clone(),
+    /// What the material renders take of these arguments, checked; the Blender found and a
+    /// Ctrl-C handler that stops it installed.
+    fn render_options(&self) -> anyhow::Result<RenderOptions> {
+        let timeout = match self.timeout {
+            Some(t) => Some(crate::run_args::seconds("--timeout", t)?),
+            None => None,
+        };
+        let blender = clevrtex_render::blender::locate(self.blender.as_deref())?;
+        let interrupt = interrupt::flag(OnInterrupt::Stop {
+            message: "stopping Blender",
+        });
+        let startup_timeout = crate::run_args::seconds("--startup-timeout", self.startup_timeout)?;
+        Ok(RenderOptions {
+            blender,
             threads: self.threads,
-            timeout: self.timeout,
+            timeout,
             retries: self.retries,
-            startup_timeout: self.startup_timeout,
-        }
+            startup_timeout,
+            interrupt,
+        })
     }
 }
 
@@ -220,11 +233,12 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
         let failed = render_into_cache(
             cat,
             &missing,
-            &a.batch.render_options(),
+            &a.batch.render_options()?,
             &settings,
             &cache,
             &key,
-        )?;
+        )
+        .map_err(command_error)?;
         if !failed.is_empty() {
             bail!(
                 "{} material(s) failed to build:\n{}\nhint: run `clevrtex materials check --names <name>` for the traceback",
@@ -251,9 +265,10 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
         displacement: 0.0,
         random: 0.37,
     };
-    let opts = a.render_options();
-    let (mut session, _checked) = session(cat, &names, &opts)?;
-    let outcomes = render_all_in_temp(&mut session, &opts, &settings, &names, &dir)?;
+    let opts = a.render_options()?;
+    let (mut session, _checked) = session(cat, &names, &opts).map_err(command_error)?;
+    let outcomes =
+        render_all_in_temp(&mut session, &opts, &settings, &names, &dir).map_err(command_error)?;
     session.close();
     let mut failed = 0;
     let mut out = std::io::stdout().lock();
@@ -301,8 +316,8 @@ fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
         std::env::temp_dir().join(format!("clevrtex-stats-{}", std::process::id()))
     });
     let mut feats = Vec::new();
-    let opts = a.batch.render_options();
-    let (mut session, _checked) = session(cat, &names, &opts)?;
+    let opts = a.batch.render_options()?;
+    let (mut session, _checked) = session(cat, &names, &opts).map_err(command_error)?;
     for (i, random) in [0.37, 0.81].into_iter().enumerate() {
         let settings = MaterialSettings {
             mode: MaterialMode::Tile,
@@ -312,7 +327,8 @@ fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
             random,
         };
         let out_dir = dir.join(format!("r{i}"));
-        let outcomes = render_all(&mut session, &opts, &settings, &names, &out_dir)?;
+        let outcomes =
+            render_all(&mut session, &opts, &settings, &names, &out_dir).map_err(command_error)?;
         let mut f = Vec::new();
         for (name, outcome) in names.iter().zip(outcomes) {
             let file = match outcome {
@@ -381,9 +397,10 @@ fn cost(cat: &Catalogue, a: CostArgs) -> CmdResult {
         displacement: 0.0,
         random: 0.37,
     };
-    let opts = a.batch.render_options();
-    let (mut session, _checked) = session(cat, &names, &opts)?;
-    let outcomes = render_all_in_temp(&mut session, &opts, &settings, &names, &dir)?;
+    let opts = a.batch.render_options()?;
+    let (mut session, _checked) = session(cat, &names, &opts).map_err(command_error)?;
+    let outcomes =
+        render_all_in_temp(&mut session, &opts, &settings, &names, &dir).map_err(command_error)?;
     session.close();
     // A material that failed to build has no time (NaN), so it shows as such in the table.
     let times: Vec<f64> = outcomes

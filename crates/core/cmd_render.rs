@@ -71,7 +71,7 @@ pub fn run(args: Args) -> CmdResult {
     for f in files {
         let scene = read_scene(&f)?;
         // Every material known before anything renders (a user one needs `--materials`).
-        used.extend(crate::user_materials::used_by_scenes(
+        used.extend(clevrtex_render::user_materials::used_by_scenes(
             &catalogue,
             [(f.as_path(), &scene)],
         )?);

@@ -55,3 +55,12 @@ pub fn report(result: CmdResult) -> u8 {
         }
     }
 }
+
+/// A render error as the command's error: an interrupt becomes [`Interrupted`] (exit code
+/// 130), anything else keeps its message and hint.
+pub fn command_error(err: clevrtex_render::RenderError) -> anyhow::Error {
+    match err {
+        clevrtex_render::RenderError::Interrupted => anyhow::Error::new(Interrupted),
+        e => e.into(),
+    }
+}

@@ -7,7 +7,6 @@ use clap::{Parser, Subcommand};
 // The one font loader, also for the benchmark plot (`crate::font`).
 use clevrtex_report::font;
 
-mod blender_session;
 mod cmd_bench;
 mod cmd_doctor;
 mod cmd_eval;
@@ -22,8 +21,6 @@ mod cmd_verify;
 mod estimate;
 mod exit;
 mod interrupt;
-mod material_copies;
-mod materials_blender;
 mod provenance;
 mod run;
 mod run_args;

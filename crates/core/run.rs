@@ -16,7 +16,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
 use crate::run_args::{self, RunArgs};
-use crate::user_materials;
+use clevrtex_render::user_materials;
 
 /// Render `jobs` with the pool as `args` say, failures to `ledger`, with a progress bar (or,
 /// when stderr is not a terminal, a line per sample and a progress line with rate and ETA every
@@ -266,7 +266,8 @@ pub(crate) fn pool_options(
         &blender,
         startup_timeout,
         Arc::clone(interrupt),
-    )?;
+    )
+    .map_err(crate::exit::command_error)?;
     let materials_json = catalogue.resolved_json();
     let devices = clevrtex_render::gpu_probe::plan_devices(
         choice,

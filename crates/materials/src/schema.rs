@@ -521,7 +521,7 @@ impl Ctx<'_> {
             ));
         };
         let p = base.join(s);
-        // Its bytes are checked before a run (`core/material_copies.rs`); here only whether
+        // Its bytes are checked before a run (`render/src/user_materials/copies.rs`); here only whether
         // it is a file at all, said as it is (a FIFO or device is not "missing").
         let problem = match std::fs::metadata(&p) {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Some("does not exist".into()),

@@ -5,7 +5,7 @@
 //! [`MAX_TEXTURE_SIDE`] pixels a side, decodable to the end. Blender renders a texture it
 //! cannot read as pink without failing, so these run first, in Rust, on files from
 //! elsewhere; the caller reads each file once from inside the material folder and hands
-//! Blender a private copy of exactly the bytes checked (`core/material_copies.rs`,
+//! Blender a private copy of exactly the bytes checked (`render/src/user_materials/copies.rs`,
 //! docs/security.md).
 
 use std::path::Path;
@@ -36,7 +36,7 @@ pub fn side_problem(w: u32, h: u32) -> Option<String> {
 
 /// What a file a user material reads must be ([`bytes_problem`]): every file of a user
 /// material reaches Blender as one of these, checked by this one function before a run, on
-/// the very bytes Blender is then given (`core/material_copies.rs`, docs/security.md).
+/// the very bytes Blender is then given (`render/src/user_materials/copies.rs`, docs/security.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Expect {
     /// A `.blend` file: at most [`MAX_BLEND_BYTES`], Blender's header (or gzip, zstd).

@@ -237,7 +237,7 @@ impl Catalogue {
     }
 
     /// Replace the recipe of user material `name` by `recipe` (its files checked and copied
-    /// for a run: `core/material_copies.rs`; a `.blend` fixed to its node group and the
+    /// for a run: `render/src/user_materials/copies.rs`; a `.blend` fixed to its node group and the
     /// images it reads, `images`: the path the bridge sees -> the checked copy); the hash is
     /// computed again from the files the new recipe names.
     pub fn set_user_recipe(&mut self, name: &str, recipe: Value) -> Result<(), Error> {

@@ -46,10 +46,14 @@
 //   3. output, metadata, passes, ledger: a sample and the failure ledger written to disk
 //   4. worker (process, protocol, report): one Blender process
 //   5. session, gpu_probe, job: a worker restarted, asked for its GPUs, rendering one image
-//   6. pool: the run
+//   6. pool, command_session: the run; one restartable worker for the commands outside it
+//   7. user_materials (copies): user materials checked and copied before a run renders
+//   8. material_renders: `clevrtex materials`' renders of single materials; planner: the
+//      model of `generate --estimate` and its calibration run
 
 pub mod blender;
 pub mod bridge;
+pub mod command_session;
 pub mod device;
 mod error;
 pub mod exr_io;
@@ -57,13 +61,16 @@ pub mod gpu_probe;
 pub mod group;
 mod job;
 mod ledger;
+pub mod material_renders;
 pub mod metadata;
 pub mod output;
 mod passes;
+pub mod planner;
 pub mod pool;
 pub mod post;
 mod session;
 pub mod tmp;
+pub mod user_materials;
 mod worker;
 
 pub use bridge::BridgeDir;

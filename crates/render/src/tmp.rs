@@ -49,7 +49,7 @@ pub(crate) fn private_dir(prefix: &str) -> Result<tempfile::TempDir> {
 /// A fresh private scratch folder `$TMPDIR/clevrtex-work-XXXXXX` owned by this process, removed
 /// when dropped (or by a later run's [`remove_stale`] after a `kill -9`): where `generate
 /// --estimate` renders its calibration images, so that nothing is written into `--out`, and
-/// where a run keeps the checked copies of its user materials' files (`core/material_copies.rs`).
+/// where a run keeps the checked copies of its user materials' files (`render/src/user_materials/copies.rs`).
 pub fn scratch_dir() -> Result<tempfile::TempDir> {
     private_dir("clevrtex-work-")
 }

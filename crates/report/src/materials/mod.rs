@@ -4,7 +4,7 @@
 //! render cost table ([`cost`]) and the dataset figures of `materials measure` ([`figures`]
 //! reads a dataset, [`regions`] computes the figures, [`measure_output`] writes them as
 //! tables or JSON). The Blender renders stay with the command
-//! (`crates/core/materials_blender.rs`).
+//! (`crates/render/src/material_renders.rs`).
 
 use std::path::Path;
 

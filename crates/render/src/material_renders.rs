@@ -1,35 +1,40 @@
 //! The Blender renders of `clevrtex materials sheet|check|stats|cost`: one worker for a batch
-//! of materials (the shared [`BlenderSession`]: `generate`'s restart-and-retry policy, Ctrl-C
+//! of materials (a [`BlenderSession`]: `generate`'s restart-and-retry policy, Ctrl-C
 //! stopping Blender), one `material` request per material (`docs/bridge-protocol.md`).
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use std::time::Duration;
 
-use anyhow::Context;
 use clevrtex_materials::Catalogue;
-use clevrtex_render::{MaterialReply, MaterialSettings, RenderError};
 
-use crate::blender_session::{command_error, BlenderSession, Settings};
-use crate::interrupt::{self, OnInterrupt};
+use crate::command_session::{BlenderSession, Settings};
+use crate::error::{RenderError, Result};
+use crate::user_materials::{check_before_run, Checked};
+use crate::worker::{MaterialReply, MaterialSettings};
 
 /// How the materials are rendered: the Blender and the limits of its worker (the values of
-/// `materials`'s `--blender`, `--threads`, `--timeout`, `--retries` and `--startup-timeout`).
+/// `materials`'s `--blender`, `--threads`, `--timeout`, `--retries` and `--startup-timeout`,
+/// checked by the command).
 #[derive(Debug, Clone)]
-pub(crate) struct RenderOptions {
-    /// Blender executable (`None`: `CLEVRTEX_BLENDER`, else `blender` on `PATH`).
-    pub(crate) blender: Option<PathBuf>,
+pub struct RenderOptions {
+    /// The Blender executable.
+    pub blender: PathBuf,
     /// Cycles threads (0: automatic).
-    pub(crate) threads: u32,
-    /// Time limit per material render, seconds (`None`: by the render's size and samples).
-    pub(crate) timeout: Option<f64>,
+    pub threads: u32,
+    /// Time limit per material render (`None`: by the render's size and samples).
+    pub timeout: Option<Duration>,
     /// Restarts of a crashed or hung worker per material.
-    pub(crate) retries: u32,
-    /// Time limit for a worker to start, seconds.
-    pub(crate) startup_timeout: f64,
+    pub retries: u32,
+    /// Time limit for a worker to start.
+    pub startup_timeout: Duration,
+    /// Set by the command's Ctrl-C handler; stops Blender.
+    pub interrupt: Arc<AtomicBool>,
 }
 
 /// How one material's render came out.
-pub(crate) enum Outcome {
+pub enum Outcome {
     /// Rendered.
     Done(MaterialReply),
     /// The bridge could not build or render it (the worker survived).
@@ -41,45 +46,33 @@ pub(crate) enum Outcome {
     },
 }
 
-/// One Blender worker for the materials `names` of `cat`, started on the first render, with
-/// a Ctrl-C handler that stops it. User materials among `names` are checked first, as for
-/// `generate` ([`crate::user_materials::check_before_run`]: every bad file named at once),
-/// and the worker reads only their checked copies, which live as long as the returned
-/// [`Checked`](crate::user_materials::Checked).
-pub(crate) fn session(
+/// One Blender worker for the materials `names` of `cat`, started on the first render. User
+/// materials among `names` are checked first, as for `generate` ([`check_before_run`]: every
+/// bad file named at once), and the worker reads only their checked copies, which live as
+/// long as the returned [`Checked`].
+pub fn session(
     cat: &Catalogue,
     names: &[&str],
     a: &RenderOptions,
-) -> anyhow::Result<(BlenderSession, crate::user_materials::Checked)> {
-    if let Some(t) = a.timeout {
-        crate::run_args::seconds("--timeout", t)?;
-    }
-    let blender = clevrtex_render::blender::locate(a.blender.as_deref())?;
-    let interrupt = interrupt::flag(OnInterrupt::Stop {
-        message: "stopping Blender",
-    });
-    let startup_timeout = crate::run_args::seconds("--startup-timeout", a.startup_timeout)?;
+) -> Result<(BlenderSession, Checked)> {
     let mut cat = cat.clone();
     let used = names.iter().map(|n| n.to_string()).collect();
-    let checked = crate::user_materials::check_before_run(
+    let checked = check_before_run(
         &mut cat,
         &used,
-        &blender,
-        startup_timeout,
-        interrupt.clone(),
+        &a.blender,
+        a.startup_timeout,
+        a.interrupt.clone(),
     )?;
     let session = BlenderSession::new(Settings {
-        blender,
+        blender: a.blender.clone(),
         materials_json: cat.resolved_json_for(names.iter().copied()),
         threads: a.threads,
         retries: a.retries,
         // With an explicit `--timeout` that limit is the only one, as in `generate`.
-        idle_timeout: a
-            .timeout
-            .is_none()
-            .then_some(clevrtex_render::pool::IDLE_TIMEOUT),
-        interrupt,
-        startup_timeout,
+        idle_timeout: a.timeout.is_none().then_some(crate::pool::IDLE_TIMEOUT),
+        interrupt: a.interrupt.clone(),
+        startup_timeout: a.startup_timeout,
     })?;
     Ok((session, checked))
 }
@@ -89,21 +82,25 @@ pub(crate) fn session(
 fn timeout(a: &RenderOptions, s: &MaterialSettings) -> Duration {
     let pixels = f64::from(s.size) * f64::from(s.size) / (320.0 * 240.0);
     let auto = 600.0 + 8.0 * f64::from(s.samples) * pixels.max(0.05);
-    Duration::from_secs_f64(a.timeout.unwrap_or(auto))
+    a.timeout.unwrap_or(Duration::from_secs_f64(auto))
 }
 
 /// Render each of `names` with `settings` into `out_dir/<name>.png`, in order. A material the
 /// bridge cannot build is an [`Outcome::Failed`] and the batch goes on; a worker that keeps
 /// failing (after `--retries` restarts) or an interrupt ends it with an error.
-pub(crate) fn render_all(
+pub fn render_all(
     session: &mut BlenderSession,
     a: &RenderOptions,
     settings: &MaterialSettings,
     names: &[&str],
     out_dir: &Path,
-) -> anyhow::Result<Vec<Outcome>> {
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("cannot create `{}`", out_dir.display()))?;
+) -> Result<Vec<Outcome>> {
+    std::fs::create_dir_all(out_dir).map_err(|cause| RenderError::Io {
+        what: "cannot create",
+        path: out_dir.to_path_buf(),
+        cause,
+        hint: "make the folder writable, or free disk space".into(),
+    })?;
     let limit = timeout(a, settings);
     names
         .iter()
@@ -113,20 +110,20 @@ pub(crate) fn render_all(
                 Err(RenderError::Bridge {
                     message, traceback, ..
                 }) => Ok(Outcome::Failed { message, traceback }),
-                Err(e) => Err(command_error(e)),
+                Err(e) => Err(e),
             },
         )
         .collect()
 }
 
 /// [`render_all`] into `dir`, which is removed afterwards whatever happened.
-pub(crate) fn render_all_in_temp(
+pub fn render_all_in_temp(
     session: &mut BlenderSession,
     a: &RenderOptions,
     settings: &MaterialSettings,
     names: &[&str],
     dir: &Path,
-) -> anyhow::Result<Vec<Outcome>> {
+) -> Result<Vec<Outcome>> {
     let result = render_all(session, a, settings, names, dir);
     let _ = std::fs::remove_dir_all(dir);
     result
@@ -135,14 +132,14 @@ pub(crate) fn render_all_in_temp(
 /// Render the sheet cells of `missing` with `settings` into `cache` (as `key(name)`), through
 /// a temporary folder there that is removed whatever happened; the materials the bridge could
 /// not build come back as `name: message` lines.
-pub(crate) fn render_into_cache(
+pub fn render_into_cache(
     cat: &Catalogue,
     missing: &[&str],
     a: &RenderOptions,
     settings: &MaterialSettings,
     cache: &Path,
     key: &dyn Fn(&str) -> String,
-) -> anyhow::Result<Vec<String>> {
+) -> Result<Vec<String>> {
     let tmp = cache.join(format!("tmp-{}", std::process::id()));
     let (mut session, _checked) = session(cat, missing, a)?;
     let result = render_all(&mut session, a, settings, missing, &tmp).and_then(|outcomes| {
@@ -151,8 +148,13 @@ pub(crate) fn render_into_cache(
         for (name, outcome) in missing.iter().zip(outcomes) {
             match outcome {
                 Outcome::Done(reply) => {
-                    std::fs::rename(&reply.file, cache.join(key(name))).with_context(|| {
-                        format!("cannot move `{}` into the cache", reply.file.display())
+                    std::fs::rename(&reply.file, cache.join(key(name))).map_err(|cause| {
+                        RenderError::Io {
+                            what: "cannot move into the cache",
+                            path: reply.file.clone(),
+                            cause,
+                            hint: "make the cache folder writable, or free disk space".into(),
+                        }
                     })?;
                 }
                 Outcome::Failed { message, .. } => failed.push(format!("{name}: {message}")),

@@ -10,30 +10,34 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::bail;
 use clevrtex_dataset::dataset::{read_beneath, ReadError};
 use clevrtex_materials::texture::{bytes_problem, Expect};
 use clevrtex_scene::text::printable;
 
+use crate::error::{RenderError, Result};
+
 /// The private folder of one run's copies, removed when dropped (or, after a `kill -9`, by a
 /// later run: `clevrtex_render::tmp`).
-pub(crate) struct Copies {
-    dir: clevrtex_render::tmp::TempDir,
+pub struct Copies {
+    dir: crate::tmp::TempDir,
     /// (material, file in its folder) -> the copy, so a file read twice is copied once.
     done: BTreeMap<(String, PathBuf), PathBuf>,
 }
 
 /// One file copied: where the copy is and the file's path inside its material folder (what
 /// the manifest records).
-pub(crate) struct Copied {
-    pub(crate) copy: PathBuf,
-    pub(crate) rel: String,
+pub struct Copied {
+    /// The copy, in the private folder: what Blender reads.
+    pub copy: PathBuf,
+    /// The file's path inside its material folder.
+    pub rel: String,
 }
 
 impl Copies {
-    pub(crate) fn new() -> anyhow::Result<Copies> {
+    /// An empty private folder for this run's copies.
+    pub fn new() -> Result<Copies> {
         Ok(Copies {
-            dir: clevrtex_render::tmp::scratch_dir()?,
+            dir: crate::tmp::scratch_dir()?,
             done: BTreeMap::new(),
         })
     }
@@ -41,21 +45,21 @@ impl Copies {
     /// The folder of material `material`'s copies: its files keep their places relative to
     /// the material folder in it (so a `.blend`'s `//textures/x.png` points at the place of
     /// the copy of `textures/x.png`).
-    pub(crate) fn base(&self, material: &str) -> PathBuf {
+    pub fn base(&self, material: &str) -> PathBuf {
         self.dir.path().join("materials").join(material)
     }
 
     /// Read `path`, a file of user material `material` (shown as `shown`, the material's own
     /// file) that must lie inside the canonical folder `root`, check it as `expect` says, and
     /// copy it to this run's private folder.
-    pub(crate) fn copy(
+    pub fn copy(
         &mut self,
         material: &str,
         shown: &str,
         root: &Path,
         path: &Path,
         expect: Expect,
-    ) -> anyhow::Result<Copied> {
+    ) -> Result<Copied> {
         let what = match expect {
             Expect::Blend => "file",
             Expect::Texture | Expect::PbrMap { .. } => "texture",
@@ -67,23 +71,23 @@ impl Copies {
         let rel = clevrtex_dataset::dataset::relative_to_root(root, path);
         let bytes = match rel.as_ref().map(|r| read_beneath(root, &root.join(r), expect.max_bytes())) {
             Some(Ok(b)) => b,
-            None | Some(Err(ReadError::LeadsOut)) => bail!(
+            None | Some(Err(ReadError::LeadsOut)) => refuse!(
                 "{intro} is outside the material folder `{}`\nhint: copy the file into the material folder and reference it relative to the material (`//textures/...` in a `.blend`, `textures/...` in a JSON material); a link out of the folder is not followed",
                 root.display()
             ),
-            Some(Err(ReadError::NotRegular)) => bail!(
+            Some(Err(ReadError::NotRegular)) => refuse!(
                 "{intro} is not a regular file (a FIFO, socket or device)\nhint: reference an image file"
             ),
-            Some(Err(ReadError::TooLarge { len, cap })) => bail!(
+            Some(Err(ReadError::TooLarge { len, cap })) => refuse!(
                 "{intro} is {} bytes, more than the {cap} allowed\nhint: use a smaller resolution (3K or 4K)",
                 len.map_or_else(|| "over".into(), |l| l.to_string())
             ),
-            Some(Err(ReadError::Io(e))) => bail!(
+            Some(Err(ReadError::Io(e))) => refuse!(
                 "{intro} cannot be read: {e}\nhint: put the file where the material expects it (beside a `.blend`, usually in `textures/`), or remove the material from the folder; Blender would render it pink"
             ),
         };
         if let Some(problem) = bytes_problem(&bytes, expect) {
-            bail!("{intro} {problem}\nhint: {}", expect.hint());
+            refuse!("{intro} {problem}\nhint: {}", expect.hint());
         }
         let rel = rel.expect("read above");
         let key = (material.to_string(), normal(&rel));
@@ -104,19 +108,27 @@ impl Copies {
 
     /// Check `path`, a file this run's Blender wrote into the private folder (a packed image
     /// of a `.blend` copy), as `expect` says; it is itself the copy Blender will read.
-    pub(crate) fn check_own(
+    pub fn check_own(
         &self,
         material: &str,
         shown: &str,
         what: &str,
         path: &Path,
         expect: Expect,
-    ) -> anyhow::Result<()> {
-        let root = self.dir.path().canonicalize()?;
-        let bytes = read_beneath(&root, path, expect.max_bytes())
-            .map_err(|e| anyhow::anyhow!("user material `{material}` (`{shown}`): {what} {e}"))?;
+    ) -> Result<()> {
+        let root = self.dir.path().canonicalize().map_err(|e| {
+            RenderError::Refused(format!(
+                "cannot read this run's private folder `{}`: {e}\nhint: set `TMPDIR` to a writable folder with free space",
+                self.dir.path().display()
+            ))
+        })?;
+        let bytes = read_beneath(&root, path, expect.max_bytes()).map_err(|e| {
+            RenderError::Refused(format!(
+                "user material `{material}` (`{shown}`): {what} {e}"
+            ))
+        })?;
         if let Some(problem) = bytes_problem(&bytes, expect) {
-            bail!(
+            refuse!(
                 "user material `{material}` (`{shown}`): {what} {problem}\nhint: {}",
                 expect.hint()
             );
@@ -124,15 +136,15 @@ impl Copies {
         Ok(())
     }
 
-    fn write(&self, copy: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    fn write(&self, copy: &Path, bytes: &[u8]) -> Result<()> {
         let parent = copy.parent().expect("under the private folder");
         std::fs::create_dir_all(parent)
             .and_then(|()| std::fs::write(copy, bytes))
             .map_err(|e| {
-                anyhow::anyhow!(
+                RenderError::Refused(format!(
                     "cannot copy a user material's file into `{}`: {e}\nhint: set `TMPDIR` to a writable folder with free space",
                     parent.display()
-                )
+                ))
             })
     }
 }

@@ -1,16 +1,17 @@
 //! The Blender session of the commands that render outside the pool (`bench render`,
-//! `materials sheet|check|stats|cost`): the render crate's [`Session`] (the same
-//! restart-and-retry policy as `generate`) together with its bridge folder, a warning on
-//! stderr for each restart, and Ctrl-C mapped to exit code 130.
+//! `materials sheet|check|stats|cost`, the user-material checks): a [`Session`] (the same
+//! restart-and-retry policy as `generate`) together with its bridge folder, and a warning on
+//! stderr for each restart.
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Duration;
 
-use clevrtex_render::{BridgeDir, Hooks, Ready, RenderError, Session, Worker, WorkerOptions};
-
-use crate::exit;
+use crate::bridge::BridgeDir;
+use crate::error::{RenderError, Result};
+use crate::session::{Hooks, Session};
+use crate::worker::{Ready, Worker, WorkerOptions};
 
 /// Prints each restart the way `generate` does.
 struct WarnOnRestart;
@@ -48,7 +49,7 @@ pub struct BlenderSession {
 
 impl BlenderSession {
     /// Write the bridge; the first worker starts with the first request (or [`Self::ready`]).
-    pub fn new(settings: Settings) -> anyhow::Result<BlenderSession> {
+    pub fn new(settings: Settings) -> Result<BlenderSession> {
         let bridge = BridgeDir::create(&settings.materials_json)?;
         let session = Session::new(
             WorkerOptions::new(settings.blender, &bridge, settings.interrupt)
@@ -64,36 +65,19 @@ impl BlenderSession {
     }
 
     /// What the worker reported when it started (starting it if needed).
-    pub fn ready(&mut self) -> anyhow::Result<Ready> {
-        let worker = self
-            .session
-            .worker(&mut WarnOnRestart)
-            .map_err(command_error)?;
+    pub fn ready(&mut self) -> Result<Ready> {
+        let worker = self.session.worker(&mut WarnOnRestart)?;
         Ok(worker.ready().clone())
     }
 
     /// Run `call` on a worker, restarting and retrying after worker failures (see
-    /// [`Session::request`]). Errors are the render crate's, for callers that handle some
-    /// (a material that does not build); [`command_error`] turns the rest into the
-    /// command's.
-    pub fn request<T>(
-        &mut self,
-        call: impl FnMut(&mut Worker) -> Result<T, RenderError>,
-    ) -> Result<T, RenderError> {
+    /// [`Session::request`]).
+    pub fn request<T>(&mut self, call: impl FnMut(&mut Worker) -> Result<T>) -> Result<T> {
         self.session.request(&mut WarnOnRestart, call)
     }
 
     /// Let the worker quit (or kill it after Ctrl-C).
     pub fn close(mut self) {
         self.session.close();
-    }
-}
-
-/// A render error as the command's error: an interrupt becomes [`exit::Interrupted`] (exit
-/// code 130), anything else keeps its message and hint.
-pub fn command_error(err: RenderError) -> anyhow::Error {
-    match err {
-        RenderError::Interrupted => anyhow::Error::new(exit::Interrupted),
-        e => e.into(),
     }
 }
