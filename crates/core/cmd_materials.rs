@@ -13,13 +13,11 @@ use anyhow::{bail, Context};
 use clevrtex_materials::Catalogue;
 use clevrtex_render::{MaterialMode, MaterialSettings};
 
-use clevrtex_report::materials::{self, cost, figures, measure_output, sheet, stats};
+use clevrtex_report::materials::{self, batches, cost, figures, measure_output, sheet, stats};
 
-use clevrtex_render::material_renders::{
-    render_all, render_all_in_temp, render_into_cache, session, Outcome, RenderOptions,
-};
+use clevrtex_render::material_renders::{render_into_cache, Outcome, RenderOptions};
 
-use crate::exit::{command_error, CmdResult, OK};
+use crate::exit::{command_error, command_error_any, CmdResult, OK};
 use crate::interrupt::{self, OnInterrupt};
 
 /// Arguments of `clevrtex materials`.
@@ -258,18 +256,8 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
 fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
     let names = materials::select(cat, &a.set, &a.names)?;
     let dir = std::env::temp_dir().join(format!("clevrtex-check-{}", std::process::id()));
-    let settings = MaterialSettings {
-        mode: MaterialMode::Check,
-        size: 64,
-        samples: 2,
-        displacement: 0.0,
-        random: 0.37,
-    };
-    let opts = a.render_options()?;
-    let (mut session, _checked) = session(cat, &names, &opts).map_err(command_error)?;
     let outcomes =
-        render_all_in_temp(&mut session, &opts, &settings, &names, &dir).map_err(command_error)?;
-    session.close();
+        batches::check(cat, &names, &a.render_options()?, &dir).map_err(command_error)?;
     let mut failed = 0;
     let mut out = std::io::stdout().lock();
     for (name, outcome) in names.iter().zip(&outcomes) {
@@ -315,36 +303,14 @@ fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
     let dir = a.out_dir.clone().unwrap_or_else(|| {
         std::env::temp_dir().join(format!("clevrtex-stats-{}", std::process::id()))
     });
-    let mut feats = Vec::new();
-    let opts = a.batch.render_options()?;
-    let (mut session, _checked) = session(cat, &names, &opts).map_err(command_error)?;
-    for (i, random) in [0.37, 0.81].into_iter().enumerate() {
-        let settings = MaterialSettings {
-            mode: MaterialMode::Tile,
-            size: a.size,
-            samples: a.samples,
-            displacement: 0.0,
-            random,
-        };
-        let out_dir = dir.join(format!("r{i}"));
-        let outcomes =
-            render_all(&mut session, &opts, &settings, &names, &out_dir).map_err(command_error)?;
-        let mut f = Vec::new();
-        for (name, outcome) in names.iter().zip(outcomes) {
-            let file = match outcome {
-                Outcome::Done(reply) => reply.file,
-                Outcome::Failed { message, .. } => bail!(
-                    "material `{name}` failed: {message}\nhint: run `clevrtex materials check --names {name}`"
-                ),
-            };
-            f.push(
-                stats::features(&file)
-                    .with_context(|| format!("cannot read `{}`", file.display()))?,
-            );
-        }
-        feats.push(f);
-    }
-    session.close();
+    let feats = batches::tile_features(
+        cat,
+        &names,
+        &a.batch.render_options()?,
+        (a.size, a.samples),
+        &dir,
+    )
+    .map_err(command_error_any)?;
     // The same material with another `random` is the yardstick (`stats::distinctness`).
     let d = stats::distinctness(&feats[0], &feats[1]);
     let threshold = d.threshold;
@@ -390,26 +356,14 @@ fn cost(cat: &Catalogue, a: CostArgs) -> CmdResult {
         names.insert(0, "plain");
     }
     let dir = std::env::temp_dir().join(format!("clevrtex-cost-{}", std::process::id()));
-    let settings = MaterialSettings {
-        mode: MaterialMode::Cost,
-        size: a.size,
-        samples: a.samples,
-        displacement: 0.0,
-        random: 0.37,
-    };
-    let opts = a.batch.render_options()?;
-    let (mut session, _checked) = session(cat, &names, &opts).map_err(command_error)?;
-    let outcomes =
-        render_all_in_temp(&mut session, &opts, &settings, &names, &dir).map_err(command_error)?;
-    session.close();
-    // A material that failed to build has no time (NaN), so it shows as such in the table.
-    let times: Vec<f64> = outcomes
-        .iter()
-        .map(|o| match o {
-            Outcome::Done(reply) => reply.timings.render_s,
-            Outcome::Failed { .. } => f64::NAN,
-        })
-        .collect();
+    let times = batches::render_seconds(
+        cat,
+        &names,
+        &a.batch.render_options()?,
+        (a.size, a.samples),
+        &dir,
+    )
+    .map_err(command_error)?;
     let c = cost::relative(&names, &times);
     let mut out = std::io::stdout().lock();
     let _ = writeln!(out, "{:<24} {:>8} {:>8}", "material", "seconds", "x plain");

@@ -64,3 +64,11 @@ pub fn command_error(err: clevrtex_render::RenderError) -> anyhow::Error {
         e => e.into(),
     }
 }
+
+/// [`command_error`] for an error that may hold a render error (a library's `anyhow` error).
+pub fn command_error_any(err: anyhow::Error) -> anyhow::Error {
+    match err.downcast::<clevrtex_render::RenderError>() {
+        Ok(e) => command_error(e),
+        Err(e) => e,
+    }
+}

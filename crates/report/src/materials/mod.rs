@@ -3,14 +3,15 @@
 //! statistics of rendered tiles ([`stats`], also the CIELAB conversion the report uses), the
 //! render cost table ([`cost`]) and the dataset figures of `materials measure` ([`figures`]
 //! reads a dataset, [`regions`] computes the figures, [`measure_output`] writes them as
-//! tables or JSON). The Blender renders stay with the command
-//! (`crates/render/src/material_renders.rs`).
+//! tables or JSON), and the Blender batches of `check`, `stats` and `cost` ([`batches`], on
+//! `crates/render/src/material_renders.rs`).
 
 use std::path::Path;
 
 use anyhow::{bail, Context};
 use clevrtex_materials::{Catalogue, Set};
 
+pub mod batches;
 pub mod cost;
 pub mod figures;
 pub mod measure_output;
