@@ -2,11 +2,9 @@
 //! embedded bridge starts in it, and what is missing.
 
 use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
 use std::time::Duration;
 
-use clevrtex_render::{blender, BridgeDir, Worker, WorkerOptions};
+use clevrtex_render::{blender, doctor};
 
 use crate::exit::{self, CmdResult};
 
@@ -58,19 +56,17 @@ pub fn run(args: Args) -> CmdResult {
     }
     let materials = clevrtex_render::default_materials_json()
         .map_err(|e| anyhow::anyhow!("the built-in material catalogue is invalid: {e}"))?;
-    let bridge = BridgeDir::create(&materials)?;
     println!(
         "bridge: {} embedded file(s), protocol version {}",
         clevrtex_render::bridge::files().len(),
         clevrtex_render::bridge::BRIDGE_VERSION
     );
-    match start_worker(&path, &bridge, deadline) {
-        Ok(worker) => {
-            let ready = worker.ready().clone();
+    match doctor::probe(&path, &materials, deadline) {
+        Ok(probe) => {
+            let ready = probe.ready;
             println!(
                 "worker: started in {:.1} s, reports Blender {}",
-                worker.startup_time().as_secs_f64(),
-                ready.blender_version
+                probe.startup_s, ready.blender_version
             );
             println!(
                 "cycles devices: {}",
@@ -89,7 +85,6 @@ pub fn run(args: Args) -> CmdResult {
             if !ready.cycles_devices.iter().any(|d| d == "CPU") {
                 problems.push("Cycles reports no CPU device".to_string());
             }
-            worker.quit();
         }
         Err(e) => {
             // The worker error's own hint sends the user to `clevrtex doctor`: drop it here.
@@ -116,88 +111,36 @@ pub fn run(args: Args) -> CmdResult {
     }
 }
 
-/// One single-threaded worker of `blender` running `bridge`'s script, on the default device:
-/// what `doctor` starts to ask a Blender what it has.
-fn start_worker(
-    blender: &std::path::Path,
-    bridge: &BridgeDir,
-    deadline: Duration,
-) -> Result<Worker, clevrtex_render::RenderError> {
-    Worker::start(
-        &WorkerOptions::new(
-            blender.to_path_buf(),
-            bridge,
-            Arc::new(AtomicBool::new(false)),
-        )
-        .with_threads(1)
-        .with_startup_timeout(deadline),
-    )
-}
-
 /// One line per Blender found (PATH, `CLEVRTEX_BLENDER`, `./.venv-bpy`): its kind, version,
 /// Cycles devices and features, and which one `generate` uses. Probed in parallel; a
 /// Blender that does not start is listed with why, and is not a problem of this check.
 fn list_blenders(checked: &std::path::Path, explicit: bool, deadline: Duration) {
-    let found = blender::candidates();
     let used = if explicit {
         Some(checked.to_path_buf())
     } else {
         blender::locate(None).ok()
     };
-    let same = |a: &std::path::Path, b: &std::path::Path| {
-        std::fs::canonicalize(a).ok() == std::fs::canonicalize(b).ok()
-    };
-    let (used, same) = (&used, &same);
-    let lines: Vec<String> = std::thread::scope(|s| {
-        let handles: Vec<_> = found
-            .iter()
-            .map(|(path, from)| {
-                s.spawn(move || {
-                    let flavour = blender::flavour(path);
-                    let version = blender::version_line_within(path, deadline)
-                        .unwrap_or_else(|e| format!("no version ({})", first_line(&e.to_string())));
-                    let detail = match BridgeDir::create("{\"materials\": {}}")
-                        .and_then(|bridge| start_worker(path, &bridge, deadline))
-                    {
-                        Ok(worker) => {
-                            let ready = worker.ready().clone();
-                            worker.quit();
-                            format!(
-                                "cycles devices: {}; {}",
-                                ready.cycles_devices.join(", "),
-                                ready.features_line()
-                            )
-                        }
-                        Err(e) => {
-                            format!("the bridge does not start: {}", first_line(&e.to_string()))
-                        }
-                    };
-                    format!(
-                        "{}{} [{from}]: {version} ({})\n      {detail}",
-                        used.as_deref()
-                            .filter(|u| same(u, path))
-                            .map(|_| "  * ")
-                            .unwrap_or("    "),
-                        path.display(),
-                        flavour.describe()
-                    )
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_default())
-            .collect()
-    });
+    let found = doctor::probe_all(used.as_deref(), deadline);
     println!("blenders found (* = the one `generate` uses; pick another with `--blender PATH`):");
-    if lines.is_empty() {
+    if found.is_empty() {
         println!("    (none on PATH, in CLEVRTEX_BLENDER or ./.venv-bpy)");
     }
-    for line in lines {
-        println!("{line}");
+    for f in found {
+        let version = f.version.unwrap_or_else(|e| format!("no version ({e})"));
+        let detail = match f.probe {
+            Ok(ready) => format!(
+                "cycles devices: {}; {}",
+                ready.cycles_devices.join(", "),
+                ready.features_line()
+            ),
+            Err(e) => format!("the bridge does not start: {e}"),
+        };
+        println!(
+            "{}{} [{}]: {version} ({})\n      {detail}",
+            if f.used { "  * " } else { "    " },
+            f.path.display(),
+            f.from,
+            f.flavour.describe()
+        );
     }
-}
-
-fn first_line(text: &str) -> &str {
-    text.lines().next().unwrap_or("")
 }

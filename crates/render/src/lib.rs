@@ -45,7 +45,8 @@
 //   2. blender, bridge, exr_io, post: finding Blender, the embedded bridge, EXRs, encodings
 //   3. output, metadata, passes, ledger: a sample and the failure ledger written to disk
 //   4. worker (process, protocol, report): one Blender process
-//   5. session, gpu_probe, job: a worker restarted, asked for its GPUs, rendering one image
+//   5. session, gpu_probe, job, doctor: a worker restarted, asked for its GPUs, rendering one
+//      image, asked what it has (`doctor`)
 //   6. pool, command_session: the run; one restartable worker for the commands outside it
 //   7. user_materials (copies): user materials checked and copied before a run renders
 //   8. material_renders: `clevrtex materials`' renders of single materials; planner: the
@@ -55,6 +56,7 @@ pub mod blender;
 pub mod bridge;
 pub mod command_session;
 pub mod device;
+pub mod doctor;
 mod error;
 pub mod exr_io;
 pub mod gpu_probe;
