@@ -97,7 +97,7 @@ impl Suite {
             let exact = images as f64 * scale;
             let total = exact.round();
             if total < 1.0 {
-                let least = 0.5 / self.variants.iter().map(|v| v.1).min().unwrap_or(1) as f64;
+                let least = 1.0 / self.variants.iter().map(|v| v.1).min().unwrap_or(1) as f64;
                 return Err(format!(
                     "`--scale {scale}` makes variant `{variant}` of suite `{}` empty ({images} x {scale} = {exact} images)\nhint: pass a scale of at least {least} so that every variant keeps an image",
                     self.name
