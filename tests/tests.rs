@@ -30,6 +30,7 @@ mod shadow;
 mod slurm;
 mod splits;
 mod structure;
+mod suite;
 mod trust_paths;
 mod user_materials;
 mod verify;

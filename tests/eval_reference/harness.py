@@ -10,8 +10,9 @@ published sources (read, not copied):
   (`adjusted_rand_index`, `fg_adjusted_rand_index`, `tensor_to_one_hot`) and
   `ocl/metrics/masks.py` (`ARIMetric.update`, `UnsupervisedMaskIoUMetric.update`,
   `unsupervised_mask_iou`; torch float64 there, numpy float64 here).
-- `karazijal/clevrtex` `clevrtex_eval.py`: `CLEVRTEX` (the loader: crop, Pillow resize) and
-  `CLEVRTEX_Evaluator.update` / `statistic` (torch there, numpy here).
+- `karazijal/clevrtex` `clevrtex_eval.py`: `CLEVRTEX` (the loader: its index of a variant's
+  files and split by position, crop, Pillow resize) and `CLEVRTEX_Evaluator.update` /
+  `statistic` (torch there, numpy here).
 
 Why numpy and not the originals: the originals need TensorFlow or PyTorch; PyPI's Linux
 PyTorch wheel (torch 2.15.0, 539 MB) pulls the CUDA 13 libraries (cuDNN, NCCL, cuSPARSELt,
@@ -22,10 +23,12 @@ first index on ties; float64 sums of integer counts are exact).
 Usage:
     python harness.py cases OUT.json             # per-image fixtures with expected values
     python harness.py dataset GT PREDS OUT.json  # per-protocol means over a dataset (npz preds)
+    python harness.py splits ROOT OUT.json       # the public loader's indices per variant and split
 """
 
 import json
 import os
+import pathlib
 import sys
 from collections import defaultdict
 
@@ -336,6 +339,53 @@ def clevrtex_load(img_path, msk_path, crop=True, resize=(128, 128)):
     return img, np.array(msk).astype(np.int64)
 
 
+# The loader's variants and split fractions (`CLEVRTEX.variants`, `CLEVRTEX.splits`).
+PUBLIC_VARIANTS = ["full", "pbg", "vbg", "grassbg", "camo", "outd"]
+PUBLIC_SPLITS = {"test": (0.0, 0.1), "val": (0.1, 0.2), "train": (0.2, 1.0)}
+
+
+def public_split_indices(root, variant, split):
+    """The image indices `CLEVRTEX(root, variant, split)` serves, in its order: `_reindex`
+    (every `CLEVRTEX_{variant}_??????.png` below `root/clevrtex_{variant}` (or `root` when it is
+    that folder), the index parsed from the name, a gap or a duplicate refused), then the split
+    by position over all the images: `bias, limit = int(frac * len(index))`; `outd` has no
+    split (every image)."""
+    base = pathlib.Path(root)
+    sub = f"clevrtex_{variant.lower()}"
+    if base.name != sub:
+        base = base / sub
+    prefix = f"CLEVRTEX_{variant}_"
+    index = {}
+    top = 0
+    for img in base.glob(f"**/{prefix}??????.png"):
+        digits = img.name.replace(prefix, "").replace(".png", "")
+        ind = int(digits) if digits.lstrip("0") else 0
+        top = max(top, ind)
+        if not (img.parent / f"{prefix}{digits}_flat.png").exists():
+            raise ValueError(f"missing mask of {img.name}")
+        if ind in index:
+            raise ValueError(f"duplicate {ind}")
+        index[ind] = img
+    if not index:
+        raise ValueError("no values found")
+    missing = [i for i in range(0, top) if i not in index]
+    if missing:
+        raise ValueError(f"missing image numbers {missing}")
+    bias, limit = (0.0, 1.0) if variant == "outd" else PUBLIC_SPLITS[split]
+    bias, limit = int(bias * len(index)), int(limit * len(index))
+    # `__getitem__(i)` reads `self.index[i + bias]` for `0 <= i < limit - bias`.
+    return [i + bias for i in range(limit - bias)]
+
+
+def public_splits(root):
+    """`public_split_indices` for every variant the loader knows that `root` holds."""
+    out = {}
+    for v in PUBLIC_VARIANTS:
+        if (pathlib.Path(root) / f"clevrtex_{v}").is_dir():
+            out[v] = {s: public_split_indices(root, v, s) for s in PUBLIC_SPLITS}
+    return out
+
+
 def dataset_means(gt, preds):
     """Per-protocol means over every sample of `gt` with an npz prediction (`masks`)."""
     per = defaultdict(list)
@@ -361,6 +411,9 @@ if __name__ == "__main__":
     elif mode == "dataset":
         out = dataset_means(sys.argv[2], sys.argv[3])
         path = sys.argv[4]
+    elif mode == "splits":
+        out = public_splits(sys.argv[2])
+        path = sys.argv[3]
     else:
         sys.exit(f"unknown mode {mode}")
     with open(path, "w") as f:

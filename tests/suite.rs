@@ -1,0 +1,311 @@
+//! `generate --suite` (issue 41): the published suite made in shards equals the suite made in
+//! one run (`verify --against`: layouts, masks and metadata image by image), its splits are
+//! the public loader's for every variant that loader knows, a dataset grown with another
+//! `--total` is refused before anything renders, and a suite's bad input is refused with
+//! nothing written. (Runs of mixed settings failing `verify`:
+//! `verify::runs_of_other_settings_in_one_folder_fail_verify_unless_mixed_on_purpose`.)
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+use serde_json::Value;
+
+use crate::util::{blender_or_skip, blender_wrapper, clevrtex, test_python_or_skip, text};
+
+/// The suite's scale in these tests: the issue's try, 70 images (full 25, pbg, vbg, grassbg
+/// and camo 10 each, outd 5), every variant with a test split.
+const SCALE: &str = "0.0005";
+/// The public loader's variants: the suite's.
+const VARIANTS: [&str; 6] = ["full", "pbg", "vbg", "grassbg", "camo", "outd"];
+
+/// `clevrtex generate --suite clevrtex --scale SCALE` into `out`, tiny renders, then `extra`.
+fn suite(blender: &Path, out: &Path, extra: &[&str]) -> Output {
+    clevrtex()
+        .args(["generate", "--suite", "clevrtex", "--scale", SCALE])
+        .args(["--width", "32", "--height", "24", "--samples", "1"])
+        .args(["--passes", "rgb,mask", "--blender"])
+        .arg(blender)
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .output()
+        .unwrap()
+}
+
+/// Every file below `dir` with its bytes (locks included: nothing may appear or change).
+fn tree(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let bytes = std::fs::read(&p).unwrap_or_default();
+                out.insert(p.strip_prefix(dir).unwrap().to_path_buf(), bytes);
+            }
+        }
+    }
+    out
+}
+
+/// The suite in two shards into `a` and in one run into `b`: `verify` calls `a` whole,
+/// `verify a --against b` finds the same layouts, masks and metadata in every variant (and
+/// the masks and metadata files are byte-identical), the public loader's splits equal
+/// `clevrtex.Dataset`'s, rerunning the same command renders nothing, and growing a variant
+/// with another `--total` is refused before Blender starts.
+#[test]
+fn a_suite_in_two_shards_is_the_suite_of_one_run_with_the_public_loaders_splits() {
+    let Some(blender) = blender_or_skip("suite_in_two_shards") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    for shard in ["0/2", "1/2"] {
+        let o = suite(&blender, &a, &["--shard", shard]);
+        assert_eq!(o.status.code(), Some(0), "shard {shard}: {}", text(&o));
+    }
+    let o = suite(&blender, &b, &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let t = text(&o);
+    assert!(
+        t.contains("full 25, pbg 10, vbg 10, grassbg 10, camo 10, outd 5"),
+        "{t}"
+    );
+
+    let o = clevrtex().arg("verify").arg(&a).output().unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("suite `clevrtex` at scale 0.0005: whole (6 variants, 70 images)"),
+        "{t}"
+    );
+
+    let o = clevrtex()
+        .arg("verify")
+        .arg(&a)
+        .arg("--against")
+        .arg(&b)
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    for (v, n) in [
+        ("full", 25),
+        ("pbg", 10),
+        ("vbg", 10),
+        ("grassbg", 10),
+        ("camo", 10),
+        ("outd", 5),
+    ] {
+        assert!(
+            t.contains(&format!(
+                "{v}: against `{}`: {n} of {n} image(s) in both hold the same layout, mask and metadata",
+                b.display()
+            )),
+            "{v}: {t}"
+        );
+    }
+    assert_eq!(
+        t.matches("same layouts, masks and metadata").count(),
+        6,
+        "{t}"
+    );
+    // What `--against` claims, checked on the files themselves.
+    let (ta, tb) = (tree(&a), tree(&b));
+    let mut compared = 0;
+    for (rel, bytes) in &ta {
+        let name = rel.file_name().unwrap().to_string_lossy();
+        let per_image = name.starts_with("CLEVRTEX_")
+            && (name.ends_with("_flat.png") || name.ends_with(".json"));
+        if per_image {
+            assert_eq!(Some(bytes), tb.get(rel), "{} differs", rel.display());
+            compared += 1;
+        }
+    }
+    assert_eq!(compared, 2 * 70);
+
+    // The public loader's splits (`tests/eval_reference/harness.py`, its `_reindex` and split
+    // rule) against `clevrtex.Dataset`'s, for every variant, split by split.
+    if let Some(python) = test_python_or_skip("suite_public_loader_splits", "clevrtex") {
+        let script = r#"
+import json, sys
+sys.path.insert(0, sys.argv[1])
+import harness, clevrtex
+root = sys.argv[2]
+public = harness.public_splits(root)
+ours = {}
+for v in public:
+    ours[v] = {}
+    for s in harness.PUBLIC_SPLITS:
+        try:
+            ds = clevrtex.Dataset(root, dataset_variant=v, split=s, return_metadata=False)
+            ours[v][s] = [int(ds[i][0]) for i in range(len(ds))]
+        except ValueError as e:
+            if "is empty" not in str(e):
+                raise
+            ours[v][s] = []
+print(json.dumps({"public": public, "ours": ours}))
+"#;
+        let o = std::process::Command::new(&python)
+            .arg("-c")
+            .arg(script)
+            .arg(crate::util::repo_root().join("tests/eval_reference"))
+            .arg(&a)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+        let public = v["public"].as_object().unwrap();
+        assert_eq!(
+            public.keys().map(String::as_str).collect::<Vec<_>>().len(),
+            VARIANTS.len(),
+            "{v}"
+        );
+        for variant in VARIANTS {
+            assert_eq!(
+                v["public"][variant], v["ours"][variant],
+                "{variant}: the public loader's splits vs clevrtex.Dataset's"
+            );
+        }
+        // The position rule over the whole variant: full's 25 images give test 2, val 3.
+        assert_eq!(v["public"]["full"]["test"], serde_json::json!([0, 1]));
+        assert_eq!(v["public"]["full"]["val"], serde_json::json!([2, 3, 4]));
+        assert_eq!(v["public"]["pbg"]["test"], serde_json::json!([0]));
+        assert_eq!(
+            v["public"]["outd"]["test"],
+            serde_json::json!([0, 1, 2, 3, 4])
+        );
+    }
+
+    // The same command again: every sample is complete, nothing changes.
+    let before = tree(&b);
+    let o = suite(&blender, &b, &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let after = tree(&b);
+    let changed: Vec<_> = after
+        .iter()
+        .filter(|(rel, bytes)| {
+            let name = rel.file_name().unwrap().to_string_lossy();
+            name.starts_with("CLEVRTEX_") && before.get(*rel) != Some(bytes)
+        })
+        .map(|(rel, _)| rel.display().to_string())
+        .collect();
+    assert!(changed.is_empty(), "a rerun changed {changed:?}");
+
+    // Growing `full` past the suite's 25 with a run of another total: refused before anything
+    // is made, and before Blender is started (the wrapper would leave its marker).
+    let marker = tmp.path().join("blender-started");
+    let bin = tmp.path().join("bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    let wrapper = blender_wrapper(&bin, &format!(": > '{}'\nexit 1", marker.display()));
+    let before = tree(&b);
+    let o = clevrtex()
+        .args(["generate", "--variant", "full", "--start", "25", "-n", "5"])
+        .args(["--width", "32", "--height", "24", "--samples", "1"])
+        .args(["--passes", "rgb,mask", "--blender"])
+        .arg(&wrapper)
+        .arg("--out")
+        .arg(&b)
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("for a dataset of 25 images, and this run's total is 30")
+            && t.contains("pass `--total 25`"),
+        "{t}"
+    );
+    assert!(!marker.exists(), "Blender was started: {t}");
+    assert_eq!(tree(&b), before, "the refused run wrote into the folder");
+}
+
+/// A suite's bad input: an unknown suite, a scale that empties a variant or passes the index
+/// cap, a folder holding a variant the suite does not have, and a folder of another suite's
+/// plan: a message naming what is wrong, a non-zero exit, nothing written (no Blender needed:
+/// every refusal comes first).
+#[test]
+fn a_suites_bad_input_is_refused_with_nothing_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let run = |args: &[&str], out: &Path| {
+        let o = clevrtex()
+            .arg("generate")
+            .args(args)
+            .arg("--out")
+            .arg(out)
+            .args(["--blender", "/nonexistent/blender"])
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .unwrap();
+        (o.status.code(), text(&o))
+    };
+    for (args, wants) in [
+        (
+            &["--suite", "clevrtex2"][..],
+            &["unknown suite `clevrtex2`", "pass one of: clevrtex"][..],
+        ),
+        (
+            &["--suite", "clevrtex", "--scale", "0.00001"][..],
+            &[
+                "makes variant `pbg` of suite `clevrtex` empty",
+                "at least 0.0001",
+            ][..],
+        ),
+        (
+            &["--suite", "clevrtex", "--scale", "3000"][..],
+            &["makes variant `full` of suite `clevrtex` 150000000 images, over the cap"][..],
+        ),
+        (
+            &["--suite", "clevrtex", "--scale=-1"][..],
+            &["`--scale -1` is not a positive number"][..],
+        ),
+    ] {
+        let (code, t) = run(args, &out);
+        assert!(code.is_some_and(|c| c != 0), "{args:?}: {t}");
+        for w in wants {
+            assert!(t.contains(w), "{args:?}: {w:?} not in: {t}");
+        }
+        assert!(!out.exists(), "{args:?} wrote {}", out.display());
+    }
+
+    // A folder holding a variant the suite does not have.
+    let foreign = tmp.path().join("foreign");
+    std::fs::create_dir_all(foreign.join("clevrtex_clevr")).unwrap();
+    let before = tree(&foreign);
+    let (code, t) = run(&["--suite", "clevrtex", "--scale", SCALE], &foreign);
+    assert!(code.is_some_and(|c| c != 0), "{t}");
+    assert!(
+        t.contains("holds `clevrtex_clevr`, a variant that suite `clevrtex` does not have"),
+        "{t}"
+    );
+    assert_eq!(tree(&foreign), before);
+    assert!(!foreign.join("SUITE.json").exists());
+
+    // A folder of the suite at another scale: named, not resumed into.
+    let other = tmp.path().join("other");
+    std::fs::create_dir_all(&other).unwrap();
+    let plan = clevrtex_scene::suite::find("clevrtex")
+        .unwrap()
+        .plan(0.001, 0)
+        .unwrap();
+    clevrtex_dataset::suite::write(&other, &plan).unwrap();
+    let before = tree(&other);
+    let (code, t) = run(&["--suite", "clevrtex", "--scale", SCALE], &other);
+    assert!(code.is_some_and(|c| c != 0), "{t}");
+    assert!(
+        t.contains("holds suite `clevrtex` at scale 0.001 with seed 0, not suite `clevrtex` at scale 0.0005 with seed 0"),
+        "{t}"
+    );
+    assert_eq!(tree(&other), before);
+}
