@@ -486,3 +486,81 @@ fn gpu_template_requests_gpus_and_runs_a_valid_command() {
     assert_ne!(o.status.code(), Some(0), "{}", text(&o));
     assert!(text(&o).contains("set SHARDS"), "{}", text(&o));
 }
+
+/// The suite as one array (issue 41): `SUITE=clevrtex SCALE=...` makes the template's tasks
+/// split the whole suite, not each variant; the union is the whole suite (`verify`), the same
+/// layouts, masks and metadata as one local run (`verify --against`).
+#[test]
+fn slurm_array_makes_the_whole_suite() {
+    let Some(blender) = blender_or_skip("slurm_array_makes_the_whole_suite") else {
+        return;
+    };
+    let Some(cluster) = Cluster::start() else {
+        return;
+    };
+    let work = tempfile::tempdir().unwrap();
+    let bin = PathBuf::from(env!("CARGO_BIN_EXE_clevrtex"));
+    let extra = format!(
+        "--width 32 --height 24 --samples 1 --passes rgb,mask --blender {}",
+        blender.display()
+    );
+    let tmp = work.path().join("tmp");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let (out, logs) = (work.path().join("slurm"), work.path().join("logs"));
+    std::fs::create_dir_all(&logs).unwrap();
+    let env = vec![
+        ("OUT", out.display().to_string()),
+        ("CLEVRTEX", bin.display().to_string()),
+        ("SUITE", "clevrtex".to_string()),
+        ("SCALE", "0.0001".to_string()),
+        ("SHARDS", "2".to_string()),
+        ("EXTRA_ARGS", extra.clone()),
+        ("TMPDIR", tmp.display().to_string()),
+    ];
+    let id = cluster.submit(2, &env, &logs);
+    cluster.wait(&id, Duration::from_secs(600));
+    let task_logs: String = (0..2)
+        .map(|k| std::fs::read_to_string(logs.join(format!("task-{k}.log"))).unwrap_or_default())
+        .collect();
+    // Each task made its share of every variant the shard holds images of.
+    for k in 0..2 {
+        let log = std::fs::read_to_string(logs.join(format!("task-{k}.log"))).unwrap_or_default();
+        assert!(
+            log.contains(&format!("shard {k}/2"))
+                && log.contains("suite `clevrtex` at scale 0.0001"),
+            "task {k}: {log}"
+        );
+    }
+    let v = clevrtex().arg("verify").arg(&out).output().unwrap();
+    assert_eq!(v.status.code(), Some(0), "{}\n{task_logs}", text(&v));
+    assert!(
+        text(&v).contains("suite `clevrtex` at scale 0.0001: whole (6 variants, 14 images)"),
+        "{}",
+        text(&v)
+    );
+    let local = work.path().join("local");
+    let o = clevrtex()
+        .args(["generate", "--suite", "clevrtex", "--scale", "0.0001"])
+        .args(extra.split(' '))
+        .arg("--out")
+        .arg(&local)
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("SLURM_ARRAY_TASK_COUNT")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let v = clevrtex()
+        .arg("verify")
+        .arg(&out)
+        .arg("--against")
+        .arg(&local)
+        .output()
+        .unwrap();
+    assert_eq!(v.status.code(), Some(0), "{}", text(&v));
+    assert_eq!(
+        text(&v).matches("same layouts, masks and metadata").count(),
+        6,
+        "{}",
+        text(&v)
+    );
+}
