@@ -75,6 +75,7 @@ fn shards_writing_at_once_leave_a_card_of_every_run() {
     );
     for want in [
         "- **Suite**: none".to_string(),
+        "- `clevr`: not a variant the public loader knows".to_string(),
         format!("`0.1.0 @ {commit}"),
         "over 6 sample(s)".to_string(),
         "### Materials used".to_string(),
@@ -114,4 +115,81 @@ fn shards_writing_at_once_leave_a_card_of_every_run() {
         .unwrap();
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     assert!(!text(&o).contains("DATASET_CARD"), "{}", text(&o));
+}
+
+/// Issue 41: the card says variant by variant what the public loader makes of the folder,
+/// and the card, `verify` and `report` say where a grown variant's recorded splits are not
+/// the public loader's: `camo` grown from 12 to 20 images with another `--total` (the loader
+/// cuts test 2, val 2, train 16; the runs recorded test 1, val 1, train 18), `pbg` made in one
+/// run (read unchanged), `clevr` (a variant the public loader does not know).
+#[test]
+fn the_card_says_what_the_public_loader_makes_of_each_variant() {
+    let Some(blender) = blender_or_skip("the_card_says_what_the_public_loader_makes") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    for args in [
+        &["--variant", "camo", "-n", "12"][..],
+        &[
+            "--variant",
+            "camo",
+            "--start",
+            "12",
+            "-n",
+            "8",
+            "--allow-split-mismatch",
+        ][..],
+        &["--variant", "pbg", "-n", "10"][..],
+        &["--variant", "clevr", "-n", "3"][..],
+    ] {
+        let o = clevrtex()
+            .arg("generate")
+            .args(args)
+            .args(["--width", "32", "--height", "24", "--samples", "1"])
+            .args(["--passes", "rgb,mask", "--blender"])
+            .arg(&blender)
+            .arg("--out")
+            .arg(&out)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {}", text(&o));
+    }
+    let card = std::fs::read_to_string(out.join("DATASET_CARD.md")).unwrap();
+    for want in [
+        "- `camo`: read, but with other splits than those recorded here: its position rule over all 20 samples gives test 2, val 2, train 16, the runs recorded test 1, val 1, train 18",
+        "- `pbg`: read unchanged (`CLEVRTEX(path, 'pbg', split)`), with the splits recorded here (test 1, val 1, train 8)",
+        "- `clevr`: not a variant the public loader knows (it raises `Unknown variant clevr`)",
+    ] {
+        assert!(card.contains(want), "{want:?} not in: {card}");
+    }
+    assert!(!card.contains("read this dataset unchanged"), "{card}");
+
+    let o = clevrtex().arg("verify").arg(&out).output().unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("the recorded splits (test 1, val 1, train 18) differ from the public loader's position rule over these 20 samples (test 2, val 2, train 16)"),
+        "{t}"
+    );
+    let html = dir.path().join("report.html");
+    let o = clevrtex()
+        .arg("report")
+        .arg("--out")
+        .arg(&html)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(
+        page.contains("<b>warning</b>: camo: the recorded splits (test 1, val 1, train 18) differ"),
+        "no split warning for camo in the report"
+    );
+    assert!(
+        !page.contains("<b>warning</b>: pbg:"),
+        "pbg's splits are the loader's"
+    );
 }

@@ -185,6 +185,18 @@ print(json.dumps({"public": public, "ours": ours}))
         );
     }
 
+    // The card names the suite, and every variant is read unchanged by the public loader.
+    let card = std::fs::read_to_string(b.join("DATASET_CARD.md")).unwrap();
+    assert!(card.contains("- **Suite**: `clevrtex`"), "{card}");
+    for v in VARIANTS {
+        assert!(
+            card.contains(&format!(
+                "- `{v}`: read unchanged (`CLEVRTEX(path, '{v}', split)`)"
+            )),
+            "{v}: {card}"
+        );
+    }
+
     // The same command again: every sample is complete, nothing changes.
     let before = tree(&b);
     let o = suite(&blender, &b, &[]);

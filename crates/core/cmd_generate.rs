@@ -138,6 +138,8 @@ pub(crate) struct Part<'a> {
     pub shard: clevrtex_scene::shard::Shard,
     /// Run seed.
     pub seed: u64,
+    /// The suite this part belongs to (`--suite`), recorded in its manifest.
+    pub suite: Option<&'a str>,
 }
 
 /// Run `clevrtex generate` (one variant; `--suite` is `crate::suite::run`, which `main.rs`
@@ -151,6 +153,7 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         total: args.total,
         shard,
         seed: args.seed,
+        suite: None,
     };
     run_part(&args, &part, None)
 }
@@ -324,6 +327,7 @@ pub(crate) fn run_part(
             tool_commit: crate::provenance::COMMIT.into(),
             tool_modified: crate::provenance::modified(),
             mixed_settings: args.mix_settings,
+            suite: part.suite.map(str::to_string),
             command: std::env::args().collect(),
             ..manifest::Manifest::unfinished()
         },

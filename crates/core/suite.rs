@@ -43,6 +43,7 @@ pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
             total: Some(v.total),
             shard: plan.variant_shard(v, shard),
             seed: v.seed,
+            suite: Some(&plan.suite),
         };
         if part.shard.count(0, v.total) == 0 {
             continue;

@@ -40,6 +40,54 @@ struct VariantRuns {
 /// Samples of each split the runs planned (each index once, with the split the run that
 /// first covers it gives it: the recorded one), and how many are complete (in a finished
 /// manifest).
+/// What the public loader makes of `variant` whose planned samples have the recorded splits
+/// `by_split`: unknown to it (`clevr`, a config's own name), read with the splits recorded,
+/// or read with other splits (its position rule over all the samples differs from the
+/// splits the runs recorded: a dataset grown with another `--total`).
+fn loader_claim(variant: &str, by_split: &BTreeMap<Split, u64>) -> String {
+    if !clevrtex_scene::suite::public_loader_knows(variant) {
+        return format!(
+            "{}: not a variant the public loader knows (it raises `Unknown variant {}`); read it with `clevrtex.Dataset`, score it with `clevrtex eval`",
+            code(variant),
+            clevrtex_scene::text::printable(variant)
+        );
+    }
+    let n: u64 = by_split.values().sum();
+    let rule = layout::variant_splits(variant);
+    let theirs: BTreeMap<Split, u64> = Split::ALL
+        .iter()
+        .map(|&s| {
+            let r = s.range(rule, n);
+            (s, r.end - r.start)
+        })
+        .collect();
+    let sizes = |m: &BTreeMap<Split, u64>| {
+        Split::ALL
+            .iter()
+            .map(|s| format!("{} {}", s.name(), m.get(s).unwrap_or(&0)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if Split::ALL
+        .iter()
+        .all(|s| by_split.get(s).unwrap_or(&0) == theirs.get(s).unwrap_or(&0))
+    {
+        format!(
+            "{}: read unchanged (`CLEVRTEX(path, '{}', split)`), with the splits recorded here ({})",
+            code(variant),
+            clevrtex_scene::text::printable(variant),
+            sizes(by_split)
+        )
+    } else {
+        format!(
+            "{}: read, but with other splits than those recorded here: its position rule over all {n} samples gives {}, the runs recorded {} (the dataset was grown with another `--total`); the public evaluator and `clevrtex eval --split` score other sets (`clevrtex verify` names the positions; remake the variant with one `--total` in a new folder)",
+            code(variant),
+            sizes(&theirs),
+            sizes(by_split)
+        )
+    }
+}
+
 fn counts(variant: &str, runs: &[(String, Manifest)]) -> (BTreeMap<Split, u64>, u64) {
     let rule = layout::variant_splits(variant);
     let mut by_split = BTreeMap::new();
@@ -130,8 +178,14 @@ fn card_text(
            materials on a studio backdrop, sampled from a seed and rendered with Blender's Cycles \
            by clevrtex (after the public generator, karazijal/clevrtex-generation). Each sample is an image with its instance mask, the passes listed below and CLEVR \
            metadata (objects, their material, shape, size, colour, 3D and pixel coordinates, \
-           the camera). Layout and file names follow the published ClevrTex, so its public \
-           loader and evaluator read this dataset unchanged.\n\n";
+           the camera). Layout and file names follow the published ClevrTex; what its public \
+           loader and evaluator (karazijal/clevrtex-generation `clevrtex_eval.py`) make of \
+           each variant here:\n\n";
+    for (v, runs) in variants {
+        let (by_split, _) = counts(v, &runs.manifests);
+        c += &format!("- {}\n", loader_claim(v, &by_split));
+    }
+    c += "\n";
 
     c += "## Contents\n\n";
     c += "| variant | test | val | train | planned | complete |\n|---|---|---|---|---|---|\n";

@@ -37,6 +37,13 @@ pub const SUITES: [Suite; 1] = [Suite {
     ],
 }];
 
+/// Whether the public loader (`CLEVRTEX` of karazijal/clevrtex-generation's
+/// `clevrtex_eval.py`) knows `variant`: the `clevrtex` suite's variants. For any other
+/// (`clevr`, a config's own name) it raises `Unknown variant`.
+pub fn public_loader_knows(variant: &str) -> bool {
+    SUITES[0].variants.iter().any(|(v, _)| *v == variant)
+}
+
 /// The suite named `name`, or a message naming the known ones.
 pub fn find(name: &str) -> Result<&'static Suite, String> {
     SUITES.iter().find(|s| s.name == name).ok_or_else(|| {

@@ -126,6 +126,10 @@ pub struct Manifest {
     /// the dataset. Absent (false) otherwise.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub mixed_settings: bool,
+    /// The suite the run was made for (`generate --suite NAME`); absent for a run of one
+    /// variant (and in older manifests). The card and `verify --against` name it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub suite: Option<String>,
 }
 
 /// The render settings that differ between two `render` objects (a manifest's or a sample's
@@ -195,6 +199,7 @@ impl Manifest {
             sample_seconds: BTreeMap::new(),
             user_materials: BTreeMap::new(),
             mixed_settings: false,
+            suite: None,
         }
     }
 

@@ -79,6 +79,10 @@ pub struct Dataset {
     /// Samples left out, one line each (`<file>: <why>`): metadata that cannot be read or is
     /// not valid, a link out of the dataset, a FIFO.
     pub problems: Vec<String>,
+    /// By variant: where the recorded splits differ from the public loader's position rule
+    /// over the samples read (`clevrtex_dataset::dataset::loader_disagreement`, as `verify`
+    /// says it); absent where they agree.
+    pub loader_splits: BTreeMap<String, String>,
 }
 
 impl Dataset {
@@ -187,6 +191,7 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
     // The one split rule of every reader (`clevrtex_dataset::dataset::splits`): the recorded
     // split, else (the published ClevrTex) the position among the variant's samples.
     let mut start = 0;
+    let mut loader_splits = BTreeMap::new();
     while start < samples.len() {
         let variant = samples[start].variant.clone();
         let end = start
@@ -194,6 +199,9 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
                 .iter()
                 .take_while(|s| s.variant == variant)
                 .count();
+        if let Some(d) = reader::loader_disagreement(&variant, &recorded[start..end]) {
+            loader_splits.insert(variant.clone(), d);
+        }
         for (s, split) in samples[start..end]
             .iter_mut()
             .zip(reader::splits(&variant, &recorded[start..end]))
@@ -212,6 +220,7 @@ pub fn read(dir: &Path, bar: &ProgressBar) -> anyhow::Result<Dataset> {
     Ok(Dataset {
         root: dir.to_path_buf(),
         samples,
+        loader_splits,
         manifests,
         failures,
         bad_manifests,

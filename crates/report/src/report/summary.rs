@@ -78,6 +78,10 @@ impl Summary {
                     .collect(),
                 bad_manifests: Vec::new(),
                 problems: Vec::new(),
+                loader_splits: (self.data.loader_splits.iter())
+                    .filter(|(v, _)| *v == variant)
+                    .map(|(v, d)| (v.clone(), d.clone()))
+                    .collect(),
             },
             problems: Vec::new(),
             measures: (self.measures.iter())

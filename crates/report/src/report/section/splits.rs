@@ -45,6 +45,16 @@ pub(in crate::report) fn write(
             let _ = write!(page.html, "<td>{tot}</td></tr>");
         }
         page.html += "</table>";
+        // Where a grown dataset's recorded splits are not the public loader's (as `verify`
+        // says it): the public evaluator would score another test set.
+        for (v, d) in &s.data.loader_splits {
+            let _ = write!(
+                page.html,
+                "<p><b>warning</b>: {}: {}: <code>clevrtex eval --split</code> and the public loader and evaluator use other sets; remake the variant with one <code>--total</code> for every run, in a new folder.</p>",
+                esc(v),
+                esc(d)
+            );
+        }
     }
     Ok(())
 }
