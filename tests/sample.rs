@@ -40,6 +40,14 @@ fn run_ok(args: &[&str], env: &[(&str, &str)]) {
 
 /// Every file under `dir`, as relative path -> bytes.
 fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    all_files(dir)
+        .into_iter()
+        .filter(|(rel, _)| !is_scenes_manifest(rel))
+        .collect()
+}
+
+/// Every file below `dir` (temporaries and the runs' manifests included) by relative path.
+fn all_files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     let mut files = BTreeMap::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
@@ -54,6 +62,21 @@ fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         }
     }
     files
+}
+
+/// A run's commit point (`SCENES-<start>-<end>-<k>of<n>.manifest`), not a scene file.
+fn is_scenes_manifest(rel: &str) -> bool {
+    let name = rel.rsplit('/').next().unwrap_or(rel);
+    name.starts_with("SCENES-") && name.ends_with(".manifest")
+}
+
+/// The runs' manifests below `dir`, parsed, by relative path.
+fn scenes_manifests(dir: &Path) -> BTreeMap<String, serde_json::Value> {
+    all_files(dir)
+        .into_iter()
+        .filter(|(rel, _)| is_scenes_manifest(rel))
+        .map(|(rel, b)| (rel, serde_json::from_slice(&b).unwrap()))
+        .collect()
 }
 
 #[test]
@@ -75,6 +98,16 @@ fn writes_one_valid_scene_file_per_image_in_the_published_layout() {
     );
     let files = tree(tmp.path());
     assert_eq!(files.len(), 1005, "no temporary files left behind");
+    // One manifest commits the run (issue 40: the files are made durable once, then it).
+    let m = scenes_manifests(tmp.path());
+    assert_eq!(
+        m.keys().collect::<Vec<_>>(),
+        ["clevrtex_camo/SCENES-0-1005-0of1.manifest"]
+    );
+    let m = &m["clevrtex_camo/SCENES-0-1005-0of1.manifest"];
+    assert_eq!(m["files"], 1005);
+    assert_eq!(m["seed"], 7);
+    assert_eq!(m["format"], "clevrtex-scenes");
     for i in [0u64, 999, 1000, 1004] {
         let rel = format!("clevrtex_camo/{}/CLEVRTEX_camo_{i:06}.json", i / 1000);
         let scene: SceneFile = serde_json::from_slice(&files[&rel]).unwrap();
@@ -127,6 +160,21 @@ fn same_seed_gives_byte_identical_files_and_three_shards_equal_one_run() {
     assert!(
         a == tree(Path::new(&dir("sharded"))),
         "3 shards != unsharded"
+    );
+    // Each shard committed its own share.
+    let m = scenes_manifests(Path::new(&dir("sharded")));
+    let files: Vec<(String, u64)> = m
+        .iter()
+        .map(|(rel, v)| (rel.clone(), v["files"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(
+        files,
+        (0..3)
+            .map(|k| (
+                format!("clevrtex_full/SCENES-0-301-{k}of3.manifest"),
+                [101, 100, 100][k]
+            ))
+            .collect::<Vec<_>>()
     );
     assert!(
         a == tree(Path::new(&dir("slurm"))),

@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context};
 use clevrtex_dataset::layout::sample_dir;
+use clevrtex_dataset::scene_files;
 use clevrtex_scene::{config::Config, sample, SampleRequest};
 use rayon::prelude::*;
 
@@ -178,6 +179,8 @@ pub fn run(args: Args) -> CmdResult {
         });
         if interrupted.load(Ordering::SeqCst) {
             progress.finish_and_clear();
+            // The files written are whole; no manifest commits them (a rerun rewrites them).
+            let _ = clevrtex_dataset::atomic::sync_filesystem(&args.out);
             return Err(Interrupted.into());
         }
         if let Some(err) = results.into_iter().find_map(Result::err) {
@@ -187,6 +190,29 @@ pub fn run(args: Args) -> CmdResult {
         written += chunk.len() as u64;
     }
     progress.finish_and_clear();
+    // Durable once for the whole run, then committed by its manifest.
+    let vdir = clevrtex_dataset::layout::variant_dir(&args.out, &config.name);
+    let manifest = scene_files::ScenesManifest {
+        format: scene_files::FORMAT.into(),
+        version: 1,
+        variant: config.name.clone(),
+        seed: args.seed,
+        layout_stream: config.layout_stream().to_string(),
+        start: args.start,
+        end,
+        total,
+        shard: [shard.k, shard.n],
+        files: written,
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+    };
+    if written > 0 {
+        scene_files::commit(&vdir, &manifest).map_err(|e| {
+            anyhow::anyhow!(
+                "cannot commit the scene files of `{}`: {e}\nhint: check free space and permissions under `--out`, then rerun the same command",
+                vdir.display()
+            )
+        })?;
+    }
     eprintln!(
         "wrote {} scene files (indices {}..{end}, shard {}/{}, seed {}) under `{}` in {:.2} s",
         written,
@@ -203,12 +229,13 @@ pub fn run(args: Args) -> CmdResult {
 /// Indices sampled and written per batch (bounds memory for any `-n`).
 const SAMPLE_CHUNK: usize = 1 << 16;
 
-/// Write one scene file with the one atomic writer ([`clevrtex_dataset::atomic`]).
+/// Write one scene file with the one atomic writer, made durable with the others at the end
+/// ([`scene_files`]).
 fn write_scene(out: &Path, variant: &str, scene: &clevrtex_scene::SceneFile) -> anyhow::Result<()> {
     let dir = sample_dir(out, variant, scene.index);
     let path = dir.join(format!("{}.json", scene.stem));
     let text = clevrtex_scene::to_pretty_json(scene).context("cannot serialise scene")?;
-    clevrtex_dataset::atomic::write(&path, text.as_bytes()).map_err(|e| {
+    scene_files::write(&path, text.as_bytes()).map_err(|e| {
         anyhow::anyhow!(
             "cannot write `{}`: {e}\nhint: check free space and permissions under `--out`",
             path.display()

@@ -211,6 +211,40 @@ impl AtomicFile {
     }
 }
 
+impl AtomicFile {
+    /// Rename the temporary over the final path without syncing the file or its folder: for a
+    /// writer of many small files, which makes them durable once at the end
+    /// ([`sync_filesystem`]) and then writes its manifest, the commit point. Readers see the
+    /// old file or the whole new one; after a power loss before that sync the new file may be
+    /// empty or missing, which only the manifest's absence tells.
+    pub fn commit_unsynced(mut self) -> std::io::Result<()> {
+        let file = self
+            .file
+            .take()
+            .ok_or_else(|| std::io::Error::other("committed twice"))?;
+        drop(file);
+        std::fs::rename(&self.tmp, &self.path)?;
+        self.tmp = PathBuf::new();
+        Ok(())
+    }
+}
+
+/// [`write`] without the syncs ([`AtomicFile::commit_unsynced`]): the writer makes the files
+/// durable once ([`sync_filesystem`]) before it commits them with its manifest.
+pub fn write_unsynced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut f = AtomicFile::create(path)?;
+    f.write_all(bytes)?;
+    f.commit_unsynced()
+}
+
+/// Make everything written so far on the file system that holds `dir` durable: one
+/// `syncfs(2)` instead of a sync per file and folder.
+pub fn sync_filesystem(dir: &Path) -> std::io::Result<()> {
+    let f = std::fs::File::open(dir)?;
+    rustix::fs::syncfs(&f)?;
+    Ok(())
+}
+
 impl Write for AtomicFile {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         self.file()?.write(buf)

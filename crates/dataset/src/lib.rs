@@ -45,6 +45,7 @@ pub mod png;
 pub mod resize;
 #[cfg(feature = "tools")]
 pub mod run_lock;
+pub mod scene_files;
 #[cfg(feature = "tools")]
 pub mod suite;
 #[cfg(feature = "tools")]
