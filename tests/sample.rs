@@ -1086,3 +1086,62 @@ fn help_lists_the_variant_table() {
         assert!(help.contains(&list), "{cmd:?}: {help}");
     }
 }
+
+/// Issue 40 (item 6): a `sample` killed with SIGKILL mid-run leaves only whole scene files
+/// (and its temporaries) and no manifest, so its folder is never taken as committed; the same
+/// command again removes the dead run's temporaries, rewrites the files and commits them: the
+/// same bytes as a run never killed.
+#[test]
+fn a_killed_sample_run_is_uncommitted_and_a_rerun_commits_the_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (killed, clean) = (tmp.path().join("killed"), tmp.path().join("clean"));
+    let args = |out: &Path| -> Vec<String> {
+        ["--variant", "clevr", "-n", "8000", "--seed", "2", "--out"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain([out.display().to_string()])
+            .collect()
+    };
+    let mut child = clevrtex()
+        .arg("sample")
+        .args(args(&killed))
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let first = killed.join("clevrtex_clevr/0");
+    let written = || std::fs::read_dir(&first).map_or(0, |d| d.count());
+    while written() < 50 && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let left = all_files(&killed);
+    assert!(left.len() >= 50, "nothing written before the kill");
+    assert!(
+        scenes_manifests(&killed).is_empty(),
+        "a killed run committed its files"
+    );
+    for (rel, bytes) in &left {
+        if rel.ends_with(".json") {
+            serde_json::from_slice::<SceneFile>(bytes)
+                .unwrap_or_else(|e| panic!("{rel} is not whole: {e}"));
+        }
+    }
+    let a: Vec<String> = args(&killed);
+    run_ok(&a.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+    let b: Vec<String> = args(&clean);
+    run_ok(&b.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+    let after = tree(&killed);
+    assert_eq!(after.len(), 8000, "temporaries left: {}", after.len());
+    assert!(
+        after == tree(&clean),
+        "the rerun's files differ from a clean run's"
+    );
+    assert_eq!(
+        scenes_manifests(&killed)["clevrtex_clevr/SCENES-0-8000-0of1.manifest"]["files"],
+        8000
+    );
+}

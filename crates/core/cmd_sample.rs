@@ -149,6 +149,8 @@ pub fn run(args: Args) -> CmdResult {
             if last_dir.as_ref() != Some(&d) {
                 // A folder of the layout that is a link out of `--out` is refused, naming it.
                 clevrtex_dataset::layout::make_dir(&args.out, &d).map_err(anyhow::Error::msg)?;
+                // What a killed run of this host left there (its owner is dead).
+                clevrtex_dataset::atomic::remove_stale_temps(&d);
                 last_dir = Some(d);
             }
         }

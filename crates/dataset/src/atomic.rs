@@ -237,6 +237,22 @@ pub fn write_unsynced(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     f.commit_unsynced()
 }
 
+/// Remove temporary files a killed run left in `dir` (not recursive). Temporary names carry
+/// their writer's owner tag ([`owner_tag`]): files of live runs (other shards writing into the
+/// same folder) and of other machines are left alone.
+pub fn remove_stale_temps(dir: &Path) {
+    let Ok(root) = crate::dataset::root(dir) else {
+        return;
+    };
+    for (name, path, kind) in crate::dataset::list(&root, dir).unwrap_or_default() {
+        if let Some(stem) = name.strip_suffix(TMP_SUFFIX) {
+            if kind == crate::dataset::Kind::File && tagged_name_is_stale(stem) {
+                let _ = std::fs::remove_file(path);
+            }
+        }
+    }
+}
+
 /// Make everything written so far on the file system that holds `dir` durable: one
 /// `syncfs(2)` instead of a sync per file and folder.
 pub fn sync_filesystem(dir: &Path) -> std::io::Result<()> {

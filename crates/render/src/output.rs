@@ -7,8 +7,7 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use clevrtex_dataset::atomic::{tagged_name_is_stale, AtomicFile};
-use clevrtex_dataset::dataset;
+use clevrtex_dataset::atomic::AtomicFile;
 use clevrtex_dataset::layout::{expected_files, legacy_exr_files};
 use clevrtex_scene::Pass;
 
@@ -36,21 +35,9 @@ pub fn remove_other_outputs(dir: &Path, stem: &str, passes: &[Pass], keep_exr: b
     }
 }
 
-/// Remove temporary files a killed run left in `dir` (not recursive). Temporary names carry
-/// their writer's owner tag ([`clevrtex_dataset::atomic::owner_tag`]): files of live runs
-/// (other shards writing into the same folder) and of other machines are left alone.
-pub fn remove_stale_temps(dir: &Path) {
-    let Ok(root) = dataset::root(dir) else {
-        return;
-    };
-    for (name, path, kind) in dataset::list(&root, dir).unwrap_or_default() {
-        if let Some(stem) = name.strip_suffix(TMP_SUFFIX) {
-            if kind == dataset::Kind::File && tagged_name_is_stale(stem) {
-                let _ = std::fs::remove_file(path);
-            }
-        }
-    }
-}
+/// Remove temporary files a killed run left in `dir` (the one sweep:
+/// [`clevrtex_dataset::atomic::remove_stale_temps`]).
+pub use clevrtex_dataset::atomic::remove_stale_temps;
 
 /// Files of one sample being written: each an [`AtomicFile`] (a unique temporary) until
 /// [`Staged::commit`]. Dropping without committing removes the temporaries, so no partial
