@@ -76,7 +76,7 @@ pub(crate) fn run(mut req: Request) -> CmdResult {
         message: "stopping the calibration; nothing was written into `--out`",
     });
     let (catalogue, used) = &mut req.materials;
-    let (opts, _user) = pool_options(
+    let planned = pool_options(
         &args,
         blender,
         scratch.path().join("failures.jsonl"),
@@ -84,6 +84,7 @@ pub(crate) fn run(mut req: Request) -> CmdResult {
         &interrupt,
         (catalogue, used),
     )?;
+    let opts = &planned.opts;
     let k = req
         .calibrate
         .map(|c| c as usize)
@@ -95,7 +96,7 @@ pub(crate) fn run(mut req: Request) -> CmdResult {
         opts.workers,
         req.run.out.display()
     );
-    let made = match planner::calibrate(&opts, req.jobs, k, &|line| eprintln!("{line}")) {
+    let made = match planner::calibrate(opts, req.jobs, k, &|line| eprintln!("{line}")) {
         Ok(m) => m,
         Err(RenderError::Interrupted) => {
             eprintln!(

@@ -1,5 +1,6 @@
-//! The pool run of `generate` and `render`: the render crate's pool ([`pool::run`]) with the
-//! options of [`RunArgs`], a progress bar, a line per event and the summary of the run.
+//! What `generate` and `render` show of their run: the render crate's batch run
+//! ([`batch::run`]) with the options of [`RunArgs`], a progress bar, a line per event and the
+//! summary of the run.
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -9,28 +10,27 @@ use std::time::Duration;
 
 use anyhow::bail;
 use clevrtex_dataset::manifest;
-use clevrtex_render::pool::{self, Jobs, PoolEvent, PoolOptions, RunReport};
-use clevrtex_render::RenderError;
+use clevrtex_render::batch;
+use clevrtex_render::pool::{Jobs, PoolEvent, RunReport};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
 use crate::run_args::{self, RunArgs};
-use clevrtex_render::user_materials;
 
 /// Render `jobs` with the pool as `args` say, failures to `ledger`, with a progress bar (or,
 /// when stderr is not a terminal, a line per sample and a progress line with rate and ETA every
-/// few images or minute: [`BatchProgress`]) and a summary; with `manifest`, under the
-/// range's lock, the plan written first and the manifest last. `catalogue` is the built-in
-/// one plus `--materials`; the user materials of it that `used` names are checked before any
-/// image is rendered ([`user_materials::check_before_run`]) and recorded in the manifest and
-/// each sample's metadata.
+/// few images or minute: [`BatchProgress`]) and a summary; with `manifest`, the render crate's
+/// batch run ([`batch::run`]: under the range's lock, the plan written first and the manifest
+/// last). `catalogue` is the built-in one plus `--materials`; the user materials of it that
+/// `used` names are checked before any image is rendered ([`batch::plan`]) and recorded in the
+/// manifest and each sample's metadata.
 pub(crate) fn run_jobs(
     args: &RunArgs,
     jobs: Jobs,
     ledger: PathBuf,
     max_attempts: u32,
-    mut manifest: Option<manifest::Plan>,
+    manifest: Option<manifest::Plan>,
     (mut catalogue, used): (
         clevrtex_materials::Catalogue,
         std::collections::BTreeSet<String>,
@@ -43,7 +43,7 @@ pub(crate) fn run_jobs(
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the workers; finished samples are kept",
     });
-    let (mut opts, user) = pool_options(
+    let mut planned = pool_options(
         args,
         blender,
         ledger.clone(),
@@ -51,18 +51,10 @@ pub(crate) fn run_jobs(
         &interrupt,
         (&mut catalogue, &used),
     )?;
-    if let Some(plan) = manifest.as_mut() {
-        plan.run.user_materials = user.entries.clone();
-        // Each sample records the run's config hash, so `verify` can tell a sample made from
-        // another config than the manifest claiming it.
-        opts.config_hash = Some(plan.run.config_hash.clone());
-    }
     let total = jobs.len();
     let bar = progress_bar(total);
     let (done, rejects, failures) = (AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0));
     let started = std::time::Instant::now();
-    // Seconds per finished sample, by index, for the manifest (`clevrtex report` plots them).
-    let seconds = std::sync::Mutex::new(std::collections::BTreeMap::<u64, f64>::new());
     let plain = bar.is_hidden();
     let batch = BatchProgress::new(total);
     // A hidden bar swallows `println`: then messages go straight to stderr.
@@ -84,13 +76,7 @@ pub(crate) fn run_jobs(
                 rejects.fetch_add(1, Ordering::Relaxed);
             }
             PoolEvent::Done { sample } => {
-                let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-                let s =
-                    sample.visibility_s + sample.reject_s + sample.final_request_s + sample.post_s;
-                seconds
-                    .lock()
-                    .unwrap_or_else(|e| e.into_inner())
-                    .insert(sample.index, s);
+                done.fetch_add(1, Ordering::Relaxed);
                 bar.inc(1);
                 if plain {
                     eprintln!(
@@ -114,7 +100,6 @@ pub(crate) fn run_jobs(
                         sample.metadata.display()
                     ));
                 }
-                let _ = d;
             }
             PoolEvent::Failed { index, error } => {
                 failures.fetch_add(1, Ordering::Relaxed);
@@ -141,30 +126,13 @@ pub(crate) fn run_jobs(
             failures.load(Ordering::Relaxed)
         ));
     };
-    // One writer per range: a run whose indices overlap a live run's refuses here, before
-    // anything is written; then the plan, so even a run that never ends is known to `verify`.
-    let _lock = match &manifest {
-        Some(plan) => {
-            let lock = clevrtex_dataset::run_lock::RunLock::acquire(
-                &plan.variant_dir(&args.out),
-                plan.run.start,
-                plan.run.end,
-                plan.run.shard,
-                std::env::args().collect(),
-            )
-            .map_err(|e| anyhow::anyhow!(e))?;
-            // The lock made the variant folder (`layout::make_dir`: not a link out of `--out`).
-            // Under the lock, before anything is written: a folder of a run with other
-            // settings is refused.
-            plan.check_settings(&args.out, args.overwrite)?;
-            plan.write_plan(&args.out)?;
-            write_card(&args.out);
-            Some(lock)
-        }
-        None => None,
+    let warn = |line: String| eprintln!("{line}");
+    let hooks = batch::Hooks {
+        on_event: &on_event,
+        warn: &warn,
     };
     // Without a terminal, a progress line also every `BatchProgress::EVERY` while images take
-    // long: a ticker beside the pool, stopped when it returns.
+    // long: a ticker beside the run, stopped when it returns.
     let finished = std::sync::atomic::AtomicBool::new(false);
     let result = std::thread::scope(|s| {
         if plain {
@@ -180,30 +148,28 @@ pub(crate) fn run_jobs(
                 }
             });
         }
-        let result = pool::run(&opts, jobs, &on_event);
+        let result = batch::run(
+            &mut planned,
+            jobs,
+            manifest,
+            std::env::args().collect(),
+            &hooks,
+        );
         finished.store(true, Ordering::Relaxed);
         result
     });
     bar.finish_and_clear();
+    let interrupted = || {
+        eprintln!(
+            "error: {}\nhint: rerun the same command to go on; complete samples are skipped",
+            exit::Interrupted
+        );
+        Ok(crate::interrupt::exit_code())
+    };
     match result {
-        Ok(report) => {
+        Ok(batch::Ended::Finished { report, manifest }) => {
             print_summary(&report, &args.out, &ledger);
-            if let Some(plan) = manifest {
-                let seconds = seconds.into_inner().unwrap_or_else(|e| e.into_inner());
-                let failed: std::collections::BTreeSet<u64> =
-                    report.failed.iter().map(|(i, _)| *i).collect();
-                let path = match plan.write(&args.out, &seconds, &failed, &opts.interrupt) {
-                    Ok(p) => p,
-                    Err(_) if opts.interrupt.load(Ordering::SeqCst) => {
-                        eprintln!(
-                            "error: {}\nhint: rerun the same command to go on; complete samples are skipped",
-                            exit::Interrupted
-                        );
-                        return Ok(crate::interrupt::exit_code());
-                    }
-                    Err(e) => return Err(e.into()),
-                };
-                write_card(&args.out);
+            if let Some(path) = manifest {
                 println!(
                     "manifest: {} (check with `clevrtex verify {}`)",
                     path.display(),
@@ -216,19 +182,18 @@ pub(crate) fn run_jobs(
                 exit::PARTIAL
             })
         }
-        Err(RenderError::Interrupted) => {
-            eprintln!(
-                "error: {}\nhint: rerun the same command to go on; complete samples are skipped",
-                exit::Interrupted
-            );
-            Ok(crate::interrupt::exit_code())
+        Ok(batch::Ended::Interrupted { report }) => {
+            if let Some(report) = report {
+                print_summary(&report, &args.out, &ledger);
+            }
+            interrupted()
         }
-        Err(e) => Err(e.into()),
+        Err(batch::RunError::Render(e)) => Err(crate::exit::command_error(e)),
+        Err(batch::RunError::Dataset(e)) => Err(e.into()),
+        Err(batch::RunError::Refused(m)) => Err(anyhow::anyhow!(m)),
     }
 }
 
-/// The pool's options for `args`: checks of the numbers, the devices (a first worker asked
-/// for its GPUs where `--device` needs them), the workers and threads; `interrupt` stops it.
 /// The numbers given as flags, checked (before Blender is looked for): `--timeout` and
 /// `--startup-timeout` as durations, `--workers` in range.
 fn checked_numbers(args: &RunArgs) -> anyhow::Result<(Option<Duration>, Duration)> {
@@ -247,76 +212,39 @@ fn checked_numbers(args: &RunArgs) -> anyhow::Result<(Option<Duration>, Duration
     Ok((timeout, startup_timeout))
 }
 
+/// The pool's options for `args` ([`batch::plan`]: the user materials checked, the devices,
+/// the workers and threads), its lines printed; `interrupt` stops it.
 pub(crate) fn pool_options(
     args: &RunArgs,
     blender: PathBuf,
     ledger: PathBuf,
     max_attempts: u32,
     interrupt: &Arc<std::sync::atomic::AtomicBool>,
-    (catalogue, used): (
+    materials: (
         &mut clevrtex_materials::Catalogue,
         &std::collections::BTreeSet<String>,
     ),
-) -> anyhow::Result<(PoolOptions, user_materials::Checked)> {
+) -> anyhow::Result<batch::Planned> {
     let (timeout, startup_timeout) = checked_numbers(args)?;
-    let choice = run_args::device_choice(&args.device)?;
-    let user = user_materials::check_before_run(
-        catalogue,
-        used,
-        &blender,
-        startup_timeout,
-        Arc::clone(interrupt),
-    )
-    .map_err(crate::exit::command_error)?;
-    let materials_json = catalogue.resolved_json();
-    let devices = clevrtex_render::gpu_probe::plan_devices(
-        choice,
-        &blender,
-        &materials_json,
-        startup_timeout,
-        interrupt,
-    )?;
-    if devices.iter().any(|d| d.is_gpu()) {
-        let names: Vec<String> = devices.iter().map(|d| d.describe()).collect();
-        eprintln!("devices: {}", names.join(", "));
-    }
-    let workers = args.workers.unwrap_or_else(|| {
-        clevrtex_render::device::default_workers(
-            &devices,
-            pool::default_workers(),
-            pool::available_cores(),
-        )
-    });
-    for w in [
-        clevrtex_render::device::kernel_compile_warning(&devices),
-        clevrtex_render::device::workers_per_gpu_warning(&devices, workers),
-    ]
-    .into_iter()
-    .flatten()
-    {
-        eprintln!("{w}");
-    }
-    let opts = PoolOptions {
+    let settings = batch::Settings {
         blender,
-        materials_json,
-        user_materials: user_materials::hashes(&user.entries),
-        config_hash: None,
-        workers,
-        threads: args.threads.unwrap_or(0),
+        device: run_args::device_choice(&args.device)?,
+        workers: args.workers,
+        threads: args.threads,
         timeout,
         startup_timeout,
         retries: args.retries,
-        max_attempts: max_attempts.max(1),
-        visibility_check: true,
         keep_exr: args.keep_exr,
         overwrite: args.overwrite,
         fail_fast: args.fail_fast,
         out: args.out.clone(),
-        ledger,
-        interrupt: Arc::clone(interrupt),
-        devices,
     };
-    Ok((opts, user))
+    let planned = batch::plan(&settings, ledger, max_attempts, interrupt, materials)
+        .map_err(crate::exit::command_error)?;
+    for line in &planned.notes {
+        eprintln!("{line}");
+    }
+    Ok(planned)
 }
 
 /// The progress lines of a batch log (stderr not a terminal): `progress: 40/200 images (38
@@ -520,14 +448,6 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
             "failures recorded in `{}`; rerun the same command to retry them",
             ledger.display()
         );
-    }
-}
-
-/// Rewrite the dataset card from every run's manifest (`clevrtex_dataset::card`); a card that
-/// cannot be written is a warning: the samples and the manifest are what the run made.
-fn write_card(out: &std::path::Path) {
-    if let Err(e) = clevrtex_dataset::card::write_card(out) {
-        eprintln!("warning: the dataset card was not written: {e}");
     }
 }
 

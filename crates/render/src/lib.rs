@@ -51,7 +51,9 @@
 //   7. user_materials (copies): user materials checked and copied before a run renders
 //   8. material_renders: `clevrtex materials`' renders of single materials; planner: the
 //      model of `generate --estimate` and its calibration run
+//   9. batch: a run of `generate` or `render` (its pool planned and run, manifest, card)
 
+pub mod batch;
 pub mod blender;
 pub mod bridge;
 pub mod command_session;
