@@ -190,11 +190,14 @@ mod tests {
             "{e}"
         );
         // `full` keeps 50,000 x 0.00001 = 0.5 -> 1 image; `pbg` (0.2) is the first emptied.
+        // The hint: 1 / 10,000 (`outd`'s size), where every variant has an image before
+        // rounding (a half image rounds up, but 0.5 is not exact in floating point).
         let e = s.plan(0.00001, 0).unwrap_err();
         assert!(
-            e.contains("`pbg`") && e.contains("empty") && e.contains("at least 0.00005"),
+            e.contains("`pbg`") && e.contains("empty") && e.contains("at least 0.0001"),
             "{e}"
         );
+        assert!(s.plan(0.0001, 0).is_ok());
         let e = s.plan(5000.0, 0).unwrap_err();
         assert!(e.contains("over the cap"), "{e}");
         assert!(s.plan(f64::NAN, 0).is_err() && s.plan(-1.0, 0).is_err());
