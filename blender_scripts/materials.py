@@ -160,6 +160,16 @@ def _set_bsdf(g, bsdf, name, value):
         g.set(socket, compat.principled_value(name, value))
 
 
+def _displace(g, nt, out, vals, height, relief):
+    """True displacement of the material output `out` by `height` times `relief` (world units).
+    Object space, so divided by the object's scale (read per object) to keep world units."""
+    d = g.node("ShaderNodeDisplacement", space="OBJECT")
+    g.set(d.inputs["Height"], height)
+    g.set(d.inputs["Midlevel"], 0.5)
+    vals.put(d.inputs["Scale"], lambda i: relief * float(i["displacement"]))
+    nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
+
+
 def _build_layers(nt, out, recipe, instance, displace, albedo, vals):
     g = Graph(nt)
     p, normal = _coords(g, recipe, vals)
@@ -204,12 +214,7 @@ def _build_layers(nt, out, recipe, instance, displace, albedo, vals):
     nt.links.new(compat.principled_output(nt, bsdf), out.inputs["Surface"])
     relief = surf.get("relief", 0.0)
     if displace and relief > 0 and height is not None and hasattr(height, "node"):
-        d = g.node("ShaderNodeDisplacement", space="OBJECT")
-        g.set(d.inputs["Height"], height)
-        g.set(d.inputs["Midlevel"], 0.5)
-        # Object space, so divide by the object's scale (read per object) to keep world units.
-        vals.put(d.inputs["Scale"], lambda i: relief * float(i["displacement"]))
-        nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
+        _displace(g, nt, out, vals, height, relief)
         return True
     return False
 
@@ -670,10 +675,6 @@ def _build_pbr(nt, out, name, recipe, instance, displace, albedo, vals):
     relief = float(recipe.get("relief") or 0.0)
     if displace and relief > 0 and maps.get("displacement"):
         height = channels("displacement", True)[0]
-        d = g.node("ShaderNodeDisplacement", space="OBJECT")
-        g.set(d.inputs["Height"], height)
-        g.set(d.inputs["Midlevel"], 0.5)
-        vals.put(d.inputs["Scale"], lambda i: relief * float(i["displacement"]))
-        nt.links.new(d.outputs["Displacement"], out.inputs["Displacement"])
+        _displace(g, nt, out, vals, height, relief)
         return True
     return False

@@ -13,25 +13,13 @@ use crate::util::{blender_or_skip, data, run, test_blenders, text};
 /// of one sRGB colour) with `blender` (an executable, or a Python with `bpy`).
 fn make_blend(blender: &Path, dir: &Path, name: &str, rgb: [u8; 3], ext: &str, mode: &str) {
     let script = data("user_materials/make_blend.py");
-    let is_python = blender
-        .file_name()
-        .is_some_and(|n| n.to_string_lossy().starts_with("python"));
-    let mut cmd = Command::new(blender);
-    if !is_python {
-        cmd.args([
-            "-b",
-            "--factory-startup",
-            "--python-exit-code",
-            "1",
-            "--python",
-        ]);
-    }
     let rgb = rgb.map(|c| c.to_string());
-    let out = cmd
-        .arg(&script)
-        .arg("--")
-        .arg(dir)
-        .args([name, &rgb[0], &rgb[1], &rgb[2], ext, mode])
+    // Started as the bridge is (`-b --factory-startup ... --python` or a Python with `bpy`);
+    // the script reads its own arguments, the first seven after `--`.
+    let mut args = vec![dir.as_os_str().to_owned()];
+    args.extend([name, &rgb[0], &rgb[1], &rgb[2], ext, mode].map(std::ffi::OsString::from));
+    let flavour = clevrtex_render::blender::flavour(blender);
+    let out = clevrtex_render::blender::worker_command(blender, flavour, &script, &args)
         .output()
         .unwrap();
     assert!(

@@ -132,18 +132,10 @@ pub fn run(args: Args) -> CmdResult {
         r.bytes as f64 / 1e6 / secs.max(1e-9),
         r.index.display()
     );
-    if !r.skipped.is_empty() {
-        eprintln!(
-            "warning: {} file(s) or folder(s) not followed, not read or refused by the checks of every reader; their samples are not exported:",
-            r.skipped.len()
-        );
-        for s in &r.skipped {
-            eprintln!("  {s}");
-        }
-        eprintln!("hint: check the dataset with `clevrtex verify`");
-        return Ok(exit::PARTIAL);
-    }
-    Ok(exit::OK)
+    Ok(skipped_warning(
+        &r.skipped,
+        "not followed, not read or refused by the checks of every reader",
+    ))
 }
 
 /// `clevrtex export --format coco`.
@@ -183,16 +175,22 @@ fn run_coco(args: Args) -> CmdResult {
         r.files.len(),
         args.out.display()
     );
-    if !r.skipped.is_empty() {
-        eprintln!(
-            "warning: {} file(s) or folder(s) not followed or not read; their samples are not exported:",
-            r.skipped.len()
-        );
-        for s in &r.skipped {
-            eprintln!("  {s}");
-        }
-        eprintln!("hint: check the dataset with `clevrtex verify`");
-        return Ok(exit::PARTIAL);
+    Ok(skipped_warning(&r.skipped, "not followed or not read"))
+}
+
+/// The exit code of an export that skipped `skipped` (each printed under a warning saying
+/// they were `why`): `PARTIAL` when any, else `OK`.
+fn skipped_warning(skipped: &[impl std::fmt::Display], why: &str) -> u8 {
+    if skipped.is_empty() {
+        return exit::OK;
     }
-    Ok(exit::OK)
+    eprintln!(
+        "warning: {} file(s) or folder(s) {why}; their samples are not exported:",
+        skipped.len()
+    );
+    for s in skipped {
+        eprintln!("  {s}");
+    }
+    eprintln!("hint: check the dataset with `clevrtex verify`");
+    exit::PARTIAL
 }

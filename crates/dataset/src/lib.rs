@@ -53,4 +53,4 @@ pub mod verify;
 #[cfg(feature = "tools")]
 pub mod webdataset;
 
-pub use error::Error;
+pub use error::{Error, IoFailure};

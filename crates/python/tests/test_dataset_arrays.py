@@ -287,3 +287,28 @@ def test_stems_and_predictions_clevrtex_eval_reads(data, tmp_path):
     with pytest.raises(ValueError, match="`recon` is"):
         clevrtex.write_predictions(str(tmp_path / "none"), stems, masks, recon=images[:, :2])
     assert not os.path.exists(tmp_path / "none")
+
+
+def test_write_predictions_refuses_a_planted_link_and_leaves_its_target(tmp_path):
+    # A link planted at a prediction's name, or as the folder, is refused before anything is
+    # written and never written through: its target keeps its bytes; no temporary is left.
+    masks = np.zeros((1, 4, 5), np.uint8)
+    victim = tmp_path / "victim"
+    victim.write_bytes(b"keep me")
+    out = tmp_path / "preds"
+    out.mkdir()
+    os.symlink(victim, out / "a_mask.png")
+    with pytest.raises(ValueError, match="a_mask.png` is a symbolic link"):
+        clevrtex.write_predictions(str(out), ["a"], masks)
+    assert victim.read_bytes() == b"keep me"
+    assert os.listdir(out) == ["a_mask.png"] and os.path.islink(out / "a_mask.png")
+    linked = tmp_path / "linked"
+    os.symlink(out, linked)
+    with pytest.raises(ValueError, match="linked` is a symbolic link"):
+        clevrtex.write_predictions(str(linked), ["b"], masks)
+    assert os.listdir(out) == ["a_mask.png"]
+    # Without the link, the file is written, atomically, and nothing else is left.
+    os.unlink(out / "a_mask.png")
+    assert clevrtex.write_predictions(str(out), ["a"], masks) == [str(out / "a_mask.png")]
+    assert os.listdir(out) == ["a_mask.png"] and not os.path.islink(out / "a_mask.png")
+    assert victim.read_bytes() == b"keep me"

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitStatus;
 use std::time::Duration;
 
+use clevrtex_dataset::error::IoFailure;
 use clevrtex_scene::text::{printable, printable_lines};
 
 /// Smallest image (in pixels) at which every object of a default layout can cover a pixel:
@@ -131,19 +132,9 @@ pub enum RenderError {
     /// [`crate::device::plan`], with its hint).
     #[error("{0}")]
     DevicePlan(String),
-    /// Reading or writing a file failed.
-    #[error("{what} `{}`: {cause}\nhint: {hint}", .path.display())]
-    Io {
-        /// What we were doing, e.g. `cannot write`.
-        what: &'static str,
-        /// The file.
-        path: PathBuf,
-        /// The OS error. Not named `source`: the message already shows it, and as the error's
-        /// source it would be printed a second time, after the `hint:` line.
-        cause: std::io::Error,
-        /// What to do about it.
-        hint: String,
-    },
+    /// Reading or writing a file failed (the dataset writers' error, with the same text).
+    #[error(transparent)]
+    Io(#[from] IoFailure),
     /// An image failed and its failure could not be written to the failure ledger (e.g. the
     /// disk is full): the run stops, since it could not say what is missing.
     #[error("image {index} failed and its failure could not be recorded in the ledger `{}`: {cause}\nthe image's error: {failure}\nhint: free disk space (or make the folder writable) and rerun the same command: finished samples are kept and the ledger on disk is unchanged", .path.display())]
@@ -223,22 +214,12 @@ impl RenderError {
         source: std::io::Error,
         hint: impl Into<String>,
     ) -> RenderError {
-        RenderError::Io {
-            what,
-            path: path.into(),
-            cause: source,
-            hint: hint.into(),
-        }
+        RenderError::Io(IoFailure::new(what, path, source, hint))
     }
 
     /// I/O error writing an output file; the hint covers full disks and permissions.
     pub fn write(path: impl Into<PathBuf>, source: std::io::Error) -> RenderError {
-        RenderError::io(
-            "cannot write",
-            path,
-            source,
-            "check that the output folder is writable and the disk is not full; finished samples were kept and the run can be resumed",
-        )
+        RenderError::Io(IoFailure::write(path, source))
     }
 }
 

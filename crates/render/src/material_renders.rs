@@ -95,11 +95,13 @@ pub fn render_all(
     names: &[&str],
     out_dir: &Path,
 ) -> Result<Vec<Outcome>> {
-    std::fs::create_dir_all(out_dir).map_err(|cause| RenderError::Io {
-        what: "cannot create",
-        path: out_dir.to_path_buf(),
-        cause,
-        hint: "make the folder writable, or free disk space".into(),
+    std::fs::create_dir_all(out_dir).map_err(|cause| {
+        RenderError::io(
+            "cannot create",
+            out_dir.to_path_buf(),
+            cause,
+            "make the folder writable, or free disk space",
+        )
     })?;
     let limit = timeout(a, settings);
     names
@@ -149,12 +151,12 @@ pub fn render_into_cache(
             match outcome {
                 Outcome::Done(reply) => {
                     std::fs::rename(&reply.file, cache.join(key(name))).map_err(|cause| {
-                        RenderError::Io {
-                            what: "cannot move into the cache",
-                            path: reply.file.clone(),
+                        RenderError::io(
+                            "cannot move into the cache",
+                            reply.file.clone(),
                             cause,
-                            hint: "make the cache folder writable, or free disk space".into(),
-                        }
+                            "make the cache folder writable, or free disk space",
+                        )
                     })?;
                 }
                 Outcome::Failed { message, .. } => failed.push(format!("{name}: {message}")),

@@ -487,7 +487,7 @@ fn is_fatal(err: &RenderError) -> bool {
         RenderError::BlenderNotFound { .. }
             | RenderError::Spawn { .. }
             | RenderError::WorkerStart(_)
-            | RenderError::Io { .. }
+            | RenderError::Io(_)
             | RenderError::Refused(_)
     )
 }

@@ -77,6 +77,8 @@ impl Bound {
     }
 }
 
+// The bounds below are the table's rows, one `pub const` each (so each has its doc and is named
+// where it is used): their likeness is the table's, not code written twice.
 const fn closed(what: &'static str, min: f64, max: f64, reason: &'static str) -> Bound {
     Bound {
         what,

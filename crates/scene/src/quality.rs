@@ -35,6 +35,9 @@ pub enum Quality {
 }
 
 /// The sampling and light-path fields a preset sets.
+// The same fields as the scene file's `RenderSettings` by design (copied by `of`): it cannot be
+// flattened into it (serde's `flatten` does not go with `deny_unknown_fields`, which untrusted
+// scene files need).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sampling {
     /// Samples per pixel (the maximum when adaptive sampling is on).

@@ -51,6 +51,7 @@ impl Drop for PixelBudget {
 
 /// Also the split the sample's metadata records (`None`: none, or not read). `runs`: the split
 /// each run that covers the index gives it, with the run named.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn check_sample(
     index: u64,
     stem: &str,
@@ -61,30 +62,6 @@ pub(super) fn check_sample(
     runs: &[(layout::Split, String)],
 ) -> (Option<layout::Split>, Result<(), Broken>) {
     let mut recorded = None;
-    let result = check_sample_files(
-        index,
-        stem,
-        f,
-        entries,
-        listed_run,
-        claims,
-        runs,
-        &mut recorded,
-    );
-    (recorded, result)
-}
-
-#[allow(clippy::too_many_arguments)]
-pub(super) fn check_sample_files(
-    index: u64,
-    stem: &str,
-    f: &Found,
-    entries: &Entries,
-    listed_run: bool,
-    claims: &[&ReadManifest],
-    runs: &[(layout::Split, String)],
-    recorded: &mut Option<layout::Split>,
-) -> Result<(), Broken> {
     let mut problems = Vec::new();
     let variant_from_stem = layout::parse_stem(&format!("{stem}.json"), ".json")
         .map(|(_, v, _)| v.to_string())
@@ -138,17 +115,17 @@ pub(super) fn check_sample_files(
     }
     let Some(meta_bytes) = bytes_of.get(&meta_name) else {
         problems.push(format!("no metadata `{meta_name}` (an unfinished sample)"));
-        return Err(broken(index, stem, f, problems));
+        return (recorded, Err(broken(index, stem, f, problems)));
     };
     let meta: Value = match serde_json::from_slice(meta_bytes) {
         Ok(v @ Value::Object(_)) => v,
         Ok(_) => {
             problems.push(format!("metadata `{meta_name}` is not a JSON object"));
-            return Err(broken(index, stem, f, problems));
+            return (recorded, Err(broken(index, stem, f, problems)));
         }
         Err(e) => {
             problems.push(format!("metadata `{meta_name}` does not parse: {e}"));
-            return Err(broken(index, stem, f, problems));
+            return (recorded, Err(broken(index, stem, f, problems)));
         }
     };
     // Every value that sizes or indexes something below, typed first.
@@ -156,7 +133,7 @@ pub(super) fn check_sample_files(
         Ok(v) => v,
         Err(e) => {
             problems.push(e.to_string());
-            return Err(broken(index, stem, f, problems));
+            return (recorded, Err(broken(index, stem, f, problems)));
         }
     };
     let (w, h, n, threshold) = (
@@ -184,7 +161,7 @@ pub(super) fn check_sample_files(
     // the sample gave it: the position rule over the run's `total`.
     match dataset::recorded_split(&meta["split"], &variant_from_stem, &meta_name) {
         Ok(Some(split)) => {
-            *recorded = Some(split);
+            recorded = Some(split);
             if !runs.is_empty() && !runs.iter().any(|(s, _)| *s == split) {
                 problems.push(format!(
                     "metadata `split` is `{}`, but {} puts index {index} in `{}`",
@@ -259,9 +236,9 @@ pub(super) fn check_sample_files(
         }
     }
     if problems.is_empty() {
-        Ok(())
+        (recorded, Ok(()))
     } else {
-        Err(broken(index, stem, f, problems))
+        (recorded, Err(broken(index, stem, f, problems)))
     }
 }
 

@@ -4,8 +4,8 @@ the names `clevrtex eval` finds them by (docs/eval.md): `<stem>_mask.png` and
 written here (8-bit grey ids, 16-bit when an id is over 255; 8-bit RGB reconstructions)."""
 
 import os
+import stat
 import struct
-import tempfile
 import zlib
 from typing import Any, List, Optional, Sequence
 
@@ -61,16 +61,48 @@ def _png(a: np.ndarray) -> bytes:
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", head) + chunk(b"IDAT", zlib.compress(data, 6)) + chunk(b"IEND", b"")
 
 
-def _write(path: str, data: bytes) -> None:
-    """`data` as `path`, through a temporary file in its folder and a rename."""
-    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), prefix=".clevrtex-pred-")
+def _link_refused(path: str) -> ValueError:
+    return ValueError(f"`{path}` is a symbolic link; predictions are not written through a link\nhint: remove the link, or write into another folder")
+
+
+def _open_folder(out_dir: str) -> int:
+    """A handle on `out_dir` (created if missing), refused when it is a symbolic link."""
+    if os.path.islink(out_dir):
+        raise _link_refused(out_dir)
+    os.makedirs(out_dir, exist_ok=True)
+    try:
+        return os.open(out_dir, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
+    except OSError as e:
+        if os.path.islink(out_dir):  # swapped for a link since the check
+            raise _link_refused(out_dir) from e
+        raise
+
+
+def _write(folder: int, name: str, data: bytes) -> None:
+    """`data` as `name` in the folder `folder` (a handle), as clevrtex's own writers write
+    (docs/security.md): a temporary beside it created exclusively without following a link
+    (another name is tried when something sits there), synced and renamed over `name`; the
+    temporary is removed on every error path."""
+    for attempt in range(100):
+        tmp = f".{name}.{os.getpid()}.{attempt}.clevrtex-tmp"
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o666, dir_fd=folder)
+            break
+        except FileExistsError:
+            continue
+    else:
+        raise FileExistsError(f"no free temporary name for `{name}`")
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
-        os.replace(tmp, path)
+            f.flush()
+            os.fsync(f.fileno())
+        os.rename(tmp, name, src_dir_fd=folder, dst_dir_fd=folder)
     except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        try:
+            os.unlink(tmp, dir_fd=folder)
+        except FileNotFoundError:
+            pass
         raise
 
 
@@ -91,7 +123,10 @@ def write_predictions(
     soft masks (argmax over K); `recon`: `(B, 3, H, W)` or `(B, H, W, 3)` floats in [0, 1]
     (the PNG rounds them to 8 bits, the `.npz` keeps them). numpy arrays or torch tensors.
     Returns the paths written. A stem that is not a plain file name, or arrays of the wrong
-    shape, are a ValueError naming them; nothing is written then."""
+    shape, are a ValueError naming them; nothing is written then. Each file is written as
+    clevrtex's own writers write (a temporary beside it, synced and renamed over it); a
+    symbolic link as `out_dir` or at a file's name is refused (ValueError), never written
+    through."""
     if format not in ("png", "npz"):
         raise ValueError(f"unknown format `{format}`; known: png, npz")
     if isinstance(stems, str):
@@ -110,25 +145,34 @@ def write_predictions(
             rec = rec.transpose(0, 2, 3, 1)
         if rec.shape != ids.shape + (3,):
             raise ValueError(f"`recon` is {_array(recon, 'recon').shape}; expected (B, 3, H, W) or (B, H, W, 3) with (B, H, W) = {ids.shape}")
-    os.makedirs(out_dir, exist_ok=True)
-    written = []
-    for b, stem in enumerate(stems):
-        base = os.path.join(out_dir, stem)
-        if format == "npz":
-            import io
+    exts = (".npz",) if format == "npz" else ("_mask.png", "_recon.png") if rec is not None else ("_mask.png",)
+    names = [stem + ext for stem in stems for ext in exts]
+    folder = _open_folder(out_dir)
+    try:
+        for name in names:
+            try:
+                link = stat.S_ISLNK(os.lstat(name, dir_fd=folder).st_mode)
+            except FileNotFoundError:
+                link = False
+            if link:
+                raise _link_refused(os.path.join(out_dir, name))
+        for b, stem in enumerate(stems):
+            if format == "npz":
+                import io
 
-            buf = io.BytesIO()
-            arrays = {"labels": ids[b]}
+                buf = io.BytesIO()
+                arrays = {"labels": ids[b]}
+                if rec is not None:
+                    arrays["recon"] = rec[b].transpose(2, 0, 1)
+                np.savez_compressed(buf, **arrays)
+                _write(folder, stem + ".npz", buf.getvalue())
+                continue
+            _write(folder, stem + "_mask.png", _png(ids[b]))
             if rec is not None:
-                arrays["recon"] = rec[b].transpose(2, 0, 1)
-            np.savez_compressed(buf, **arrays)
-            _write(base + ".npz", buf.getvalue())
-            written.append(base + ".npz")
-            continue
-        _write(base + "_mask.png", _png(ids[b]))
-        written.append(base + "_mask.png")
-        if rec is not None:
-            rgb = np.clip(np.round(rec[b] * 255.0), 0, 255).astype(np.uint8)
-            _write(base + "_recon.png", _png(rgb))
-            written.append(base + "_recon.png")
+                rgb = np.clip(np.round(rec[b] * 255.0), 0, 255).astype(np.uint8)
+                _write(folder, stem + "_recon.png", _png(rgb))
+        os.fsync(folder)
+    finally:
+        os.close(folder)
+    written = [os.path.join(out_dir, n) for n in names]
     return written

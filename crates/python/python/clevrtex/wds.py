@@ -68,13 +68,16 @@ KEYS: Dict[str, Tuple[str, Optional[str], Optional[int]]] = {
 #: The per-object keys of `clevrtex export --objects K` -> the name `decode` gives them, the
 #: dtype and the number of dimensions of the array.
 OBJECT_KEYS: Dict[str, Tuple[str, str, int]] = {
-    "shape.npy": ("shape", "int64", 1),
-    "size.npy": ("size", "int64", 1),
-    "material.npy": ("material", "int64", 1),
-    "color.npy": ("color", "int64", 1),
-    "bbox.npy": ("bbox", "float32", 2),
-    "visibility.npy": ("visibility", "bool", 1),
-    "valid.npy": ("valid", "bool", 1),
+    f"{name}.npy": (name, dtype, ndim)
+    for name, dtype, ndim in [
+        ("shape", "int64", 1),
+        ("size", "int64", 1),
+        ("material", "int64", 1),
+        ("color", "int64", 1),
+        ("bbox", "float32", 2),
+        ("visibility", "bool", 1),
+        ("valid", "bool", 1),
+    ]
 }
 
 

@@ -207,11 +207,13 @@ fn inspect_blend(
     let path = PathBuf::from(m.recipe["path"].as_str().unwrap_or(""));
     let group = m.recipe["group"].as_str().map(String::from);
     let packed_dir = copies.base(name).join(".packed");
-    std::fs::create_dir_all(&packed_dir).map_err(|cause| RenderError::Io {
-        what: "cannot create the folder for packed images",
-        path: packed_dir.clone(),
-        cause,
-        hint: "set `TMPDIR` to a writable folder with free space".into(),
+    std::fs::create_dir_all(&packed_dir).map_err(|cause| {
+        RenderError::io(
+            "cannot create the folder for packed images",
+            packed_dir.clone(),
+            cause,
+            "set `TMPDIR` to a writable folder with free space",
+        )
     })?;
     let reply =
         session.request(|w| w.inspect(&path, group.as_deref(), Some(&packed_dir), INSPECT_TIMEOUT));

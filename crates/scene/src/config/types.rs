@@ -156,6 +156,9 @@ pub struct LightRig {
 }
 
 /// The sun of the base scene.
+// Like the scene file's `Sun` and `Backdrop` by design, not by copy: the scene file's types
+// cannot embed these (serde's `flatten` does not go with `deny_unknown_fields`, which untrusted
+// scene files need, and nesting would change the scene file's bytes).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SunRig {
