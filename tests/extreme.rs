@@ -413,6 +413,7 @@ fn render(blender: PathBuf, out: &Path, scenes: &[SceneFile]) -> Vec<SampleStats
         ledger: out.join("failures.jsonl"),
         interrupt: Arc::new(AtomicBool::new(false)),
         devices: Vec::new(),
+        recycle: Default::default(),
     };
     let stats = Mutex::new(Vec::new());
     let report = pool::run(&opts, jobs, &|ev| {

@@ -451,6 +451,7 @@ pub(crate) fn render_fixtures(
         ledger: out.join("failures.jsonl"),
         interrupt: Arc::new(AtomicBool::new(false)),
         devices: Vec::new(),
+        recycle: Default::default(),
     };
     let stats = Mutex::new(Vec::new());
     let report = pool::run(&opts, jobs, &|ev| {

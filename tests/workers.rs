@@ -278,3 +278,87 @@ fn a_tiny_image_is_blamed_for_its_rejects() {
     assert!(ledger.contains("is too small"), "{ledger}");
     assert!(!ledger.contains("fewer or larger objects"), "{ledger}");
 }
+
+/// Issue 40: a worker is recycled between images, never during one: after `--recycle-after`
+/// images, or past `--max-worker-memory` (here a bound every Blender passes), each with a
+/// note; the dataset's masks and metadata are those of a run that never recycled, and the
+/// summary gives the workers' peak memory. A bound that is no number of GiB is refused.
+#[test]
+fn workers_are_recycled_between_images_by_count_or_memory() {
+    let Some(blender) = blender_or_skip("workers_are_recycled_between_images") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let o = clevrtex()
+            .args(["generate", "--variant", "clevr", "-n", "5", "--seed", "6"])
+            .args(["--width", "32", "--height", "24", "--samples", "1"])
+            .args(["--passes", "rgb,mask", "--workers", "1", "--blender"])
+            .arg(&blender)
+            .arg("--out")
+            .arg(tmp.path().join(name))
+            .args(extra)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(0), "{extra:?}: {t}");
+        t
+    };
+    let plain = run("plain", &["--max-worker-memory", "1000"]);
+    assert!(!plain.contains("was recycled"), "{plain}");
+    assert!(
+        plain.contains("MiB peak resident between images"),
+        "{plain}"
+    );
+    let by_count = run("count", &["--recycle-after", "2"]);
+    assert_eq!(
+        by_count
+            .matches("made 2 image(s)")
+            .filter(|_| by_count.contains("(`--recycle-after`)"))
+            .count(),
+        2,
+        "{by_count}"
+    );
+    assert!(by_count.contains("(3 start(s))"), "{by_count}");
+    let by_memory = run("memory", &["--max-worker-memory", "0.001"]);
+    assert_eq!(
+        by_memory.matches("past `--max-worker-memory`").count(),
+        5,
+        "{by_memory}"
+    );
+    assert!(by_memory.contains("(5 start(s))"), "{by_memory}");
+    for i in 0..5 {
+        for suffix in ["_flat.png", ".json"] {
+            let rel = format!("clevrtex_clevr/0/CLEVRTEX_clevr_{i:06}{suffix}");
+            let want = std::fs::read(tmp.path().join("plain").join(&rel)).unwrap();
+            for other in ["count", "memory"] {
+                assert!(
+                    std::fs::read(tmp.path().join(other).join(&rel)).unwrap() == want,
+                    "{other}: {rel} differs from the run that never recycled"
+                );
+            }
+        }
+    }
+    let o = clevrtex()
+        .args([
+            "generate",
+            "--variant",
+            "clevr",
+            "-n",
+            "1",
+            "--max-worker-memory",
+            "0",
+        ])
+        .arg("--out")
+        .arg(tmp.path().join("bad"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(
+        text(&o).contains("`--max-worker-memory 0` is out of range"),
+        "{}",
+        text(&o)
+    );
+}

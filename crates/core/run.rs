@@ -101,6 +101,19 @@ pub(crate) fn run_jobs(
                     ));
                 }
             }
+            PoolEvent::WorkerRecycled { rss, images, why } => {
+                let mem = rss
+                    .map(|r| format!(", {} MiB resident", r >> 20))
+                    .unwrap_or_default();
+                say(format!(
+                    "note: a Blender worker made {images} image(s){mem} and was recycled ({}); the next image starts a fresh one",
+                    if *why == "memory" {
+                        "past `--max-worker-memory`"
+                    } else {
+                        "`--recycle-after`"
+                    }
+                ));
+            }
             PoolEvent::Failed { index, error } => {
                 failures.fetch_add(1, Ordering::Relaxed);
                 bar.inc(1);
@@ -238,6 +251,14 @@ pub(crate) fn pool_options(
         overwrite: args.overwrite,
         fail_fast: args.fail_fast,
         out: args.out.clone(),
+        max_worker_memory: match args.max_worker_memory {
+            Some(g) if !(g > 0.0 && g <= 1e6) => bail!(
+                "`--max-worker-memory {g}` is out of range\nhint: pass the GiB a worker may hold, more than 0 (e.g. 8)"
+            ),
+            Some(g) => Some((g * (1u64 << 30) as f64) as u64),
+            None => None,
+        },
+        recycle_after: args.recycle_after,
     };
     let planned = batch::plan(&settings, ledger, max_attempts, interrupt, materials)
         .map_err(crate::exit::command_error)?;
@@ -432,6 +453,17 @@ fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
         r.prerejects,
         r.rejects_cost_if_checked_after()
     );
+    if r.peak_rss > 0 {
+        println!(
+            "  worker memory    {:>8} MiB peak resident between images{}",
+            r.peak_rss >> 20,
+            if r.recycled > 0 {
+                format!("; {} worker(s) recycled", r.recycled)
+            } else {
+                String::new()
+            }
+        );
+    }
     if let Some(ratio) = r.overhead_ratio() {
         println!("  overhead: wall x workers / cycles render = {ratio:.3}");
     }

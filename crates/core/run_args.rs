@@ -62,6 +62,14 @@ pub struct RunArgs {
     /// Stop at the first failed scene instead of recording it in the ledger and going on.
     #[arg(long)]
     pub(crate) fail_fast: bool,
+    /// Recycle a Blender worker (it quits after its image; a fresh one makes the next) when
+    /// its resident memory passes this many GiB, more than 0 [default: half the machine's
+    /// memory shared by the workers, at least 2]. Never during an image.
+    #[arg(long, value_name = "GIB")]
+    pub(crate) max_worker_memory: Option<f64>,
+    /// Recycle each Blender worker after this many images, 1 to 100000000 [default: never].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=100_000_000))]
+    pub(crate) recycle_after: Option<u64>,
     #[command(flatten)]
     pub(crate) materials: crate::user_materials::MaterialsArg,
 }

@@ -43,6 +43,10 @@ pub struct Settings {
     pub fail_fast: bool,
     /// `--out`.
     pub out: PathBuf,
+    /// `--max-worker-memory` in bytes (`None`: [`pool::default_max_rss`]).
+    pub max_worker_memory: Option<u64>,
+    /// `--recycle-after` (`None`: never by count).
+    pub recycle_after: Option<u64>,
 }
 
 /// The pool's options for a run and the user materials it checked (which must outlive the
@@ -117,6 +121,12 @@ pub fn plan(
         ledger,
         interrupt: Arc::clone(interrupt),
         devices,
+        recycle: pool::Recycle {
+            max_rss: s
+                .max_worker_memory
+                .or_else(|| pool::default_max_rss(workers)),
+            after_images: s.recycle_after,
+        },
     };
     Ok(Planned { opts, user, notes })
 }

@@ -66,11 +66,41 @@ pub struct PoolOptions {
     /// The devices to spread the workers over, round robin ([`crate::device::plan`]); empty:
     /// the CPU.
     pub devices: Vec<crate::device::Placement>,
+    /// When a worker is replaced between images.
+    pub recycle: Recycle,
 }
 
 /// Without `--timeout`, a worker that prints nothing at all for this long is hung (Cycles
 /// prints a line per sample; scene builds print too).
 pub const IDLE_TIMEOUT: Duration = Duration::from_secs(300);
+
+/// When a worker is replaced by a fresh one between two images (never during one): its
+/// Blender's memory past a bound, or a number of images made.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Recycle {
+    /// Resident memory (bytes) past which a worker is recycled after its image
+    /// (`--max-worker-memory`; `None`: never).
+    pub max_rss: Option<u64>,
+    /// Images after which a worker is recycled (`--recycle-after`; `None`: never).
+    pub after_images: Option<u64>,
+}
+
+/// The default memory bound of one worker: half of this machine's memory shared by the
+/// `workers`, at least 2 GiB (a 320x240 worker of the built-in materials holds well under
+/// 1 GiB; docs/performance.md). `None` where the machine's memory is unknown.
+pub fn default_max_rss(workers: usize) -> Option<u64> {
+    let meminfo = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let kb: u64 = meminfo
+        .lines()
+        .find_map(|l| l.strip_prefix("MemTotal:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    let share = kb.saturating_mul(1024) / 2 / workers.max(1) as u64;
+    Some(share.max(2 << 30))
+}
 
 /// Progress reports, sent while the run goes.
 #[derive(Debug)]
@@ -110,6 +140,15 @@ pub enum PoolEvent<'a> {
         index: u64,
         /// Why.
         error: &'a RenderError,
+    },
+    /// A worker was let go between two images and the next image starts a fresh one.
+    WorkerRecycled {
+        /// Its Blender's resident memory then (bytes), where known.
+        rss: Option<u64>,
+        /// Images it made.
+        images: u64,
+        /// Why: `memory` (past `Recycle::max_rss`) or `images` (`Recycle::after_images`).
+        why: &'static str,
     },
 }
 
@@ -160,6 +199,11 @@ pub struct RunReport {
     pub interrupted: bool,
     /// Lines of the existing failure ledger that could not be read (dropped).
     pub ledger_unreadable: usize,
+    /// The largest resident memory of a worker's Blender seen between two images (bytes; 0
+    /// where unknown).
+    pub peak_rss: u64,
+    /// Workers recycled ([`Recycle`]).
+    pub recycled: u64,
 }
 
 impl RunReport {
@@ -394,6 +438,8 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         user_materials: opts.user_materials.clone(),
         config_hash: opts.config_hash.clone(),
     };
+    // (pid of the slot's worker, images it made since it started)
+    let mut on_worker: (u32, u64) = (0, 0);
     loop {
         if shared.stopping() {
             break;
@@ -425,7 +471,11 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
                 break;
             }
         }
-        match crate::job::run_job(&mut slot, &settings, &job) {
+        let result = crate::job::run_job(&mut slot, &settings, &job);
+        if !matches!(result, Err(RenderError::Interrupted)) {
+            recycle_between_images(&mut slot, &mut on_worker);
+        }
+        match result {
             Ok(stats) => {
                 shared.report.lock().unwrap().add(&stats);
                 (shared.on_event)(&PoolEvent::Done { sample: &stats });
@@ -460,6 +510,46 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         }
     }
     slot.session.close();
+}
+
+/// After an image (made or failed), between two requests: note the worker's memory, and let
+/// it go (it quits; the next image starts a fresh one) when it is past the bound or has made
+/// its number of images ([`Recycle`]). `on_worker`: the worker's pid and images made.
+fn recycle_between_images(slot: &mut Slot, on_worker: &mut (u32, u64)) {
+    let Some(w) = slot.session.current() else {
+        *on_worker = (0, 0);
+        return;
+    };
+    let pid = w.pid();
+    if on_worker.0 != pid {
+        *on_worker = (pid, 0);
+    }
+    on_worker.1 += 1;
+    let rss = w.rss_bytes();
+    let recycle = slot.shared.opts.recycle;
+    let why = if rss.zip(recycle.max_rss).is_some_and(|(r, max)| r > max) {
+        Some("memory")
+    } else if recycle.after_images.is_some_and(|n| on_worker.1 >= n) {
+        Some("images")
+    } else {
+        None
+    };
+    {
+        let mut report = slot.shared.report.lock().unwrap();
+        report.peak_rss = report.peak_rss.max(rss.unwrap_or(0));
+        if why.is_some() {
+            report.recycled += 1;
+        }
+    }
+    if let Some(why) = why {
+        (slot.shared.on_event)(&PoolEvent::WorkerRecycled {
+            rss,
+            images: on_worker.1,
+            why,
+        });
+        slot.session.close();
+        *on_worker = (0, 0);
+    }
 }
 
 /// Logical cores of this machine (1 if unknown).

@@ -153,6 +153,26 @@ impl Worker {
         self.process.is_dead()
     }
 
+    /// The Blender process's id.
+    pub fn pid(&self) -> u32 {
+        self.process.pid()
+    }
+
+    /// The Blender process's resident memory now (`VmRSS` of `/proc/<pid>/status`), in bytes;
+    /// `None` where there is no `/proc` or the process is gone.
+    pub fn rss_bytes(&self) -> Option<u64> {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.pid())).ok()?;
+        let kb: u64 = status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmRSS:"))?
+            .trim()
+            .trim_end_matches("kB")
+            .trim()
+            .parse()
+            .ok()?;
+        kb.checked_mul(1024)
+    }
+
     /// Refuse a scene whose `render` settings this worker's Blender cannot honour
     /// ([`protocol::Features::refusal`]: denoising without OIDN), before it renders anything.
     pub fn check_features(

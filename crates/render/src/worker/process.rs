@@ -171,6 +171,11 @@ impl Process {
         self.dead
     }
 
+    /// The Blender process's id.
+    pub(super) fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     /// Current output tails. After the process died, waits briefly for its last stderr
     /// lines (the reader thread may still be draining the pipe).
     pub(super) fn tails(&self) -> Tails {
