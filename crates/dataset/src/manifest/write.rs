@@ -144,7 +144,8 @@ impl Plan {
     /// grown dataset's recorded splits would differ from the public loader's position rule
     /// over all its images, and `clevrtex eval --split test` and the public evaluator would
     /// score other test sets. `allow` (`--allow-split-mismatch`) renders anyway; `verify`,
-    /// `report` and the card then say where the splits differ.
+    /// `report` and the card then say where the splits differ. A run of the same range, shard
+    /// and total as one already recorded (the same command again) is never refused.
     pub fn check_splits(
         &self,
         out: &Path,
@@ -154,6 +155,12 @@ impl Plan {
         if allow || rule == clevrtex_scene::names::Splits::TestOnly {
             return Ok(());
         }
+        let total = self.run.total;
+        // The same range, shard and total as a run already in the folder: that run again (a
+        // resume, or a repair of a complete range), never refused, whatever other runs hold.
+        if self.earlier(out).is_some_and(|m| m.total == total) {
+            return Ok(());
+        }
         let vdir = self.variant_dir(out);
         let Ok(root) = crate::dataset::files::root(&vdir) else {
             return Ok(());
@@ -161,7 +168,6 @@ impl Plan {
         let Ok(entries) = crate::dataset::files::list(&root, &vdir) else {
             return Ok(());
         };
-        let total = self.run.total;
         for (name, path, kind) in entries {
             if kind != crate::dataset::files::Kind::File || !is_manifest_name(&name) {
                 continue;
@@ -281,5 +287,52 @@ impl Plan {
             )));
         }
         Ok(path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clevrtex_scene::names::Splits;
+
+    fn plan(start: u64, end: u64, total: u64) -> Plan {
+        Plan {
+            run: Manifest {
+                variant: "camo".into(),
+                start,
+                end,
+                total,
+                ..Manifest::unfinished()
+            },
+            passes: Vec::new(),
+            keep_exr: false,
+        }
+    }
+
+    /// Issue 41: growing with another `--total` is refused, but the same command again (the
+    /// first run's, or the grown run's) never is, even in a folder grown on purpose.
+    #[test]
+    fn the_same_command_again_is_never_refused_by_the_split_check() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        let (first, grown) = (plan(0, 12, 12), plan(12, 20, 20));
+        std::fs::create_dir_all(first.variant_dir(out)).unwrap();
+        first.write_plan(out).unwrap();
+        let e = grown.check_splits(out, Splits::Standard, false).unwrap_err();
+        assert!(e.to_string().contains("pass `--total 12`"), "{e}");
+        grown.check_splits(out, Splits::Standard, true).unwrap();
+        grown.write_plan(out).unwrap();
+        // Both runs again: resumes or repairs of their own ranges.
+        first.check_splits(out, Splits::Standard, false).unwrap();
+        grown.check_splits(out, Splits::Standard, false).unwrap();
+        // A new range with the first run's total is still refused (the grown run differs).
+        let e = plan(0, 4, 12)
+            .check_splits(out, Splits::Standard, false)
+            .unwrap_err();
+        assert!(e.to_string().contains("this run's total is 12"), "{e}");
+        // A test-only variant has one split whatever the total.
+        plan(0, 4, 4)
+            .check_splits(out, Splits::TestOnly, false)
+            .unwrap();
     }
 }
