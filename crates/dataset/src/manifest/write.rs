@@ -318,7 +318,9 @@ mod tests {
         let (first, grown) = (plan(0, 12, 12), plan(12, 20, 20));
         std::fs::create_dir_all(first.variant_dir(out)).unwrap();
         first.write_plan(out).unwrap();
-        let e = grown.check_splits(out, Splits::Standard, false).unwrap_err();
+        let e = grown
+            .check_splits(out, Splits::Standard, false)
+            .unwrap_err();
         assert!(e.to_string().contains("pass `--total 12`"), "{e}");
         grown.check_splits(out, Splits::Standard, true).unwrap();
         grown.write_plan(out).unwrap();
