@@ -179,4 +179,6 @@ fn a_variant_no_layout_of_which_passes_fails_with_the_usual_message() {
         t.contains("3 layouts in a row had an object with at most"),
         "not the usual rejects message: {t}"
     );
+    // A failed image's rejects are in the run's time split.
+    assert!(t.contains("(3 rejected layout(s), "), "{t}");
 }

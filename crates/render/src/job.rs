@@ -223,12 +223,16 @@ pub(crate) struct JobSettings {
 
 /// Turn `job` into a written sample on `slot`: attempts, the visibility check, the final
 /// render, its passes and metadata, committed at once.
+///
+/// On failure, `stats` still holds what the image cost before it failed (its rejected
+/// layouts, visibility passes and phases), for the run's time split.
 pub(crate) fn run_job(
     slot: &mut dyn JobHost,
     opts: &JobSettings,
     job: &Job,
-) -> Result<SampleStats> {
-    let mut stats = SampleStats {
+    stats: &mut SampleStats,
+) -> Result<()> {
+    *stats = SampleStats {
         index: job.index,
         ..SampleStats::default()
     };
@@ -264,7 +268,7 @@ pub(crate) fn run_job(
         // scene build) is skipped; the attempts and accepted layouts are the same.
         if job.resample && opts.visibility_check && prerejected(&scene, threshold) {
             stats.prerejects += 1;
-            reject(slot, job, attempt, t_attempt, &mut stats, Path::new(""));
+            reject(slot, job, attempt, t_attempt, stats, Path::new(""));
             continue;
         }
         let work = slot.scratch().join(format!("{}-{attempt}", job.stem));
@@ -301,7 +305,7 @@ pub(crate) fn run_job(
             let px = post::object_pixels(&ids, ch.width, n);
             visibility_s = t.elapsed().as_secs_f64();
             if px.iter().any(|p| p.pixels <= threshold) {
-                reject(slot, job, attempt, t_attempt, &mut stats, &work);
+                reject(slot, job, attempt, t_attempt, stats, &work);
                 continue;
             }
         }
@@ -329,7 +333,7 @@ pub(crate) fn run_job(
             // The final mask disagrees with the cheap pass (e.g. displacement hides an
             // object): reject this layout too.
             drop(staged);
-            reject(slot, job, attempt, t_attempt, &mut stats, &work);
+            reject(slot, job, attempt, t_attempt, stats, &work);
             continue;
         }
         let mut meta_scene = scene.clone();
@@ -365,7 +369,7 @@ pub(crate) fn run_job(
         stats.post_s = t_post.elapsed().as_secs_f64();
         stats.projected = reply.projected.clone();
         stats.objects = objects;
-        return Ok(stats);
+        return Ok(());
     }
     Err(RenderError::TooManyRejects {
         index: job.index,

@@ -207,18 +207,25 @@ pub struct RunReport {
 }
 
 impl RunReport {
+    /// Count a written sample.
     fn add(&mut self, s: &SampleStats) {
         self.done += 1;
-        self.rejects += s.rejects as u64;
         self.build_s += s.build_s;
         self.visibility_s += s.visibility_s;
+        self.render_s += s.render_s;
+        self.final_request_s += s.final_request_s;
+        self.post_s += s.post_s;
+        self.add_attempts(s);
+    }
+
+    /// Count what every image's attempts cost, written or failed: its rejected layouts,
+    /// visibility passes and bridge phases (a failed image's rejects are in the split too).
+    fn add_attempts(&mut self, s: &SampleStats) {
+        self.rejects += s.rejects as u64;
         self.visibility_build_s += s.visibility_build_s;
         self.visibility_render_s += s.visibility_render_s;
         self.visibility_passes += s.visibility_passes;
         self.prerejects += u64::from(s.prerejects);
-        self.render_s += s.render_s;
-        self.final_request_s += s.final_request_s;
-        self.post_s += s.post_s;
         self.phases.add(&s.phases);
         self.reject_s += s.reject_s;
     }
@@ -471,12 +478,16 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
                 break;
             }
         }
-        let result = crate::job::run_job(&mut slot, &settings, &job);
-        if !matches!(result, Err(RenderError::Interrupted)) {
+        let mut stats = SampleStats::default();
+        let result = crate::job::run_job(&mut slot, &settings, &job, &mut stats);
+        if result.is_err() {
+            shared.report.lock().unwrap().add_attempts(&stats);
+        }
+        if !matches!(result, Err(RenderError::Interrupted)) && !shared.stopping() {
             recycle_between_images(&mut slot, &mut on_worker);
         }
         match result {
-            Ok(stats) => {
+            Ok(()) => {
                 shared.report.lock().unwrap().add(&stats);
                 (shared.on_event)(&PoolEvent::Done { sample: &stats });
             }
