@@ -13,7 +13,8 @@ use clevrtex_render::RenderError;
 
 use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
-use crate::run::{format_duration, pool_options};
+use crate::progress::format_duration;
+use crate::run::pool_options;
 use crate::run_args::RunArgs;
 
 /// What `--estimate` was asked for.

@@ -21,11 +21,13 @@ mod cmd_verify;
 mod estimate;
 mod exit;
 mod interrupt;
+mod progress;
 mod provenance;
 mod run;
 mod run_args;
 mod suite;
 mod user_materials;
+mod verify_print;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object
 /// segmentation, in the style of ClevrTex.

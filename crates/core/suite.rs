@@ -64,7 +64,7 @@ pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
                 .iter()
                 .map(|v| plan.variant_shard(v, shard).count(0, v.total))
                 .sum::<u64>(),
-            crate::run::format_duration(wall)
+            crate::progress::format_duration(wall)
         );
     } else {
         println!(

@@ -1,0 +1,237 @@
+//! What `clevrtex verify` prints: a variant's report ([`print_report`]: counts, splits,
+//! problems, what to repair) and what `--against` found ([`print_comparison`]).
+
+use std::path::PathBuf;
+
+use clevrtex_dataset::verify::{index_ranges, shell_words, Comparison, VariantReport};
+
+pub(crate) fn print_report(r: &VariantReport, dirs: &[PathBuf], remove: bool) {
+    println!(
+        "{}: {} of {} expected samples whole ({})",
+        r.variant, r.ok, r.expected, r.expected_from
+    );
+    // What the dataset was made from, beyond the built-in catalogue (from the manifests).
+    for (name, m) in &r.user_materials {
+        let p = clevrtex_scene::text::printable;
+        println!(
+            "  user material {}: `{}`{}, {} texture(s), xxh3 {}",
+            p(name),
+            p(&m.file),
+            m.group
+                .as_deref()
+                .map(|g| format!(" group `{}`", p(g)))
+                .unwrap_or_default(),
+            m.textures.len(),
+            p(&m.xxh3)
+        );
+    }
+    if !r.splits.is_empty() {
+        // Each sample's split as every reader takes it (recorded, else by position).
+        let sizes: Vec<String> = ["test", "val", "train"]
+            .iter()
+            .map(|s| {
+                let n: u64 = r
+                    .splits
+                    .get(*s)
+                    .map_or(0, |v| v.iter().map(|[a, b]| b - a + 1).sum());
+                format!("{s} {n}")
+            })
+            .collect();
+        println!("  splits: {}", sizes.join(", "));
+    }
+    if let Some(differ) = &r.loader_splits {
+        println!("  warning: {differ}: `clevrtex eval --split` and the public loader and evaluator would use other sets\n  hint: remake the variant with one `--total` for every run (`generate --total N`), in a new folder");
+    }
+    if r.missing_count > 0 {
+        // The list is capped (`verify::MAX_LISTED`); say where it stops.
+        let more = match r.missing_count - r.missing.len() as u64 {
+            0 => String::new(),
+            n => format!(
+                ", and {n} more after {} (not listed)",
+                r.missing.last().unwrap_or(&0)
+            ),
+        };
+        println!(
+            "  missing ({}): {}{more}",
+            r.missing_count,
+            index_ranges(&r.missing)
+        );
+    }
+    if !r.duplicates.is_empty() {
+        println!("  duplicated indices ({}):", r.duplicates.len());
+        for (i, places) in r.duplicates.iter().take(20) {
+            let p: Vec<String> = places
+                .iter()
+                .map(|p| format!("`{}`", p.display()))
+                .collect();
+            println!("    {i} in {}", p.join(" and "));
+        }
+    }
+    if !r.broken.is_empty() {
+        println!("  broken samples ({}):", r.broken.len());
+        for b in r.broken.iter().take(20) {
+            println!("    {} (`{}`):", b.stem, b.dir.display());
+            for p in &b.problems {
+                println!("      {p}");
+            }
+        }
+        if r.broken.len() > 20 {
+            println!("    ... {} more (see --json)", r.broken.len() - 20);
+        }
+    }
+    if !r.unexpected.is_empty() {
+        println!(
+            "  outside the run's indices ({}, not counted as errors): {}",
+            r.unexpected.len(),
+            index_ranges(&r.unexpected)
+        );
+    }
+    // A temporary whose owner tag names a live process (or another host) is a file being
+    // written now, not one left by a killed run.
+    let (live, dead): (Vec<&PathBuf>, Vec<&PathBuf>) = r.temp_files.iter().partition(|t| {
+        t.file_name()
+            .and_then(|n| n.to_str())
+            .and_then(|n| n.strip_suffix(clevrtex_dataset::layout::TMP_SUFFIX))
+            .is_some_and(|stem| !clevrtex_dataset::atomic::tagged_name_is_stale(stem))
+    });
+    for (what, list) in [
+        ("temporary files left by killed runs", dead),
+        (
+            "temporary files of runs still writing (or of another host; never removed)",
+            live,
+        ),
+    ] {
+        if !list.is_empty() {
+            println!("  {what} ({}):", list.len());
+            for t in list.iter().take(10) {
+                println!("    {}", t.display());
+            }
+        }
+    }
+    if !r.skipped.is_empty() {
+        println!("  not followed or not read ({}):", r.skipped.len());
+        for s in r.skipped.iter().take(20) {
+            println!("    {s}");
+        }
+        if r.skipped.len() > 20 {
+            println!("    ... {} more (see --json)", r.skipped.len() - 20);
+        }
+    }
+    for m in &r.mixed_on_purpose {
+        println!("  settings mixed on purpose (`--mix-settings`): {m}");
+    }
+    for p in &r.manifest_problems {
+        println!("  manifest: {p}");
+    }
+    if !r.ledger.is_empty() {
+        let idx: Vec<u64> = r.ledger.keys().copied().collect();
+        println!(
+            "  failure ledger: {} image(s) recorded as failed: {}",
+            idx.len(),
+            index_ranges(&idx)
+        );
+        if let Some((i, e)) = r.ledger.iter().next() {
+            println!("    e.g. {i}: {e}");
+        }
+    }
+    if !r.is_whole() {
+        let dirs: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+        let rerun = match r.commands.as_slice() {
+            [] => {
+                "rerun the `clevrtex generate` command that made it (complete samples are skipped)"
+                    .to_string()
+            }
+            cmds => cmds
+                .iter()
+                .map(|c| shell_words(c))
+                .collect::<Vec<_>>()
+                .join("\n    "),
+        };
+        if clevrtex_dataset::layout::variant_name_problem(&r.variant).is_some() {
+            // A `clevrtex_<x>` folder no run could have written: no command repairs it.
+            println!("  to repair: move or rename the folder named above; it is not a variant's folder and nothing in it was checked");
+        } else if remove {
+            println!("  to repair, rerun:\n    {rerun}");
+        } else {
+            println!(
+                "  to repair: clevrtex verify {} --variant {} --remove-broken, then rerun:\n    {rerun}",
+                dirs.join(" "),
+                r.variant
+            );
+        }
+    }
+}
+
+/// Print what `--against` found for one variant.
+pub(crate) fn print_comparison(c: &Comparison) {
+    let other = c.other.display();
+    if !c.settings.is_empty() {
+        println!(
+            "{}: not comparable with `{other}`: made by another command ({}; this dataset's value first)\nhint: compare datasets made by the same `clevrtex generate` command (same variant, seed, config, size, samples, passes, materials, suite and `--total`)",
+            c.variant,
+            c.settings.join(", ")
+        );
+        return;
+    }
+    let noise: Vec<String> = c
+        .render_noise
+        .iter()
+        .map(|(p, n)| format!("{p} {n}"))
+        .collect();
+    println!(
+        "{}: against `{other}`: {} of {} image(s) in both hold the same layout, mask and metadata{}",
+        c.variant,
+        c.identical,
+        c.compared,
+        if noise.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; rendered passes differ (render noise, not a failure): {}",
+                noise.join(", ")
+            )
+        }
+    );
+    if !c.fingerprints[0].is_empty() || !c.fingerprints[1].is_empty() {
+        let show = |f: &str| {
+            if f.is_empty() {
+                "(not read)".to_string()
+            } else {
+                f.to_string()
+            }
+        };
+        println!(
+            "  layout fingerprints: {} here, {} there",
+            show(&c.fingerprints[0]),
+            show(&c.fingerprints[1])
+        );
+    }
+    for d in &c.differ {
+        println!("  differs: {d}");
+    }
+    if c.differ_count as usize > c.differ.len() {
+        println!(
+            "  ... {} more differ (see --json)",
+            c.differ_count as usize - c.differ.len()
+        );
+    }
+    if !c.only_here.is_empty() {
+        println!(
+            "  only here ({}): {}",
+            c.only_here.len(),
+            index_ranges(&c.only_here)
+        );
+    }
+    if !c.only_there.is_empty() {
+        println!(
+            "  only in `{other}` ({}): {}",
+            c.only_there.len(),
+            index_ranges(&c.only_there)
+        );
+    }
+    if c.same() {
+        println!("  same layouts, masks and metadata");
+    } else if c.compared == 0 && c.only_here.is_empty() && c.only_there.is_empty() {
+        println!("  no finished image on either side to compare");
+    }
+}
