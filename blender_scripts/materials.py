@@ -466,7 +466,14 @@ def inspect_blend(path, group=None, packed_dir=None):
             entry["height"] = int(img.generated_height)
         if img.packed_file is not None and packed_dir is not None:
             f = os.path.join(packed_dir, str(i))
-            with open(f, "wb") as out:
+            # The run's private folder: a file left by a worker that died mid-request is
+            # replaced; nothing at the name is followed (exclusive, no-follow create).
+            try:
+                os.unlink(f)
+            except FileNotFoundError:
+                pass
+            fd = os.open(f, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+            with os.fdopen(fd, "wb") as out:
                 out.write(img.packed_file.data)
             entry["file"] = f
             entry["key"] = _packed_key(i)
