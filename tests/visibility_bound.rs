@@ -1,14 +1,18 @@
-//! The geometric pre-reject of `generate` (`clevrtex_scene::visibility`): its per-object bound
-//! of visible pixels is never below what Blender's object-index pass counts, on real renders
-//! of the layouts where the bound is tightest (the most occluded and cut ones, where the
-//! pre-reject fires), and a variant whose layouts all fail fails as before.
+//! The geometric pre-reject and pre-accept of `generate` (`clevrtex_scene::visibility`): its
+//! per-object upper bound of visible pixels is never below what Blender's object-index pass
+//! counts and its lower bound never above, on real renders of the layouts where the bounds are
+//! tightest (the most occluded and cut ones, where the pre-reject fires, and the pre-accepted
+//! ones closest to the threshold); the shape tables behind them fit the meshes of every
+//! Blender; and a variant whose layouts all fail fails as before.
 
 use clevrtex_render::post::visibility_threshold;
 use clevrtex_scene::config::Config;
-use clevrtex_scene::visibility::visible_pixel_bounds;
+use clevrtex_scene::visibility::{
+    inner_balls, outer_box, visible_pixel_bounds, visible_pixel_lower_bounds,
+};
 use clevrtex_scene::{sample, Pass, SampleRequest, SceneFile};
 
-use crate::util::{blender_or_skip, clevrtex, text};
+use crate::util::{blender_or_skip, clevrtex, repo_root, test_blenders, text};
 
 const W: u32 = 160;
 const H: u32 = 120;
@@ -50,7 +54,8 @@ fn the_bound_holds_on_real_renders_of_the_most_occluded_layouts() {
     };
     let threshold = visibility_threshold(W, H);
     // Of 600 layouts, the 12 whose smallest bound is smallest (half pre-rejected at least,
-    // where the pre-reject matters) and 4 ordinary ones.
+    // where the pre-reject matters), the 8 pre-accepted ones whose smallest lower bound is
+    // closest to the threshold, and 4 ordinary ones.
     let mut pool: Vec<(u64, SceneFile, Vec<u64>)> = (0..600)
         .map(|i| {
             let s = layout(i / 3, (i % 3) as u32);
@@ -60,7 +65,30 @@ fn the_bound_holds_on_real_renders_of_the_most_occluded_layouts() {
         .collect();
     pool.sort_by_key(|(m, s, _)| (*m, s.index, s.attempt));
     let mut chosen: Vec<(SceneFile, Vec<u64>)> = pool.drain(..12).map(|(_, s, b)| (s, b)).collect();
-    chosen.extend(pool.into_iter().step_by(150).map(|(_, s, b)| (s, b)));
+    let lower_min = |s: &SceneFile| *visible_pixel_lower_bounds(s).unwrap().iter().min().unwrap();
+    let mut accepted: Vec<usize> = (0..pool.len())
+        .filter(|&k| lower_min(&pool[k].1) > threshold)
+        .collect();
+    accepted.sort_by_key(|&k| lower_min(&pool[k].1));
+    let near: Vec<usize> = accepted.into_iter().take(8).collect();
+    chosen.extend(near.iter().map(|&k| (pool[k].1.clone(), pool[k].2.clone())));
+    chosen.extend(
+        pool.iter()
+            .step_by(150)
+            .map(|(_, s, b)| (s.clone(), b.clone())),
+    );
+    let lowers: Vec<Vec<u64>> = chosen
+        .iter()
+        .map(|(s, _)| visible_pixel_lower_bounds(s).unwrap())
+        .collect();
+    let preaccepted = lowers
+        .iter()
+        .filter(|l| l.iter().all(|&px| px > threshold))
+        .count();
+    assert!(
+        preaccepted >= 8,
+        "only {preaccepted} pre-accepted layouts chosen"
+    );
     let prerejected = chosen
         .iter()
         .filter(|(_, b)| b.iter().any(|&px| px <= threshold))
@@ -106,6 +134,14 @@ fn the_bound_holds_on_real_renders_of_the_most_occluded_layouts() {
             .collect();
         for (i, (&px, &bound)) in counts.iter().zip(bounds).enumerate() {
             assert!(
+                px >= lowers[k][i],
+                "layout {k} (index {}, attempt {}) object {i} ({}): Blender counts {px} pixels, the lower bound says at least {}",
+                s.index,
+                s.attempt,
+                s.objects[i].shape,
+                lowers[k][i]
+            );
+            assert!(
                 px <= bound,
                 "layout {k} (index {}, attempt {}) object {i} ({}): Blender counts {px} pixels, the bound says at most {bound}",
                 s.index,
@@ -125,6 +161,13 @@ fn the_bound_holds_on_real_renders_of_the_most_occluded_layouts() {
                 "layout {k}: pre-rejected but Blender accepts {counts:?}"
             );
             rejected_by_blender += 1;
+        }
+        if lowers[k].iter().all(|&px| px > threshold) {
+            // What the pre-accept promises: Blender accepts the layout too.
+            assert!(
+                !blender_rejects,
+                "layout {k}: pre-accepted but Blender rejects {counts:?}"
+            );
         }
     }
     assert_eq!(rejected_by_blender, prerejected);
@@ -181,4 +224,46 @@ fn a_variant_no_layout_of_which_passes_fails_with_the_usual_message() {
     );
     // A failed image's rejects are in the run's time split.
     assert!(t.contains("(3 rejected layout(s), "), "{t}");
+}
+
+/// The shape tables of the bounds (`inner_balls`, `outer_box`) hold for the meshes every
+/// Blender builds: each ball enclosed (no ray leaves it outwards without meeting the mesh), every
+/// vertex of the subdivided mesh inside the box and the vertical cylinder
+/// (`blender_scripts/dev/inner_balls.py check`).
+#[test]
+fn the_shape_tables_fit_the_meshes_of_every_blender() {
+    let blenders = test_blenders("the_shape_tables_fit_the_meshes_of_every_blender");
+    let dir = tempfile::tempdir().unwrap();
+    let table: serde_json::Map<String, serde_json::Value> = clevrtex_scene::names::KNOWN_SHAPES
+        .iter()
+        .map(|&shape| {
+            let (b, radial) = outer_box(shape);
+            let spec = serde_json::json!({"balls": inner_balls(shape), "box": b, "radial": radial});
+            (shape.to_string(), spec)
+        })
+        .collect();
+    let table_path = dir.path().join("table.json");
+    std::fs::write(&table_path, serde_json::Value::Object(table).to_string()).unwrap();
+    let script = repo_root().join("blender_scripts/dev/inner_balls.py");
+    for (k, blender) in blenders.iter().enumerate() {
+        let report = dir.path().join(format!("report-{k}.json"));
+        let args = [
+            "check".into(),
+            table_path.clone().into_os_string(),
+            report.clone().into_os_string(),
+        ];
+        let flavour = clevrtex_render::blender::flavour(blender);
+        let out = clevrtex_render::blender::worker_command(blender, flavour, &script, &args)
+            .output()
+            .unwrap();
+        let report = std::fs::read_to_string(&report).unwrap_or_default();
+        assert!(
+            out.status.success(),
+            "{}: the shape tables do not fit: {report}\n{}",
+            blender.display(),
+            text(&out)
+        );
+        let parsed: serde_json::Value = serde_json::from_str(&report).unwrap();
+        assert_eq!(parsed.as_object().unwrap().len(), 8, "{report}");
+    }
 }

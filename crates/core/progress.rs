@@ -154,8 +154,8 @@ pub(crate) fn print_summary(r: &RunReport, out: &Path, ledger: &Path) {
     );
     println!("  scene build      {:>8.1} s", r.build_s);
     println!(
-        "  visibility pass  {:>8.1} s  (all {} passes incl. rejected: build {:.1} s, cycles {:.1} s)",
-        r.visibility_s, r.visibility_passes, r.visibility_build_s, r.visibility_render_s
+        "  visibility pass  {:>8.1} s  (all {} passes incl. rejected: build {:.1} s, cycles {:.1} s; {} layout(s) accepted from the geometry without one)",
+        r.visibility_s, r.visibility_passes, r.visibility_build_s, r.visibility_render_s, r.preaccepts
     );
     println!("  render (cycles)  {:>8.1} s", r.render_s);
     println!(

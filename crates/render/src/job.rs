@@ -161,6 +161,9 @@ pub struct SampleStats {
     /// Rejected attempts of this image decided from the geometry alone
     /// ([`clevrtex_scene::visibility`]), without a visibility render (counted in `rejects`).
     pub prerejects: u32,
+    /// Layouts accepted from the geometry alone, without a visibility render (at most one per
+    /// image: the final mask may still reject it).
+    pub preaccepts: u32,
     /// Wall time of the rejected attempts.
     pub reject_s: f64,
     /// The bridge's phases of every request of this image (visibility and final, accepted
@@ -271,6 +274,10 @@ pub(crate) fn run_job(
             reject(slot, job, attempt, t_attempt, stats, Path::new(""));
             continue;
         }
+        // The geometric pre-accept: every object's lower bound is over the threshold, so the
+        // visibility render accepts for certain and is skipped; the final mask is checked as
+        // always.
+        let preaccepted = job.resample && opts.visibility_check && preaccepted(&scene, threshold);
         let work = slot.scratch().join(format!("{}-{attempt}", job.stem));
         let _ = std::fs::remove_dir_all(&work);
         std::fs::create_dir_all(&work).map_err(|e| RenderError::write(&work, e))?;
@@ -287,7 +294,9 @@ pub(crate) fn run_job(
         };
 
         let mut visibility_s = 0.0;
-        if job.resample && opts.visibility_check {
+        if preaccepted {
+            stats.preaccepts += 1;
+        } else if job.resample && opts.visibility_check {
             let t = Instant::now();
             let reply = slot.request(&mut |w| {
                 w.check_features(&scene.render)?;
@@ -385,6 +394,14 @@ pub(crate) fn run_job(
 fn prerejected(scene: &SceneFile, threshold: u64) -> bool {
     clevrtex_scene::visibility::visible_pixel_bounds(scene)
         .is_some_and(|b| b.iter().any(|&px| px <= threshold))
+}
+
+/// Whether the geometry alone shows that every object of `scene` gets more than `threshold`
+/// pixels in the visibility render
+/// ([`clevrtex_scene::visibility::visible_pixel_lower_bounds`]).
+fn preaccepted(scene: &SceneFile, threshold: u64) -> bool {
+    clevrtex_scene::visibility::visible_pixel_lower_bounds(scene)
+        .is_some_and(|b| b.iter().all(|&px| px > threshold))
 }
 
 /// Count a rejected attempt and tell the run.

@@ -179,6 +179,8 @@ pub struct RunReport {
     pub visibility_passes: u64,
     /// Rejected layouts decided from the geometry, without a visibility pass (of `rejects`).
     pub prerejects: u64,
+    /// Layouts accepted from the geometry, without a visibility pass.
+    pub preaccepts: u64,
     /// Total Cycles time of final renders.
     pub render_s: f64,
     /// Total final-request time (build + render + bridge writing), accepted attempts.
@@ -226,6 +228,7 @@ impl RunReport {
         self.visibility_render_s += s.visibility_render_s;
         self.visibility_passes += s.visibility_passes;
         self.prerejects += u64::from(s.prerejects);
+        self.preaccepts += u64::from(s.preaccepts);
         self.phases.add(&s.phases);
         self.reject_s += s.reject_s;
     }

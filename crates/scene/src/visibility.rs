@@ -14,6 +14,16 @@
 //! never below what Blender counts, so a layout where a bound is at or under the threshold is
 //! one that the visibility render rejects: `generate` skips that render and resamples (the
 //! same attempts, the same accepted layouts, fewer Blender renders).
+//!
+//! [`visible_pixel_lower_bounds`] is the other side: per object, the pixels whose every
+//! footprint ray certainly meets that object first. Each shape carries balls that its
+//! undisplaced mesh encloses ([`inner_balls`]: a ray leaving a ball outwards always meets the
+//! mesh, checked in Blender by `blender_scripts/dev/inner_balls.py check` in the test
+//! `visibility_bound::`); a pixel counts when its centre ray enters one of the object's balls,
+//! shrunk by the footprint, before it can enter any other object's outer body grown by the
+//! footprint. A layout where every object's lower bound is over the threshold is one that the
+//! visibility render accepts: `generate` skips that render and goes straight to the final
+//! render, whose mask is checked as before (again the same accepted layouts).
 
 use crate::camera::{axis, dot, focal_px};
 use crate::scene_file::{SceneFile, SceneObject};
@@ -36,17 +46,101 @@ fn outer_radius(shape: &str) -> f64 {
     }
 }
 
-/// A ball inside the shape's closed mesh (normalised units): `(centre z, radius)`, or `None`
-/// for shapes whose mesh is open or holed (monkey, teapot, torus), which never count as
-/// covering another object. The radii are about 10% under the shape's inscribed ball (cube and
-/// cylinder 1, sphere 1, cone 0.618 at z = -0.382, icosahedron 0.795), for the subdivision's
-/// shrinking and the bevels.
-fn inner_ball(shape: &str) -> Option<(f64, f64)> {
+/// The box of the shape's mesh vertices (normalised units: `[lo, hi]` per axis, rounded out by
+/// 0.001), and the largest distance of a vertex from the shape's vertical axis. A level-1
+/// subdivision moves every vertex to an average of the mesh's vertices, so the rendered
+/// surface lies inside both. Measured with `shapes.mesh` in Blender 3.4 (the meshes are built
+/// the same vertex for vertex on every version; `visibility_bound::` checks the fit).
+pub fn outer_box(shape: &str) -> ([[f64; 2]; 3], f64) {
     match shape {
-        "cube" | "sphere" | "cylinder" => Some((0.0, 0.9)),
-        "cone" => Some((-0.382, 0.45)),
-        "icosahedron" => Some((0.0, 0.7)),
-        _ => None,
+        "monkey" => ([[-1.0, 1.0], [-0.624, 0.624], [-0.971, 0.471]], 1.066),
+        "cone" => ([[-0.967, 0.967], [-0.967, 0.967], [-1.0, 1.0]], 0.967),
+        "torus" => ([[-1.0, 1.0], [-1.0, 1.0], [-1.0, -0.499]], 1.0),
+        "icosahedron" => ([[-0.895, 0.895], [-0.851, 0.851], [-1.0, 1.0]], 0.895),
+        "teapot" => ([[-1.0, 1.0], [-0.624, 0.624], [-1.0, -0.019]], 1.001),
+        "sphere" | "cylinder" => ([[-1.0, 1.0]; 3], 1.0),
+        _ => ([[-1.0, 1.0]; 3], std::f64::consts::SQRT_2),
+    }
+}
+
+/// Balls enclosed by the shape's undisplaced mesh (normalised units: `[x, y, z, radius]`),
+/// fitted by `blender_scripts/dev/inner_balls.py fit` (greedy cover of the enclosed grid
+/// points, each ball shrunk until it is enclosed: exactly inside a closed mesh, sampled
+/// densely for the open monkey, whose balls keep a further 10% margin) and rounded down. The
+/// teapot has none: rays leak through the seams of its patches and the gap under its lid, so
+/// no ball inside it is enclosed and a layout with a teapot is never pre-accepted.
+pub fn inner_balls(shape: &str) -> &'static [[f64; 4]] {
+    match shape {
+        "cube" => &[
+            [0.0, 0.0, 0.0, 0.968],
+            [-0.4, -0.4, -0.4, 0.576],
+            [-0.4, -0.4, 0.4, 0.576],
+            [-0.4, 0.4, -0.4, 0.576],
+            [-0.4, 0.4, 0.4, 0.576],
+            [0.4, -0.4, -0.4, 0.576],
+            [0.4, -0.4, 0.4, 0.576],
+            [0.4, 0.4, -0.4, 0.576],
+            [0.4, 0.4, 0.4, 0.576],
+        ],
+        "sphere" => &[[0.0, 0.0, 0.0, 0.955]],
+        "cylinder" => &[
+            [0.0, 0.0, 0.0, 0.961],
+            [-0.6, -0.1, -0.6, 0.369],
+            [-0.6, -0.1, 0.6, 0.369],
+            [-0.1, -0.6, -0.6, 0.369],
+            [-0.1, -0.6, 0.6, 0.369],
+            [-0.1, 0.6, -0.6, 0.369],
+            [-0.1, 0.6, 0.6, 0.369],
+            [0.6, -0.1, -0.6, 0.369],
+            [0.6, -0.1, 0.6, 0.369],
+            [0.4, 0.4, -0.6, 0.383],
+            [0.4, 0.4, 0.6, 0.383],
+            [-0.5, 0.3, -0.6, 0.383],
+        ],
+        "monkey" => &[
+            [0.0, 0.1, 0.0, 0.374],
+            [0.0, -0.1, -0.1, 0.304],
+            [-0.2, 0.1, 0.0, 0.327],
+            [0.2, 0.1, 0.0, 0.31],
+            [0.0, -0.4, -0.6, 0.126],
+            [-0.2, -0.2, -0.1, 0.227],
+            [0.2, -0.2, -0.1, 0.167],
+            [0.0, -0.2, -0.3, 0.218],
+            [0.0, 0.1, -0.1, 0.356],
+            [-0.4, -0.2, -0.1, 0.128],
+            [0.0, -0.4, -0.3, 0.128],
+            [0.4, -0.2, -0.1, 0.104],
+        ],
+        "cone" => &[
+            [0.0, 0.0, -0.4, 0.581],
+            [-0.3, -0.2, -0.6, 0.372],
+            [-0.2, 0.3, -0.6, 0.372],
+            [0.2, -0.3, -0.6, 0.372],
+            [0.3, 0.2, -0.6, 0.372],
+            [0.0, 0.0, 0.1, 0.33],
+            [-0.5, 0.1, -0.7, 0.286],
+            [-0.1, -0.5, -0.7, 0.286],
+            [0.1, 0.5, -0.7, 0.286],
+            [0.5, -0.1, -0.7, 0.286],
+            [-0.6, -0.3, -0.8, 0.189],
+            [-0.3, 0.6, -0.8, 0.189],
+        ],
+        "torus" => &[
+            [-0.7, -0.3, -0.8, 0.184],
+            [-0.7, 0.2, -0.8, 0.183],
+            [-0.6, 0.5, -0.8, 0.176],
+            [-0.5, -0.6, -0.8, 0.176],
+            [-0.3, 0.7, -0.8, 0.184],
+            [-0.2, -0.7, -0.8, 0.183],
+            [0.2, -0.7, -0.8, 0.183],
+            [0.2, 0.7, -0.8, 0.183],
+            [0.5, -0.6, -0.8, 0.176],
+            [0.5, 0.5, -0.8, 0.172],
+            [0.7, -0.3, -0.8, 0.184],
+            [0.7, 0.2, -0.8, 0.183],
+        ],
+        "icosahedron" => &[[0.0, 0.0, 0.0, 0.77]],
+        _ => &[],
     }
 }
 
@@ -57,19 +151,20 @@ pub fn sample_reach(filter_width: f64) -> f64 {
 }
 
 /// One object in camera coordinates (x right, y up, looking along -z; a ray's parameter is
-/// the depth along the view axis).
+/// the depth along the view axis), its outer bodies grown by the footprint.
 struct Body {
     /// Centre of the box.
     centre: [f64; 3],
     /// The box's local x, y, z axes.
     axes: [[f64; 3]; 3],
-    /// Half side of the box, grown by `grow`.
-    half: f64,
-    /// Radius of the outer ball, grown by `grow`.
+    /// Half sides of the box, grown.
+    half: [f64; 3],
+    /// The object's origin (the ball's centre, on the vertical axis).
+    origin: [f64; 3],
+    /// Radius of the outer ball, grown.
     outer: f64,
-    /// Inner ball: centre and radius, shrunk by `grow` (absent when the shape has none or it
-    /// shrank away).
-    inner: Option<([f64; 3], f64)>,
+    /// Radius of the vertical cylinder around the origin, grown.
+    radial: f64,
 }
 
 fn to_camera(scene: &SceneFile, p: [f64; 3]) -> [f64; 3] {
@@ -78,33 +173,38 @@ fn to_camera(scene: &SceneFile, p: [f64; 3]) -> [f64; 3] {
     [dot(d, axis(m, 0)), dot(d, axis(m, 1)), dot(d, axis(m, 2))]
 }
 
+/// A point of the object's normalised frame in world coordinates.
+fn to_world(o: &SceneObject, p: [f64; 3]) -> [f64; 3] {
+    let s = o.scale;
+    let (sin, cos) = o.rotation_deg.to_radians().sin_cos();
+    [
+        o.location[0] + s * (cos * p[0] - sin * p[1]),
+        o.location[1] + s * (sin * p[0] + cos * p[1]),
+        o.location[2] + s * p[2],
+    ]
+}
+
 fn body(scene: &SceneFile, o: &SceneObject, slope: f64) -> Body {
     let m = &scene.camera.matrix_world;
     let s = o.scale;
-    let world_centre = o.location;
-    let centre = to_camera(scene, world_centre);
+    let origin = to_camera(scene, o.location);
     let (sin, cos) = o.rotation_deg.to_radians().sin_cos();
     let world_axes = [[cos, sin, 0.0], [-sin, cos, 0.0], [0.0, 0.0, 1.0]];
     let axes = world_axes.map(|a| [dot(a, axis(m, 0)), dot(a, axis(m, 1)), dot(a, axis(m, 2))]);
     let radius = s * outer_radius(&o.shape);
-    let depth = -centre[2];
+    let depth = -origin[2];
     // Every ray of a pixel's footprint, at depth t, is within `t * slope` of the centre ray;
     // the object's points have depth at most `depth + radius`.
     let grow = ((depth + radius) * slope).max(0.0);
-    let inner = inner_ball(&o.shape).and_then(|(z, r)| {
-        let c = to_camera(
-            scene,
-            [world_centre[0], world_centre[1], world_centre[2] + z * s],
-        );
-        let r = r * s - grow;
-        (r > 0.0).then_some((c, r))
-    });
+    let (bounds, radial) = outer_box(&o.shape);
+    let mid = bounds.map(|[lo, hi]| (lo + hi) / 2.0);
     Body {
-        centre,
+        centre: to_camera(scene, to_world(o, mid)),
         axes,
-        half: s + grow,
+        half: bounds.map(|[lo, hi]| s * (hi - lo) / 2.0 + grow),
+        origin,
         outer: radius + grow,
-        inner,
+        radial: s * radial + grow,
     }
 }
 
@@ -123,28 +223,50 @@ fn ball_hit(d: [f64; 3], c: [f64; 3], r: f64) -> Option<(f64, f64)> {
 /// Depths where the ray `t * d` is inside the box (slab test): `None` when it misses.
 fn box_hit(d: [f64; 3], b: &Body) -> Option<(f64, f64)> {
     let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
-    for a in &b.axes {
+    for (a, &half) in b.axes.iter().zip(&b.half) {
         let p = dot(*a, b.centre);
         let q = dot(*a, d);
         if q.abs() < 1e-12 {
-            if p.abs() > b.half {
+            if p.abs() > half {
                 return None;
             }
             continue;
         }
-        let (t0, t1) = ((p - b.half) / q, (p + b.half) / q);
+        let (t0, t1) = ((p - half) / q, (p + half) / q);
         lo = lo.max(t0.min(t1));
         hi = hi.min(t0.max(t1));
     }
     (lo <= hi).then_some((lo, hi))
 }
 
-/// Where the ray `t * d` may first meet the object: the first depth inside both its grown box
-/// and grown ball, or `None` when no ray of the footprint can hit it in front of the camera.
+/// Depths where the ray `t * d` is inside the infinite cylinder of radius `r` around the line
+/// through `c` along the unit vector `a`: `None` when it misses.
+fn cylinder_hit(d: [f64; 3], c: [f64; 3], a: [f64; 3], r: f64) -> Option<(f64, f64)> {
+    let (da, ca) = (dot(d, a), dot(c, a));
+    let dp = [d[0] - da * a[0], d[1] - da * a[1], d[2] - da * a[2]];
+    let cp = [c[0] - ca * a[0], c[1] - ca * a[1], c[2] - ca * a[2]];
+    let qa = dot(dp, dp);
+    let qc = dot(cp, cp) - r * r;
+    if qa < 1e-18 {
+        return (qc <= 0.0).then_some((f64::NEG_INFINITY, f64::INFINITY));
+    }
+    let qb = dot(dp, cp);
+    let disc = qb * qb - qa * qc;
+    if disc < 0.0 {
+        return None;
+    }
+    let q = disc.sqrt();
+    Some(((qb - q) / qa, (qb + q) / qa))
+}
+
+/// Where the ray `t * d` may first meet the object: the first depth inside its grown box,
+/// ball and vertical cylinder, or `None` when no ray of the footprint can hit it in front of
+/// the camera.
 fn outer_entry(d: [f64; 3], b: &Body) -> Option<f64> {
     let (b0, b1) = box_hit(d, b)?;
-    let (s0, s1) = ball_hit(d, b.centre, b.outer)?;
-    let (lo, hi) = (b0.max(s0), b1.min(s1));
+    let (s0, s1) = ball_hit(d, b.origin, b.outer)?;
+    let (c0, c1) = cylinder_hit(d, b.origin, b.axes[2], b.radial)?;
+    let (lo, hi) = (b0.max(s0).max(c0), b1.min(s1).min(c1));
     (lo <= hi && hi > 0.0).then_some(lo)
 }
 
@@ -162,7 +284,7 @@ fn pixel_rect(b: &Body, f: f64, w: u32, h: u32) -> (u32, u32, u32, u32) {
         for (i, a) in b.axes.iter().enumerate() {
             let sign = if k >> i & 1 == 1 { 1.0 } else { -1.0 };
             for c in 0..3 {
-                p[c] += sign * b.half * a[c];
+                p[c] += sign * b.half[i] * a[c];
             }
         }
         let depth = -p[2];
@@ -205,15 +327,20 @@ pub fn visible_pixel_bounds(scene: &SceneFile) -> Option<Vec<u64>> {
         .iter()
         .map(|o| body(scene, o, slope))
         .collect();
+    let balls: Vec<Vec<([f64; 3], f64)>> = scene
+        .objects
+        .iter()
+        .map(|o| shrunk_balls(scene, o, slope))
+        .collect();
     let bounds = bodies
         .iter()
         .enumerate()
         .map(|(i, b)| {
-            let covers: Vec<([f64; 3], f64)> = bodies
+            let covers: Vec<([f64; 3], f64)> = balls
                 .iter()
                 .enumerate()
                 .filter(|&(j, _)| j != i)
-                .filter_map(|(_, o)| o.inner)
+                .flat_map(|(_, o)| o.iter().copied())
                 .collect();
             let (x0, x1, y0, y1) = pixel_rect(b, f, w, h);
             let mut count = 0u64;
@@ -231,6 +358,78 @@ pub fn visible_pixel_bounds(scene: &SceneFile) -> Option<Vec<u64>> {
                         ball_hit(d, c, r).is_some_and(|(t0, _)| t0 > 0.0 && t0 < entry)
                     });
                     if !hidden {
+                        count += 1;
+                    }
+                }
+            }
+            count
+        })
+        .collect();
+    Some(bounds)
+}
+
+/// An object's balls in camera coordinates, each shrunk by the footprint's reach at its depth
+/// (a ball that shrinks away is dropped).
+fn shrunk_balls(scene: &SceneFile, o: &SceneObject, slope: f64) -> Vec<([f64; 3], f64)> {
+    inner_balls(&o.shape)
+        .iter()
+        .filter_map(|&[x, y, z, r]| {
+            let c = to_camera(scene, to_world(o, [x, y, z]));
+            let r = r * o.scale;
+            let r = r - ((-c[2] + r) * slope).max(0.0);
+            (r > 0.0 && -c[2] - r > 1e-6).then_some((c, r))
+        })
+        .collect()
+}
+
+/// For each object of `scene`, in order, a lower bound on the pixels it gets in the
+/// object-index pass of the undisplaced visibility render at the scene's size (see the module
+/// documentation); `None` where [`visible_pixel_bounds`] has none.
+pub fn visible_pixel_lower_bounds(scene: &SceneFile) -> Option<Vec<u64>> {
+    let (w, h) = (scene.render.width, scene.render.height);
+    if w < 4 || h < 4 {
+        return None;
+    }
+    let f = focal_px(&scene.camera, w, h);
+    let slope = sample_reach(f64::from(scene.render.filter_width)) * std::f64::consts::SQRT_2 / f;
+    let bodies: Vec<Body> = scene
+        .objects
+        .iter()
+        .map(|o| body(scene, o, slope))
+        .collect();
+    let bounds = scene
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(i, o)| {
+            let balls = shrunk_balls(scene, o, slope);
+            if balls.is_empty() {
+                return 0;
+            }
+            let (x0, x1, y0, y1) = pixel_rect(&bodies[i], f, w, h);
+            let mut count = 0u64;
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let d = [
+                        (f64::from(x) + 0.5 - f64::from(w) / 2.0) / f,
+                        -(f64::from(y) + 0.5 - f64::from(h) / 2.0) / f,
+                        -1.0,
+                    ];
+                    // The depth by which every footprint ray has met the object.
+                    let Some(met) = balls
+                        .iter()
+                        .filter_map(|&(c, r)| ball_hit(d, c, r).map(|(t0, _)| t0))
+                        .filter(|&t0| t0 > 0.0)
+                        .min_by(f64::total_cmp)
+                    else {
+                        continue;
+                    };
+                    let first = bodies
+                        .iter()
+                        .enumerate()
+                        .filter(|&(j, _)| j != i)
+                        .all(|(_, b)| outer_entry(d, b).is_none_or(|e| e > met));
+                    if first {
                         count += 1;
                     }
                 }
@@ -299,9 +498,72 @@ mod tests {
     }
 
     #[test]
+    fn the_lower_bound_is_under_the_upper_and_a_lone_sphere_near_its_disc() {
+        for index in 0..40 {
+            let s = scene(index);
+            let lower = visible_pixel_lower_bounds(&s).unwrap();
+            let upper = visible_pixel_bounds(&s).unwrap();
+            for (l, u) in lower.iter().zip(&upper) {
+                assert!(l <= u, "layout {index}: {lower:?} vs {upper:?}");
+            }
+        }
+        let mut s = scene(0);
+        s.objects.truncate(1);
+        let o = &mut s.objects[0];
+        o.shape = "sphere".into();
+        o.location = [0.0, 0.0, o.scale];
+        let l = visible_pixel_lower_bounds(&s).unwrap()[0] as f64;
+        let d = crate::camera::dot(s.camera.location, s.camera.location).sqrt();
+        let f = focal_px(&s.camera, s.render.width, s.render.height);
+        let disc = std::f64::consts::PI * (f * s.objects[0].scale / d).powi(2);
+        // The ball of radius 0.955, less the footprint: most of the disc, never more.
+        assert!(l < disc && l > 0.6 * disc, "{l} vs {disc}");
+        // A teapot has no enclosed ball: never pre-accepted.
+        s.objects[0].shape = "teapot".into();
+        assert_eq!(visible_pixel_lower_bounds(&s).unwrap()[0], 0);
+    }
+
+    #[test]
+    fn an_object_behind_another_has_no_certain_pixel_where_they_overlap() {
+        let mut s = scene(1);
+        s.objects.truncate(2);
+        let cam = s.camera.location;
+        let dir = crate::camera::normalize([-cam[0], -cam[1], 0.0]);
+        s.objects[0].shape = "cube".into();
+        s.objects[0].scale = 0.9;
+        s.objects[0].location = [0.0, 0.0, 0.9];
+        s.objects[1].shape = "sphere".into();
+        s.objects[1].scale = 0.2;
+        s.objects[1].location = [dir[0] * 2.0, dir[1] * 2.0, 0.2];
+        let l = visible_pixel_lower_bounds(&s).unwrap();
+        assert_eq!(l[1], 0, "{l:?}");
+        assert!(l[0] > 1000, "{l:?}");
+        // In front of the cube, the sphere's lower bound is its own alone, and the cube loses
+        // the pixels the sphere may cover.
+        let c = [0.0, 0.0, 0.9];
+        s.objects[1].location = [0, 1, 2].map(|k| c[k] + 0.3 * (cam[k] - c[k]));
+        let l = visible_pixel_lower_bounds(&s).unwrap();
+        let mut alone = s.clone();
+        alone.objects.remove(0);
+        assert_eq!(
+            l[1],
+            visible_pixel_lower_bounds(&alone).unwrap()[0],
+            "{l:?}"
+        );
+        assert!(l[1] > 20, "{l:?}");
+        let mut cube = s.clone();
+        cube.objects.truncate(1);
+        assert!(
+            l[0] < visible_pixel_lower_bounds(&cube).unwrap()[0],
+            "{l:?}"
+        );
+    }
+
+    #[test]
     fn images_under_four_pixels_have_no_bound() {
         let mut s = scene(2);
         s.render.width = 3;
         assert!(visible_pixel_bounds(&s).is_none());
+        assert!(visible_pixel_lower_bounds(&s).is_none());
     }
 }
