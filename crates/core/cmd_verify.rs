@@ -6,7 +6,6 @@ use anyhow::Context;
 use clevrtex_dataset::verify::{self, index_ranges, Comparison, VariantReport, VerifyOptions};
 
 use crate::exit::{self, CmdResult};
-use crate::verify_print::{print_comparison, print_report};
 
 /// Arguments of `clevrtex verify`.
 #[derive(Debug, clap::Args)]
@@ -122,7 +121,7 @@ pub fn run(args: Args) -> CmdResult {
     }
     let samples: u64 = reports.iter().map(|r| r.ok + r.broken.len() as u64).sum();
     for r in &reports {
-        print_report(r, &args.dirs, args.remove_broken);
+        print!("{}", verify::report_text(r, &args.dirs, args.remove_broken));
     }
     let suite_whole = check_suite(&args.dirs, &reports, args.variant.is_some())?;
     let secs = started.elapsed().as_secs_f64();
@@ -137,7 +136,7 @@ pub fn run(args: Args) -> CmdResult {
         None => Vec::new(),
     };
     for c in &comparisons {
-        print_comparison(c);
+        print!("{}", verify::comparison_text(c));
     }
     if let Some(path) = &args.json {
         let text = if args.against.is_some() {

@@ -13,9 +13,9 @@ use clevrtex_render::RenderError;
 
 use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
-use crate::progress::format_duration;
 use crate::run::pool_options;
 use crate::run_args::RunArgs;
+use clevrtex_render::run_text::format_duration;
 
 /// What `--estimate` was asked for.
 pub(crate) struct Request<'a> {

@@ -14,8 +14,9 @@ use clevrtex_render::pool::{Jobs, PoolEvent};
 
 use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
-use crate::progress::{print_summary, progress_bar, BatchProgress};
+use crate::progress::progress_bar;
 use crate::run_args::{self, RunArgs};
+use clevrtex_render::run_text::{self, BatchProgress};
 
 /// Render `jobs` with the pool as `args` say, failures to `ledger`, with a progress bar (or,
 /// when stderr is not a terminal, a line per sample and a progress line with rate and ETA every
@@ -67,10 +68,6 @@ pub(crate) fn run_jobs(
     let on_event = |ev: &PoolEvent| {
         match ev {
             PoolEvent::Skipped { .. } => bar.inc(1),
-            PoolEvent::WorkerStarted { .. } => {}
-            PoolEvent::WorkerRestarted { error } => {
-                say(format!("warning: restarting a Blender worker: {error}"));
-            }
             PoolEvent::Rejected { .. } => {
                 rejects.fetch_add(1, Ordering::Relaxed);
             }
@@ -85,51 +82,22 @@ pub(crate) fn run_jobs(
                         sample.metadata.display()
                     );
                 }
-                // Only fixed scene files (`render`) can get here with a hidden object:
-                // `generate` resamples such layouts.
-                let hidden: Vec<String> = (1..)
-                    .zip(&sample.objects)
-                    .filter(|(_, o)| o.pixels == 0)
-                    .map(|(i, _)| i.to_string())
-                    .collect();
-                if !hidden.is_empty() {
-                    say(format!(
-                        "warning: object(s) {} of `{}` are hidden (not in the mask)\nhint: `clevrtex render` cannot resample fixed scene files; use `clevrtex generate` for layouts with every object visible",
-                        hidden.join(", "),
-                        sample.metadata.display()
-                    ));
-                }
             }
-            PoolEvent::WorkerRecycled { rss, images, why } => {
-                let mem = rss
-                    .map(|r| format!(", {} MiB resident", r >> 20))
-                    .unwrap_or_default();
-                say(format!(
-                    "note: a Blender worker made {images} image(s){mem} and was recycled ({}); the next image starts a fresh one",
-                    if *why == "memory" {
-                        "past `--max-worker-memory`"
-                    } else {
-                        "`--recycle-after`"
-                    }
-                ));
-            }
-            PoolEvent::Failed { index, error } => {
+            PoolEvent::Failed { .. } => {
                 failures.fetch_add(1, Ordering::Relaxed);
                 bar.inc(1);
-                say(format!(
-                    "error: image {index} failed (recorded in `{}`): {error}",
-                    ledger.display()
-                ));
             }
+            _ => {}
+        }
+        if let Some(line) = run_text::event_line(ev, &ledger) {
+            say(line);
         }
         let d = done.load(Ordering::Relaxed);
         if plain {
-            batch.event(
-                bar.position(),
-                d,
-                failures.load(Ordering::Relaxed),
-                started.elapsed(),
-            );
+            let f = failures.load(Ordering::Relaxed);
+            if let Some(line) = batch.event(bar.position(), d, f, started.elapsed()) {
+                eprintln!("{line}");
+            }
         }
         let per_hour = d as f64 / started.elapsed().as_secs_f64().max(1e-9) * 3600.0;
         bar.set_message(format!(
@@ -151,12 +119,13 @@ pub(crate) fn run_jobs(
             s.spawn(|| {
                 while !finished.load(Ordering::Relaxed) {
                     std::thread::sleep(Duration::from_millis(250));
-                    batch.tick(
-                        bar.position(),
+                    let (d, f) = (
                         done.load(Ordering::Relaxed),
                         failures.load(Ordering::Relaxed),
-                        started.elapsed(),
                     );
+                    if let Some(line) = batch.tick(bar.position(), d, f, started.elapsed()) {
+                        eprintln!("{line}");
+                    }
                 }
             });
         }
@@ -287,4 +256,13 @@ fn check_output_writable(out: &Path) -> anyhow::Result<()> {
         },
     )?;
     Ok(())
+}
+
+/// The run's summary on stdout, its ledger's warning on stderr.
+fn print_summary(report: &clevrtex_render::RunReport, out: &Path, ledger: &Path) {
+    let (text, warning) = run_text::summary(report, out, ledger);
+    print!("{text}");
+    if let Some(w) = warning {
+        eprintln!("{w}");
+    }
 }

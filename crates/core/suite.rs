@@ -64,7 +64,7 @@ pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
                 .iter()
                 .map(|v| plan.variant_shard(v, shard).count(0, v.total))
                 .sum::<u64>(),
-            crate::progress::format_duration(wall)
+            clevrtex_render::run_text::format_duration(wall)
         );
     } else {
         println!(

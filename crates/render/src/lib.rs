@@ -47,7 +47,8 @@
 //   4. worker (process, protocol, report): one Blender process
 //   5. session, gpu_probe, job, doctor: a worker restarted, asked for its GPUs, rendering one
 //      image, asked what it has (`doctor`)
-//   6. pool, command_session: the run; one restartable worker for the commands outside it
+//   6. pool, command_session: the run; one restartable worker for the commands outside it;
+//      run_text: what a run prints, as text
 //   7. user_materials (copies): user materials checked and copied before a run renders
 //   8. material_renders: `clevrtex materials`' renders of single materials; planner: the
 //      model of `generate --estimate` and its calibration run
@@ -72,6 +73,7 @@ mod passes;
 pub mod planner;
 pub mod pool;
 pub mod post;
+pub mod run_text;
 mod session;
 pub mod tmp;
 pub mod user_materials;

@@ -24,12 +24,14 @@ pub(crate) mod remove;
 pub(crate) mod report;
 #[cfg(test)]
 mod tests;
+pub(crate) mod text;
 
 pub use against::{against, Comparison};
 pub use command::{index_ranges, shell_words};
 pub use mixed::run_differences;
 pub use remove::*;
 pub use report::*;
+pub use text::{comparison_text, report_text};
 
 use checks::*;
 use command::*;
