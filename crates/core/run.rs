@@ -187,7 +187,8 @@ fn checked_numbers(args: &RunArgs) -> anyhow::Result<(Option<Duration>, Duration
     }
     if let Some(w) = args.workers {
         let w = u32::try_from(w).unwrap_or(u32::MAX);
-        run_args::within("--workers", w, run_args::MAX_THREADS as u32)?;
+        clevrtex_scene::config::within("--workers", w, run_args::MAX_THREADS as u32)
+            .map_err(anyhow::Error::msg)?;
     }
     let startup_timeout = run_args::seconds("--startup-timeout", args.startup_timeout)?;
     Ok((timeout, startup_timeout))
