@@ -13,9 +13,11 @@ use anyhow::{bail, Context};
 use clevrtex_materials::Catalogue;
 use clevrtex_render::{MaterialMode, MaterialSettings};
 
-use clevrtex_report::materials::{self, batches, cost, figures, measure_output, sheet, stats};
+use clevrtex_report::materials::{
+    self, batches, cost, figures, measure_output, sheet, stats, text,
+};
 
-use clevrtex_render::material_renders::{render_into_cache, Outcome, RenderOptions};
+use clevrtex_render::material_renders::{render_into_cache, RenderOptions};
 
 use crate::exit::{command_error, command_error_any, CmdResult, OK};
 use crate::interrupt::{self, OnInterrupt};
@@ -170,14 +172,7 @@ pub fn run(args: Args) -> CmdResult {
     match args.command {
         Sub::List => {
             let mut out = std::io::stdout().lock();
-            let _ = writeln!(
-                out,
-                "{:<26} {:<10} {:<9} description",
-                "name", "set", "displaces"
-            );
-            for m in cat.iter() {
-                let d = if m.displaces { "yes" } else { "no" };
-                let line = format!("{:<26} {:<10} {:<9} {}", m.name, m.set, d, m.description);
+            for line in text::list_lines(&cat) {
                 if writeln!(out, "{line}").is_err() {
                     break;
                 }
@@ -258,26 +253,8 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
     let dir = std::env::temp_dir().join(format!("clevrtex-check-{}", std::process::id()));
     let outcomes =
         batches::check(cat, &names, &a.render_options()?, &dir).map_err(command_error)?;
-    let mut failed = 0;
-    let mut out = std::io::stdout().lock();
-    for (name, outcome) in names.iter().zip(&outcomes) {
-        match outcome {
-            Outcome::Done(reply) if reply.measures.get("pink").copied().unwrap_or(0.0) == 0.0 => {
-                let _ = writeln!(out, "ok     {name}");
-            }
-            Outcome::Done(_) => {
-                failed += 1;
-                let _ = writeln!(out, "FAILED {name}: pink (missing texture) pixels");
-            }
-            Outcome::Failed { message, traceback } => {
-                failed += 1;
-                let _ = writeln!(out, "FAILED {name}: {message}");
-                if !traceback.is_empty() {
-                    let _ = writeln!(out, "{traceback}");
-                }
-            }
-        }
-    }
+    let (lines, failed) = text::check_text(&names, &outcomes);
+    out(&lines);
     if failed > 0 {
         bail!(
             "{failed} of {} material(s) failed to build or render\nhint: the traceback above names the block and parameter",
@@ -314,29 +291,8 @@ fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
     // The same material with another `random` is the yardstick (`stats::distinctness`).
     let d = stats::distinctness(&feats[0], &feats[1]);
     let threshold = d.threshold;
-    let mut out = std::io::stdout().lock();
-    let _ = writeln!(
-        out,
-        "{:<24} {:<24} {:>8} {:>8}",
-        "material", "nearest", "distance", "self"
-    );
-    for (i, (j, dist)) in d.nearest.iter().enumerate() {
-        let _ = writeln!(
-            out,
-            "{:<24} {:<24} {:>8.3} {:>8.3}",
-            names[i], names[*j], dist, d.self_distance[i]
-        );
-    }
-    let near: Vec<String> = d
-        .near
-        .iter()
-        .map(|(i, j, dist)| format!("`{}` ~ `{}` ({dist:.3})", names[*i], names[*j]))
-        .collect();
-    let _ = writeln!(
-        out,
-        "self-distance (same material, random 0.37 vs 0.81): median {threshold:.3}, max {:.3}; smallest distance between different materials {:.3}",
-        d.max_self, d.min_inter
-    );
+    let (table, near) = text::stats_text(&names, &d);
+    out(&table);
     if a.out_dir.is_none() {
         let _ = std::fs::remove_dir_all(&dir);
     }
@@ -365,22 +321,7 @@ fn cost(cat: &Catalogue, a: CostArgs) -> CmdResult {
     )
     .map_err(command_error)?;
     let c = cost::relative(&names, &times);
-    let mut out = std::io::stdout().lock();
-    let _ = writeln!(out, "{:<24} {:>8} {:>8}", "material", "seconds", "x plain");
-    for ((name, t), x) in names.iter().zip(&times).zip(&c.relative) {
-        let _ = writeln!(out, "{name:<24} {t:>8.2} {x:>8.2}");
-    }
-    let _ = writeln!(
-        out,
-        "median {:.2}x plain, max {:.2}x plain; over 3x the median: {}",
-        c.median,
-        c.max,
-        if c.outliers.is_empty() {
-            "none".to_string()
-        } else {
-            c.outliers.join(", ")
-        }
-    );
+    out(&text::cost_text(&names, &times, &c));
     Ok(OK)
 }
 
@@ -393,4 +334,9 @@ fn measure(a: MeasureArgs) -> CmdResult {
         let _ = write!(out, "{}", measure_output::tables(&samples));
     }
     Ok(OK)
+}
+
+/// `text` on stdout; a closed stdout (`| head`) is not an error.
+fn out(text: &str) {
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }

@@ -30,29 +30,8 @@ impl MaterialsArg {
 /// [`clevrtex_materials::CLEVR_BASE`]) are left out of set `user`, said in one line on stderr.
 pub(crate) fn load(dir: Option<&Path>) -> anyhow::Result<Catalogue> {
     let cat = clevrtex_report::materials::load(dir)?;
-    if let Some(line) = clevr_base_note(&cat) {
+    if let Some(line) = clevrtex_report::materials::text::clevr_base_note(&cat) {
         eprintln!("{line}");
     }
     Ok(cat)
-}
-
-/// The one line saying which `.blend` files were left out as CLEVR base materials, if any.
-fn clevr_base_note(cat: &Catalogue) -> Option<String> {
-    let base = cat.clevr_base();
-    if base.is_empty() {
-        return None;
-    }
-    let quoted = |items: Vec<String>| items.join(", ");
-    let files = quoted(
-        base.iter()
-            .map(|b| format!("`{}`", b.file.display()))
-            .collect(),
-    );
-    let builtins = quoted(base.iter().map(|b| format!("`{}`", b.builtin)).collect());
-    Some(format!(
-        "note: {files}: the public generator's CLEVR base material{s}, which its textured variants never draw; left out of set `user` (the built-in {builtins} play{v} {their} part{s})",
-        s = if base.len() == 1 { "" } else { "s" },
-        v = if base.len() == 1 { "s" } else { "" },
-        their = if base.len() == 1 { "its" } else { "their" },
-    ))
 }
