@@ -9,15 +9,14 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use clevrtex_materials::Catalogue;
-use clevrtex_render::{MaterialMode, MaterialSettings};
 
 use clevrtex_report::materials::{
     self, batches, cost, figures, measure_output, sheet, stats, text,
 };
 
-use clevrtex_render::material_renders::{render_into_cache, RenderOptions};
+use clevrtex_render::material_renders::RenderOptions;
 
 use crate::exit::{command_error, command_error_any, CmdResult, OK};
 use crate::interrupt::{self, OnInterrupt};
@@ -200,51 +199,16 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
         );
     }
     let cache = sheet::cache_dir(a.cache.clone());
-    let key = |name: &str| {
-        let m = cat.get(name).expect("selected from the catalogue");
-        sheet::cell_file(name, &m.hash, a.size, a.samples)
-    };
-    let missing: Vec<&str> = names
-        .iter()
-        .copied()
-        .filter(|n| !cache.join(key(n)).is_file())
-        .collect();
-    eprintln!(
-        "sheet: {} materials, {} cached, {} to render",
-        names.len(),
-        names.len() - missing.len(),
-        missing.len()
-    );
-    if !missing.is_empty() {
-        let settings = MaterialSettings {
-            mode: MaterialMode::Sheet,
-            size: a.size,
-            samples: a.samples,
-            displacement: 0.0,
-            random: 0.37,
-        };
-        let failed = render_into_cache(
-            cat,
-            &missing,
-            &a.batch.render_options()?,
-            &settings,
-            &cache,
-            &key,
-        )
-        .map_err(command_error)?;
-        if !failed.is_empty() {
-            bail!(
-                "{} material(s) failed to build:\n{}\nhint: run `clevrtex materials check --names <name>` for the traceback",
-                failed.len(),
-                failed.join("\n")
-            );
-        }
-    }
-    let cells: Vec<PathBuf> = names.iter().map(|n| cache.join(key(n))).collect();
-    let img = sheet::stitch(&cells, a.cols).context("cannot assemble the sheet")?;
-    // The preview sheet's writer: PNG through the one atomic writer.
-    clevrtex_report::preview::save(&img, &a.out)?;
-    eprintln!("wrote {}", a.out.display());
+    sheet::make(
+        cat,
+        &names,
+        &|| a.batch.render_options(),
+        (a.size, a.samples, a.cols),
+        &cache,
+        &a.out,
+        &mut |line| eprintln!("{line}"),
+    )
+    .map_err(command_error_any)?;
     Ok(OK)
 }
 

@@ -31,7 +31,7 @@ pub use command::{index_ranges, shell_words};
 pub use mixed::run_differences;
 pub use remove::*;
 pub use report::*;
-pub use text::{comparison_text, report_text};
+pub use text::{comparison_text, removal_text, report_text};
 
 use checks::*;
 use command::*;

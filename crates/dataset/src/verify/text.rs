@@ -255,3 +255,34 @@ pub fn comparison_text(c: &Comparison) -> String {
     }
     out
 }
+
+/// What `--remove-broken` left alone of variant `variant` (`done`), as `verify` prints it.
+pub fn removal_text(variant: &str, done: &super::Removal) -> String {
+    let mut out = String::new();
+    if !done.live.is_empty() {
+        let idx: Vec<u64> = done.live.iter().map(|(i, _)| *i).collect();
+        let mut runs: Vec<&str> = done.live.iter().map(|(_, h)| h.as_str()).collect();
+        runs.dedup();
+        let _ = writeln!(
+            out,
+            "{variant}: left alone sample(s) {}: a live run is writing them ({})\nhint: run `clevrtex verify --remove-broken` again once that run has ended",
+            index_ranges(&idx),
+            runs.join("; ")
+        );
+    }
+    if done.live_temps > 0 {
+        let _ = writeln!(
+            out,
+            "{variant}: left alone {} temporary file(s) of runs still writing",
+            done.live_temps
+        );
+    }
+    if !done.kept.is_empty() {
+        let _ = writeln!(
+            out,
+            "{variant}: kept broken sample(s) {}: no run of the manifests covers them, so no known command remakes them\nhint: remove them by hand if they are not wanted, or remake them with `clevrtex generate --start I -n N --out DIR`",
+            index_ranges(&done.kept)
+        );
+    }
+    out
+}
