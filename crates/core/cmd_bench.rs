@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clevrtex_bench::measure::Plan;
-use clevrtex_bench::{csv, ladder, run, scenes, summary, Row};
+use clevrtex_bench::{csv, ladder, run, scenes, Row};
 
 use crate::exit::{self, command_error_any, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
@@ -154,22 +154,7 @@ fn run_render(args: RenderArgs) -> CmdResult {
 
 /// Table and summary on stdout, plot next to the CSV.
 fn report(rows: &[Row], n: usize, width: u32, height: u32, out: &Path) -> CmdResult {
-    let agg = summary::aggregate(rows);
-    print!("{}", summary::table(&agg));
-    print!("{}", summary::summary(&agg));
-    print!("{}", summary::side_by_side(rows));
-    let text = summary::write_plot(&agg, n, width, height, out, crate::font::available())?;
-    let stem = summary::plot_stem(out);
-    println!("csv: {}", csv::path(out).display());
-    println!(
-        "plot: {} and {}{}",
-        stem.with_extension("png").display(),
-        stem.with_extension("svg").display(),
-        if text {
-            ""
-        } else {
-            " (no system font found: drawn without text; install fonts-dejavu-core)"
-        }
-    );
+    let fonts = crate::font::available();
+    run::report(rows, (n, width, height), out, fonts, &mut |t| print!("{t}"))?;
     Ok(exit::OK)
 }

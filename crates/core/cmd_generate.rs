@@ -6,12 +6,11 @@ use std::path::PathBuf;
 
 use clevrtex_dataset::manifest;
 use clevrtex_render::generate;
-use clevrtex_render::scene_jobs::RunJobs;
 use clevrtex_scene::config::Overrides;
 use clevrtex_scene::Config;
 
 use crate::exit::CmdResult;
-use crate::run_args::{index_range, RunArgs};
+use crate::run_args::{index_range, read_config, RunArgs};
 
 /// Arguments of `clevrtex generate`.
 #[derive(Debug, clap::Args)]
@@ -157,18 +156,8 @@ pub(crate) fn run_part(
     estimate_sum: Option<&std::cell::Cell<(f64, f64)>>,
 ) -> CmdResult {
     let catalogue = args.run.materials.catalogue()?;
-    let config = match &args.config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path).map_err(|e| {
-                anyhow::anyhow!(
-                    "cannot read config `{}`: {e}\nhint: pass an existing JSON file, e.g. one of `configs/`",
-                    path.display()
-                )
-            })?;
-            Config::from_json_str_in(&text, &path.display().to_string(), &catalogue)?
-        }
-        None => Config::builtin_in(part.variant, &catalogue)?,
-    };
+    let hint = "pass an existing JSON file, e.g. one of `configs/`";
+    let config = read_config(args.config.as_deref(), part.variant, &catalogue, hint)?;
     let prepared = generate::prepare(generate::Request {
         config,
         catalogue: &catalogue,
@@ -200,29 +189,20 @@ pub(crate) fn run_part(
         },
     })
     .map_err(anyhow::Error::msg)?;
-    let RunJobs { jobs, ledger, used } = prepared.jobs;
     if args.estimate {
         return crate::estimate::run(crate::estimate::Request {
             run: &args.run,
-            jobs: &jobs,
+            jobs: &prepared.jobs.jobs,
             what: prepared.what,
             calibrate: args.calibrate,
             tasks: args.tasks,
             max_attempts: args.max_attempts,
-            materials: (catalogue, used),
+            materials: (catalogue, prepared.jobs.used),
             sum: estimate_sum,
         });
     }
     // Before anything is made: growing a dataset with another `--total` is refused.
-    let plan = prepared.plan;
-    plan.check_splits(&args.run.out, prepared.splits, args.allow_split_mismatch)?;
-    let materials = (catalogue, used);
-    crate::run::run_jobs(
-        &args.run,
-        jobs,
-        ledger,
-        args.max_attempts,
-        Some(plan),
-        materials,
-    )
+    let (plan, a) = (prepared.plan, args);
+    plan.check_splits(&a.run.out, prepared.splits, a.allow_split_mismatch)?;
+    crate::run::run_jobs(&a.run, prepared.jobs, a.max_attempts, Some(plan), catalogue)
 }

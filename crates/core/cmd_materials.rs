@@ -12,9 +12,7 @@ use std::path::PathBuf;
 use anyhow::bail;
 use clevrtex_materials::Catalogue;
 
-use clevrtex_report::materials::{
-    self, batches, cost, figures, measure_output, sheet, stats, text,
-};
+use clevrtex_report::materials::{self, batches, cost, figures, measure_output, sheet, text};
 
 use clevrtex_render::material_renders::RenderOptions;
 
@@ -229,41 +227,21 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
 }
 
 fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
-    let mut names = materials::select(cat, &a.batch.set, &a.batch.names)?;
-    names.retain(|n| !matches!(*n, "rubber" | "metal"));
-    if names.is_empty() {
-        let what = if a.batch.names.is_empty() {
-            format!("set `{}`", a.batch.set)
-        } else {
-            "`--names`".to_string()
-        };
-        bail!(
-            "no materials to compare in {what} (`rubber` and `metal` are left out)\nhint: pick another `--set` or `--names`"
-        );
-    }
-    let dir = a.out_dir.clone().unwrap_or_else(|| {
-        std::env::temp_dir().join(format!("clevrtex-stats-{}", std::process::id()))
-    });
-    let feats = batches::tile_features(
+    let (names, d) = batches::distinctness(
         cat,
-        &names,
-        &a.batch.render_options()?,
+        (&a.batch.set, &a.batch.names),
+        &|| a.batch.render_options(),
         (a.size, a.samples),
-        &dir,
+        a.out_dir.as_deref(),
     )
     .map_err(command_error_any)?;
-    // The same material with another `random` is the yardstick (`stats::distinctness`).
-    let d = stats::distinctness(&feats[0], &feats[1]);
-    let threshold = d.threshold;
     let (table, near) = text::stats_text(&names, &d);
     out(&table);
-    if a.out_dir.is_none() {
-        let _ = std::fs::remove_dir_all(&dir);
-    }
     if !near.is_empty() {
         bail!(
-            "{} pair(s) of materials are closer than the median self-distance {threshold:.3}:\n{}\nhint: change the colours or the pattern scale of one of each pair",
+            "{} pair(s) of materials are closer than the median self-distance {:.3}:\n{}\nhint: change the colours or the pattern scale of one of each pair",
             near.len(),
+            d.threshold,
             near.join("\n")
         );
     }
@@ -271,19 +249,14 @@ fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
 }
 
 fn cost(cat: &Catalogue, a: CostArgs) -> CmdResult {
-    let mut names = materials::select(cat, &a.batch.set, &a.batch.names)?;
-    if !names.contains(&"plain") {
-        names.insert(0, "plain");
-    }
-    let dir = std::env::temp_dir().join(format!("clevrtex-cost-{}", std::process::id()));
-    let times = batches::render_seconds(
+    let opts = || a.batch.render_options();
+    let (names, times) = batches::costs(
         cat,
-        &names,
-        &a.batch.render_options()?,
+        (&a.batch.set, &a.batch.names),
+        &opts,
         (a.size, a.samples),
-        &dir,
     )
-    .map_err(command_error)?;
+    .map_err(command_error_any)?;
     let c = cost::relative(&names, &times);
     out(&text::cost_text(&names, &times, &c));
     Ok(OK)

@@ -31,5 +31,5 @@ pub fn run(args: Args) -> CmdResult {
     let catalogue = args.run.materials.catalogue()?;
     let r = clevrtex_render::scene_jobs::of_scene_files(files, &args.run.out, passes, &catalogue)
         .map_err(command_error)?;
-    run_jobs(&args.run, r.jobs, r.ledger, 1, None, (catalogue, r.used))
+    run_jobs(&args.run, r, 1, None, catalogue)
 }

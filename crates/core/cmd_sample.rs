@@ -84,26 +84,14 @@ fn load_config(args: &Args) -> anyhow::Result<Config> {
 }
 
 fn read_config(args: &Args, cat: &clevrtex_materials::Catalogue) -> anyhow::Result<Config> {
-    match (&args.config, &args.variant) {
-        (Some(path), _) => {
-            // The cause goes before the hint, which is the message's last line.
-            let text = std::fs::read_to_string(path).map_err(|e| {
-                anyhow::anyhow!(
-                    "cannot read config `{}`: {e}\nhint: check the path; built-in configs are listed in `configs/`",
-                    path.display()
-                )
-            })?;
-            Ok(Config::from_json_str_in(
-                &text,
-                &path.display().to_string(),
-                cat,
-            )?)
-        }
-        (None, Some(variant)) => Ok(Config::builtin_in(variant, cat)?),
+    let variant = match (&args.config, &args.variant) {
         (None, None) => {
             bail!("no variant given\nhint: pass `--variant camo` or `--config my.json`")
         }
-    }
+        (_, v) => v.as_deref().unwrap_or_default(),
+    };
+    let hint = "check the path; built-in configs are listed in `configs/`";
+    crate::run_args::read_config(args.config.as_deref(), variant, cat, hint)
 }
 
 /// Run `clevrtex sample`.

@@ -38,16 +38,13 @@ pub struct Args {
 
 /// Run `clevrtex verify`.
 pub fn run(args: Args) -> CmdResult {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.jobs.unwrap_or(0))
-        .build()
-        .context("cannot start worker threads")?;
+    let threads = args.jobs.unwrap_or(0);
     let started = std::time::Instant::now();
     let opts = VerifyOptions {
         variant: args.variant.clone(),
     };
-    let reports = pool
-        .install(|| verify::verify(&args.dirs, &opts))
+    let reports = verify::with_threads(threads, || verify::verify(&args.dirs, &opts))
+        .map_err(anyhow::Error::msg)?
         .map_err(|e| {
             anyhow::anyhow!("{e}\nhint: pass the `--out` folder of `clevrtex generate`")
         })?;
@@ -80,9 +77,11 @@ pub fn run(args: Args) -> CmdResult {
         samples as f64 / secs.max(1e-9)
     );
     let comparisons = match &args.against {
-        Some(other) => pool
-            .install(|| verify::against(&args.dirs, other, args.variant.as_deref()))
-            .map_err(|e| anyhow::anyhow!("--against: {e}"))?,
+        Some(other) => verify::with_threads(threads, || {
+            verify::against(&args.dirs, other, args.variant.as_deref())
+        })
+        .map_err(anyhow::Error::msg)?
+        .map_err(|e| anyhow::anyhow!("--against: {e}"))?,
         None => Vec::new(),
     };
     for c in &comparisons {

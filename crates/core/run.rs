@@ -10,7 +10,8 @@ use std::time::Duration;
 use anyhow::bail;
 use clevrtex_dataset::manifest;
 use clevrtex_render::batch;
-use clevrtex_render::pool::{Jobs, PoolEvent};
+use clevrtex_render::pool::PoolEvent;
+use clevrtex_render::scene_jobs::RunJobs;
 
 use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
@@ -18,7 +19,7 @@ use crate::progress::progress_bar;
 use crate::run_args::{self, RunArgs};
 use clevrtex_render::run_text::{self, BatchProgress};
 
-/// Render `jobs` with the pool as `args` say, failures to `ledger`, with a progress bar (or,
+/// Render the jobs with the pool as `args` say, failures to their ledger, with a progress bar (or,
 /// when stderr is not a terminal, a line per sample and a progress line with rate and ETA every
 /// few images or minute: [`BatchProgress`]) and a summary; with `manifest`, the render crate's
 /// batch run ([`batch::run`]: under the range's lock, the plan written first and the manifest
@@ -27,19 +28,15 @@ use clevrtex_render::run_text::{self, BatchProgress};
 /// manifest and each sample's metadata.
 pub(crate) fn run_jobs(
     args: &RunArgs,
-    jobs: Jobs,
-    ledger: PathBuf,
+    RunJobs { jobs, ledger, used }: RunJobs,
     max_attempts: u32,
     manifest: Option<manifest::Plan>,
-    (mut catalogue, used): (
-        clevrtex_materials::Catalogue,
-        std::collections::BTreeSet<String>,
-    ),
+    mut catalogue: clevrtex_materials::Catalogue,
 ) -> CmdResult {
     // The numbers given as flags first: a refusal never waits on Blender.
     checked_numbers(args)?;
     let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
-    check_output_writable(&args.out)?;
+    clevrtex_dataset::layout::check_writable(&args.out).map_err(anyhow::Error::msg)?;
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the workers; finished samples are kept",
     });
@@ -220,13 +217,8 @@ pub(crate) fn pool_options(
         overwrite: args.overwrite,
         fail_fast: args.fail_fast,
         out: args.out.clone(),
-        max_worker_memory: match args.max_worker_memory {
-            Some(g) if !(g > 0.0 && g <= 1e6) => bail!(
-                "`--max-worker-memory {g}` is out of range\nhint: pass the GiB a worker may hold, more than 0 (e.g. 8)"
-            ),
-            Some(g) => Some((g * (1u64 << 30) as f64) as u64),
-            None => None,
-        },
+        max_worker_memory: batch::memory_bound(args.max_worker_memory)
+            .map_err(anyhow::Error::msg)?,
         recycle_after: args.recycle_after,
     };
     let planned = batch::plan(&settings, ledger, max_attempts, interrupt, materials)
@@ -235,28 +227,6 @@ pub(crate) fn pool_options(
         eprintln!("{line}");
     }
     Ok(planned)
-}
-
-/// Make sure the output root exists and a file can be created in it, before any rendering.
-fn check_output_writable(out: &Path) -> anyhow::Result<()> {
-    let hint = "hint: pass a writable folder with `--out`";
-    std::fs::create_dir_all(out).map_err(|e| {
-        anyhow::anyhow!(
-            "cannot create output folder `{}`: {e}\n{hint}",
-            out.display()
-        )
-    })?;
-    // A temporary of the one atomic writer, dropped unrenamed: nothing is left, and nothing
-    // planted there is written through or removed.
-    clevrtex_dataset::atomic::AtomicFile::create(&out.join(".clevrtex-write-test")).map_err(
-        |e| {
-            anyhow::anyhow!(
-                "cannot write in output folder `{}`: {e}\n{hint}",
-                out.display()
-            )
-        },
-    )?;
-    Ok(())
 }
 
 /// The run's summary on stdout, its ledger's warning on stderr.

@@ -137,3 +137,22 @@ pub struct DatasetDir {
     #[arg(long, value_name = "FILE")]
     pub(crate) out: PathBuf,
 }
+
+/// The config of `sample` and `generate`: the file `--config` (read, then checked against
+/// `cat`; `hint` ends the message when it cannot be read), else the built-in `variant`.
+pub(crate) fn read_config(
+    config: Option<&std::path::Path>,
+    variant: &str,
+    cat: &clevrtex_materials::Catalogue,
+    hint: &str,
+) -> anyhow::Result<clevrtex_scene::Config> {
+    let Some(path) = config else {
+        return Ok(clevrtex_scene::Config::builtin_in(variant, cat)?);
+    };
+    // The cause goes before the hint, which is the message's last line.
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        anyhow::anyhow!("cannot read config `{}`: {e}\nhint: {hint}", path.display())
+    })?;
+    let name = path.display().to_string();
+    Ok(clevrtex_scene::Config::from_json_str_in(&text, &name, cat)?)
+}

@@ -134,3 +134,32 @@ pub fn run(
     }
     Ok(rows)
 }
+
+/// What `bench render` shows of `rows` (`n` scenes at `width` x `height`): the table, summary
+/// and side-by-side to `say` first, then the plot drawn next to the CSV in `out` (with text
+/// if `fonts`, a font is registered) and the lines naming both files.
+pub fn report(
+    rows: &[Row],
+    (n, width, height): (usize, u32, u32),
+    out: &Path,
+    fonts: bool,
+    say: &mut dyn FnMut(String),
+) -> anyhow::Result<()> {
+    use crate::summary;
+    let agg = summary::aggregate(rows);
+    say(summary::table(&agg) + &summary::summary(&agg) + &summary::side_by_side(rows));
+    let text = summary::write_plot(&agg, n, width, height, out, fonts)?;
+    let stem = summary::plot_stem(out);
+    say(format!(
+        "csv: {}\nplot: {} and {}{}\n",
+        crate::csv::path(out).display(),
+        stem.with_extension("png").display(),
+        stem.with_extension("svg").display(),
+        if text {
+            ""
+        } else {
+            " (no system font found: drawn without text; install fonts-dejavu-core)"
+        }
+    ));
+    Ok(())
+}

@@ -74,6 +74,16 @@ fn variant_dirs(opened: &[Dataset]) -> VariantDirs<'_> {
     (out, skipped)
 }
 
+/// `f` run on a pool of `threads` threads (0: one per core): `verify`'s walks and checks and
+/// `against`'s comparisons are parallel.
+pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T, String> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| format!("cannot start worker threads: {e}"))?;
+    Ok(pool.install(f))
+}
+
 /// Verify the dataset under `roots`. Errors only for unreadable roots.
 pub fn verify(roots: &[PathBuf], opts: &VerifyOptions) -> Result<Vec<VariantReport>, String> {
     for r in roots {

@@ -69,7 +69,6 @@ pub fn make(
     say: &mut dyn FnMut(String),
 ) -> anyhow::Result<()> {
     use anyhow::{bail, Context};
-    use clevrtex_render::{MaterialMode, MaterialSettings};
     let key = |name: &str| {
         let m = cat.get(name).expect("selected from the catalogue");
         cell_file(name, &m.hash, size, samples)
@@ -86,13 +85,8 @@ pub fn make(
         missing.len()
     ));
     if !missing.is_empty() {
-        let settings = MaterialSettings {
-            mode: MaterialMode::Sheet,
-            size,
-            samples,
-            displacement: 0.0,
-            random: 0.37,
-        };
+        let mode = clevrtex_render::MaterialMode::Sheet;
+        let settings = super::batches::settings(mode, size, samples, 0.37);
         let failed = clevrtex_render::material_renders::render_into_cache(
             cat,
             &missing,
