@@ -36,7 +36,7 @@ pub(crate) fn run_jobs(
     // The numbers given as flags first: a refusal never waits on Blender.
     checked_numbers(args)?;
     let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
-    clevrtex_dataset::layout::check_writable(&args.out).map_err(anyhow::Error::msg)?;
+    clevrtex_dataset::atomic::check_writable(&args.out).map_err(anyhow::Error::msg)?;
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the workers; finished samples are kept",
     });
