@@ -42,28 +42,22 @@ pub fn probe_lines(
     caps: &[(String, u32)],
     problems: &mut Vec<String>,
 ) -> String {
-    let mut out = String::new();
+    let mut lines = Vec::new();
     match probe {
         Ok(probe) => {
             let ready = probe.ready;
-            let _ = writeln!(
-                out,
+            let devices = if ready.cycles_devices.is_empty() {
+                "(none reported)".to_string()
+            } else {
+                ready.cycles_devices.join(", ")
+            };
+            lines.push(format!(
                 "worker: started in {:.1} s, reports Blender {}",
                 probe.startup_s, ready.blender_version
-            );
-            let _ = writeln!(
-                out,
-                "cycles devices: {}",
-                if ready.cycles_devices.is_empty() {
-                    "(none reported)".to_string()
-                } else {
-                    ready.cycles_devices.join(", ")
-                }
-            );
-            let _ = writeln!(out, "{}", ready.features_line());
-            for l in ready.cuda_kernel_lines(caps) {
-                let _ = writeln!(out, "{l}");
-            }
+            ));
+            lines.push(format!("cycles devices: {devices}"));
+            lines.push(ready.features_line());
+            lines.extend(ready.cuda_kernel_lines(caps));
             if !ready.cycles_devices.iter().any(|d| d == "CPU") {
                 problems.push("Cycles reports no CPU device".to_string());
             }
@@ -78,7 +72,7 @@ pub fn probe_lines(
             problems.push(format!("the bridge does not start in this Blender: {text}"))
         }
     }
-    out
+    lines.iter().map(|l| format!("{l}\n")).collect()
 }
 
 /// One line per Blender found: its kind, version, Cycles devices and features, and which one
