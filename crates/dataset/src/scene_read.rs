@@ -137,3 +137,28 @@ pub fn read(path: &Path) -> Result<SceneFile, String> {
     }
     Ok(scene)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scene_files_are_found_capped_and_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut warnings = Vec::new();
+        let e = collect(&[dir.path().to_path_buf()], &mut |w| warnings.push(w)).unwrap_err();
+        assert!(e.contains("no `*.json` scene files found"), "{e}");
+        let e = collect(&[dir.path().join("nope")], &mut |w| warnings.push(w)).unwrap_err();
+        assert!(e.contains("does not exist"), "{e}");
+        let sub = dir.path().join("clevrtex_x/0");
+        std::fs::create_dir_all(&sub).unwrap();
+        let (a, b) = (sub.join("b.json"), sub.join("a.json"));
+        std::fs::write(&a, b"{}").unwrap();
+        std::fs::write(&b, vec![b' '; (MAX_SCENE_BYTES + 1) as usize]).unwrap();
+        let found = collect(&[dir.path().to_path_buf()], &mut |w| warnings.push(w)).unwrap();
+        assert_eq!(found, vec![b.clone(), a.clone()]);
+        assert!(warnings.is_empty());
+        assert!(read(&b).unwrap_err().contains("larger than 4 MiB"));
+        assert!(read(&a).unwrap_err().starts_with("bad scene file"));
+    }
+}

@@ -140,3 +140,32 @@ pub fn report(
     );
     Ok((out, p))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn requests_are_checked_and_calibration_sized() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        assert!(check_request(Some(4), Some(2), 10, &out).is_ok());
+        let e = check_request(Some(1), None, 10, &out).unwrap_err();
+        assert!(e.contains("`--calibrate 1` is out of range"), "{e}");
+        assert!(check_request(None, Some(0), 10, &out)
+            .unwrap_err()
+            .contains("`--tasks 0`"));
+        assert!(check_request(None, Some(11), 10, &out)
+            .unwrap_err()
+            .contains("`--tasks 11`"));
+        let file = dir.path().join("file");
+        std::fs::write(&file, b"x").unwrap();
+        let e = check_request(None, None, 10, &file.join("out")).unwrap_err();
+        assert!(e.contains("is not a folder"), "{e}");
+        // 2 per worker, at least 4, at most the run.
+        assert_eq!(calibration_size(None, 1, 100), 4);
+        assert_eq!(calibration_size(None, 3, 100), 6);
+        assert_eq!(calibration_size(None, 3, 5), 5);
+        assert_eq!(calibration_size(Some(2), 8, 100), 2);
+    }
+}

@@ -145,3 +145,53 @@ pub fn check_index_end(start: u64, end: u64) -> Result<(), String> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flags_are_checked_and_applied_in_order() {
+        assert_eq!(within("--width", 320, 4096), Ok(320));
+        assert!(within("--width", 5000, 4096)
+            .unwrap_err()
+            .contains("`--width 5000`"));
+        assert!(within("--samples", 0, 10)
+            .unwrap_err()
+            .contains("`--samples 0`"));
+        assert_eq!(
+            parse_passes(&["mask".into(), " rgb".into(), "mask".into()]).unwrap(),
+            vec![Pass::Rgb, Pass::Mask]
+        );
+        assert!(parse_passes(&["nope".into()])
+            .unwrap_err()
+            .contains("unknown pass `nope`"));
+        assert!(parse_passes(&[" ".into()])
+            .unwrap_err()
+            .contains("`--passes` is empty"));
+        assert!(check_index_end(0, crate::bounds::INDEX_END).is_ok());
+        assert!(check_index_end(1, crate::bounds::INDEX_END + 1).is_err());
+        assert!(parse_set("clevr").is_err());
+
+        let cat = Catalogue::builtin().unwrap();
+        let mut config = Config::builtin_in("full", &cat).unwrap();
+        let o = Overrides {
+            width: Some(64),
+            samples: Some(3),
+            quality: Some(crate::quality::Quality::Draft),
+            ..Default::default()
+        };
+        config.apply_overrides(&o).unwrap();
+        let r = &config.base.render;
+        // `--samples` overrides the preset's samples, which come first.
+        assert_eq!((r.width, r.samples), (64, 3));
+        let bad = Overrides {
+            height: Some(0),
+            ..Default::default()
+        };
+        assert!(config
+            .apply_overrides(&bad)
+            .unwrap_err()
+            .contains("`--height 0`"));
+    }
+}
