@@ -1,19 +1,16 @@
 //! `clevrtex bench render`: error against run time of Cycles settings. This file parses the
-//! arguments, hands the bench (`clevrtex_bench`) a Blender session and prints what it measured.
+//! arguments, has the bench run (`clevrtex_bench::run`: Blender sessions, the ladder) and
+//! prints what it measured.
 //! See `docs/notes/performance.md`, section `bench`.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use clevrtex_bench::measure::WorkerResult;
-use clevrtex_bench::measure::{Bench, Plan};
-use clevrtex_bench::{csv, ladder, scenes, summary, Render, Row};
-use clevrtex_render::{RenderReply, Worker};
+use clevrtex_bench::measure::Plan;
+use clevrtex_bench::{csv, ladder, run, scenes, Row};
 
-use clevrtex_render::command_session::{BlenderSession, Settings};
-
-use crate::exit::{self, command_error, CmdResult};
+use crate::exit::{self, command_error_any, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
 
 /// Arguments of `clevrtex bench`.
@@ -99,19 +96,6 @@ pub fn run(args: Args) -> CmdResult {
     }
 }
 
-/// The bench renders through the command's Blender session: restarts are warned about and
-/// Ctrl-C exits with 130, as in every command.
-struct BenchSession(BlenderSession);
-
-impl Render for BenchSession {
-    fn request(
-        &mut self,
-        call: &mut dyn FnMut(&mut Worker) -> WorkerResult,
-    ) -> anyhow::Result<RenderReply> {
-        self.0.request(call).map_err(command_error)
-    }
-}
-
 fn run_render(args: RenderArgs) -> CmdResult {
     let quick = args.quick;
     let plan = Plan::new(
@@ -128,11 +112,10 @@ fn run_render(args: RenderArgs) -> CmdResult {
         return report(&rows, scenes.len(), w, h, &args.out);
     }
     let settings = ladder::select(quick, args.levers, args.max_samples, args.only.as_deref())?;
-    let ref_samples = plan.reference_samples;
     if let Some(big) = plan.oversampled(&settings) {
         eprintln!(
-            "warning: rung `{}` has {} samples, not fewer than the reference's {ref_samples}: its error is not meaningful",
-            big.label, big.sampling.samples
+            "warning: rung `{}` has {} samples, not fewer than the reference's {}: its error is not meaningful",
+            big.label, big.sampling.samples, plan.reference_samples
         );
     }
     let (n, width, height) = (plan.scenes, plan.width, plan.height);
@@ -145,106 +128,33 @@ fn run_render(args: RenderArgs) -> CmdResult {
             args.out.display()
         )
     })?;
-
-    // Every Blender is found before anything renders: a typo in the last one must not cost
-    // the first one's hours.
-    let blenders = if args.blender.is_empty() {
-        vec![clevrtex_render::blender::locate(None)?]
-    } else {
-        args.blender
-            .iter()
-            .map(|b| clevrtex_render::blender::locate(Some(b)))
-            .collect::<Result<Vec<_>, _>>()?
+    let opts = run::Options {
+        blenders: &args.blender,
+        threads: args.threads,
+        retries: args.retries,
+        startup_timeout: crate::run_args::seconds("--startup-timeout", args.startup_timeout)?,
+        levers: args.levers,
+        quick,
+        out: &args.out,
+        interrupt: interrupt::flag(OnInterrupt::Stop {
+            message: "stopping Blender",
+        }),
     };
-    let startup_timeout = crate::run_args::seconds("--startup-timeout", args.startup_timeout)?;
-    let interrupt = interrupt::flag(OnInterrupt::Stop {
-        message: "stopping Blender",
-    });
-    // User materials are checked before anything renders (once: the checks do not depend on
-    // the Blender), with the first Blender.
-    let used: BTreeSet<String> = scenes
-        .iter()
-        .flat_map(|s| {
-            std::iter::once(&s.scene.backdrop.material)
-                .chain(s.scene.objects.iter().map(|o| &o.material))
-                .map(|m| m.name.clone())
-        })
-        .collect();
-    let _user = clevrtex_render::user_materials::check_before_run(
+    let rows = run::run(
+        &opts,
         &mut catalogue,
-        &used,
-        &blenders[0],
-        startup_timeout,
-        interrupt.clone(),
+        (&plan, &scenes, &settings),
+        &mut |line| println!("{line}"),
+        &mut |event| eprintln!("{event}"),
     )
-    .map_err(command_error)?;
-    let mut rows = Vec::new();
-    for (i, blender) in blenders.into_iter().enumerate() {
-        let mut session = BenchSession(BlenderSession::new(Settings {
-            blender,
-            materials_json: catalogue.resolved_json(),
-            threads: args.threads,
-            retries: args.retries,
-            idle_timeout: None,
-            interrupt: interrupt.clone(),
-            startup_timeout,
-        })?);
-        let ready = session.0.ready().map_err(command_error)?;
-        let blender_version = ready.blender_version;
-        if args.levers && !ready.features.light_tree {
-            anyhow::bail!(
-                "`--levers` needs Cycles 4.x levers, but Blender {blender_version} has none\nhint: pass only Blenders 4.x or 5.x with `--blender` (e.g. `.venv-bpy/bin/python` from `./scripts/setup.sh --bpy 4.5`)"
-            );
-        }
-
-        println!(
-            "bench render: {n} scene(s) at {width}x{height}, {} setting(s), references at {ref_samples} fixed samples; Blender {blender_version}, {} Cycles thread(s){}",
-            settings.len(),
-            if args.threads == 0 { "auto".to_string() } else { args.threads.to_string() },
-            if quick && i == 0 {
-                "\nquick mode: small frames, 2 scenes and fewer rungs; compare settings with it, take per-image costs from a full run"
-            } else {
-                ""
-            }
-        );
-        let place = (args.blender.len() > 1).then_some(i);
-        let runs = clevrtex_bench::measure::runs_dir(&args.out, place, &blender_version);
-        rows.extend(
-            Bench {
-                blender: &mut session,
-                catalogue: &catalogue,
-                blender_version: &blender_version,
-                out: &args.out,
-                runs: &runs,
-                on_event: &mut |event| eprintln!("{event}"),
-            }
-            .measure(&plan, &scenes, &settings)?,
-        );
-        session.0.close();
-    }
-
+    .map_err(command_error_any)?;
     csv::save(&rows, &args.out)?;
     report(&rows, n, width, height, &args.out)
 }
 
 /// Table and summary on stdout, plot next to the CSV.
 fn report(rows: &[Row], n: usize, width: u32, height: u32, out: &Path) -> CmdResult {
-    let agg = summary::aggregate(rows);
-    print!("{}", summary::table(&agg));
-    print!("{}", summary::summary(&agg));
-    print!("{}", summary::side_by_side(rows));
-    let text = summary::write_plot(&agg, n, width, height, out, crate::font::available())?;
-    let stem = summary::plot_stem(out);
-    println!("csv: {}", csv::path(out).display());
-    println!(
-        "plot: {} and {}{}",
-        stem.with_extension("png").display(),
-        stem.with_extension("svg").display(),
-        if text {
-            ""
-        } else {
-            " (no system font found: drawn without text; install fonts-dejavu-core)"
-        }
-    );
+    let fonts = crate::font::available();
+    run::report(rows, (n, width, height), out, fonts, &mut |t| print!("{t}"))?;
     Ok(exit::OK)
 }

@@ -166,26 +166,8 @@ pub fn run(args: Args) -> CmdResult {
         write_atomic(path, &output::to_csv(&report))?;
     }
     print!("{}", output::to_table(&report));
-    let undefined = report.recon_undefined();
-    if undefined > 0 {
-        eprintln!(
-            "warning: {undefined} of {} reconstructions hold NaN or infinite values (or errors too large to sum): their MSE is undefined and left out of the mean (`recon_undefined` in the JSON)",
-            report.images.len()
-        );
-    }
-    let out_of_range = report.recon_out_of_range();
-    if out_of_range > 0 {
-        eprintln!(
-            "warning: {out_of_range} of {} reconstructions hold values outside [0, 1]; they are scored as given, not clipped (`recon_out_of_range` in the JSON)",
-            report.images.len()
-        );
-    }
-    let missing = report.missing();
-    if missing > 0 {
-        eprintln!(
-            "warning: {missing} of {} predictions were missing and scored as all-background",
-            report.images.len()
-        );
+    for line in output::warnings(&report) {
+        eprintln!("{line}");
     }
     Ok(OK)
 }

@@ -181,16 +181,11 @@ fn run_coco(args: Args) -> CmdResult {
 /// The exit code of an export that skipped `skipped` (each printed under a warning saying
 /// they were `why`): `PARTIAL` when any, else `OK`.
 fn skipped_warning(skipped: &[impl std::fmt::Display], why: &str) -> u8 {
-    if skipped.is_empty() {
-        return exit::OK;
+    match clevrtex_dataset::export::skipped_text(skipped, why) {
+        Some(text) => {
+            eprintln!("{text}");
+            exit::PARTIAL
+        }
+        None => exit::OK,
     }
-    eprintln!(
-        "warning: {} file(s) or folder(s) {why}; their samples are not exported:",
-        skipped.len()
-    );
-    for s in skipped {
-        eprintln!("  {s}");
-    }
-    eprintln!("hint: check the dataset with `clevrtex verify`");
-    exit::PARTIAL
 }

@@ -1,17 +1,16 @@
-//! `clevrtex generate`: the variant config with the command line's overrides, the sampler's
-//! jobs (`clevrtex-scene`) and the pool run shared with `render` (`run.rs`).
+//! `clevrtex generate`: the variant config read, its part prepared by the render crate
+//! (`clevrtex_render::generate::prepare`: overrides, checks, jobs, manifest) and run by the
+//! pool run shared with `render` (`run.rs`), or planned (`estimate.rs`).
 
 use std::path::PathBuf;
-use std::sync::Arc;
 
-use anyhow::{bail, Context};
-use clevrtex_dataset::layout;
 use clevrtex_dataset::manifest;
-use clevrtex_render::pool::{Job, Jobs};
-use clevrtex_scene::{Config, Pass, SampleRequest};
+use clevrtex_render::generate;
+use clevrtex_scene::config::Overrides;
+use clevrtex_scene::Config;
 
 use crate::exit::CmdResult;
-use crate::run_args::{index_range, parse_passes, within, RunArgs, MAX_ATTEMPTS};
+use crate::run_args::{index_range, read_config, RunArgs};
 
 /// Arguments of `clevrtex generate`.
 #[derive(Debug, clap::Args)]
@@ -120,24 +119,12 @@ pub struct GenerateArgs {
     pub(crate) run: RunArgs,
 }
 
-/// Layouts drawn by `generate` before any Blender starts, to refuse impossible configs.
-const PREFLIGHT_LAYOUTS: usize = 20;
-
-/// One variant's part of a `generate` run: its images `start..start + count` of `total`, the
-/// share `shard` of them, with `seed`.
+/// One variant's part of a `generate` run: the render crate's part, the variant and suite.
 pub(crate) struct Part<'a> {
     /// Built-in variant (when `config` is `None`).
     pub variant: &'a str,
-    /// First index.
-    pub start: u64,
-    /// Images.
-    pub count: u64,
-    /// Size of the whole variant (fixes the splits); `None`: `start + count`.
-    pub total: Option<u64>,
-    /// This process's share.
-    pub shard: clevrtex_scene::shard::Shard,
-    /// Run seed.
-    pub seed: u64,
+    /// The images, the shard, the seed.
+    pub images: generate::Part,
     /// The suite this part belongs to (`--suite`), recorded in its manifest.
     pub suite: Option<&'a str>,
 }
@@ -146,13 +133,16 @@ pub(crate) struct Part<'a> {
 /// calls instead, as it runs this file's [`run_part`] per variant).
 pub fn run_generate(args: GenerateArgs) -> CmdResult {
     let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
-    let part = Part {
-        variant: &args.variant,
+    let images = generate::Part {
         start: args.start,
         count: args.count.unwrap_or(0),
         total: args.total,
         shard,
         seed: args.seed,
+    };
+    let part = Part {
+        variant: &args.variant,
+        images,
         suite: None,
     };
     run_part(&args, &part, None)
@@ -166,163 +156,29 @@ pub(crate) fn run_part(
     estimate_sum: Option<&std::cell::Cell<(f64, f64)>>,
 ) -> CmdResult {
     let catalogue = args.run.materials.catalogue()?;
-    let mut config = match &args.config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path).map_err(|e| {
-                anyhow::anyhow!(
-                    "cannot read config `{}`: {e}\nhint: pass an existing JSON file, e.g. one of `configs/`",
-                    path.display()
-                )
-            })?;
-            Config::from_json_str_in(&text, &path.display().to_string(), &catalogue)?
-        }
-        None => Config::builtin_in(part.variant, &catalogue)?,
-    };
-    crate::user_materials::apply_material_set(
-        &mut config,
-        &catalogue,
-        args.material_set.as_deref(),
-        args.run.materials.materials.is_some() && args.config.is_none(),
-    )?;
-    if let Some(stream) = &args.layout_stream {
-        config
-            .set_layout_stream(stream)
-            .map_err(anyhow::Error::msg)?;
-    }
-    let used: std::collections::BTreeSet<String> = config
-        .objects
-        .materials
-        .iter()
-        .chain(&config.background.materials)
-        .cloned()
-        .collect();
-    use clevrtex_scene::scene_file::{MAX_IMAGE_SIDE, MAX_SAMPLES};
-    if let Some(w) = args.width {
-        config.base.render.width = within("--width", w, MAX_IMAGE_SIDE)?;
-    }
-    if let Some(h) = args.height {
-        config.base.render.height = within("--height", h, MAX_IMAGE_SIDE)?;
-    }
-    if let Some(q) = args.quality {
-        q.apply(&mut config.base.render);
-    }
-    if let Some(s) = args.samples {
-        config.base.render.samples = within("--samples", s, MAX_SAMPLES)?;
-    }
-    if let Some(s) = args.shadow_samples {
-        config.base.render.shadow_samples = Some(within("--shadow-samples", s, MAX_SAMPLES)?);
-    }
-    within("--max-attempts", args.max_attempts, MAX_ATTEMPTS as u32)?;
-    // Fail before starting Blender when no layout could ever be drawn, as `sample` does.
-    clevrtex_scene::sample::check_feasible(&config)?;
-    let passes = match &args.run.passes {
-        Some(list) => parse_passes(list)?,
-        None => Pass::ALL.to_vec(),
-    };
-    config.base.passes = passes.clone();
-    if part.count == 0 {
-        bail!("`-n 0` asks for no images\nhint: pass the number of images, e.g. `-n 100`");
-    }
-    let end = part
-        .start
-        .checked_add(part.count)
-        .context("`--start` + `-n` overflows\nhint: pass smaller numbers")?;
-    crate::run_args::check_index_end(part.start, end)?;
-    let total = part.total.unwrap_or(end);
-    if total < end {
-        bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset");
-    }
-    let shard = part.shard;
-    let start = part.start;
-    // Draw the first layouts before starting Blender: a config whose objects can never be
-    // placed fails here once (exit 1), as in `sample`, not once per image into the ledger.
-    for index in shard.iter(start, end).take(PREFLIGHT_LAYOUTS) {
-        let req = SampleRequest {
-            seed: part.seed,
-            index,
-            attempt: 0,
-            total,
-        };
-        clevrtex_scene::sample(&config, &req)?;
-    }
-    let config = Arc::new(config);
-    let variant = config.name.clone();
-    // Job `i` is made when a worker takes it: no list of the run's jobs is held, so
-    // `-n 100000000` runs in bounded memory.
-    let seed = part.seed;
-    let make = {
-        let (config, variant, passes) = (Arc::clone(&config), variant.clone(), passes.clone());
-        move |i: u64| {
-            let index = shard.nth(start, end, i);
-            let config = Arc::clone(&config);
-            Job {
-                index,
-                variant: variant.clone(),
-                stem: clevrtex_scene::stem(&variant, index),
-                passes: passes.clone(),
-                scene: Arc::new(move |attempt| {
-                    clevrtex_scene::sample(
-                        &config,
-                        &SampleRequest {
-                            seed,
-                            index,
-                            attempt,
-                            total,
-                        },
-                    )
-                    .map_err(|e| e.to_string())
-                }),
-                resample: true,
-                source: None,
-            }
-        }
-    };
-    let has_stem = {
-        let variant = variant.clone();
-        move |stem: &str| {
-            layout::parse_stem(stem, "")
-                .is_some_and(|(_, v, index)| v == variant && shard.contains(start, end, index))
-        }
-    };
-    let jobs = Jobs::lazy(shard.count(start, end), make, has_stem);
-    if args.estimate {
-        let r = &config.base.render;
-        return crate::estimate::run(crate::estimate::Request {
-            run: &args.run,
-            jobs: &jobs,
-            what: format!(
-                "`{variant}` at {}x{}, {} samples{}, passes {}",
-                r.width,
-                r.height,
-                r.samples,
-                r.adaptive_threshold
-                    .map(|t| format!(" (adaptive threshold {t})"))
-                    .unwrap_or_default(),
-                passes
-                    .iter()
-                    .map(|p| p.name())
-                    .collect::<Vec<_>>()
-                    .join(",")
-            ),
-            calibrate: args.calibrate,
-            tasks: args.tasks,
-            max_attempts: args.max_attempts,
-            materials: (catalogue, used),
-            sum: estimate_sum,
-        });
-    }
-    let ledger = layout::variant_dir(&args.run.out, &variant).join("failures.jsonl");
-    let plan = manifest::Plan {
-        run: manifest::Manifest {
-            variant: variant.clone(),
-            seed: part.seed,
-            layout_stream: Some(config.layout_stream().to_string()),
-            config_hash: manifest::hash_hex(format!("{config:?}").as_bytes()),
-            render: serde_json::to_value(&config.base.render).ok(),
-            start: part.start,
-            end,
-            total,
-            shard: [shard.k, shard.n],
+    let hint = "pass an existing JSON file, e.g. one of `configs/`";
+    let config = read_config(args.config.as_deref(), part.variant, &catalogue, hint)?;
+    let prepared = generate::prepare(generate::Request {
+        config,
+        catalogue: &catalogue,
+        material_set: (
+            args.material_set.as_deref(),
+            args.run.materials.materials.is_some() && args.config.is_none(),
+        ),
+        overrides: &Overrides {
+            layout_stream: args.layout_stream.clone(),
+            width: args.width,
+            height: args.height,
+            quality: args.quality,
+            samples: args.samples,
+            shadow_samples: args.shadow_samples,
+        },
+        max_attempts: args.max_attempts,
+        passes: args.run.passes.as_deref(),
+        part: part.images,
+        out: &args.run.out,
+        keep_exr: args.run.keep_exr,
+        manifest: manifest::Manifest {
             tool_version: env!("CARGO_PKG_VERSION").into(),
             tool_commit: crate::provenance::COMMIT.into(),
             tool_modified: crate::provenance::modified(),
@@ -331,17 +187,22 @@ pub(crate) fn run_part(
             command: std::env::args().collect(),
             ..manifest::Manifest::unfinished()
         },
-        passes: passes.clone(),
-        keep_exr: args.run.keep_exr,
-    };
+    })
+    .map_err(anyhow::Error::msg)?;
+    if args.estimate {
+        return crate::estimate::run(crate::estimate::Request {
+            run: &args.run,
+            jobs: &prepared.jobs.jobs,
+            what: prepared.what,
+            calibrate: args.calibrate,
+            tasks: args.tasks,
+            max_attempts: args.max_attempts,
+            materials: (catalogue, prepared.jobs.used),
+            sum: estimate_sum,
+        });
+    }
     // Before anything is made: growing a dataset with another `--total` is refused.
-    plan.check_splits(&args.run.out, config.splits, args.allow_split_mismatch)?;
-    crate::run::run_jobs(
-        &args.run,
-        jobs,
-        ledger,
-        args.max_attempts,
-        Some(plan),
-        (catalogue, used),
-    )
+    let (plan, a) = (prepared.plan, args);
+    plan.check_splits(&a.run.out, prepared.splits, a.allow_split_mismatch)?;
+    crate::run::run_jobs(&a.run, prepared.jobs, a.max_attempts, Some(plan), catalogue)
 }

@@ -9,13 +9,12 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use clevrtex_materials::Catalogue;
-use clevrtex_render::{MaterialMode, MaterialSettings};
 
-use clevrtex_report::materials::{self, batches, cost, figures, measure_output, sheet, stats};
+use clevrtex_report::materials::{self, batches, cost, figures, measure_output, sheet, text};
 
-use clevrtex_render::material_renders::{render_into_cache, Outcome, RenderOptions};
+use clevrtex_render::material_renders::RenderOptions;
 
 use crate::exit::{command_error, command_error_any, CmdResult, OK};
 use crate::interrupt::{self, OnInterrupt};
@@ -170,14 +169,7 @@ pub fn run(args: Args) -> CmdResult {
     match args.command {
         Sub::List => {
             let mut out = std::io::stdout().lock();
-            let _ = writeln!(
-                out,
-                "{:<26} {:<10} {:<9} description",
-                "name", "set", "displaces"
-            );
-            for m in cat.iter() {
-                let d = if m.displaces { "yes" } else { "no" };
-                let line = format!("{:<26} {:<10} {:<9} {}", m.name, m.set, d, m.description);
+            for line in text::list_lines(&cat) {
                 if writeln!(out, "{line}").is_err() {
                     break;
                 }
@@ -205,51 +197,16 @@ fn sheet(cat: &Catalogue, a: SheetArgs) -> CmdResult {
         );
     }
     let cache = sheet::cache_dir(a.cache.clone());
-    let key = |name: &str| {
-        let m = cat.get(name).expect("selected from the catalogue");
-        sheet::cell_file(name, &m.hash, a.size, a.samples)
-    };
-    let missing: Vec<&str> = names
-        .iter()
-        .copied()
-        .filter(|n| !cache.join(key(n)).is_file())
-        .collect();
-    eprintln!(
-        "sheet: {} materials, {} cached, {} to render",
-        names.len(),
-        names.len() - missing.len(),
-        missing.len()
-    );
-    if !missing.is_empty() {
-        let settings = MaterialSettings {
-            mode: MaterialMode::Sheet,
-            size: a.size,
-            samples: a.samples,
-            displacement: 0.0,
-            random: 0.37,
-        };
-        let failed = render_into_cache(
-            cat,
-            &missing,
-            &a.batch.render_options()?,
-            &settings,
-            &cache,
-            &key,
-        )
-        .map_err(command_error)?;
-        if !failed.is_empty() {
-            bail!(
-                "{} material(s) failed to build:\n{}\nhint: run `clevrtex materials check --names <name>` for the traceback",
-                failed.len(),
-                failed.join("\n")
-            );
-        }
-    }
-    let cells: Vec<PathBuf> = names.iter().map(|n| cache.join(key(n))).collect();
-    let img = sheet::stitch(&cells, a.cols).context("cannot assemble the sheet")?;
-    // The preview sheet's writer: PNG through the one atomic writer.
-    clevrtex_report::preview::save(&img, &a.out)?;
-    eprintln!("wrote {}", a.out.display());
+    sheet::make(
+        cat,
+        &names,
+        &|| a.batch.render_options(),
+        (a.size, a.samples, a.cols),
+        &cache,
+        &a.out,
+        &mut |line| eprintln!("{line}"),
+    )
+    .map_err(command_error_any)?;
     Ok(OK)
 }
 
@@ -258,26 +215,8 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
     let dir = std::env::temp_dir().join(format!("clevrtex-check-{}", std::process::id()));
     let outcomes =
         batches::check(cat, &names, &a.render_options()?, &dir).map_err(command_error)?;
-    let mut failed = 0;
-    let mut out = std::io::stdout().lock();
-    for (name, outcome) in names.iter().zip(&outcomes) {
-        match outcome {
-            Outcome::Done(reply) if reply.measures.get("pink").copied().unwrap_or(0.0) == 0.0 => {
-                let _ = writeln!(out, "ok     {name}");
-            }
-            Outcome::Done(_) => {
-                failed += 1;
-                let _ = writeln!(out, "FAILED {name}: pink (missing texture) pixels");
-            }
-            Outcome::Failed { message, traceback } => {
-                failed += 1;
-                let _ = writeln!(out, "FAILED {name}: {message}");
-                if !traceback.is_empty() {
-                    let _ = writeln!(out, "{traceback}");
-                }
-            }
-        }
-    }
+    let (lines, failed) = text::check_text(&names, &outcomes);
+    out(&lines);
     if failed > 0 {
         bail!(
             "{failed} of {} material(s) failed to build or render\nhint: the traceback above names the block and parameter",
@@ -288,62 +227,21 @@ fn check(cat: &Catalogue, a: BatchArgs) -> CmdResult {
 }
 
 fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
-    let mut names = materials::select(cat, &a.batch.set, &a.batch.names)?;
-    names.retain(|n| !matches!(*n, "rubber" | "metal"));
-    if names.is_empty() {
-        let what = if a.batch.names.is_empty() {
-            format!("set `{}`", a.batch.set)
-        } else {
-            "`--names`".to_string()
-        };
-        bail!(
-            "no materials to compare in {what} (`rubber` and `metal` are left out)\nhint: pick another `--set` or `--names`"
-        );
-    }
-    let dir = a.out_dir.clone().unwrap_or_else(|| {
-        std::env::temp_dir().join(format!("clevrtex-stats-{}", std::process::id()))
-    });
-    let feats = batches::tile_features(
+    let (names, d) = batches::distinctness(
         cat,
-        &names,
-        &a.batch.render_options()?,
+        (&a.batch.set, &a.batch.names),
+        &|| a.batch.render_options(),
         (a.size, a.samples),
-        &dir,
+        a.out_dir.as_deref(),
     )
     .map_err(command_error_any)?;
-    // The same material with another `random` is the yardstick (`stats::distinctness`).
-    let d = stats::distinctness(&feats[0], &feats[1]);
-    let threshold = d.threshold;
-    let mut out = std::io::stdout().lock();
-    let _ = writeln!(
-        out,
-        "{:<24} {:<24} {:>8} {:>8}",
-        "material", "nearest", "distance", "self"
-    );
-    for (i, (j, dist)) in d.nearest.iter().enumerate() {
-        let _ = writeln!(
-            out,
-            "{:<24} {:<24} {:>8.3} {:>8.3}",
-            names[i], names[*j], dist, d.self_distance[i]
-        );
-    }
-    let near: Vec<String> = d
-        .near
-        .iter()
-        .map(|(i, j, dist)| format!("`{}` ~ `{}` ({dist:.3})", names[*i], names[*j]))
-        .collect();
-    let _ = writeln!(
-        out,
-        "self-distance (same material, random 0.37 vs 0.81): median {threshold:.3}, max {:.3}; smallest distance between different materials {:.3}",
-        d.max_self, d.min_inter
-    );
-    if a.out_dir.is_none() {
-        let _ = std::fs::remove_dir_all(&dir);
-    }
+    let (table, near) = text::stats_text(&names, &d);
+    out(&table);
     if !near.is_empty() {
         bail!(
-            "{} pair(s) of materials are closer than the median self-distance {threshold:.3}:\n{}\nhint: change the colours or the pattern scale of one of each pair",
+            "{} pair(s) of materials are closer than the median self-distance {:.3}:\n{}\nhint: change the colours or the pattern scale of one of each pair",
             near.len(),
+            d.threshold,
             near.join("\n")
         );
     }
@@ -351,36 +249,16 @@ fn stats(cat: &Catalogue, a: StatsArgs) -> CmdResult {
 }
 
 fn cost(cat: &Catalogue, a: CostArgs) -> CmdResult {
-    let mut names = materials::select(cat, &a.batch.set, &a.batch.names)?;
-    if !names.contains(&"plain") {
-        names.insert(0, "plain");
-    }
-    let dir = std::env::temp_dir().join(format!("clevrtex-cost-{}", std::process::id()));
-    let times = batches::render_seconds(
+    let opts = || a.batch.render_options();
+    let (names, times) = batches::costs(
         cat,
-        &names,
-        &a.batch.render_options()?,
+        (&a.batch.set, &a.batch.names),
+        &opts,
         (a.size, a.samples),
-        &dir,
     )
-    .map_err(command_error)?;
+    .map_err(command_error_any)?;
     let c = cost::relative(&names, &times);
-    let mut out = std::io::stdout().lock();
-    let _ = writeln!(out, "{:<24} {:>8} {:>8}", "material", "seconds", "x plain");
-    for ((name, t), x) in names.iter().zip(&times).zip(&c.relative) {
-        let _ = writeln!(out, "{name:<24} {t:>8.2} {x:>8.2}");
-    }
-    let _ = writeln!(
-        out,
-        "median {:.2}x plain, max {:.2}x plain; over 3x the median: {}",
-        c.median,
-        c.max,
-        if c.outliers.is_empty() {
-            "none".to_string()
-        } else {
-            c.outliers.join(", ")
-        }
-    );
+    out(&text::cost_text(&names, &times, &c));
     Ok(OK)
 }
 
@@ -393,4 +271,9 @@ fn measure(a: MeasureArgs) -> CmdResult {
         let _ = write!(out, "{}", measure_output::tables(&samples));
     }
     Ok(OK)
+}
+
+/// `text` on stdout; a closed stdout (`| head`) is not an error.
+fn out(text: &str) {
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }

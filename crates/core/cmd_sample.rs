@@ -1,14 +1,12 @@
-//! `clevrtex sample`: write one scene file per image, without rendering.
+//! `clevrtex sample`: write one scene file per image, without rendering (the run is
+//! `clevrtex_dataset::sample_run`'s).
 
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context};
-use clevrtex_dataset::layout::sample_dir;
-use clevrtex_dataset::scene_files;
-use clevrtex_scene::{config::Config, sample, SampleRequest};
-use rayon::prelude::*;
+use clevrtex_dataset::sample_run;
+use clevrtex_scene::config::Config;
 
 use crate::exit::{CmdResult, Interrupted, OK};
 use crate::interrupt::{self, OnInterrupt};
@@ -73,41 +71,27 @@ pub struct Args {
 fn load_config(args: &Args) -> anyhow::Result<Config> {
     let cat = args.materials.catalogue()?;
     let mut config = read_config(args, &cat)?;
-    crate::user_materials::apply_material_set(
-        &mut config,
-        &cat,
-        args.material_set.as_deref(),
-        args.materials.materials.is_some() && args.config.is_none(),
-    )?;
-    if let Some(stream) = &args.layout_stream {
-        config
-            .set_layout_stream(stream)
-            .map_err(anyhow::Error::msg)?;
-    }
+    let default_user = args.materials.materials.is_some() && args.config.is_none();
+    let overrides = clevrtex_scene::config::Overrides {
+        layout_stream: args.layout_stream.clone(),
+        ..Default::default()
+    };
+    config
+        .apply_material_set(&cat, args.material_set.as_deref(), default_user)
+        .and_then(|()| config.apply_overrides(&overrides))
+        .map_err(anyhow::Error::msg)?;
     Ok(config)
 }
 
 fn read_config(args: &Args, cat: &clevrtex_materials::Catalogue) -> anyhow::Result<Config> {
-    match (&args.config, &args.variant) {
-        (Some(path), _) => {
-            // The cause goes before the hint, which is the message's last line.
-            let text = std::fs::read_to_string(path).map_err(|e| {
-                anyhow::anyhow!(
-                    "cannot read config `{}`: {e}\nhint: check the path; built-in configs are listed in `configs/`",
-                    path.display()
-                )
-            })?;
-            Ok(Config::from_json_str_in(
-                &text,
-                &path.display().to_string(),
-                cat,
-            )?)
-        }
-        (None, Some(variant)) => Ok(Config::builtin_in(variant, cat)?),
+    let variant = match (&args.config, &args.variant) {
         (None, None) => {
             bail!("no variant given\nhint: pass `--variant camo` or `--config my.json`")
         }
-    }
+        (_, v) => v.as_deref().unwrap_or_default(),
+    };
+    let hint = "check the path; built-in configs are listed in `configs/`";
+    crate::run_args::read_config(args.config.as_deref(), variant, cat, hint)
 }
 
 /// Run `clevrtex sample`.
@@ -121,100 +105,32 @@ pub fn run(args: Args) -> CmdResult {
             args.start, args.count
         )
     })?;
-    crate::run_args::check_index_end(args.start, end)?;
+    clevrtex_scene::config::check_index_end(args.start, end).map_err(anyhow::Error::msg)?;
     let total = args.total.unwrap_or(end);
     if total < end {
         bail!("`--total {total}` is smaller than the last index + 1 (`{end}`)\nhint: pass the size of the whole dataset, or leave `--total` out");
     }
     // Fail before writing anything when no draw could ever succeed.
     clevrtex_scene::sample::check_feasible(&config)?;
-
-    // First index >= start with index % n == k, then every n-th, streamed in chunks: memory
-    // stays bounded whatever `-n` is, and files appear in index order chunk by chunk.
-    let mut indices = shard.iter(args.start, end).peekable();
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.jobs.unwrap_or(0))
-        .build()
-        .context("cannot start worker threads")?;
     let progress = indicatif::ProgressBar::new(end.saturating_sub(args.start).div_ceil(shard.n));
-    let stop = AtomicBool::new(false);
     // Ctrl-C: finish the files being written (each appears whole or not at all) and stop.
     let interrupted = interrupt::flag(OnInterrupt::FlagOnly);
-    let mut written = 0u64;
-    let mut last_dir = None;
-    while indices.peek().is_some() {
-        let chunk: Vec<u64> = indices.by_ref().take(SAMPLE_CHUNK).collect();
-        for &i in &chunk {
-            let d = sample_dir(&args.out, &config.name, i);
-            if last_dir.as_ref() != Some(&d) {
-                // A folder of the layout that is a link out of `--out` is refused, naming it.
-                clevrtex_dataset::layout::make_dir(&args.out, &d).map_err(anyhow::Error::msg)?;
-                // What a killed run of this host left there (its owner is dead).
-                clevrtex_dataset::atomic::remove_stale_temps(&d);
-                last_dir = Some(d);
-            }
-        }
-        // Results come back in index order, so the error reported is the first one by index.
-        let results: Vec<anyhow::Result<()>> = pool.install(|| {
-            chunk
-                .par_iter()
-                .map(|&index| {
-                    if stop.load(Ordering::Relaxed) || interrupted.load(Ordering::Relaxed) {
-                        return Ok(());
-                    }
-                    let req = SampleRequest {
-                        seed: args.seed,
-                        index,
-                        attempt: 0,
-                        total,
-                    };
-                    let result = sample(&config, &req)
-                        .map_err(anyhow::Error::from)
-                        .and_then(|scene| write_scene(&args.out, &config.name, &scene));
-                    if result.is_err() {
-                        stop.store(true, Ordering::Relaxed);
-                    }
-                    progress.inc(1);
-                    result
-                })
-                .collect()
-        });
-        if interrupted.load(Ordering::SeqCst) {
-            progress.finish_and_clear();
-            // The files written are whole; no manifest commits them (a rerun rewrites them).
-            let _ = clevrtex_dataset::atomic::sync_filesystem(&args.out);
-            return Err(Interrupted.into());
-        }
-        if let Some(err) = results.into_iter().find_map(Result::err) {
-            progress.finish_and_clear();
-            return Err(err);
-        }
-        written += chunk.len() as u64;
-    }
-    progress.finish_and_clear();
-    // Durable once for the whole run, then committed by its manifest.
-    let vdir = clevrtex_dataset::layout::variant_dir(&args.out, &config.name);
-    let manifest = scene_files::ScenesManifest {
-        format: scene_files::FORMAT.into(),
-        version: 1,
-        variant: config.name.clone(),
+    let req = sample_run::Request {
+        config: &config,
+        out: &args.out,
         seed: args.seed,
-        layout_stream: config.layout_stream().to_string(),
         start: args.start,
         end,
         total,
-        shard: [shard.k, shard.n],
-        files: written,
-        tool_version: env!("CARGO_PKG_VERSION").into(),
+        shard,
+        threads: args.jobs.unwrap_or(0),
     };
-    if written > 0 {
-        scene_files::commit(&vdir, &manifest).map_err(|e| {
-            anyhow::anyhow!(
-                "cannot commit the scene files of `{}`: {e}\nhint: check free space and permissions under `--out`, then rerun the same command",
-                vdir.display()
-            )
-        })?;
-    }
+    let result = sample_run::run(&req, &interrupted, &|| progress.inc(1));
+    progress.finish_and_clear();
+    let written = match result.map_err(anyhow::Error::msg)? {
+        sample_run::Sampled::Done(written) => written,
+        sample_run::Sampled::Interrupted => return Err(Interrupted.into()),
+    };
     eprintln!(
         "wrote {} scene files (indices {}..{end}, shard {}/{}, seed {}) under `{}` in {:.2} s",
         written,
@@ -226,21 +142,4 @@ pub fn run(args: Args) -> CmdResult {
         started.elapsed().as_secs_f64()
     );
     Ok(OK)
-}
-
-/// Indices sampled and written per batch (bounds memory for any `-n`).
-const SAMPLE_CHUNK: usize = 1 << 16;
-
-/// Write one scene file with the one atomic writer, made durable with the others at the end
-/// ([`scene_files`]).
-fn write_scene(out: &Path, variant: &str, scene: &clevrtex_scene::SceneFile) -> anyhow::Result<()> {
-    let dir = sample_dir(out, variant, scene.index);
-    let path = dir.join(format!("{}.json", scene.stem));
-    let text = clevrtex_scene::to_pretty_json(scene).context("cannot serialise scene")?;
-    scene_files::write(&path, text.as_bytes()).map_err(|e| {
-        anyhow::anyhow!(
-            "cannot write `{}`: {e}\nhint: check free space and permissions under `--out`",
-            path.display()
-        )
-    })
 }

@@ -3,10 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use clevrtex_dataset::verify::{self, index_ranges, Comparison, VariantReport, VerifyOptions};
+use clevrtex_dataset::verify::{self, Comparison, VariantReport, VerifyOptions};
 
 use crate::exit::{self, CmdResult};
-use crate::verify_print::{print_comparison, print_report};
 
 /// Arguments of `clevrtex verify`.
 #[derive(Debug, clap::Args)]
@@ -37,72 +36,15 @@ pub struct Args {
     jobs: Option<usize>,
 }
 
-/// The suite of `dirs` (`generate --suite`: their `SUITE.json`) checked as a whole: which
-/// of its variants are incomplete or foreign; whether it is whole (`true` without a suite,
-/// or with `--variant`, which checks one variant only).
-fn check_suite(
-    dirs: &[PathBuf],
-    reports: &[VariantReport],
-    one_variant: bool,
-) -> anyhow::Result<bool> {
-    let mut plan: Option<clevrtex_scene::suite::SuitePlan> = None;
-    for d in dirs {
-        let found = clevrtex_dataset::suite::read(d).map_err(anyhow::Error::msg)?;
-        match (&plan, found) {
-            (Some(p), Some(f)) if p != &f => anyhow::bail!(
-                "the folders hold different suites (`{}` and `{}` at scales {} and {})\nhint: verify each suite's folders apart",
-                p.suite, f.suite, p.scale, f.scale
-            ),
-            (None, Some(f)) => plan = Some(f),
-            _ => {}
-        }
-    }
-    let Some(plan) = plan else {
-        return Ok(true);
-    };
-    if one_variant {
-        return Ok(true);
-    }
-    let lines = clevrtex_dataset::suite::check(&plan, reports);
-    if lines.is_empty() {
-        println!(
-            "suite `{}` at scale {}: whole ({} variants, {} images)",
-            plan.suite,
-            plan.scale,
-            plan.variants.len(),
-            plan.images()
-        );
-        return Ok(true);
-    }
-    println!(
-        "suite `{}` at scale {}: incomplete variants ({} of {}):",
-        plan.suite,
-        plan.scale,
-        lines.len(),
-        plan.variants.len()
-    );
-    for l in &lines {
-        println!("  {l}");
-    }
-    println!(
-        "  to repair: rerun `clevrtex generate --suite {} --scale {} --seed {} --out DIR` (complete samples are skipped)",
-        plan.suite, plan.scale, plan.seed
-    );
-    Ok(false)
-}
-
 /// Run `clevrtex verify`.
 pub fn run(args: Args) -> CmdResult {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(args.jobs.unwrap_or(0))
-        .build()
-        .context("cannot start worker threads")?;
+    let threads = args.jobs.unwrap_or(0);
     let started = std::time::Instant::now();
     let opts = VerifyOptions {
         variant: args.variant.clone(),
     };
-    let reports = pool
-        .install(|| verify::verify(&args.dirs, &opts))
+    let reports = verify::with_threads(threads, || verify::verify(&args.dirs, &opts))
+        .map_err(anyhow::Error::msg)?
         .map_err(|e| {
             anyhow::anyhow!("{e}\nhint: pass the `--out` folder of `clevrtex generate`")
         })?;
@@ -122,22 +64,28 @@ pub fn run(args: Args) -> CmdResult {
     }
     let samples: u64 = reports.iter().map(|r| r.ok + r.broken.len() as u64).sum();
     for r in &reports {
-        print_report(r, &args.dirs, args.remove_broken);
+        print!("{}", verify::report_text(r, &args.dirs, args.remove_broken));
     }
-    let suite_whole = check_suite(&args.dirs, &reports, args.variant.is_some())?;
+    // A suite (`SUITE.json`) checked as a whole: none of its variants incomplete or foreign.
+    let (suite_whole, text) =
+        clevrtex_dataset::suite::verify_dirs(&args.dirs, &reports, args.variant.is_some())
+            .map_err(anyhow::Error::msg)?;
+    print!("{text}");
     let secs = started.elapsed().as_secs_f64();
     eprintln!(
         "checked {samples} samples in {secs:.1} s ({:.0} samples/s)",
         samples as f64 / secs.max(1e-9)
     );
     let comparisons = match &args.against {
-        Some(other) => pool
-            .install(|| verify::against(&args.dirs, other, args.variant.as_deref()))
-            .map_err(|e| anyhow::anyhow!("--against: {e}"))?,
+        Some(other) => verify::with_threads(threads, || {
+            verify::against(&args.dirs, other, args.variant.as_deref())
+        })
+        .map_err(anyhow::Error::msg)?
+        .map_err(|e| anyhow::anyhow!("--against: {e}"))?,
         None => Vec::new(),
     };
     for c in &comparisons {
-        print_comparison(c);
+        print!("{}", verify::comparison_text(c));
     }
     if let Some(path) = &args.json {
         let text = if args.against.is_some() {
@@ -156,30 +104,7 @@ pub fn run(args: Args) -> CmdResult {
         for r in &reports {
             let done = verify::remove_broken(r).context("cannot remove a broken sample's file")?;
             removed += done.files;
-            if !done.live.is_empty() {
-                let idx: Vec<u64> = done.live.iter().map(|(i, _)| *i).collect();
-                let mut runs: Vec<&str> = done.live.iter().map(|(_, h)| h.as_str()).collect();
-                runs.dedup();
-                println!(
-                    "{}: left alone sample(s) {}: a live run is writing them ({})\nhint: run `clevrtex verify --remove-broken` again once that run has ended",
-                    r.variant,
-                    index_ranges(&idx),
-                    runs.join("; ")
-                );
-            }
-            if done.live_temps > 0 {
-                println!(
-                    "{}: left alone {} temporary file(s) of runs still writing",
-                    r.variant, done.live_temps
-                );
-            }
-            if !done.kept.is_empty() {
-                println!(
-                    "{}: kept broken sample(s) {}: no run of the manifests covers them, so no known command remakes them\nhint: remove them by hand if they are not wanted, or remake them with `clevrtex generate --start I -n N --out DIR`",
-                    r.variant,
-                    index_ranges(&done.kept)
-                );
-            }
+            print!("{}", verify::removal_text(&r.variant, &done));
         }
         println!("removed {removed} file(s) of broken samples and temporary files");
     }

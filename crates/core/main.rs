@@ -27,7 +27,6 @@ mod run;
 mod run_args;
 mod suite;
 mod user_materials;
-mod verify_print;
 
 /// Make and score texture-rich synthetic benchmarks for unsupervised multi-object
 /// segmentation, in the style of ClevrTex.

@@ -10,14 +10,16 @@ use std::time::Duration;
 use anyhow::bail;
 use clevrtex_dataset::manifest;
 use clevrtex_render::batch;
-use clevrtex_render::pool::{Jobs, PoolEvent};
+use clevrtex_render::pool::PoolEvent;
+use clevrtex_render::scene_jobs::RunJobs;
 
 use crate::exit::{self, CmdResult};
 use crate::interrupt::{self, OnInterrupt};
-use crate::progress::{print_summary, progress_bar, BatchProgress};
+use crate::progress::progress_bar;
 use crate::run_args::{self, RunArgs};
+use clevrtex_render::run_text::{self, BatchProgress};
 
-/// Render `jobs` with the pool as `args` say, failures to `ledger`, with a progress bar (or,
+/// Render the jobs with the pool as `args` say, failures to their ledger, with a progress bar (or,
 /// when stderr is not a terminal, a line per sample and a progress line with rate and ETA every
 /// few images or minute: [`BatchProgress`]) and a summary; with `manifest`, the render crate's
 /// batch run ([`batch::run`]: under the range's lock, the plan written first and the manifest
@@ -26,19 +28,15 @@ use crate::run_args::{self, RunArgs};
 /// manifest and each sample's metadata.
 pub(crate) fn run_jobs(
     args: &RunArgs,
-    jobs: Jobs,
-    ledger: PathBuf,
+    RunJobs { jobs, ledger, used }: RunJobs,
     max_attempts: u32,
     manifest: Option<manifest::Plan>,
-    (mut catalogue, used): (
-        clevrtex_materials::Catalogue,
-        std::collections::BTreeSet<String>,
-    ),
+    mut catalogue: clevrtex_materials::Catalogue,
 ) -> CmdResult {
     // The numbers given as flags first: a refusal never waits on Blender.
     checked_numbers(args)?;
     let blender = clevrtex_render::blender::locate(args.blender.as_deref())?;
-    check_output_writable(&args.out)?;
+    clevrtex_dataset::atomic::check_writable(&args.out).map_err(anyhow::Error::msg)?;
     let interrupt = interrupt::flag(OnInterrupt::Stop {
         message: "stopping the workers; finished samples are kept",
     });
@@ -67,10 +65,6 @@ pub(crate) fn run_jobs(
     let on_event = |ev: &PoolEvent| {
         match ev {
             PoolEvent::Skipped { .. } => bar.inc(1),
-            PoolEvent::WorkerStarted { .. } => {}
-            PoolEvent::WorkerRestarted { error } => {
-                say(format!("warning: restarting a Blender worker: {error}"));
-            }
             PoolEvent::Rejected { .. } => {
                 rejects.fetch_add(1, Ordering::Relaxed);
             }
@@ -85,51 +79,22 @@ pub(crate) fn run_jobs(
                         sample.metadata.display()
                     );
                 }
-                // Only fixed scene files (`render`) can get here with a hidden object:
-                // `generate` resamples such layouts.
-                let hidden: Vec<String> = (1..)
-                    .zip(&sample.objects)
-                    .filter(|(_, o)| o.pixels == 0)
-                    .map(|(i, _)| i.to_string())
-                    .collect();
-                if !hidden.is_empty() {
-                    say(format!(
-                        "warning: object(s) {} of `{}` are hidden (not in the mask)\nhint: `clevrtex render` cannot resample fixed scene files; use `clevrtex generate` for layouts with every object visible",
-                        hidden.join(", "),
-                        sample.metadata.display()
-                    ));
-                }
             }
-            PoolEvent::WorkerRecycled { rss, images, why } => {
-                let mem = rss
-                    .map(|r| format!(", {} MiB resident", r >> 20))
-                    .unwrap_or_default();
-                say(format!(
-                    "note: a Blender worker made {images} image(s){mem} and was recycled ({}); the next image starts a fresh one",
-                    if *why == "memory" {
-                        "past `--max-worker-memory`"
-                    } else {
-                        "`--recycle-after`"
-                    }
-                ));
-            }
-            PoolEvent::Failed { index, error } => {
+            PoolEvent::Failed { .. } => {
                 failures.fetch_add(1, Ordering::Relaxed);
                 bar.inc(1);
-                say(format!(
-                    "error: image {index} failed (recorded in `{}`): {error}",
-                    ledger.display()
-                ));
             }
+            _ => {}
+        }
+        if let Some(line) = run_text::event_line(ev, &ledger) {
+            say(line);
         }
         let d = done.load(Ordering::Relaxed);
         if plain {
-            batch.event(
-                bar.position(),
-                d,
-                failures.load(Ordering::Relaxed),
-                started.elapsed(),
-            );
+            let f = failures.load(Ordering::Relaxed);
+            if let Some(line) = batch.event(bar.position(), d, f, started.elapsed()) {
+                eprintln!("{line}");
+            }
         }
         let per_hour = d as f64 / started.elapsed().as_secs_f64().max(1e-9) * 3600.0;
         bar.set_message(format!(
@@ -151,12 +116,13 @@ pub(crate) fn run_jobs(
             s.spawn(|| {
                 while !finished.load(Ordering::Relaxed) {
                     std::thread::sleep(Duration::from_millis(250));
-                    batch.tick(
-                        bar.position(),
+                    let (d, f) = (
                         done.load(Ordering::Relaxed),
                         failures.load(Ordering::Relaxed),
-                        started.elapsed(),
                     );
+                    if let Some(line) = batch.tick(bar.position(), d, f, started.elapsed()) {
+                        eprintln!("{line}");
+                    }
                 }
             });
         }
@@ -218,7 +184,8 @@ fn checked_numbers(args: &RunArgs) -> anyhow::Result<(Option<Duration>, Duration
     }
     if let Some(w) = args.workers {
         let w = u32::try_from(w).unwrap_or(u32::MAX);
-        run_args::within("--workers", w, run_args::MAX_THREADS as u32)?;
+        clevrtex_scene::config::within("--workers", w, run_args::MAX_THREADS as u32)
+            .map_err(anyhow::Error::msg)?;
     }
     let startup_timeout = run_args::seconds("--startup-timeout", args.startup_timeout)?;
     Ok((timeout, startup_timeout))
@@ -250,13 +217,8 @@ pub(crate) fn pool_options(
         overwrite: args.overwrite,
         fail_fast: args.fail_fast,
         out: args.out.clone(),
-        max_worker_memory: match args.max_worker_memory {
-            Some(g) if !(g > 0.0 && g <= 1e6) => bail!(
-                "`--max-worker-memory {g}` is out of range\nhint: pass the GiB a worker may hold, more than 0 (e.g. 8)"
-            ),
-            Some(g) => Some((g * (1u64 << 30) as f64) as u64),
-            None => None,
-        },
+        max_worker_memory: batch::memory_bound(args.max_worker_memory)
+            .map_err(anyhow::Error::msg)?,
         recycle_after: args.recycle_after,
     };
     let planned = batch::plan(&settings, ledger, max_attempts, interrupt, materials)
@@ -267,24 +229,11 @@ pub(crate) fn pool_options(
     Ok(planned)
 }
 
-/// Make sure the output root exists and a file can be created in it, before any rendering.
-fn check_output_writable(out: &Path) -> anyhow::Result<()> {
-    let hint = "hint: pass a writable folder with `--out`";
-    std::fs::create_dir_all(out).map_err(|e| {
-        anyhow::anyhow!(
-            "cannot create output folder `{}`: {e}\n{hint}",
-            out.display()
-        )
-    })?;
-    // A temporary of the one atomic writer, dropped unrenamed: nothing is left, and nothing
-    // planted there is written through or removed.
-    clevrtex_dataset::atomic::AtomicFile::create(&out.join(".clevrtex-write-test")).map_err(
-        |e| {
-            anyhow::anyhow!(
-                "cannot write in output folder `{}`: {e}\n{hint}",
-                out.display()
-            )
-        },
-    )?;
-    Ok(())
+/// The run's summary on stdout, its ledger's warning on stderr.
+fn print_summary(report: &clevrtex_render::RunReport, out: &Path, ledger: &Path) {
+    let (text, warning) = run_text::summary(report, out, ledger);
+    print!("{text}");
+    if let Some(w) = warning {
+        eprintln!("{w}");
+    }
 }

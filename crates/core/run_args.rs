@@ -1,6 +1,6 @@
 //! What the commands that render share on their command line: the run options of `generate`
-//! and `render` ([`RunArgs`]), `--passes` ([`parse_passes`]), `--device` ([`device_choice`])
-//! and the checks of numbers given as flags ([`seconds`], [`positive`], [`within`]); and the
+//! and `render` ([`RunArgs`]), `--device` ([`device_choice`]) and `--timeout`'s check
+//! ([`seconds`]; the other numbers' are `clevrtex_scene::config::within`); and the
 //! dataset folder that `preview` and `report` read and the file they write ([`DatasetDir`]).
 
 use std::path::PathBuf;
@@ -8,7 +8,6 @@ use std::time::Duration;
 
 use anyhow::bail;
 use clevrtex_render::device::DeviceChoice;
-use clevrtex_scene::Pass;
 
 /// Options shared by `generate` and `render`: how to run Blender and write the output.
 #[derive(Debug, Clone, clap::Args)]
@@ -86,9 +85,6 @@ pub(crate) const MAX_THREADS: u64 = 1024;
 pub(crate) const MAX_SECONDS: f64 = 7.0 * 24.0 * 3600.0;
 /// Most restarts of a worker per scene.
 pub(crate) const MAX_RETRIES: u64 = 100;
-/// Most layout attempts per image.
-pub(crate) const MAX_ATTEMPTS: u64 = 1000;
-
 /// `--jobs`, `--workers`, `--threads`: 1 to [`MAX_THREADS`].
 pub(crate) fn threads_range<T>() -> clap::builder::RangedU64ValueParser<T>
 where
@@ -104,28 +100,6 @@ pub(crate) fn index_range() -> clap::builder::RangedU64ValueParser<u64> {
     clap::builder::RangedU64ValueParser::<u64>::new().range(0..=clevrtex_scene::bounds::INDEX_END)
 }
 
-/// `--start + -n` (`end`) within the dataset cap: every index below
-/// [`clevrtex_scene::bounds::INDEX_END`], so `verify` never refuses what a run made.
-pub(crate) fn check_index_end(start: u64, end: u64) -> anyhow::Result<()> {
-    let cap = clevrtex_scene::bounds::INDEX_END;
-    if end > cap {
-        bail!(
-            "`--start {start}` plus `-n {}` reaches index {}, past the dataset cap of {cap} images\nhint: keep `--start + -n` at most {cap}",
-            end - start,
-            end - 1
-        );
-    }
-    Ok(())
-}
-
-/// `v`, which must not be 0 (given as `flag`).
-pub(crate) fn positive(flag: &str, v: u32) -> anyhow::Result<u32> {
-    if v == 0 {
-        bail!("`{flag} 0` is not allowed\nhint: pass a positive number");
-    }
-    Ok(v)
-}
-
 /// A number of seconds given as `flag`: more than 0 and at most [`MAX_SECONDS`] (a week;
 /// `1e300` overflowed a duration and panicked).
 pub(crate) fn seconds(flag: &str, v: f64) -> anyhow::Result<Duration> {
@@ -139,37 +113,6 @@ pub(crate) fn seconds(flag: &str, v: f64) -> anyhow::Result<Duration> {
         bail!("`{flag} {shown}` must be a positive number of seconds, at most {MAX_SECONDS} (one week)\nhint: e.g. `{flag} 120`");
     }
     Ok(Duration::from_secs_f64(v))
-}
-
-/// `v`, which must be 1 to `max` (given as `flag`).
-pub(crate) fn within(flag: &str, v: u32, max: u32) -> anyhow::Result<u32> {
-    if v > max {
-        bail!("`{flag} {v}` is more than the {max} allowed\nhint: pass 1 to {max}");
-    }
-    positive(flag, v)
-}
-
-/// `--passes`: the passes named, each once, in the pass table's order.
-pub(crate) fn parse_passes(list: &[String]) -> anyhow::Result<Vec<Pass>> {
-    let mut out = Vec::new();
-    for name in list.iter().map(|s| s.trim()).filter(|s| !s.is_empty()) {
-        match Pass::from_name(name) {
-            Some(p) if !out.contains(&p) => out.push(p),
-            Some(_) => {}
-            None => bail!(
-                "unknown pass `{name}`\nhint: use a comma-separated list of {}",
-                Pass::ALL.map(Pass::name).join(", ")
-            ),
-        }
-    }
-    if out.is_empty() {
-        bail!(
-            "`--passes` is empty\nhint: name at least one of {}",
-            Pass::ALL.map(Pass::name).join(", ")
-        );
-    }
-    out.sort();
-    Ok(out)
 }
 
 /// `--device`: `auto`, `cpu`, or a GPU kind.
@@ -193,4 +136,23 @@ pub struct DatasetDir {
     /// The file to write: the sheet (PNG) for `preview`, the page (HTML) for `report`.
     #[arg(long, value_name = "FILE")]
     pub(crate) out: PathBuf,
+}
+
+/// The config of `sample` and `generate`: the file `--config` (read, then checked against
+/// `cat`; `hint` ends the message when it cannot be read), else the built-in `variant`.
+pub(crate) fn read_config(
+    config: Option<&std::path::Path>,
+    variant: &str,
+    cat: &clevrtex_materials::Catalogue,
+    hint: &str,
+) -> anyhow::Result<clevrtex_scene::Config> {
+    let Some(path) = config else {
+        return Ok(clevrtex_scene::Config::builtin_in(variant, cat)?);
+    };
+    // The cause goes before the hint, which is the message's last line.
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        anyhow::anyhow!("cannot read config `{}`: {e}\nhint: {hint}", path.display())
+    })?;
+    let name = path.display().to_string();
+    Ok(clevrtex_scene::Config::from_json_str_in(&text, &name, cat)?)
 }

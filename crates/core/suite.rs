@@ -36,16 +36,19 @@ pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
     let sum = Cell::new((0.0, 0.0));
     let mut code = exit::OK;
     for v in &plan.variants {
-        let part = Part {
-            variant: &v.variant,
+        let images = clevrtex_render::generate::Part {
             start: 0,
             count: v.total,
             total: Some(v.total),
             shard: plan.variant_shard(v, shard),
             seed: v.seed,
+        };
+        let part = Part {
+            variant: &v.variant,
+            images,
             suite: Some(&plan.suite),
         };
-        if part.shard.count(0, v.total) == 0 {
+        if images.shard.count(0, v.total) == 0 {
             continue;
         }
         let c = run_part(args, &part, args.estimate.then_some(&sum))?;
@@ -64,7 +67,7 @@ pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
                 .iter()
                 .map(|v| plan.variant_shard(v, shard).count(0, v.total))
                 .sum::<u64>(),
-            crate::progress::format_duration(wall)
+            clevrtex_render::run_text::format_duration(wall)
         );
     } else {
         println!(

@@ -288,6 +288,26 @@ pub fn write(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     f.commit()
 }
 
+/// Make sure the output root `out` exists and a file can be created in it, before any
+/// rendering: a temporary of the one atomic writer, dropped unrenamed (nothing is left, and
+/// nothing planted there is written through or removed).
+pub fn check_writable(out: &Path) -> Result<(), String> {
+    let hint = "hint: pass a writable folder with `--out`";
+    std::fs::create_dir_all(out).map_err(|e| {
+        format!(
+            "cannot create output folder `{}`: {e}\n{hint}",
+            out.display()
+        )
+    })?;
+    AtomicFile::create(&out.join(".clevrtex-write-test")).map_err(|e| {
+        format!(
+            "cannot write in output folder `{}`: {e}\n{hint}",
+            out.display()
+        )
+    })?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -305,3 +305,19 @@ pub fn open_source(
     }
     Ok((ds, variants, skipped))
 }
+
+/// The warning of an export that skipped `skipped` (each said to be `why`), for stderr; `None`
+/// when nothing was skipped (the export is then whole).
+pub fn skipped_text(skipped: &[impl std::fmt::Display], why: &str) -> Option<String> {
+    if skipped.is_empty() {
+        return None;
+    }
+    let mut text = format!(
+        "warning: {} file(s) or folder(s) {why}; their samples are not exported:\n",
+        skipped.len()
+    );
+    for s in skipped {
+        text += &format!("  {s}\n");
+    }
+    Some(text + "hint: check the dataset with `clevrtex verify`")
+}

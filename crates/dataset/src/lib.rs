@@ -45,7 +45,9 @@ pub mod png;
 pub mod resize;
 #[cfg(feature = "tools")]
 pub mod run_lock;
+pub mod sample_run;
 pub mod scene_files;
+pub mod scene_read;
 #[cfg(feature = "tools")]
 pub mod suite;
 #[cfg(feature = "tools")]

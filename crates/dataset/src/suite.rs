@@ -4,7 +4,7 @@
 //! the folder as a whole ([`check`]). The file is untrusted when read: capped, no link
 //! followed out of the folder, its values checked against the suite table.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use clevrtex_scene::suite::SuitePlan;
 use serde::{Deserialize, Serialize};
@@ -168,4 +168,51 @@ pub fn check(plan: &SuitePlan, reports: &[VariantReport]) -> Vec<String> {
         }
     }
     lines
+}
+
+/// `verify`'s check of the suite in `dirs` (their `SUITE.json`, which must agree) against its
+/// `reports`: whether the suite is whole (`true` without a suite, or with `one_variant`,
+/// `--variant`) and the lines to print.
+pub fn verify_dirs(
+    dirs: &[PathBuf],
+    reports: &[VariantReport],
+    one_variant: bool,
+) -> std::result::Result<(bool, String), String> {
+    let mut plan: Option<SuitePlan> = None;
+    for d in dirs {
+        match (&plan, read(d)?) {
+            (Some(p), Some(f)) if p != &f => return Err(format!(
+                "the folders hold different suites (`{}` and `{}` at scales {} and {})\nhint: verify each suite's folders apart",
+                p.suite, f.suite, p.scale, f.scale
+            )),
+            (None, Some(f)) => plan = Some(f),
+            _ => {}
+        }
+    }
+    let Some(plan) = plan.filter(|_| !one_variant) else {
+        return Ok((true, String::new()));
+    };
+    let lines = check(&plan, reports);
+    let (suite, scale) = (&plan.suite, plan.scale);
+    if lines.is_empty() {
+        let text = format!(
+            "suite `{suite}` at scale {scale}: whole ({} variants, {} images)\n",
+            plan.variants.len(),
+            plan.images()
+        );
+        return Ok((true, text));
+    }
+    let mut text = format!(
+        "suite `{suite}` at scale {scale}: incomplete variants ({} of {}):\n",
+        lines.len(),
+        plan.variants.len()
+    );
+    for l in &lines {
+        text += &format!("  {l}\n");
+    }
+    text += &format!(
+        "  to repair: rerun `clevrtex generate --suite {suite} --scale {scale} --seed {} --out DIR` (complete samples are skipped)\n",
+        plan.seed
+    );
+    Ok((false, text))
 }

@@ -202,3 +202,25 @@ pub fn to_table(r: &Report) -> String {
 fn fmt_val(m: Metric, v: f64) -> String {
     format!("{v:.*}", m.spec().decimals)
 }
+
+/// The warnings of a run for stderr: reconstructions with undefined MSE or out-of-range
+/// values, predictions missing.
+pub fn warnings(r: &Report) -> Vec<String> {
+    let n = r.images.len();
+    let mut out = Vec::new();
+    let undefined = r.recon_undefined();
+    if undefined > 0 {
+        out.push(format!("warning: {undefined} of {n} reconstructions hold NaN or infinite values (or errors too large to sum): their MSE is undefined and left out of the mean (`recon_undefined` in the JSON)"));
+    }
+    let out_of_range = r.recon_out_of_range();
+    if out_of_range > 0 {
+        out.push(format!("warning: {out_of_range} of {n} reconstructions hold values outside [0, 1]; they are scored as given, not clipped (`recon_out_of_range` in the JSON)"));
+    }
+    let missing = r.missing();
+    if missing > 0 {
+        out.push(format!(
+            "warning: {missing} of {n} predictions were missing and scored as all-background"
+        ));
+    }
+    out
+}

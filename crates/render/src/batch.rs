@@ -60,6 +60,17 @@ pub struct Planned {
     pub notes: Vec<String>,
 }
 
+/// `--max-worker-memory GIB` in bytes: more than 0 and at most a million GiB.
+pub fn memory_bound(gib: Option<f64>) -> std::result::Result<Option<u64>, String> {
+    match gib {
+        Some(g) if !(g > 0.0 && g <= 1e6) => Err(format!(
+            "`--max-worker-memory {g}` is out of range\nhint: pass the GiB a worker may hold, more than 0 (e.g. 8)"
+        )),
+        Some(g) => Ok(Some((g * (1u64 << 30) as f64) as u64)),
+        None => Ok(None),
+    }
+}
+
 /// Plan the pool for `settings`: the user materials of `catalogue` that `used` names checked
 /// (and `catalogue` pointed at their copies), the devices planned (a first worker asked for
 /// its GPUs where `--device` needs them), the workers and threads; failures to `ledger`;

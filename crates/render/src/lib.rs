@@ -46,11 +46,13 @@
 //   3. output, metadata, passes, ledger: a sample and the failure ledger written to disk
 //   4. worker (process, protocol, report): one Blender process
 //   5. session, gpu_probe, job, doctor: a worker restarted, asked for its GPUs, rendering one
-//      image, asked what it has (`doctor`)
-//   6. pool, command_session: the run; one restartable worker for the commands outside it
+//      image, asked what it has (`doctor`; doctor_text: what `doctor` prints of it)
+//   6. pool, command_session: the run; one restartable worker for the commands outside it;
+//      run_text: what a run prints, as text
 //   7. user_materials (copies): user materials checked and copied before a run renders
 //   8. material_renders: `clevrtex materials`' renders of single materials; planner: the
-//      model of `generate --estimate` and its calibration run
+//      model of `generate --estimate` and its calibration run, planner_text its checks and text;
+//      scene_jobs, generate: the jobs of `render` and `generate`
 //   9. batch: a run of `generate` or `render` (its pool planned and run, manifest, card)
 
 pub mod batch;
@@ -59,8 +61,10 @@ pub mod bridge;
 pub mod command_session;
 pub mod device;
 pub mod doctor;
+pub mod doctor_text;
 mod error;
 pub mod exr_io;
+pub mod generate;
 pub mod gpu_probe;
 pub mod group;
 mod job;
@@ -70,8 +74,11 @@ pub mod metadata;
 pub mod output;
 mod passes;
 pub mod planner;
+pub mod planner_text;
 pub mod pool;
 pub mod post;
+pub mod run_text;
+pub mod scene_jobs;
 mod session;
 pub mod tmp;
 pub mod user_materials;

@@ -77,8 +77,7 @@ impl Bound {
     }
 }
 
-// The bounds below are the table's rows, one `pub const` each (so each has its doc and is named
-// where it is used): their likeness is the table's, not code written twice.
+/// A closed range `[min, max]` of `what`, with its reason.
 const fn closed(what: &'static str, min: f64, max: f64, reason: &'static str) -> Bound {
     Bound {
         what,
@@ -95,250 +94,84 @@ const fn closed(what: &'static str, min: f64, max: f64, reason: &'static str) ->
 /// `sample` or `generate` never makes an index `verify` refuses.
 pub const INDEX_END: u64 = 100_000_000;
 
-/// Image index in a scene file (and `--start`, `--start + -n`, `--total` of `sample` and
-/// `generate`).
-pub const INDEX: Bound = closed(
-    "image index",
-    0.0,
-    (INDEX_END - 1) as f64,
-    "a dataset holds at most 100000000 images; `verify` refuses larger indices",
-);
-/// Camera focal length, mm.
-pub const FOCAL_LENGTH_MM: Bound = closed(
-    "camera focal length, mm",
-    1.0,
-    5000.0,
-    "Blender's camera lens is at least 1 mm (0 or less would write zero or null intrinsics); 5000 mm on the 32 mm sensor is a 0.4 degree view that shows nothing of a scene",
-);
-/// Camera sensor width, mm.
-pub const SENSOR_WIDTH_MM: Bound = closed(
-    "camera sensor width, mm",
-    1.0,
-    1000.0,
-    "Blender's sensor is at least 1 mm wide; the reference uses 32 mm",
-);
-/// Any location or look-at coordinate of a config's camera and lights, and the backdrop's
-/// profile and extent, m.
-pub const POSITION: Bound = closed(
-    "location, look-at and backdrop coordinate, m",
-    -1000.0,
-    1000.0,
-    "the reference scene fits in 20 m; with its jitter it stays far inside the scene file's magnitude bound",
-);
-/// Camera clip distances, m.
-pub const CLIP_DISTANCE: Bound = closed(
-    "camera clip_start and clip_end, m",
-    1e-6,
-    1e6,
-    "Blender's nearest clip is 1e-6 m; the scene file's magnitude bound is 1e6; the reference uses 0.1 and 100",
-);
-/// Rotation of the backdrop about world z, rad.
-pub const ROTATION_RAD: Bound = closed(
-    "backdrop rotation about z, rad",
-    -std::f64::consts::TAU,
-    std::f64::consts::TAU,
-    "one turn either way says every rotation; the reference uses 2.698",
-);
-/// Jitter of a camera or light location, m (each coordinate moves by Uniform(-j, j)).
-pub const JITTER: Bound = closed(
-    "camera and light jitter, m",
-    0.0,
-    10.0,
-    "a negative jitter is no range; the reference uses 0.5 and 1 m",
-);
-/// Area-light power, W.
-pub const LIGHT_ENERGY_W: Bound = closed(
-    "area-light energy, W",
-    0.0,
-    1e6,
-    "negative power subtracts light (Cycles renders negative radiance); the reference's key light is 500 W",
-);
-/// Area-light side, m.
-pub const LIGHT_SIZE_M: Bound = closed(
-    "area-light size, m",
-    0.0,
-    100.0,
-    "a negative size is no square; the reference uses 0.2 to 1 m",
-);
-/// Components of a linear RGB colour (lights, objects).
-pub const COLOR: Bound = closed(
-    "linear RGB colour component",
-    0.0,
-    1.0,
-    "a negative component subtracts light; CLEVR's colours and the reference lights lie in 0 to 1",
-);
-/// Sun strength, W/m^2.
-pub const SUN_STRENGTH: Bound = closed(
-    "sun strength, W/m^2",
-    0.0,
-    1e4,
-    "negative strength subtracts light; the reference uses 0.85",
-);
-/// Sun angular diameter, rad.
-pub const SUN_ANGLE: Bound = closed(
-    "sun angular diameter, rad",
-    0.0,
-    std::f64::consts::PI,
-    "Blender's sun angle is 0 to 180 degrees",
-);
-/// Points of the backdrop's profile.
-pub const PROFILE_POINTS: Bound = closed(
-    "backdrop profile points",
-    2.0,
-    1024.0,
-    "a profile needs two points; a profile of 60000 points crashed Blender (segfault), and the reference has 9",
-);
-/// Extent of the backdrop along its profile's x and along its y, m.
-pub const BACKDROP_EXTENT: Bound = closed(
-    "backdrop extent along x and along y, m",
-    0.0,
-    200.0,
-    "the bridge meshes the backdrop every 0.2 m along x and 1 m along y, so 200 m by 200 m is at most about 400000 vertices; the reference is 26 m by 38 m",
-);
-/// Scale of an object size, m (the object's radius).
-pub const OBJECT_SCALE: Bound = Bound {
-    what: "object scale, m",
-    min: 0.0,
-    min_exclusive: true,
-    max: 10.0,
-    reason: "a scale of 0 or less has no surface; the reference uses 0.4 to 0.9 and its camera sees a 6 m area",
-};
-/// Displacement strength of a material instance, m.
-pub const DISPLACEMENT: Bound = closed(
-    "material displacement, m",
-    0.0,
-    10.0,
-    "negative displacement turns the surface inside out; the reference uses 0.35",
-);
-/// Texture scale multiplier of a material instance.
-pub const TEXTURE_SCALE: Bound = Bound {
-    what: "material texture scale",
-    min: 0.0,
-    min_exclusive: true,
-    max: 1000.0,
-    reason: "0 collapses a texture to one colour; the reference uses 2",
-};
-/// Per-instance random value of a material.
-pub const MATERIAL_RANDOM: Bound = Bound {
-    what: "material random value",
-    min: 0.0,
-    min_exclusive: false,
-    max: 1.0,
-    reason: "the sampler draws it from [0, 1) and recipes read it as such",
-};
-/// Each end of the placement area, m.
-pub const PLACEMENT_AREA: Bound = closed(
-    "placement area end, m",
-    -500.0,
-    500.0,
-    "every object must lie within 1000 m of the origin, as every scene file is checked",
-);
-/// Minimum gap and margin of the placement rules, m.
-pub const PLACEMENT_GAP: Bound = closed(
-    "placement min_dist and margin, m",
-    0.0,
-    100.0,
-    "a negative gap is no rule; the reference uses 0.25 and 0.4",
-);
-/// Position draws per object, and layout restarts.
-pub const PLACEMENT_TRIES: Bound = closed(
-    "placement tries_per_object and max_restarts",
-    1.0,
-    100000.0,
-    "they bound the draws of one image; the reference uses 50 and 1000, `outd` 20000 restarts",
-);
-/// Cycles bounces of each kind.
-pub const BOUNCES: Bound = closed(
-    "render bounces (each kind)",
-    0.0,
-    1024.0,
-    "Blender's range for every bounce count",
-);
-/// Pixel filter width, px.
-pub const FILTER_WIDTH: Bound = closed(
-    "render filter width, px",
-    0.01,
-    10.0,
-    "Blender's range; the reference uses 1.5",
-);
-/// Filter glossy.
-pub const BLUR_GLOSSY: Bound = closed(
-    "render blur_glossy",
-    0.0,
-    10.0,
-    "Blender's range; the reference uses 2",
-);
-/// Indirect clamp.
-pub const CLAMP_INDIRECT: Bound = closed(
-    "render clamp_indirect",
-    0.0,
-    1e8,
-    "Blender's range (0 = off)",
-);
-/// Adaptive-sampling noise threshold.
-pub const ADAPTIVE_THRESHOLD: Bound =
-    closed("render adaptive_threshold", 0.0, 1.0, "Blender's range");
-/// View exposure.
-pub const EXPOSURE: Bound = closed(
-    "render exposure",
-    -32.0,
-    32.0,
-    "Blender's range; the reference uses 0",
-);
-/// View gamma.
-pub const GAMMA: Bound = closed(
-    "render gamma",
-    0.0,
-    5.0,
-    "Blender's range; the reference uses 1",
-);
-
-/// Every bound, for the docs table and its test.
-pub const TABLE: [&Bound; 29] = [
-    &INDEX,
-    &FOCAL_LENGTH_MM,
-    &SENSOR_WIDTH_MM,
-    &POSITION,
-    &CLIP_DISTANCE,
-    &ROTATION_RAD,
-    &JITTER,
-    &LIGHT_ENERGY_W,
-    &LIGHT_SIZE_M,
-    &COLOR,
-    &SUN_STRENGTH,
-    &SUN_ANGLE,
-    &PROFILE_POINTS,
-    &BACKDROP_EXTENT,
-    &OBJECT_SCALE,
-    &DISPLACEMENT,
-    &TEXTURE_SCALE,
-    &MATERIAL_RANDOM,
-    &PLACEMENT_AREA,
-    &PLACEMENT_GAP,
-    &PLACEMENT_TRIES,
-    &BOUNCES,
-    &FILTER_WIDTH,
-    &BLUR_GLOSSY,
-    &CLAMP_INDIRECT,
-    &ADAPTIVE_THRESHOLD,
-    &EXPOSURE,
-    &GAMMA,
-    &IMAGE_SIDE,
-];
-
 /// Largest image side accepted anywhere (flags, configs, scene files, and every reader of a
 /// dataset, which checks PNG and EXR headers against it): 4096 px. At most 4096x4096 (16.8 M
 /// pixels; 4K frames fit) so that a hostile file under 1 MB that declares the largest size
 /// decodes in well under 2 GB in every reader (8192x8192 took `materials measure` to 2.8 GB).
 pub const MAX_IMAGE_SIDE: u32 = 4096;
 
-/// Image width and height, px ([`MAX_IMAGE_SIDE`], checked as integers).
-pub const IMAGE_SIDE: Bound = closed(
-    "render width and height, px",
-    1.0,
-    MAX_IMAGE_SIDE as f64,
-    "a hostile file declaring the largest size must decode in well under 2 GB in every reader",
-);
+// The table's rows, each declared once: a `pub const` (its doc, its name where it is used)
+// and a row of [`TABLE`] (the docs table's order); one line a bound: what, range, reason.
+macro_rules! table {
+    ($($(#[$doc:meta])* $name:ident = $bound:expr;)*) => {
+        $($(#[$doc])* pub const $name: Bound = $bound;)*
+        /// Every bound, for the docs table and its test.
+        pub const TABLE: [&Bound; [$(stringify!($name)),*].len()] = [$(&$name),*];
+    };
+}
+
+table! {
+    /// Image index in a scene file (and `--start`, `--start + -n`, `--total` of `sample` and
+    /// `generate`).
+    INDEX = closed("image index", 0.0, (INDEX_END - 1) as f64, "a dataset holds at most 100000000 images; `verify` refuses larger indices");
+    /// Camera focal length, mm.
+    FOCAL_LENGTH_MM = closed("camera focal length, mm", 1.0, 5000.0, "Blender's camera lens is at least 1 mm (0 or less would write zero or null intrinsics); 5000 mm on the 32 mm sensor is a 0.4 degree view that shows nothing of a scene");
+    /// Camera sensor width, mm.
+    SENSOR_WIDTH_MM = closed("camera sensor width, mm", 1.0, 1000.0, "Blender's sensor is at least 1 mm wide; the reference uses 32 mm");
+    /// Any location or look-at coordinate of a config's camera and lights, and the backdrop's
+    /// profile and extent, m.
+    POSITION = closed("location, look-at and backdrop coordinate, m", -1000.0, 1000.0, "the reference scene fits in 20 m; with its jitter it stays far inside the scene file's magnitude bound");
+    /// Camera clip distances, m.
+    CLIP_DISTANCE = closed("camera clip_start and clip_end, m", 1e-6, 1e6, "Blender's nearest clip is 1e-6 m; the scene file's magnitude bound is 1e6; the reference uses 0.1 and 100");
+    /// Rotation of the backdrop about world z, rad.
+    ROTATION_RAD = closed("backdrop rotation about z, rad", -std::f64::consts::TAU, std::f64::consts::TAU, "one turn either way says every rotation; the reference uses 2.698");
+    /// Jitter of a camera or light location, m (each coordinate moves by Uniform(-j, j)).
+    JITTER = closed("camera and light jitter, m", 0.0, 10.0, "a negative jitter is no range; the reference uses 0.5 and 1 m");
+    /// Area-light power, W.
+    LIGHT_ENERGY_W = closed("area-light energy, W", 0.0, 1e6, "negative power subtracts light (Cycles renders negative radiance); the reference's key light is 500 W");
+    /// Area-light side, m.
+    LIGHT_SIZE_M = closed("area-light size, m", 0.0, 100.0, "a negative size is no square; the reference uses 0.2 to 1 m");
+    /// Components of a linear RGB colour (lights, objects).
+    COLOR = closed("linear RGB colour component", 0.0, 1.0, "a negative component subtracts light; CLEVR's colours and the reference lights lie in 0 to 1");
+    /// Sun strength, W/m^2.
+    SUN_STRENGTH = closed("sun strength, W/m^2", 0.0, 1e4, "negative strength subtracts light; the reference uses 0.85");
+    /// Sun angular diameter, rad.
+    SUN_ANGLE = closed("sun angular diameter, rad", 0.0, std::f64::consts::PI, "Blender's sun angle is 0 to 180 degrees");
+    /// Points of the backdrop's profile.
+    PROFILE_POINTS = closed("backdrop profile points", 2.0, 1024.0, "a profile needs two points; a profile of 60000 points crashed Blender (segfault), and the reference has 9");
+    /// Extent of the backdrop along its profile's x and along its y, m.
+    BACKDROP_EXTENT = closed("backdrop extent along x and along y, m", 0.0, 200.0, "the bridge meshes the backdrop every 0.2 m along x and 1 m along y, so 200 m by 200 m is at most about 400000 vertices; the reference is 26 m by 38 m");
+    /// Scale of an object size, m (the object's radius).
+    OBJECT_SCALE = Bound { what: "object scale, m", min: 0.0, min_exclusive: true, max: 10.0, reason: "a scale of 0 or less has no surface; the reference uses 0.4 to 0.9 and its camera sees a 6 m area" };
+    /// Displacement strength of a material instance, m.
+    DISPLACEMENT = closed("material displacement, m", 0.0, 10.0, "negative displacement turns the surface inside out; the reference uses 0.35");
+    /// Texture scale multiplier of a material instance.
+    TEXTURE_SCALE = Bound { what: "material texture scale", min: 0.0, min_exclusive: true, max: 1000.0, reason: "0 collapses a texture to one colour; the reference uses 2" };
+    /// Per-instance random value of a material.
+    MATERIAL_RANDOM = Bound { what: "material random value", min: 0.0, min_exclusive: false, max: 1.0, reason: "the sampler draws it from [0, 1) and recipes read it as such" };
+    /// Each end of the placement area, m.
+    PLACEMENT_AREA = closed("placement area end, m", -500.0, 500.0, "every object must lie within 1000 m of the origin, as every scene file is checked");
+    /// Minimum gap and margin of the placement rules, m.
+    PLACEMENT_GAP = closed("placement min_dist and margin, m", 0.0, 100.0, "a negative gap is no rule; the reference uses 0.25 and 0.4");
+    /// Position draws per object, and layout restarts.
+    PLACEMENT_TRIES = closed("placement tries_per_object and max_restarts", 1.0, 100000.0, "they bound the draws of one image; the reference uses 50 and 1000, `outd` 20000 restarts");
+    /// Cycles bounces of each kind.
+    BOUNCES = closed("render bounces (each kind)", 0.0, 1024.0, "Blender's range for every bounce count");
+    /// Pixel filter width, px.
+    FILTER_WIDTH = closed("render filter width, px", 0.01, 10.0, "Blender's range; the reference uses 1.5");
+    /// Filter glossy.
+    BLUR_GLOSSY = closed("render blur_glossy", 0.0, 10.0, "Blender's range; the reference uses 2");
+    /// Indirect clamp.
+    CLAMP_INDIRECT = closed("render clamp_indirect", 0.0, 1e8, "Blender's range (0 = off)");
+    /// Adaptive-sampling noise threshold.
+    ADAPTIVE_THRESHOLD = closed("render adaptive_threshold", 0.0, 1.0, "Blender's range");
+    /// View exposure.
+    EXPOSURE = closed("render exposure", -32.0, 32.0, "Blender's range; the reference uses 0");
+    /// View gamma.
+    GAMMA = closed("render gamma", 0.0, 5.0, "Blender's range; the reference uses 1");
+    /// Image width and height, px ([`MAX_IMAGE_SIDE`], checked as integers).
+    IMAGE_SIDE = closed("render width and height, px", 1.0, MAX_IMAGE_SIDE as f64, "a hostile file declaring the largest size must decode in well under 2 GB in every reader");
+}
 
 /// Each coordinate of `v` within `bound` (`key` names the array).
 pub fn check_all(bound: &Bound, key: &str, v: &[f64]) -> Result<(), OutOfBounds> {

@@ -24,12 +24,14 @@ pub(crate) mod remove;
 pub(crate) mod report;
 #[cfg(test)]
 mod tests;
+pub(crate) mod text;
 
 pub use against::{against, Comparison};
 pub use command::{index_ranges, shell_words};
 pub use mixed::run_differences;
 pub use remove::*;
 pub use report::*;
+pub use text::{comparison_text, removal_text, report_text};
 
 use checks::*;
 use command::*;
@@ -70,6 +72,16 @@ fn variant_dirs(opened: &[Dataset]) -> VariantDirs<'_> {
         }
     }
     (out, skipped)
+}
+
+/// `f` run on a pool of `threads` threads (0: one per core): `verify`'s walks and checks and
+/// `against`'s comparisons are parallel.
+pub fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T, String> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| format!("cannot start worker threads: {e}"))?;
+    Ok(pool.install(f))
 }
 
 /// Verify the dataset under `roots`. Errors only for unreadable roots.

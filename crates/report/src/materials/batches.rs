@@ -14,7 +14,12 @@ use clevrtex_render::{MaterialMode, MaterialSettings, RenderError};
 use super::stats::{self, Features};
 
 /// A material render of `mode` at `size` pixels wide with `samples`, no displacement.
-fn settings(mode: MaterialMode, size: u32, samples: u32, random: f64) -> MaterialSettings {
+pub(crate) fn settings(
+    mode: MaterialMode,
+    size: u32,
+    samples: u32,
+    random: f64,
+) -> MaterialSettings {
     MaterialSettings {
         mode,
         size,
@@ -37,6 +42,40 @@ pub fn check(
     let outcomes = render_all_in_temp(&mut session, opts, &settings, names, dir)?;
     session.close();
     Ok(outcomes)
+}
+
+/// `materials stats` as a whole: the materials `super::select` picks of `set` or `names`
+/// (`rubber` and `metal` left out), their tiles rendered into `out_dir` (default: a temporary
+/// folder, removed afterwards) with the options `opts` gives, and their distinctness.
+pub fn distinctness<'a>(
+    cat: &'a Catalogue,
+    (set, names): (&str, &'a [String]),
+    opts: &dyn Fn() -> anyhow::Result<RenderOptions>,
+    size_samples: (u32, u32),
+    out_dir: Option<&Path>,
+) -> anyhow::Result<(Vec<&'a str>, stats::Distinctness)> {
+    let mut chosen = super::select(cat, set, names)?;
+    chosen.retain(|n| !matches!(*n, "rubber" | "metal"));
+    if chosen.is_empty() {
+        let what = if names.is_empty() {
+            format!("set `{set}`")
+        } else {
+            "`--names`".to_string()
+        };
+        bail!(
+            "no materials to compare in {what} (`rubber` and `metal` are left out)\nhint: pick another `--set` or `--names`"
+        );
+    }
+    let dir = out_dir.map(Path::to_path_buf).unwrap_or_else(|| {
+        std::env::temp_dir().join(format!("clevrtex-stats-{}", std::process::id()))
+    });
+    let feats = tile_features(cat, &chosen, &opts()?, size_samples, &dir)?;
+    // The same material with another `random` is the yardstick (`stats::distinctness`).
+    let d = stats::distinctness(&feats[0], &feats[1]);
+    if out_dir.is_none() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    Ok((chosen, d))
 }
 
 /// `materials stats`: a tile of each of `names` at `size` px and `samples`, rendered twice
@@ -73,6 +112,24 @@ pub fn tile_features(
     }
     session.close();
     Ok(feats)
+}
+
+/// `materials cost` as a whole: the materials `super::select` picks of `set` or `names`,
+/// `plain` first when not among them, and each one's render seconds ([`render_seconds`],
+/// with the options `opts` gives).
+pub fn costs<'a>(
+    cat: &'a Catalogue,
+    (set, names): (&str, &'a [String]),
+    opts: &dyn Fn() -> anyhow::Result<RenderOptions>,
+    size_samples: (u32, u32),
+) -> anyhow::Result<(Vec<&'a str>, Vec<f64>)> {
+    let mut chosen = super::select(cat, set, names)?;
+    if !chosen.contains(&"plain") {
+        chosen.insert(0, "plain");
+    }
+    let dir = std::env::temp_dir().join(format!("clevrtex-cost-{}", std::process::id()));
+    let times = render_seconds(cat, &chosen, &opts()?, size_samples, &dir)?;
+    Ok((chosen, times))
 }
 
 /// `materials cost`: the render seconds of each of `names` at `size` px and `samples`, in the

@@ -4,7 +4,7 @@
 //! render cost table ([`cost`]) and the dataset figures of `materials measure` ([`figures`]
 //! reads a dataset, [`regions`] computes the figures, [`measure_output`] writes them as
 //! tables or JSON), and the Blender batches of `check`, `stats` and `cost` ([`batches`], on
-//! `crates/render/src/material_renders.rs`).
+//! `crates/render/src/material_renders.rs`); what the command prints of them ([`text`]).
 
 use std::path::Path;
 
@@ -18,6 +18,7 @@ pub mod measure_output;
 pub mod regions;
 pub mod sheet;
 pub mod stats;
+pub mod text;
 
 /// The built-in catalogue plus the user directory, if any.
 pub fn load(dir: Option<&Path>) -> anyhow::Result<Catalogue> {

@@ -55,3 +55,58 @@ pub fn stitch(cells: &[PathBuf], cols: usize) -> Result<image::RgbImage, image::
     }
     Ok(out)
 }
+
+/// The contact sheet of `names` made: cells of `size` at `samples` found in `cache` or
+/// rendered into it (with the options `options` gives, asked only when a cell is missing),
+/// stitched `cols` to a row and written to `out`; `say` is told what is cached and rendered.
+pub fn make(
+    cat: &clevrtex_materials::Catalogue,
+    names: &[&str],
+    options: &dyn Fn() -> anyhow::Result<clevrtex_render::material_renders::RenderOptions>,
+    (size, samples, cols): (u32, u32, usize),
+    cache: &std::path::Path,
+    out: &std::path::Path,
+    say: &mut dyn FnMut(String),
+) -> anyhow::Result<()> {
+    use anyhow::{bail, Context};
+    let key = |name: &str| {
+        let m = cat.get(name).expect("selected from the catalogue");
+        cell_file(name, &m.hash, size, samples)
+    };
+    let missing: Vec<&str> = names
+        .iter()
+        .copied()
+        .filter(|n| !cache.join(key(n)).is_file())
+        .collect();
+    say(format!(
+        "sheet: {} materials, {} cached, {} to render",
+        names.len(),
+        names.len() - missing.len(),
+        missing.len()
+    ));
+    if !missing.is_empty() {
+        let mode = clevrtex_render::MaterialMode::Sheet;
+        let settings = super::batches::settings(mode, size, samples, 0.37);
+        let failed = clevrtex_render::material_renders::render_into_cache(
+            cat,
+            &missing,
+            &options()?,
+            &settings,
+            cache,
+            &key,
+        )?;
+        if !failed.is_empty() {
+            bail!(
+                "{} material(s) failed to build:\n{}\nhint: run `clevrtex materials check --names <name>` for the traceback",
+                failed.len(),
+                failed.join("\n")
+            );
+        }
+    }
+    let cells: Vec<PathBuf> = names.iter().map(|n| cache.join(key(n))).collect();
+    let img = stitch(&cells, cols).context("cannot assemble the sheet")?;
+    // The preview sheet's writer: PNG through the one atomic writer.
+    crate::preview::save(&img, out)?;
+    say(format!("wrote {}", out.display()));
+    Ok(())
+}
