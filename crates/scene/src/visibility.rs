@@ -309,60 +309,87 @@ fn pixel_rect(b: &Body, f: f64, w: u32, h: u32) -> (u32, u32, u32, u32) {
     )
 }
 
-/// For each object of `scene`, in order, an upper bound on the pixels it gets in the
-/// object-index pass of the undisplaced visibility render at the scene's size (see the module
-/// documentation). `None` where no sound bound is known: an image under Blender's smallest
-/// size of 4x4 pixels (Blender renders more pixels than asked).
-pub fn visible_pixel_bounds(scene: &SceneFile) -> Option<Vec<u64>> {
-    let (w, h) = (scene.render.width, scene.render.height);
-    if w < 4 || h < 4 {
-        return None;
-    }
-    let f = focal_px(&scene.camera, w, h);
-    // A sample `reach` pixels off the centre along x and y turns the ray's direction by at
-    // most `reach * sqrt 2 / f` per unit depth.
-    let slope = sample_reach(f64::from(scene.render.filter_width)) * std::f64::consts::SQRT_2 / f;
-    let bodies: Vec<Body> = scene
-        .objects
-        .iter()
-        .map(|o| body(scene, o, slope))
-        .collect();
-    let balls: Vec<Vec<([f64; 3], f64)>> = scene
-        .objects
-        .iter()
-        .map(|o| shrunk_balls(scene, o, slope))
-        .collect();
-    let bounds = bodies
-        .iter()
-        .enumerate()
-        .map(|(i, b)| {
-            let covers: Vec<([f64; 3], f64)> = balls
+/// A scene as both bounds see it: the image, the focal length in pixels, and each object's
+/// outer body and shrunk enclosed balls in camera coordinates.
+struct View {
+    w: u32,
+    h: u32,
+    f: f64,
+    bodies: Vec<Body>,
+    balls: Vec<Vec<([f64; 3], f64)>>,
+}
+
+impl View {
+    /// `None` where no sound bound is known: an image under Blender's smallest size of 4x4
+    /// pixels (Blender renders more pixels than asked).
+    fn of(scene: &SceneFile) -> Option<View> {
+        let (w, h) = (scene.render.width, scene.render.height);
+        if w < 4 || h < 4 {
+            return None;
+        }
+        let f = focal_px(&scene.camera, w, h);
+        // A sample `reach` pixels off the centre along x and y turns the ray's direction by at
+        // most `reach * sqrt 2 / f` per unit depth.
+        let slope =
+            sample_reach(f64::from(scene.render.filter_width)) * std::f64::consts::SQRT_2 / f;
+        let objects = &scene.objects;
+        Some(View {
+            w,
+            h,
+            f,
+            bodies: objects.iter().map(|o| body(scene, o, slope)).collect(),
+            balls: objects
                 .iter()
-                .enumerate()
-                .filter(|&(j, _)| j != i)
-                .flat_map(|(_, o)| o.iter().copied())
-                .collect();
-            let (x0, x1, y0, y1) = pixel_rect(b, f, w, h);
-            let mut count = 0u64;
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    let d = [
-                        (f64::from(x) + 0.5 - f64::from(w) / 2.0) / f,
-                        -(f64::from(y) + 0.5 - f64::from(h) / 2.0) / f,
-                        -1.0,
-                    ];
-                    let Some(entry) = outer_entry(d, b) else {
-                        continue;
-                    };
-                    let hidden = covers.iter().any(|&(c, r)| {
-                        ball_hit(d, c, r).is_some_and(|(t0, _)| t0 > 0.0 && t0 < entry)
-                    });
-                    if !hidden {
-                        count += 1;
-                    }
+                .map(|o| shrunk_balls(scene, o, slope))
+                .collect(),
+        })
+    }
+
+    /// The pixels of object `i`'s rectangle whose centre ray `d` passes `keep(d)`.
+    fn count(&self, i: usize, keep: impl Fn([f64; 3]) -> bool) -> u64 {
+        let (w, h, f) = (self.w, self.h, self.f);
+        let (x0, x1, y0, y1) = pixel_rect(&self.bodies[i], f, w, h);
+        let mut count = 0u64;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let d = [
+                    (f64::from(x) + 0.5 - f64::from(w) / 2.0) / f,
+                    -(f64::from(y) + 0.5 - f64::from(h) / 2.0) / f,
+                    -1.0,
+                ];
+                if keep(d) {
+                    count += 1;
                 }
             }
-            count
+        }
+        count
+    }
+
+    /// The bodies or balls of every object but `i`.
+    fn others<'a, T>(&self, all: &'a [T], i: usize) -> impl Iterator<Item = &'a T> {
+        all.iter()
+            .enumerate()
+            .filter(move |&(j, _)| j != i)
+            .map(|(_, t)| t)
+    }
+}
+
+/// For each object of `scene`, in order, an upper bound on the pixels it gets in the
+/// object-index pass of the undisplaced visibility render at the scene's size (see the module
+/// documentation). `None` where no sound bound is known ([`View::of`]).
+pub fn visible_pixel_bounds(scene: &SceneFile) -> Option<Vec<u64>> {
+    let v = View::of(scene)?;
+    let bounds = (0..scene.objects.len())
+        .map(|i| {
+            let covers: Vec<([f64; 3], f64)> = v.others(&v.balls, i).flatten().copied().collect();
+            v.count(i, |d| {
+                let Some(entry) = outer_entry(d, &v.bodies[i]) else {
+                    return false;
+                };
+                !covers
+                    .iter()
+                    .any(|&(c, r)| ball_hit(d, c, r).is_some_and(|(t0, _)| t0 > 0.0 && t0 < entry))
+            })
         })
         .collect();
     Some(bounds)
@@ -386,55 +413,25 @@ fn shrunk_balls(scene: &SceneFile, o: &SceneObject, slope: f64) -> Vec<([f64; 3]
 /// object-index pass of the undisplaced visibility render at the scene's size (see the module
 /// documentation); `None` where [`visible_pixel_bounds`] has none.
 pub fn visible_pixel_lower_bounds(scene: &SceneFile) -> Option<Vec<u64>> {
-    let (w, h) = (scene.render.width, scene.render.height);
-    if w < 4 || h < 4 {
-        return None;
-    }
-    let f = focal_px(&scene.camera, w, h);
-    let slope = sample_reach(f64::from(scene.render.filter_width)) * std::f64::consts::SQRT_2 / f;
-    let bodies: Vec<Body> = scene
-        .objects
-        .iter()
-        .map(|o| body(scene, o, slope))
-        .collect();
-    let bounds = scene
-        .objects
-        .iter()
-        .enumerate()
-        .map(|(i, o)| {
-            let balls = shrunk_balls(scene, o, slope);
-            if balls.is_empty() {
+    let v = View::of(scene)?;
+    let bounds = (0..scene.objects.len())
+        .map(|i| {
+            if v.balls[i].is_empty() {
                 return 0;
             }
-            let (x0, x1, y0, y1) = pixel_rect(&bodies[i], f, w, h);
-            let mut count = 0u64;
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    let d = [
-                        (f64::from(x) + 0.5 - f64::from(w) / 2.0) / f,
-                        -(f64::from(y) + 0.5 - f64::from(h) / 2.0) / f,
-                        -1.0,
-                    ];
-                    // The depth by which every footprint ray has met the object.
-                    let Some(met) = balls
-                        .iter()
-                        .filter_map(|&(c, r)| ball_hit(d, c, r).map(|(t0, _)| t0))
-                        .filter(|&t0| t0 > 0.0)
-                        .min_by(f64::total_cmp)
-                    else {
-                        continue;
-                    };
-                    let first = bodies
-                        .iter()
-                        .enumerate()
-                        .filter(|&(j, _)| j != i)
-                        .all(|(_, b)| outer_entry(d, b).is_none_or(|e| e > met));
-                    if first {
-                        count += 1;
-                    }
-                }
-            }
-            count
+            v.count(i, |d| {
+                // The depth by which every footprint ray has met the object.
+                let Some(met) = v.balls[i]
+                    .iter()
+                    .filter_map(|&(c, r)| ball_hit(d, c, r).map(|(t0, _)| t0))
+                    .filter(|&t0| t0 > 0.0)
+                    .min_by(f64::total_cmp)
+                else {
+                    return false;
+                };
+                v.others(&v.bodies, i)
+                    .all(|b| outer_entry(d, b).is_none_or(|e| e > met))
+            })
         })
         .collect();
     Some(bounds)
