@@ -457,6 +457,29 @@ mod tests {
         .unwrap()
     }
 
+    /// A scene's first object as a ball at the origin: about `pi (f r / D)^2` pixels.
+    fn disc_px(s: &SceneFile) -> f64 {
+        let d = crate::camera::dot(s.camera.location, s.camera.location).sqrt();
+        let f = focal_px(&s.camera, s.render.width, s.render.height);
+        std::f64::consts::PI * (f * s.objects[0].scale / d).powi(2)
+    }
+
+    /// A small sphere right behind a big cube on the camera's line of sight, and the
+    /// horizontal direction from the camera to the cube.
+    fn sphere_behind_cube() -> (SceneFile, [f64; 3]) {
+        let mut s = scene(1);
+        s.objects.truncate(2);
+        let cam = s.camera.location;
+        let dir = crate::camera::normalize([-cam[0], -cam[1], 0.0]);
+        s.objects[0].shape = "cube".into();
+        s.objects[0].scale = 0.9;
+        s.objects[0].location = [0.0, 0.0, 0.9];
+        s.objects[1].shape = "sphere".into();
+        s.objects[1].scale = 0.2;
+        s.objects[1].location = [dir[0] * 2.0, dir[1] * 2.0, 0.2];
+        (s, dir)
+    }
+
     #[test]
     fn a_lone_object_in_view_is_bounded_by_its_projected_size() {
         let mut s = scene(0);
@@ -466,26 +489,14 @@ mod tests {
         let b = visible_pixel_bounds(&s).unwrap()[0];
         // A sphere of radius r at distance D covers about pi (f r / D)^2 pixels; the bound is
         // at least that and not wildly more (the box, the footprint).
-        let d = crate::camera::dot(s.camera.location, s.camera.location).sqrt();
-        let f = focal_px(&s.camera, s.render.width, s.render.height);
-        let disc = std::f64::consts::PI * (f * s.objects[0].scale / d).powi(2);
+        let disc = disc_px(&s);
         assert!(b as f64 > disc, "{b} vs {disc}");
         assert!((b as f64) < 6.0 * disc, "{b} vs {disc}");
     }
 
     #[test]
     fn an_object_behind_a_big_cube_is_bounded_to_nothing_and_off_screen_is_zero() {
-        let mut s = scene(1);
-        s.objects.truncate(2);
-        // Put a small sphere right behind a big cube on the camera's line of sight.
-        let cam = s.camera.location;
-        let dir = crate::camera::normalize([-cam[0], -cam[1], 0.0]);
-        s.objects[0].shape = "cube".into();
-        s.objects[0].scale = 0.9;
-        s.objects[0].location = [0.0, 0.0, 0.9];
-        s.objects[1].shape = "sphere".into();
-        s.objects[1].scale = 0.2;
-        s.objects[1].location = [dir[0] * 2.0, dir[1] * 2.0, 0.2];
+        let (mut s, dir) = sphere_behind_cube();
         let b = visible_pixel_bounds(&s).unwrap();
         assert!(b[0] > 1000, "{b:?}");
         assert_eq!(b[1], 0, "{b:?}");
@@ -510,9 +521,7 @@ mod tests {
         o.shape = "sphere".into();
         o.location = [0.0, 0.0, o.scale];
         let l = visible_pixel_lower_bounds(&s).unwrap()[0] as f64;
-        let d = crate::camera::dot(s.camera.location, s.camera.location).sqrt();
-        let f = focal_px(&s.camera, s.render.width, s.render.height);
-        let disc = std::f64::consts::PI * (f * s.objects[0].scale / d).powi(2);
+        let disc = disc_px(&s);
         // The ball of radius 0.955, less the footprint: most of the disc, never more.
         assert!(l < disc && l > 0.6 * disc, "{l} vs {disc}");
         // A teapot has no enclosed ball: never pre-accepted.
@@ -522,16 +531,8 @@ mod tests {
 
     #[test]
     fn an_object_behind_another_has_no_certain_pixel_where_they_overlap() {
-        let mut s = scene(1);
-        s.objects.truncate(2);
+        let (mut s, _) = sphere_behind_cube();
         let cam = s.camera.location;
-        let dir = crate::camera::normalize([-cam[0], -cam[1], 0.0]);
-        s.objects[0].shape = "cube".into();
-        s.objects[0].scale = 0.9;
-        s.objects[0].location = [0.0, 0.0, 0.9];
-        s.objects[1].shape = "sphere".into();
-        s.objects[1].scale = 0.2;
-        s.objects[1].location = [dir[0] * 2.0, dir[1] * 2.0, 0.2];
         let l = visible_pixel_lower_bounds(&s).unwrap();
         assert_eq!(l[1], 0, "{l:?}");
         assert!(l[0] > 1000, "{l:?}");
