@@ -22,6 +22,10 @@
 #   ./scripts/setup.sh --torch       also PyTorch (PyPI's wheel) in `.venv-test/` (implies
 #                                    --test-venv), for the training example
 #                                    (examples/train_toy.py) and the DataLoader tests
+#   ./scripts/setup.sh --slurm       also Debian's SLURM (munge, slurmctld, slurmd, slurm-client)
+#                                    for tests/slurm.rs, which starts its own one-host cluster
+#   ./scripts/setup.sh --all         everything the test suite uses, as `.ci/run` installs it:
+#                                    --test-venv --torch --browser --bpy 4.5 --ptxas --slurm
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SUDO=""
@@ -32,6 +36,7 @@ torch=0
 bpy=""
 cuda_arch=""
 ptxas=0
+slurm=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --test-venv) test_venv=1 ;;
@@ -52,7 +57,9 @@ while [ $# -gt 0 ]; do
       python3 scripts/cuda_kernels.py --check --cuda-arch "$cuda_arch"
       ;;
     --ptxas) ptxas=1 ;;
-    *) echo "setup.sh: unknown option \`$1\` (known: --test-venv, --torch, --bpy 4.5|5.0, --cuda-arch LIST, --ptxas, --browser)" >&2; exit 2 ;;
+    --slurm) slurm=1 ;;
+    --all) test_venv=1; torch=1; browser=1; ptxas=1; slurm=1; bpy="${bpy:-4.5}" ;;
+    *) echo "setup.sh: unknown option \`$1\` (known: --all, --test-venv, --torch, --bpy 4.5|5.0, --cuda-arch LIST, --ptxas, --browser, --slurm)" >&2; exit 2 ;;
   esac
   shift
 done
@@ -78,6 +85,11 @@ if [ -n "$bpy" ]; then
   # PyPI's bpy wheels need a few X/GL libraries even headless.
   for p in libtbb12 libvulkan1 libx11-6 libxrender1 libxxf86vm1 libxfixes3 libxi6 libxkbcommon0 \
            libsm6 libgl1 libegl1; do
+    dpkg -s "$p" >/dev/null 2>&1 || need+=("$p")
+  done
+fi
+if [ "$slurm" = 1 ]; then
+  for p in munge slurmctld slurmd slurm-client; do
     dpkg -s "$p" >/dev/null 2>&1 || need+=("$p")
   done
 fi
@@ -115,11 +127,13 @@ if [ "$test_venv" = 1 ]; then
   if ! .venv-test/bin/python -c 'import numpy, scipy, sklearn, PIL' >/dev/null 2>&1; then
     .venv-test/bin/pip install --quiet --disable-pip-version-check numpy scipy scikit-learn pillow
   fi
-  # The Python package (crates/python, PyO3 + maturin) and pytest for its tests; rebuilt each
-  # time so it follows the sources, with cargo's build folder outside the source tree (reused
-  # by the next build; scripts/build_wheel.sh builds a wheel to install elsewhere).
-  CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/clevrtex/python-target}" \
-    .venv-test/bin/pip install --quiet --disable-pip-version-check pytest ./crates/python
+  # The Python package (crates/python, PyO3 + maturin) as the one wheel scripts/build_wheel.sh
+  # makes into dist/ (rebuilt each time so it follows the sources; cargo's build folder stays
+  # outside the source tree and is reused), installed with pip like on any other machine;
+  # tests/python_package.rs also installs that wheel into a fresh venv. pytest for its tests.
+  .venv-test/bin/pip install --quiet --disable-pip-version-check pytest
+  wheel="$(PYTHON=.venv-test/bin/python ./scripts/build_wheel.sh dist | sed -n 's/^built \([^ ]*\) .*/\1/p')"
+  .venv-test/bin/pip install --quiet --disable-pip-version-check --force-reinstall --no-deps "$wheel"
   if [ "$torch" = 1 ] && ! .venv-test/bin/python -c 'import torch' >/dev/null 2>&1; then
     # PyPI's wheel (no CPU-only index is reachable from CI); pip keeps its download cache, so
     # a rerun does not fetch it again.

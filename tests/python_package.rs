@@ -1,5 +1,5 @@
 //! The Python package `clevrtex` (`crates/python`): its pytest suite, run with the test venv's
-//! Python (where `scripts/setup.sh --test-venv` installs it with `pip install ./crates/python`)
+//! Python (where `scripts/setup.sh --test-venv` installs the wheel `scripts/build_wheel.sh` makes)
 //! and this build's CLI, which it compares itself with. Skipped visibly without it; required
 //! under `CLEVRTEX_REQUIRE_TOOLS=1` (CI).
 
@@ -73,4 +73,86 @@ fn toy_training_loop_runs_end_to_end() {
     }
     let miou = summary["mIoU"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&miou), "{miou}");
+}
+
+/// Issue 49: the wheel that `scripts/build_wheel.sh` made (`dist/`, as `scripts/setup.sh
+/// --test-venv` builds it) installs with pip into a fresh venv, offline and without Rust or a
+/// build, and the package it installs is that venv's own and scores. numpy comes from the test
+/// venv (a `.pth` line after the fresh venv's own site-packages, so its `clevrtex` comes first).
+/// Skipped visibly without the wheel or the test venv; required in CI.
+#[test]
+fn the_wheel_installs_into_a_fresh_venv() {
+    let test = "the_wheel_installs_into_a_fresh_venv";
+    let Some(python) = test_python_or_skip(test, "numpy") else {
+        return;
+    };
+    let dist = repo_root().join("dist");
+    let wheel = std::fs::read_dir(&dist).ok().and_then(|d| {
+        d.flatten()
+            .map(|e| e.path())
+            .filter(|p| {
+                p.file_name()
+                    .and_then(|n| n.to_str())
+                    .is_some_and(|n| n.starts_with("clevrtex-") && n.ends_with(".whl"))
+            })
+            .max_by_key(|p| p.metadata().and_then(|m| m.modified()).ok())
+    });
+    let Some(wheel) = wheel else {
+        crate::util::skip(
+            test,
+            crate::util::REQUIRE_TOOLS,
+            &format!("no wheel `clevrtex-*.whl` in `{}`", dist.display()),
+            "run `./scripts/build_wheel.sh` (or `./scripts/setup.sh --test-venv`)",
+        );
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let venv = dir.path().join("venv");
+    let run = |cmd: &mut std::process::Command| {
+        let out = cmd.output().unwrap();
+        assert!(out.status.success(), "{cmd:?} failed:\n{}", text(&out));
+        String::from_utf8_lossy(&out.stdout).trim().to_string()
+    };
+    // The test venv's base interpreter makes the fresh venv; its site-packages lends numpy.
+    let base =
+        run(std::process::Command::new(&python)
+            .args(["-c", "import sys; print(sys._base_executable)"]));
+    let lend = run(std::process::Command::new(&python).args([
+        "-c",
+        "import numpy, os; print(os.path.dirname(os.path.dirname(numpy.__file__)))",
+    ]));
+    run(std::process::Command::new(base)
+        .args(["-m", "venv"])
+        .arg(&venv));
+    let fresh = venv.join("bin/python");
+    let site = run(std::process::Command::new(&fresh).args([
+        "-c",
+        "import sysconfig; print(sysconfig.get_paths()['purelib'])",
+    ]));
+    std::fs::write(
+        std::path::Path::new(&site).join("lend_numpy.pth"),
+        format!("{lend}\n"),
+    )
+    .unwrap();
+    run(std::process::Command::new(&fresh)
+        .args([
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+            "--no-index",
+            "--no-deps",
+        ])
+        .arg(&wheel));
+    let code = "import clevrtex, numpy as np, sys\n\
+                gt = np.array([[0, 1, 1], [0, 2, 2]], dtype=np.uint8)[None]\n\
+                r = clevrtex.evaluate(gt, gt)\n\
+                print(clevrtex.__file__.startswith(sys.prefix), r['mIoU'], r['ARI'])\n";
+    let said = run(std::process::Command::new(&fresh).args(["-c", code]));
+    assert_eq!(
+        said, "True 100.0 100.0",
+        "the fresh venv's clevrtex (from `{}`) must be its own and score a mask against itself as 100",
+        wheel.display()
+    );
 }

@@ -98,6 +98,32 @@ fn no_source_file_over_700_lines() {
     );
 }
 
+/// Issue 49: the map of the code (`crates/README.md`) stays readable in a terminal and a diff:
+/// no line over 300 characters (a table row that grows past it loses its detail to the file's
+/// own list below).
+#[test]
+fn the_crates_map_has_no_line_over_300_characters() {
+    let map = std::fs::read_to_string(repo_root().join("crates/README.md")).unwrap();
+    let long: Vec<String> = map
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.chars().count() > 300)
+        .map(|(i, l)| {
+            format!(
+                "  crates/README.md:{}: {} characters",
+                i + 1,
+                l.chars().count()
+            )
+        })
+        .collect();
+    assert!(
+        long.is_empty(),
+        "{} line(s) of the map over 300 characters:\n{}\nhint: keep a row to the files to open; details go in the crate's file list",
+        long.len(),
+        long.join("\n")
+    );
+}
+
 /// A token of Rust source, comments and literals already dropped (but a string's text kept:
 /// `#[path = "..."]` needs it).
 #[derive(Debug, Clone, PartialEq)]
