@@ -42,6 +42,7 @@ depth); n_bd: backdrop pixels.
   glossy=0                       every Principled BSDF's specular level 0 and the added
                                  parity lobes' weight 0 (diffuse only)
   metallic=0                     every Principled BSDF's Metallic 0 (unlinked)
+  roughness=F                    every Principled BSDF's Roughness F (unlinked)
   lights=NAME                    only light NAME (`sun`, an area light's name)
   diffuse_only=1                 every material's surface a white diffuse BSDF (geometry
                                  and displacement kept)
@@ -83,6 +84,8 @@ def parse_args():
     p.add_argument("--no-objects", action="store_true")
     p.add_argument("--set", action="append", default=[], dest="sets")
     p.add_argument("--out", default=None, help="keep the EXRs here (default: a temp dir)")
+    p.add_argument("--factory-startup", action="store_true",
+                   help="(what clevrtex passes a bpy module; factory settings are used anyway)")
     return p.parse_args(argv)
 
 
@@ -159,6 +162,11 @@ def apply_set(key, value, scene):
             s = n.inputs["Metallic"]
             unlink(t, s)
             s.default_value = 0.0
+    elif key == "roughness":
+        for t, n in list(nodes_of("BSDF_PRINCIPLED")):
+            s = n.inputs["Roughness"]
+            unlink(t, s)
+            s.default_value = f
     elif key == "lights":
         for o in scene.objects:
             if o.type == "LIGHT":
