@@ -172,7 +172,10 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
         // `compat.true_displacement_method`, `forest_ground_twigs` displaced was ~27 levels
         // darker on 4.5); the objects' pixels on their own too.
         for (what, keep) in [
-            ("whole image", Box::new(|_: usize| true) as Box<dyn Fn(usize) -> bool>),
+            (
+                "whole image",
+                Box::new(|_: usize| true) as Box<dyn Fn(usize) -> bool>,
+            ),
             ("objects", Box::new(|i: usize| ma.data[i] > 0)),
         ] {
             let (ra, rb) = (
@@ -442,7 +445,9 @@ fn probe_backdrops(
         let value = |key: &str| -> f64 {
             let prefix = format!("{key}=");
             let w = words.iter().find_map(|w| w.strip_prefix(prefix.as_str()));
-            w.unwrap_or_else(|| panic!("no {key} in {line}")).parse().unwrap()
+            w.unwrap_or_else(|| panic!("no {key} in {line}"))
+                .parse()
+                .unwrap()
         };
         found.insert(words[2].to_string(), (value("lum_bd"), value("depth_bd")));
     }

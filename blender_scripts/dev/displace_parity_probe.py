@@ -43,6 +43,8 @@ depth); n_bd: backdrop pixels.
                                  parity lobes' weight 0 (diffuse only)
   metallic=0                     every Principled BSDF's Metallic 0 (unlinked)
   roughness=F                    every Principled BSDF's Roughness F (unlinked)
+  derived_bump=F                 Cycles' bump derived from the displacement built as a Bump
+                                 node of filter width F (use with method=DISPLACEMENT)
   lights=NAME                    only light NAME (`sun`, an area light's name)
   diffuse_only=1                 every material's surface a white diffuse BSDF (geometry
                                  and displacement kept)
@@ -167,6 +169,29 @@ def apply_set(key, value, scene):
             s = n.inputs["Roughness"]
             unlink(t, s)
             s.default_value = f
+    elif key == "derived_bump":
+        # 3.4's bump derived from the displacement, built as a Bump node: the Displacement
+        # node's height and scale, filter width F, in front of the recipe's Bump node (else
+        # of every Principled BSDF's normal).
+        for m in bpy.data.materials:
+            t = m.node_tree
+            if t is None:
+                continue
+            disp = next((n for n in t.nodes if n.type == "DISPLACEMENT"), None)
+            if disp is None or not disp.inputs["Height"].is_linked:
+                continue
+            b = t.nodes.new("ShaderNodeBump")
+            if "Filter Width" in b.inputs:
+                b.inputs["Filter Width"].default_value = f
+            t.links.new(disp.inputs["Height"].links[0].from_socket, b.inputs["Height"])
+            b.inputs["Distance"].default_value = disp.inputs["Scale"].default_value
+            bumps = [n for n in t.nodes if n.type == "BUMP" and n != b]
+            targets = [n.inputs["Normal"] for n in bumps]
+            if not targets:
+                targets = [n.inputs["Normal"] for n in t.nodes
+                           if n.type == "BSDF_PRINCIPLED" and not n.inputs["Normal"].is_linked]
+            for sock in targets:
+                t.links.new(b.outputs["Normal"], sock)
     elif key == "lights":
         for o in scene.objects:
             if o.type == "LIGHT":
