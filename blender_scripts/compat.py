@@ -163,6 +163,27 @@ def set_displacement_method(mat, method):
         mat.cycles.displacement_method = method
 
 
+def true_displacement_method():
+    """The displacement method of a material that displaces, rendering as 3.4's `BOTH`.
+
+    3.4's `BOTH` is true displacement plus a bump that Cycles derives from the displacement
+    output itself, mostly a mild one there (`BOTH` 0.5-4% darker than `DISPLACEMENT` on the
+    three materials below). Cycles 4.x computes that derived bump with the undisplaced surface's
+    full differentials instead of 3.4's compact ones (kernel `svm_node_set_bump`, Blender
+    issue 111588) and a filter width of its own, and the same `BOTH` shades much rougher:
+    backdrops 12-27% darker on bpy 4.5 (`jagged_cliff_rock` -26.5%, `copper_chainmail` -14%,
+    `corrugated_iron` -12%; a white diffuse surface on the displaced rock -21%), with the
+    same geometry (depth of backdrop pixels equal to 0.01%). Without the derived bump
+    (`DISPLACEMENT`) 4.5 is within 1.1% of 3.4's `BOTH` on those three, and the material's
+    own Bump node (`setup_bump`) still carries its fine relief. Not every material: 3.4's
+    derived bump darkens `gold_chainmail` by 17%, so there 4.5 is +10.7% (+7.3% with
+    `BOTH`; `woven_steel` +9.8%, -0.0% with `BOTH`); over the 51 displacing materials 38
+    are within 3% (7 with `BOTH`); no Bump node rebuilds 3.4's derived bump. Measured with
+    `dev/displace_parity_probe.py`, docs/notes/materials.md "Displaced surfaces on 3.4 and
+    4.5"; measured on 4.5 only, applied from 4.0 (issue 111588's change)."""
+    return "BOTH" if VERSION < (4, 0, 0) else "DISPLACEMENT"
+
+
 def set_adaptive_subdivision(obj, modifier, enabled):
     """Adaptive subdivision (true displacement) of `obj`, whose last modifier `modifier` is a
     subdivision modifier (None when disabled and absent). Up to 4.5 a Cycles object setting

@@ -113,7 +113,7 @@ def build_material(name, recipe, instance, context, values=None):
         displace = _build_pbr(nt, out, name, recipe, instance, displace, albedo, vals)
     else:
         displace = _build_layers(nt, out, recipe, instance, displace, albedo, vals)
-    compat.set_displacement_method(mat, "BOTH" if displace else "BUMP")
+    compat.set_displacement_method(mat, compat.true_displacement_method() if displace else "BUMP")
     return mat
 
 

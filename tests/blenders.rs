@@ -10,9 +10,12 @@
 //!   of seed 0, bricks: median 1 mm, mean signed 0.1 mm, up to 72 mm at brick edges);
 //! - mean colour of the RGB: each channel's mean within [`MEAN_RGB_TOLERANCE`] of 255 levels
 //!   (4.0's Principled BSDF conserves energy between its specular and diffuse layers, so the
-//!   same material is a little darker; measured 4-10 levels at 160x120, 32 spp); on a truly
-//!   displaced backdrop, over the objects' pixels only (the displaced backdrop's shading is the
-//!   open 4.x parity gap: `forest_ground_twigs` is ~27 levels darker on 4.5).
+//!   same material is a little darker; measured 4-10 levels at 160x120, 32 spp), over the
+//!   whole image and over the objects' pixels; a truly displaced backdrop included since issue
+//!   50 (`compat.true_displacement_method`; before, `forest_ground_twigs` displaced was ~27
+//!   levels darker on 4.5);
+//! - a displaced backdrop on its own, per material (`displace_parity_probe.py`): mean linear
+//!   luminance within 3%, mean depth within 1%.
 
 use std::path::Path;
 
@@ -165,27 +168,27 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
             );
         }
 
-        // On a displaced backdrop, the objects' pixels only: the backdrop's shading there is the
-        // known gap of 4.x against 3.4 (docs/notes/scene-format.md: `forest_ground_twigs`,
-        // displaced, is ~27 levels darker on 4.5, with this stop's code and the last stop's
-        // alike).
-        let keep = |i: usize| !displaced_backdrop || ma.data[i] > 0;
-        let (ra, rb) = (
-            mean_rgb(&sub(&a, stem, ".png"), keep),
-            mean_rgb(&sub(&b, stem, ".png"), keep),
-        );
-        let (wa, wb) = (
-            mean_rgb(&sub(&a, stem, ".png"), |_| true),
-            mean_rgb(&sub(&b, stem, ".png"), |_| true),
-        );
-        eprintln!(
-            "{stem}: mean RGB 3.4 {ra:.1?} vs {version} {rb:.1?} (whole image: {wa:.1?} vs {wb:.1?})"
-        );
-        for c in 0..3 {
-            assert!(
-                (ra[c] - rb[c]).abs() <= MEAN_RGB_TOLERANCE,
-                "{stem}: mean RGB {ra:?} (3.4) vs {rb:?} ({version})"
+        // The whole image, a displaced backdrop included (issue 50: before
+        // `compat.true_displacement_method`, `forest_ground_twigs` displaced was ~27 levels
+        // darker on 4.5); the objects' pixels on their own too.
+        for (what, keep) in [
+            (
+                "whole image",
+                Box::new(|_: usize| true) as Box<dyn Fn(usize) -> bool>,
+            ),
+            ("objects", Box::new(|i: usize| ma.data[i] > 0)),
+        ] {
+            let (ra, rb) = (
+                mean_rgb(&sub(&a, stem, ".png"), &keep),
+                mean_rgb(&sub(&b, stem, ".png"), &keep),
             );
+            eprintln!("{stem}: mean RGB of the {what}: 3.4 {ra:.1?} vs {version} {rb:.1?}");
+            for c in 0..3 {
+                assert!(
+                    (ra[c] - rb[c]).abs() <= MEAN_RGB_TOLERANCE,
+                    "{stem}: mean RGB of the {what} {ra:?} (3.4) vs {rb:?} ({version})"
+                );
+            }
         }
     }
 }
@@ -398,5 +401,88 @@ fn bridge_lists_the_cuda_kernels_each_blender_ships() {
                 );
             }
         }
+    }
+}
+
+/// Materials whose displaced backdrop 4.5 rendered 12-27% darker than 3.4 before issue 50
+/// (Cycles 4.x's bump derived from the displacement; `compat.true_displacement_method`).
+const DISPLACED_PARITY_MATERIALS: [&str; 3] =
+    ["jagged_cliff_rock", "copper_chainmail", "corrugated_iron"];
+
+/// Largest relative difference of the displaced backdrop's mean linear luminance, 3.4 to 4.5.
+const DISPLACED_LUMINANCE_TOLERANCE: f64 = 0.03;
+
+/// Largest relative difference of the mean depth of the displaced backdrop's pixels (relief).
+const DISPLACED_DEPTH_TOLERANCE: f64 = 0.01;
+
+/// Each material's `PROBE` line of `blender_scripts/dev/displace_parity_probe.py` on one
+/// Blender: name -> (mean linear luminance, mean depth) of the backdrop's pixels.
+fn probe_backdrops(
+    blender: &Path,
+    materials_json: &Path,
+    scene: &Path,
+) -> std::collections::BTreeMap<String, (f64, f64)> {
+    let script = repo_root().join("blender_scripts/dev/displace_parity_probe.py");
+    let mut args: Vec<std::ffi::OsString> = vec![
+        "--materials".into(),
+        materials_json.into(),
+        "--scene".into(),
+        scene.into(),
+        "--no-objects".into(),
+    ];
+    for name in DISPLACED_PARITY_MATERIALS {
+        args.extend(["--material".into(), name.into()]);
+    }
+    let flavour = clevrtex_render::blender::flavour(blender);
+    let out = clevrtex_render::blender::worker_command(blender, flavour, &script, &args)
+        .output()
+        .unwrap();
+    let t = text(&out);
+    assert!(out.status.success(), "{}: {t}", blender.display());
+    let mut found = std::collections::BTreeMap::new();
+    for line in t.lines().filter(|l| l.starts_with("PROBE ")) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let value = |key: &str| -> f64 {
+            let prefix = format!("{key}=");
+            let w = words.iter().find_map(|w| w.strip_prefix(prefix.as_str()));
+            w.unwrap_or_else(|| panic!("no {key} in {line}"))
+                .parse()
+                .unwrap()
+        };
+        found.insert(words[2].to_string(), (value("lum_bd"), value("depth_bd")));
+    }
+    assert_eq!(found.len(), DISPLACED_PARITY_MATERIALS.len(), "{t}");
+    found
+}
+
+/// A displaced backdrop renders alike on 3.4 and 4.5 (issue 50): its mean linear luminance
+/// within 3% and the mean depth of its pixels (the relief) within 1%, on the materials 4.5
+/// rendered darkest (96x72, 16 spp, seed 0, the `full8.json` backdrop without objects).
+#[test]
+fn displaced_backdrops_render_alike_on_3_4_and_bpy_4_5() {
+    let test = "displaced_backdrops_render_alike_on_3_4_and_bpy_4_5";
+    let (Some(blender), Some(bpy)) = (blender_or_skip(test), bpy_or_skip(test)) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let materials_json = dir.path().join("materials.json");
+    let json = clevrtex().args(["materials", "json"]).output().unwrap();
+    assert!(json.status.success(), "{}", text(&json));
+    std::fs::write(&materials_json, &json.stdout).unwrap();
+    let scene = repo_root().join("tests/data/scenes/full8.json");
+    let a = probe_backdrops(&blender, &materials_json, &scene);
+    let b = probe_backdrops(&bpy, &materials_json, &scene);
+    for (name, (lum_a, depth_a)) in &a {
+        let (lum_b, depth_b) = b[name];
+        let (dl, dd) = (lum_b / lum_a - 1.0, depth_b / depth_a - 1.0);
+        eprintln!("{name}: luminance 3.4 {lum_a:.4} 4.5 {lum_b:.4} ({dl:+.3}), depth {depth_a:.4} {depth_b:.4} ({dd:+.4})");
+        assert!(
+            dl.abs() <= DISPLACED_LUMINANCE_TOLERANCE,
+            "{name}: displaced backdrop luminance 3.4 {lum_a} vs 4.5 {lum_b} ({dl:+.3})"
+        );
+        assert!(
+            dd.abs() <= DISPLACED_DEPTH_TOLERANCE,
+            "{name}: displaced backdrop depth 3.4 {depth_a} vs 4.5 {depth_b} ({dd:+.4})"
+        );
     }
 }

@@ -1,0 +1,298 @@
+"""Why a displaced surface renders darker on one Blender than another (issue 50; dev only).
+
+    blender -b --factory-startup --python-exit-code 1 \
+        --python blender_scripts/dev/displace_parity_probe.py -- \
+        --materials materials.json --scene SCENE.json --material NAME [--as backdrop|object] \
+        [--displacement 0.35] [--size 96x72] [--samples 16] [--threads 1] [--no-objects] \
+        [--set KEY=VALUE ...] [--out DIR]
+    .venv-bpy/bin/python blender_scripts/dev/displace_parity_probe.py --materials ... (the same)
+
+`materials.json` is `clevrtex materials json`, SCENE.json a scene file of `clevrtex sample`
+(one with a displaced backdrop: variant `full`). The scene is built as the bridge builds it
+(builder.build, shading.assign_materials, materials.build_material with compat's switches),
+with material NAME on the backdrop (`--as backdrop`, displacement `--displacement`; 0: no
+true displacement) or on every object (`--as object`, the backdrop keeps the scene's own);
+`--no-objects` leaves the objects out. Rendered once at `--samples` (Cycles seed 0, CPU) with
+the combined, depth and object-index passes, read back without numpy (exr_dump), and printed
+as one line:
+
+    PROBE <blender> <material> <as> <sets> lum_bd=.. lum_obj=.. lum_all=.. depth_bd=.. \
+        depth_sd_bd=.. n_bd=..
+
+lum_*: mean linear luminance (Rec. 709 weights) of the backdrop pixels (object index 0), the
+object pixels and all pixels; depth_bd / depth_sd_bd: mean and standard deviation of the
+backdrop pixels' camera depth (the relief: a surface displaced differently sits at another
+depth); n_bd: backdrop pixels.
+
+`--set KEY=VALUE` (repeatable; applied after the build, to split a difference by setting):
+  method=BUMP|DISPLACEMENT|BOTH  every material's displacement method
+  bump=0                         unlink every Bump node's output (no bump on the shading
+                                 normal; the displacement is kept)
+  bump_distance=F                multiply every Bump node's Distance
+  bump_width=F                   every Bump node's Filter Width (4.4+)
+  dicing_rate=F                  Cycles' render dicing rate (pixels)
+  offscreen_dicing_scale=F       Cycles' offscreen dicing scale
+  max_subdivisions=N             Cycles' max subdivisions
+  adaptive=0|1                   adaptive subdivision on every object that has it
+  feature_set=SUPPORTED|EXPERIMENTAL
+  midlevel=F, disp_scale=F       every Displacement node's Midlevel / Scale multiplied
+  space=OBJECT|WORLD             every Displacement node's space
+  parity_off=KEY[+KEY..]|all     compat.PARITY switches off before the materials are built
+  normal=geometry                every Principled BSDF's Normal input unlinked
+  glossy=0                       every Principled BSDF's specular level 0 and the added
+                                 parity lobes' weight 0 (diffuse only)
+  metallic=0                     every Principled BSDF's Metallic 0 (unlinked)
+  roughness=F                    every Principled BSDF's Roughness F (unlinked)
+  derived_bump=F                 Cycles' bump derived from the displacement built as a Bump
+                                 node of filter width F (use with method=DISPLACEMENT)
+  lights=NAME                    only light NAME (`sun`, an area light's name)
+  diffuse_only=1                 every material's surface a white diffuse BSDF (geometry
+                                 and displacement kept)
+"""
+
+import argparse
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+
+import bpy
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+sys.path.insert(0, HERE)
+
+import builder  # noqa: E402
+import compat  # noqa: E402
+import exr_dump  # noqa: E402
+import materials  # noqa: E402
+import passes  # noqa: E402
+
+
+def parse_args():
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+    p = argparse.ArgumentParser(prog="displace_parity_probe.py")
+    p.add_argument("--materials", required=True)
+    p.add_argument("--scene", required=True)
+    p.add_argument("--material", required=True, action="append",
+                   help="repeatable: each material rendered in turn")
+    p.add_argument("--as", dest="role", default="backdrop", choices=["backdrop", "object"])
+    p.add_argument("--displacement", type=float, default=0.35)
+    p.add_argument("--size", default="96x72")
+    p.add_argument("--samples", type=int, default=16)
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--no-objects", action="store_true")
+    p.add_argument("--set", action="append", default=[], dest="sets")
+    p.add_argument("--out", default=None, help="keep the EXRs here (default: a temp dir)")
+    p.add_argument("--factory-startup", action="store_true",
+                   help="(what clevrtex passes a bpy module; factory settings are used anyway)")
+    return p.parse_args(argv)
+
+
+def trees():
+    out = [m.node_tree for m in bpy.data.materials if m.node_tree is not None]
+    return out + list(bpy.data.node_groups)
+
+
+def nodes_of(kind):
+    for t in trees():
+        for n in t.nodes:
+            if n.type == kind:
+                yield t, n
+
+
+def unlink(tree, socket):
+    for link in list(socket.links):
+        tree.links.remove(link)
+
+
+def apply_set(key, value, scene):
+    c = scene.cycles
+    f = None
+    try:
+        f = float(value)
+    except ValueError:
+        pass
+    if key == "method":
+        for m in bpy.data.materials:
+            if m.node_tree is not None:
+                compat.set_displacement_method(m, value)
+    elif key == "bump":
+        for t, n in list(nodes_of("BUMP")):
+            unlink(t, n.outputs["Normal"])
+    elif key == "bump_distance":
+        for _t, n in nodes_of("BUMP"):
+            n.inputs["Distance"].default_value *= f
+    elif key == "bump_width":
+        for _t, n in nodes_of("BUMP"):
+            if "Filter Width" not in n.inputs:
+                return "absent"
+            n.inputs["Filter Width"].default_value = f
+    elif key in ("dicing_rate", "offscreen_dicing_scale"):
+        setattr(c, key, f)
+    elif key == "max_subdivisions":
+        c.max_subdivisions = int(value)
+    elif key == "adaptive":
+        for o in scene.objects:
+            mod = o.modifiers.get("subdivision")
+            if mod is not None:
+                compat.set_adaptive_subdivision(o, mod, bool(int(value)))
+    elif key == "feature_set":
+        c.feature_set = value
+    elif key in ("midlevel", "disp_scale"):
+        name = "Midlevel" if key == "midlevel" else "Scale"
+        for _t, n in nodes_of("DISPLACEMENT"):
+            n.inputs[name].default_value *= f
+    elif key == "space":
+        for _t, n in nodes_of("DISPLACEMENT"):
+            n.space = value
+    elif key == "normal":
+        for t, n in list(nodes_of("BSDF_PRINCIPLED")):
+            unlink(t, n.inputs["Normal"])
+    elif key == "glossy":
+        for t, n in list(nodes_of("BSDF_PRINCIPLED")):
+            s = compat.principled_input(n, "Specular")
+            unlink(t, s)
+            s.default_value = 0.0
+        for t, n in list(nodes_of("MIX_SHADER")):
+            unlink(t, n.inputs["Fac"])
+            n.inputs["Fac"].default_value = 0.0 if not n.inputs[1].is_linked else 1.0
+    elif key == "metallic":
+        for t, n in list(nodes_of("BSDF_PRINCIPLED")):
+            s = n.inputs["Metallic"]
+            unlink(t, s)
+            s.default_value = 0.0
+    elif key == "roughness":
+        for t, n in list(nodes_of("BSDF_PRINCIPLED")):
+            s = n.inputs["Roughness"]
+            unlink(t, s)
+            s.default_value = f
+    elif key == "derived_bump":
+        # 3.4's bump derived from the displacement, built as a Bump node: the Displacement
+        # node's height and scale, filter width F, in front of the recipe's Bump node (else
+        # of every Principled BSDF's normal).
+        for m in bpy.data.materials:
+            t = m.node_tree
+            if t is None:
+                continue
+            disp = next((n for n in t.nodes if n.type == "DISPLACEMENT"), None)
+            if disp is None or not disp.inputs["Height"].is_linked:
+                continue
+            b = t.nodes.new("ShaderNodeBump")
+            if "Filter Width" in b.inputs:
+                b.inputs["Filter Width"].default_value = f
+            t.links.new(disp.inputs["Height"].links[0].from_socket, b.inputs["Height"])
+            b.inputs["Distance"].default_value = disp.inputs["Scale"].default_value
+            bumps = [n for n in t.nodes if n.type == "BUMP" and n != b]
+            targets = [n.inputs["Normal"] for n in bumps]
+            if not targets:
+                targets = [n.inputs["Normal"] for n in t.nodes
+                           if n.type == "BSDF_PRINCIPLED" and not n.inputs["Normal"].is_linked]
+            for sock in targets:
+                t.links.new(b.outputs["Normal"], sock)
+    elif key == "lights":
+        for o in scene.objects:
+            if o.type == "LIGHT":
+                o.hide_render = o.name != value
+    elif key == "diffuse_only":
+        for m in bpy.data.materials:
+            t = m.node_tree
+            if t is None:
+                continue
+            out = next(n for n in t.nodes if n.type == "OUTPUT_MATERIAL")
+            d = t.nodes.new("ShaderNodeBsdfDiffuse")
+            d.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+            t.links.new(d.outputs[0], out.inputs["Surface"])
+    elif key == "parity_off":
+        pass  # applied before the build
+    else:
+        raise SystemExit("unknown --set key `%s`" % key)
+    return "ok"
+
+
+def luminance(r, g, b):
+    return 0.2126 * r + 0.7152 * g + 0.0722 * b
+
+
+def measure(path):
+    w, h, data = exr_dump.read(path)
+
+    def chan(suffix):
+        for k, v in data.items():
+            if k.endswith(suffix):
+                return v
+        raise KeyError(suffix)
+
+    r, g, b = chan("Combined.R"), chan("Combined.G"), chan("Combined.B")
+    idx, z = chan("IndexOB.X"), chan("Depth.Z")
+    lum = [luminance(r[i], g[i], b[i]) for i in range(w * h)]
+    bd = [i for i in range(w * h) if idx[i] == 0.0 and z[i] < 1e9]
+    ob = [i for i in range(w * h) if idx[i] > 0.0]
+
+    def mean(xs):
+        return sum(xs) / len(xs) if xs else float("nan")
+
+    dz = [z[i] for i in bd]
+    mz = mean(dz)
+    sd = math.sqrt(mean([(x - mz) ** 2 for x in dz])) if dz else float("nan")
+    return {"lum_bd": mean([lum[i] for i in bd]), "lum_obj": mean([lum[i] for i in ob]),
+            "lum_all": mean(lum), "depth_bd": mz, "depth_sd_bd": sd, "n_bd": len(bd),
+            "n_obj": len(ob)}
+
+
+def main():
+    args = parse_args()
+    with open(args.materials, "r", encoding="utf-8") as f:
+        catalogue = json.load(f)["materials"]
+    w, h = (int(v) for v in args.size.split("x"))
+    if compat.is_module():
+        compat.factory_startup()
+    sets = [s.split("=", 1) for s in args.sets]
+    for k, v in sets:
+        if k == "parity_off":
+            for key in (compat.PARITY if v == "all" else v.split("+")):
+                compat.PARITY[key] = False
+    out = args.out or tempfile.mkdtemp(prefix="displace_probe_")
+    os.makedirs(out, exist_ok=True)
+    for name in args.material:
+        spec = builder.load_scene_file(args.scene)
+        r = spec["render"]
+        r["width"], r["height"], r["samples"] = w, h, args.samples
+        r["cycles_seed"] = 0
+        r.pop("adaptive_threshold", None)
+        if args.no_objects:
+            spec["objects"] = []
+        if args.role == "backdrop":
+            bd = spec["backdrop"]["material"]
+            bd["name"] = name
+            if args.displacement > 0:
+                bd["displacement"] = args.displacement
+            else:
+                bd.pop("displacement", None)
+        else:
+            for o in spec["objects"]:
+                o["material"]["name"] = name
+        built = builder.build(spec, (name, time.time()), args.threads)
+        builder.assign_materials(built, catalogue, materials.build_material, displacement=True)
+        scene = bpy.context.scene
+        passes.enable(bpy.context.view_layer, ["rgb", "mask", "depth"])
+        done = {}
+        for k, v in sets:
+            done["%s=%s" % (k, v)] = apply_set(k, v, scene)
+        t0 = time.perf_counter()
+        bpy.ops.render.render(write_still=False)
+        wall = time.perf_counter() - t0
+        path = os.path.join(out, "%s_%s.exr" % (name, args.role))
+        builder._save(path, "EXR")
+        m = measure(path)
+        print("PROBE %s %s %s %s lum_bd=%.5f lum_obj=%.5f lum_all=%.5f depth_bd=%.5f "
+              "depth_sd_bd=%.5f n_bd=%d wall=%.1f" % (
+                  compat.version_string(), name, args.role,
+                  ",".join(k for k, v in done.items() if v == "ok") or "-",
+                  m["lum_bd"], m["lum_obj"], m["lum_all"], m["depth_bd"], m["depth_sd_bd"],
+                  m["n_bd"], wall), flush=True)
+
+
+main()
