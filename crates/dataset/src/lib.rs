@@ -42,6 +42,7 @@ pub mod fingerprint;
 pub mod layout;
 pub mod manifest;
 pub mod png;
+pub mod quantity;
 pub mod resize;
 #[cfg(feature = "tools")]
 pub mod run_lock;
