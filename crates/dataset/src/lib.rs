@@ -39,6 +39,7 @@ pub mod export;
 #[cfg(feature = "tools")]
 pub mod exr;
 pub mod fingerprint;
+pub mod ids;
 pub mod layout;
 pub mod manifest;
 pub mod png;
