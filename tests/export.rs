@@ -465,6 +465,7 @@ fn export_removes_the_shards_of_an_earlier_export_it_did_not_write() {
         left,
         [
             "clevr-train-000000.tar",
+            "ids.json",
             "index.json",
             "notes.tar",
             "other-name-1.tar"
