@@ -23,6 +23,7 @@ mod pbr;
 mod planning;
 mod preview;
 mod python_package;
+mod readers_agree;
 mod report;
 mod resume;
 mod sample;

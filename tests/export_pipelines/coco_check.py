@@ -10,7 +10,8 @@ from pycocotools import mask as mu
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 out, src = sys.argv[1], sys.argv[2]
-for f in sorted(glob.glob(os.path.join(out, "*.json"))):
+assert os.path.isfile(os.path.join(out, "ids.json"))  # the dataset's id table, beside the files
+for f in sorted(f for f in glob.glob(os.path.join(out, "*.json")) if os.path.basename(f) != "ids.json"):
     with contextlib.redirect_stdout(io.StringIO()):  # pycocotools' progress lines
         coco = COCO(f)
     info = coco.dataset["info"]
@@ -19,7 +20,7 @@ for f in sorted(glob.glob(os.path.join(out, "*.json"))):
     n = 0
     for img in coco.dataset["images"]:
         stem = img["stem"]
-        folder = os.path.join(src, "clevrtex_" + variant, str(img["id"] // 1000))
+        folder = os.path.join(src, "clevrtex_" + variant, str(img["index"] // 1000))
         meta = json.load(open(os.path.join(folder, stem + ".json")))
         assert meta["split"] == split == img["split"], (stem, meta["split"], split)
         truth = np.array(Image.open(os.path.join(folder, stem + "_flat.png")))

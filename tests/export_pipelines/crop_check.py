@@ -19,7 +19,9 @@ for url in sorted(glob.glob(os.path.join(out, "*.tar"))):
         assert np.array_equal(s["mask"], item["mask"][0]), s["stem"]
         assert np.array_equal(s["depth"], item["depth"][0]), s["stem"]
         assert np.array_equal(s["visibility"], item["visibility"]) and np.array_equal(s["bbox"], item["bbox"]), s["stem"]
-        assert np.array_equal(s["valid"], item["valid"]) and np.array_equal(s["shape"] >= 0, item["shape"] >= 0)
+        assert np.array_equal(s["valid"], item["valid"]), s["stem"]
+        for key in ("shape", "size", "material", "color"):  # the dataset's one id table
+            assert np.array_equal(s[key], item[key]), (s["stem"], key, s[key], item[key])
         rec = s["record"]
         assert np.allclose(np.array(rec["intrinsics"], np.float32), item["intrinsics"], atol=1e-5), s["stem"]
         got = np.array([o["pixel_coords"] for o in rec["objects"]], np.float32)

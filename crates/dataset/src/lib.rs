@@ -39,9 +39,11 @@ pub mod export;
 #[cfg(feature = "tools")]
 pub mod exr;
 pub mod fingerprint;
+pub mod ids;
 pub mod layout;
 pub mod manifest;
 pub mod png;
+pub mod quantity;
 pub mod resize;
 #[cfg(feature = "tools")]
 pub mod run_lock;

@@ -166,6 +166,22 @@ pub(crate) fn variant_names(
     Ok(Some((t.shape, t.size, materials, t.color)))
 }
 
+/// The dataset's one id table (`clevrtex_dataset::ids`, docs/output-format.md "Ids"): `(shapes,
+/// sizes, materials, colours)`, the built-in names in their fixed order, then the user
+/// materials that any run manifest of the dataset at `root` records, sorted. The same ids as
+/// the WebDataset and COCO exports of the dataset (their `ids.json`).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub(crate) fn id_tables(
+    py: Python<'_>,
+    root: &str,
+) -> PyResult<(Vec<String>, Vec<String>, Vec<String>, Vec<String>)> {
+    let t = py
+        .allow_threads(|| clevrtex_dataset::ids::IdTables::of_dataset(Path::new(root)))
+        .map_err(|e| value_error(format!("`{root}`: {e}")))?;
+    Ok((t.shape, t.size, t.material, t.color))
+}
+
 /// A sample's metadata, read as every reader of a dataset reads it
 /// (`clevrtex_dataset::dataset`): checked again when read, so that a link swapped in after
 /// `discover` that leads out of the dataset `root` is not followed; a regular file opened

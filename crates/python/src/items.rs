@@ -95,10 +95,12 @@ pub(crate) fn load_sample<'py>(
 }
 
 /// One optional pass of a sample decoded to its quantity, `(C, H, W)` float32 planar
-/// (docs/python.md): `depth` metres (background `+inf`), `normal` the unit vector in world
-/// space (background 0), `albedo` and `shadow` in 0..1. Depth, normal and shadow are data
-/// (one point per pixel): cropped and resized nearest, like the mask; albedo is a colour:
-/// bilinear, like the image. The PNG's layout must be the pass table's and its size the image's.
+/// (docs/python.md): the one decode of every reader, `clevrtex_dataset::quantity` (depth
+/// metres, background `+inf`; `normal` the unit vector in world space, background 0; `albedo`
+/// and `shadow` in 0..1), so the arrays equal the WebDataset export's. Depth, normal and
+/// shadow are data (one point per pixel): cropped and resized nearest, like the mask; albedo
+/// is a colour: bilinear, like the image. The PNG's layout must be the pass table's and its
+/// size the image's.
 fn decode_pass(
     pass: Pass,
     p: &str,
@@ -107,22 +109,16 @@ fn decode_pass(
     crop: bool,
     side: Option<usize>,
 ) -> PyResult<(Vec<f32>, usize)> {
-    use clevrtex_scene::passes::{PngKind, DEPTH_BACKGROUND, DEPTH_SCALE_M, NORMAL_BACKGROUND};
-    let img =
-        read::png_samples(bytes).map_err(|r| value_error(format!("cannot decode `{p}`: {r}")))?;
-    let (channels, bits) = match pass.spec().png {
-        PngKind::Gray8 => (1, 8),
-        PngKind::Gray16 => (1, 16),
-        PngKind::Rgb8 => (3, 8),
-        PngKind::Rgb16 => (3, 16),
-        PngKind::Palette8 => {
-            return Err(value_error(format!(
-                "internal: `{}` is not an optional pass",
-                pass.name()
-            )))
-        }
+    use clevrtex_dataset::quantity;
+    let img = clevrtex_dataset::png::decode(bytes)
+        .map_err(|r| value_error(format!("cannot decode `{p}`: {r}")))?;
+    let Some((bits, channels)) = quantity::png_layout(pass) else {
+        return Err(value_error(format!(
+            "internal: `{}` is not an optional pass",
+            pass.name()
+        )));
     };
-    if (img.channels, img.bits) != (channels, bits) {
+    if (img.channels, img.bits, img.palette) != (channels, bits, false) {
         let kind = |c: usize, b: u8| format!("{b}-bit {}", if c == 1 { "grey" } else { "RGB" });
         return Err(value_error(format!(
             "`{p}` is a {} PNG, but the {} pass is {}",
@@ -131,7 +127,7 @@ fn decode_pass(
             kind(channels, bits)
         )));
     }
-    if (img.width, img.height) != (w, h) {
+    if (img.width as usize, img.height as usize) != (w, h) {
         return Err(value_error(format!(
             "`{p}` is {}x{} but its image is {w}x{h}",
             img.width, img.height
@@ -144,61 +140,34 @@ fn decode_pass(
     };
     let n_out = out_side.map_or(w * h, |s| s * s);
     let small = || value_error(format!("`{p}` is too small to crop"));
-    // Albedo: 8-bit RGB resized as the image is (Pillow's bilinear).
+    let planar = |values: &[f32], pixels: &mut dyn Iterator<Item = usize>| {
+        let mut out = vec![0f32; channels * n_out];
+        for (i, px) in pixels.enumerate() {
+            for c in 0..channels {
+                out[c * n_out + i] = values[px * channels + c];
+            }
+        }
+        out
+    };
+    // Albedo: 8-bit RGB resized as the image is (Pillow's bilinear), then decoded.
     if pass == Pass::Albedo {
-        let rgb: Vec<u8> = img.samples.iter().map(|&v| v as u8).collect();
+        let rgb: Vec<u8> = img.data.iter().map(|&v| v as u8).collect();
         let rgb = match out_side {
             Some(s) => crop_resize_bilinear_rgb(&rgb, w, h, s).ok_or_else(small)?,
             None => rgb,
         };
-        let mut out = vec![0f32; 3 * n_out];
-        for (i, px) in rgb.chunks_exact(3).enumerate() {
-            for c in 0..3 {
-                out[c * n_out + i] = f32::from(px[c]) / 255.0;
-            }
-        }
-        return Ok((out, 3));
+        let values: Vec<f32> = rgb.iter().map(|&v| quantity::albedo(v)).collect();
+        return Ok((planar(&values, &mut (0..n_out)), 3));
     }
-    // The others: nearest, one channel plane at a time.
-    let mut planes = Vec::with_capacity(channels);
-    for c in 0..channels {
-        let plane: Vec<u32> = img
-            .samples
-            .iter()
-            .skip(c)
-            .step_by(channels)
-            .map(|&v| u32::from(v))
-            .collect();
-        planes.push(match out_side {
-            Some(s) => crop_resize_nearest(&plane, w, h, s).ok_or_else(small)?,
-            None => plane,
-        });
-    }
-    let out = match pass {
-        Pass::Depth => planes[0]
-            .iter()
-            .map(|&v| {
-                if v == u32::from(DEPTH_BACKGROUND) {
-                    f32::INFINITY
-                } else {
-                    (f64::from(v) * DEPTH_SCALE_M) as f32
-                }
-            })
-            .collect(),
-        Pass::Normal => {
-            let mut out = vec![0f32; 3 * n_out];
-            let bg = NORMAL_BACKGROUND.map(u32::from);
-            for i in 0..n_out {
-                let v = [planes[0][i], planes[1][i], planes[2][i]];
-                if v != bg {
-                    for c in 0..3 {
-                        out[c * n_out + i] = (f64::from(v[c]) / 65535.0 * 2.0 - 1.0) as f32;
-                    }
-                }
-            }
-            out
+    // The others: decoded, then the pixels the nearest crop and resize picks.
+    let q = quantity::decode(pass, &img).map_err(|r| value_error(format!("`{p}` {r}")))?;
+    let out = match out_side {
+        Some(s) => {
+            let index: Vec<u32> = (0..(w * h) as u32).collect();
+            let map = crop_resize_nearest(&index, w, h, s).ok_or_else(small)?;
+            planar(&q.data, &mut map.iter().map(|&i| i as usize))
         }
-        _ => planes[0].iter().map(|&v| v as f32 / 255.0).collect(),
+        None => planar(&q.data, &mut (0..n_out)),
     };
     Ok((out, channels))
 }

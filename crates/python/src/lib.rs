@@ -27,5 +27,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(items::load_item, m)?)?;
     m.add_function(wrap_pyfunction!(dataset::pass_files, m)?)?;
     m.add_function(wrap_pyfunction!(dataset::variant_names, m)?)?;
+    m.add_function(wrap_pyfunction!(dataset::id_tables, m)?)?;
     Ok(())
 }

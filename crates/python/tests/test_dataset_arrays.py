@@ -187,11 +187,11 @@ def test_bad_input_is_named(data, tmp_path):
     with pytest.raises(ValueError, match=r"000005.json` has no key \['3d_coords'\]"):
         ds[5]
     meta["objects"][1]["3d_coords"] = [0, 0, 0]
-    meta["objects"][1]["shape"] = "torus"
+    meta["objects"][1]["shape"] = "pyramid"
     json.dump(meta, open(path, "w"))
-    with pytest.raises(ValueError, match=r"`objects\[1\].shape` is 'torus', not in the `shape` name table"):
+    with pytest.raises(ValueError, match=r"`objects\[1\].shape` is 'pyramid', not in the `shape` name table"):
         ds[5]
-    assert _ds(data, passes=("depth",), names={"shape": ["cube", "sphere", "cylinder", "torus"]})[5]["shape"][1] == 3
+    assert _ds(data, passes=("depth",), names={"shape": ["cube", "sphere", "cylinder", "pyramid"]})[5]["shape"][1] == 3
     # A render size that is not the image's (the crop's frame would be wrong), or not a number.
     meta["objects"][1]["shape"] = "cube"
     # (Not a number: refused by the CLI's check of the metadata, shared since issue 42.)

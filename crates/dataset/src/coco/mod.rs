@@ -8,11 +8,14 @@
 //! failing the checks is left out, named). Each object with at least one pixel in the mask is one
 //! annotation: `segmentation` its compressed COCO RLE ([`rle`]), `area` its pixels, `bbox`
 //! `[x, y, w, h]` its extent in the mask, `iscrowd` 0, `category_id` its shape (one category
-//! per shape: the variant's name table, then any other shape found, sorted), the metadata's
-//! other properties of the object under `attributes` and `object_index` its place in the
-//! metadata's `objects` (its mask id less one). An image is the sample's RGB, referenced where
-//! it lies (`file_name` an absolute path) or copied to `OUT/images/<stem>.png` (`file_name`
-//! relative to OUT); `id` is the sample's index and `stem` its stem.
+//! per shape: the dataset's one id table, [`crate::ids`], id = shape id + 1, the same in every
+//! file), the metadata's other properties of the object under `attributes` (its numbers as
+//! the metadata has them, bit for bit) and `object_index` its place in the metadata's
+//! `objects` (its mask id less one). An image is the sample's RGB, referenced where it lies
+//! (`file_name` an absolute path) or copied to `OUT/images/<stem>.png` (`file_name` relative to
+//! OUT); `id` is unique across the variants of a dataset ([`crate::ids::coco_image_id`]:
+//! variant number * 10^8 + index), `index` the sample's index and `stem` its stem, so the
+//! files of several variants merge. `OUT/ids.json` holds the id table.
 
 pub mod rle;
 
@@ -24,6 +27,7 @@ use serde_json::{json, Value};
 
 use crate::dataset::{self, Dataset};
 use crate::export::{io_err, open_source, samples, ExportError, Sample};
+use crate::ids::IdTables;
 use crate::layout::Split;
 use clevrtex_scene::Pass;
 
@@ -96,6 +100,15 @@ pub fn export_coco(
             found.join("; ")
         )));
     }
+    let variants: Vec<&str> = todo.iter().map(|(v, _, _)| v.as_str()).collect();
+    if let Some((a, b)) = crate::ids::number_clash(&variants) {
+        return Err(ExportError::Message(format!(
+            "the variants `{a}` and `{b}` have the same number in COCO image ids (a hash of their names)\nhint: export them with `--variant` into separate folders, or rename one"
+        )));
+    }
+    // The dataset's one id table: the categories and attribute names of every file, and
+    // `OUT/ids.json`.
+    let mut tables = IdTables::of_dataset(dir).map_err(ExportError::Message)?;
     std::fs::create_dir_all(out).map_err(io_err(format!("cannot create `{}`", out.display())))?;
     let mut files = Vec::new();
     for (variant, list, _) in &todo {
@@ -105,7 +118,7 @@ pub fn export_coco(
                 if stop.load(Ordering::SeqCst) {
                     return Err(ExportError::Interrupted);
                 }
-                image(&ds, dir, out, s, opts.copy_images)
+                image(&ds, dir, out, variant, s, opts.copy_images)
             })
             .collect::<Result<_, _>>()?;
         let mut by_split: Vec<Vec<Image>> = vec![Vec::new(), Vec::new(), Vec::new()];
@@ -136,22 +149,26 @@ pub fn export_coco(
                 }
             }
             let path = out.join(format!("{variant}-{}.json", split.name()));
-            let (doc, n_img, n_ann) = document(dir, variant, split, of_split);
+            let (doc, n_img, n_ann) = document(dir, variant, split, of_split, &mut tables);
             write_json(&path, &doc)
                 .map_err(io_err(format!("cannot write `{}`", path.display())))?;
             files.push((path, n_img, n_ann));
         }
     }
+    let ids_path = out.join("ids.json");
+    write_json(&ids_path, &tables.to_json(&variants))
+        .map_err(io_err(format!("cannot write `{}`", ids_path.display())))?;
     Ok(CocoReport { files, skipped })
 }
 
-/// The image entry and object annotations of sample `s`: its metadata and mask read through
+/// The image entry and object annotations of sample `s` of `variant`: its metadata and mask read through
 /// the dataset reader. The inner `Err` says why the sample is left out (a pass failing the
 /// checks of every reader).
 fn image(
     ds: &Dataset,
     dir: &Path,
     out: &Path,
+    variant: &str,
     s: &Sample,
     copy: bool,
 ) -> Result<Result<Image, String>, ExportError> {
@@ -250,11 +267,13 @@ fn image(
     Ok(Ok(Image {
         split: s.split,
         entry: json!({
-            "id": s.index,
+            "id": crate::ids::coco_image_id(variant, s.index),
             "file_name": file_name,
             "width": w,
             "height": h,
             "stem": s.stem,
+            "variant": variant,
+            "index": s.index,
             "split": s.split.name(),
             "ground_material": meta["ground_material"],
         }),
@@ -288,23 +307,29 @@ fn copy_image(ds: &Dataset, from: &Path, to: &Path) -> Result<(), ExportError> {
     crate::atomic::write(to, &bytes).map_err(io_err(format!("cannot write `{}`", to.display())))
 }
 
-/// The COCO document of one variant's split: images, annotations (ids from 1 in image order),
-/// categories (the variant's shapes, then any other found, sorted), and what the ids and
-/// attributes mean. Returns it with its image and annotation counts.
-fn document(dir: &Path, variant: &str, split: Split, images: Vec<Image>) -> (Value, usize, usize) {
-    let tables = clevrtex_scene::config::Config::builtin(variant)
-        .ok()
-        .map(|c| c.name_tables());
-    let mut shapes: Vec<String> = tables.as_ref().map(|t| t.shape.clone()).unwrap_or_default();
+/// The COCO document of one variant's split: images, annotations, categories (the dataset's
+/// shapes, [`crate::ids`]: `category_id` = shape id + 1; a shape outside the table, of a
+/// dataset someone else made, is added to it, sorted), and what the ids and attributes mean.
+/// Image and annotation ids are unique across the variants of a dataset
+/// ([`crate::ids::coco_image_id`]). Returns it with its image and annotation counts.
+fn document(
+    dir: &Path,
+    variant: &str,
+    split: Split,
+    images: Vec<Image>,
+    tables: &mut IdTables,
+) -> (Value, usize, usize) {
     let mut extra: Vec<&String> = images
         .iter()
         .flat_map(|im| im.objects.iter().map(|o| &o.shape))
-        .filter(|s| !shapes.contains(s))
+        .filter(|s| tables.id("shape", s).is_none())
         .collect();
     extra.sort();
     extra.dedup();
-    shapes.extend(extra.into_iter().cloned());
-    let category = |s: &str| shapes.iter().position(|x| x == s).expect("listed") + 1;
+    for s in extra {
+        tables.id_or_add("shape", s);
+    }
+    let category = |s: &str| tables.id("shape", s).expect("listed") + 1;
     let n_img = images.len();
     let mut annotations = Vec::new();
     let mut entries = Vec::with_capacity(n_img);
@@ -312,8 +337,9 @@ fn document(dir: &Path, variant: &str, split: Split, images: Vec<Image>) -> (Val
         let (h, w) = (im.entry["height"].clone(), im.entry["width"].clone());
         for o in im.objects {
             let [x0, y0, x1, y1] = o.extent;
+            let image_id = im.entry["id"].as_u64().expect("an image id");
             annotations.push(json!({
-                "id": annotations.len() + 1,
+                "id": crate::ids::coco_annotation_id(image_id, o.index),
                 "image_id": im.entry["id"],
                 "category_id": category(&o.shape),
                 "segmentation": {"size": [h, w], "counts": o.counts},
@@ -327,12 +353,10 @@ fn document(dir: &Path, variant: &str, split: Split, images: Vec<Image>) -> (Val
         entries.push(im.entry);
     }
     let n_ann = annotations.len();
-    let names = tables.map(|t| {
-        json!({
-            "size": t.size.iter().map(|(n, _)| n).collect::<Vec<_>>(),
-            "material": t.material,
-            "color": t.color,
-        })
+    let names = json!({
+        "size": tables.size,
+        "material": tables.material,
+        "color": tables.color,
     });
     let doc = json!({
         "info": {
@@ -342,11 +366,12 @@ fn document(dir: &Path, variant: &str, split: Split, images: Vec<Image>) -> (Val
             "variant": variant,
             "split": split.name(),
             "attribute_names": names,
+            "ids": "ids.json: the dataset's one id table; image id = variant number * 10^8 + index, annotation id = image id * 1000 + object index + 1",
         },
         "licenses": [],
         "images": entries,
         "annotations": annotations,
-        "categories": shapes.iter().enumerate().map(|(i, s)| json!({"id": i + 1, "name": s, "supercategory": "shape"})).collect::<Vec<_>>(),
+        "categories": tables.shape.iter().enumerate().map(|(i, s)| json!({"id": i + 1, "name": s, "supercategory": "shape"})).collect::<Vec<_>>(),
     });
     (doc, n_img, n_ann)
 }

@@ -19,7 +19,8 @@
 //! above). Tar headers carry no time, owner or mode of the machine: the same dataset gives the
 //! same bytes (and the arrays no machine-dependent byte). Each shard is written under a
 //! temporary name and renamed when complete; `OUT/index.json` lists the shards and their
-//! sample counts, and what each key holds.
+//! sample counts, and what each key holds; `OUT/ids.json` the dataset's one id table
+//! ([`crate::ids`]), which the ids of `--objects K` index.
 //!
 //! By concern: the export of a dataset (here), one shard's entries, names and writer
 //! (`shard.rs`), a pass decoded into its `.npy` array (`npy.rs`). Everything is re-exported here.
@@ -83,17 +84,10 @@ pub fn export(
     let (ds, chosen, mut skipped) = crate::export::open_source(dir, out, variant)?;
     let variants: Vec<&VariantDir> = chosen.iter().map(|&i| &ds.variants[i]).collect();
     let names: Vec<&str> = variants.iter().map(|v| v.variant.as_str()).collect();
-    let mut tables = NameTables::of(&names);
-    // The user materials the runs' manifests record, after the built-in names, as the Python
-    // `Dataset`'s tables have them (`fingerprint::user_materials`); other names as found.
-    for v in &names {
-        for m in crate::fingerprint::user_materials(dir, v)
-            .unwrap_or_default()
-            .into_keys()
-        {
-            tables.id("material", &m);
-        }
-    }
+    // The dataset's one id table (`crate::ids`): the same integers as the Python `Dataset`
+    // and the COCO export give, whichever variants are exported; names outside it (a dataset
+    // someone else made) are added at the end, in the order found.
+    let mut tables = crate::ids::IdTables::of_dataset(dir).map_err(ExportError::Message)?;
     std::fs::create_dir_all(out).map_err(io_err(format!("cannot create `{}`", out.display())))?;
     refuse_foreign_shards(out)?;
     let dead_temps = remove_dead_temporaries(out)?;
@@ -178,10 +172,18 @@ pub fn export(
         "shards": index,
         "keys": keys,
         "objects": objects,
-        "names": objects.map(|_| json!(tables.0)),
+        "names": objects.map(|_| tables.names_json()),
+        "ids": "ids.json",
         "crop": crop.is_some(),
         "resize": crop.flatten(),
     });
+    // The id table beside the shards, with or without `--objects`.
+    let ids_path = out.join("ids.json");
+    let ids_text = serde_json::to_string_pretty(&tables.to_json(&names))
+        .expect("JSON values serialise")
+        + "\n";
+    crate::atomic::write(&ids_path, ids_text.as_bytes())
+        .map_err(io_err(format!("cannot write `{}`", ids_path.display())))?;
     let index_path = out.join("index.json");
     let text = serde_json::to_string_pretty(&doc).expect("JSON values serialise") + "\n";
     crate::atomic::write(&index_path, text.as_bytes())
@@ -262,7 +264,7 @@ fn sample_record(
     entries: &mut [(String, Vec<u8>)],
     objects: Option<usize>,
     frame: Option<Frame>,
-    tables: &mut NameTables,
+    tables: &mut crate::ids::IdTables,
 ) -> Result<Vec<(String, Vec<u8>)>, ExportError> {
     let Some(json) = entries.iter_mut().find(|(k, _)| k == "json") else {
         return Ok(Vec::new());

@@ -5,16 +5,16 @@ use clevrtex_scene::Pass;
 
 /// The `.npy` of a pass's PNG `bytes` (of the layout and encoding of the pass table:
 /// [`clevrtex_scene::passes`]): the mask's ids as `uint8 (H, W)` (a palette's indices, or an
-/// 8-bit grey image's values: the published ClevrTex's masks); depth in metres as `float32
-/// (H, W)`, background `+inf`; normals as `float32 (H, W, 3)` unit vectors, background
-/// `(0, 0, 0)`; the shadow amount as `float32 (H, W)` in `[0, 1]`. `Err` says why not, one line.
+/// 8-bit grey image's values: the published ClevrTex's masks); depth, normal and shadow as
+/// `float32` arrays of the one decode of every reader ([`crate::quantity::decode`]: metres
+/// with background `+inf`, unit normals with background `(0, 0, 0)`, the shadow amount in
+/// `[0, 1]`). `Err` says why not, one line.
 pub fn pass_npy(pass: Pass, bytes: &[u8]) -> Result<Vec<u8>, String> {
     decoded_npy(pass, &crate::png::decode(bytes)?)
 }
 
 /// [`pass_npy`] of a PNG already decoded (and checked: [`crate::dataset::check_pass_png`]).
 pub fn decoded_npy(pass: Pass, png: &crate::png::DecodedPng) -> Result<Vec<u8>, String> {
-    use clevrtex_scene::passes::{DEPTH_BACKGROUND, DEPTH_SCALE_M, NORMAL_BACKGROUND};
     let WebdatasetForm::Npy { descr, channels } = pass.spec().webdataset_form else {
         return Err(format!(
             "the {} pass is not stored as an array",
@@ -22,69 +22,23 @@ pub fn decoded_npy(pass: Pass, png: &crate::png::DecodedPng) -> Result<Vec<u8>, 
         ));
     };
     let (w, h) = (png.width as usize, png.height as usize);
-    let layout = |bits: u8, ch: usize| -> Result<(), String> {
-        if png.bits == bits && png.channels == ch {
-            Ok(())
-        } else {
-            Err(format!(
-                "is a {}-bit {}-channel PNG, not the {bits}-bit {ch}-channel {} pass",
-                png.bits,
-                png.channels,
-                pass.name()
-            ))
-        }
-    };
     let mut out = npy_header(
         descr,
         &[h, w, usize::from(channels)][..if channels == 1 { 2 } else { 3 }],
     );
-    match pass {
-        Pass::Mask => {
-            layout(8, 1)?;
-            out.extend(png.data.iter().map(|&v| v as u8));
-        }
-        Pass::Depth => {
-            layout(16, 1)?;
-            for &v in &png.data {
-                let m = if v == DEPTH_BACKGROUND {
-                    f32::INFINITY
-                } else {
-                    (f64::from(v) * DEPTH_SCALE_M) as f32
-                };
-                out.extend(m.to_le_bytes());
-            }
-        }
-        Pass::Normal => {
-            layout(16, 3)?;
-            for px in png.data.chunks_exact(3) {
-                let n = if px == NORMAL_BACKGROUND {
-                    [0.0; 3]
-                } else {
-                    let v = [0, 1, 2].map(|i| f64::from(px[i]) / 65535.0 * 2.0 - 1.0);
-                    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-                    if len > 0.0 {
-                        v.map(|c| c / len)
-                    } else {
-                        [0.0; 3]
-                    }
-                };
-                for c in n {
-                    out.extend((c as f32).to_le_bytes());
-                }
-            }
-        }
-        Pass::Shadow => {
-            layout(8, 1)?;
-            for &v in &png.data {
-                out.extend((f32::from(v) / 255.0).to_le_bytes());
-            }
-        }
-        Pass::Rgb | Pass::Albedo => {
+    if pass == Pass::Mask {
+        if png.bits != 8 || png.channels != 1 {
             return Err(format!(
-                "the {} pass is not stored as an array",
-                pass.name()
-            ))
+                "is a {}-bit {}-channel PNG, not the 8-bit 1-channel mask pass",
+                png.bits, png.channels
+            ));
         }
+        out.extend(png.data.iter().map(|&v| v as u8));
+        return Ok(out);
+    }
+    let q = crate::quantity::decode(pass, png)?;
+    for v in q.data {
+        out.extend(v.to_le_bytes());
     }
     Ok(out)
 }

@@ -1,6 +1,6 @@
 //! What a shard holds besides the passes: the sample's `json` in one schema for every variant
 //! ([`record`]), and with `--objects K` the per-object arrays padded to `K` ([`object_arrays`],
-//! ids into the export's name tables [`NameTables`]).
+//! ids into the dataset's one id table [`crate::ids::IdTables`]).
 //!
 //! One schema: Hugging Face `datasets` infers a shard set's types from its first samples and
 //! casts every other sample to them, so a key that is `null` in one variant and a string in
@@ -9,11 +9,10 @@
 //! a sample lacks is the empty string, the empty list or -1; the metadata file itself is kept,
 //! byte for byte, as a string under `metadata`.
 
-use std::collections::BTreeMap;
-
 use serde_json::{json, Value};
 
 use super::{npy_header, Frame};
+use crate::ids::{IdTables, TABLES};
 use crate::layout::Split;
 
 /// The shard's `json` of a sample (of `variant`, split `split`, index `index`, stem `stem`)
@@ -109,50 +108,6 @@ fn intrinsics(k: Vec<Vec<f64>>, f: Frame) -> Vec<Vec<f64>> {
     vec![row(0), row(1), row(2)]
 }
 
-/// The export's name tables: every exported variant's built-in tables (in the order of the
-/// variants, names not repeated), then any other name found, in the order found. The ids of
-/// the per-object arrays index them; `OUT/index.json` lists them under `names`.
-#[derive(Debug, Default)]
-pub struct NameTables(pub BTreeMap<&'static str, Vec<String>>);
-
-/// The tables, in the order `index.json` lists them.
-pub const TABLES: [&str; 4] = ["shape", "size", "material", "color"];
-
-impl NameTables {
-    /// The tables of the built-in configs of `variants`.
-    pub fn of(variants: &[&str]) -> NameTables {
-        let mut t = NameTables::default();
-        for v in variants {
-            if let Ok(c) = clevrtex_scene::config::Config::builtin(v) {
-                let n = c.name_tables();
-                let sizes: Vec<String> = n.size.into_iter().map(|(s, _)| s).collect();
-                for (table, names) in TABLES.iter().zip([n.shape, sizes, n.material, n.color]) {
-                    for name in names {
-                        t.id(table, &name);
-                    }
-                }
-            }
-        }
-        for table in TABLES {
-            t.0.entry(table).or_default();
-        }
-        t
-    }
-
-    /// The id of `name` in `table` (added at the end when new).
-    pub fn id(&mut self, table: &'static str, name: &str) -> i64 {
-        let list = self.0.entry(table).or_default();
-        let i = match list.iter().position(|n| n == name) {
-            Some(i) => i,
-            None => {
-                list.push(name.to_string());
-                list.len() - 1
-            }
-        };
-        i as i64
-    }
-}
-
 /// The per-object arrays of a sample with metadata `meta` and mask ids `mask` (`width` x
 /// `height`, row-major), padded to `k`: `(key, .npy bytes)` for `shape.npy`, `size.npy`,
 /// `material.npy`, `color.npy` (int64 (K,) ids, -1 for padding and a colour the variant does
@@ -165,7 +120,7 @@ pub fn object_arrays(
     mask: &[u16],
     width: usize,
     k: usize,
-    tables: &mut NameTables,
+    tables: &mut IdTables,
 ) -> Result<Vec<(String, Vec<u8>)>, String> {
     let objects = meta["objects"].as_array().map(Vec::as_slice).unwrap_or(&[]);
     let n = objects.len();
@@ -178,7 +133,7 @@ pub fn object_arrays(
     for (i, o) in objects.iter().enumerate() {
         for (t, table) in TABLES.iter().enumerate() {
             if let Some(name) = o[*table].as_str() {
-                ids[t][i] = tables.id(table, name);
+                ids[t][i] = tables.id_or_add(table, name) as i64;
             }
         }
     }

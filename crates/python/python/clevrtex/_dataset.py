@@ -130,13 +130,12 @@ class Dataset:
         self._by_colour = _native.colour_breakdown(self.dataset_variant)
         self._suffix = {name: suffix for name, suffix, _ in _native.pass_files()}
         self._pass_key = {name: key for name, _, key in _native.pass_files()}
+        # The dataset's one id table (the WebDataset and COCO exports' `ids.json`), whatever
+        # the variant; the sizes' scales are the variant's own.
+        shapes, sizes, materials, colors = _native.id_tables(self._root)
+        tables: Dict[str, List[str]] = {"shape": list(shapes), "size": list(sizes), "material": list(materials), "color": list(colors)}
         known = _native.variant_names(self.dataset_variant, self._root)
-        tables: Dict[str, List[str]] = {"shape": [], "size": [], "material": [], "color": []}
-        self.scales: Dict[str, float] = {}
-        if known is not None:
-            shapes, sizes, materials, colors = known
-            tables = {"shape": list(shapes), "size": [n for n, _ in sizes], "material": list(materials), "color": list(colors)}
-            self.scales = {n: float(s) for n, s in sizes}
+        self.scales: Dict[str, float] = {n: float(s) for n, s in known[1]} if known is not None else {}
         for k, v in (names or {}).items():
             if k not in tables:
                 raise ValueError(f"unknown name table `{k}` in `names`; known: {', '.join(tables)}")
@@ -180,7 +179,7 @@ class Dataset:
     def _id(self, table: str, name: Any, path: str, key: str) -> int:
         ids = self._ids[table]
         if name not in ids:
-            shown = ", ".join(self.names[table]) or "none: the variant is not built in"
+            shown = ", ".join(self.names[table]) or "empty"
             raise ValueError(f"`{path}` key `{key}` is {name!r}, not in the `{table}` name table ({shown}); pass `names={{'{table}': [...]}}`")
         return ids[name]
 

@@ -17,7 +17,8 @@ key           what it holds
 ============  =====================================================================
 
 With `clevrtex export --objects K`, per-object arrays padded to K: `shape.npy`, `size.npy`,
-`material.npy`, `color.npy` (int64 (K,) ids into `index.json`'s `names`, -1 for padding),
+`material.npy`, `color.npy` (int64 (K,) ids into `ids.json`'s `names`, the dataset's one id table
+that `clevrtex.Dataset` uses too; -1 for padding),
 `bbox.npy` (float32 (K, 4)), `visibility.npy` and `valid.npy` (bool (K,)).
 
 (A pass the dataset was made without is absent.) Ids, metres, vectors and fractions are NumPy
