@@ -133,6 +133,11 @@ pub(crate) struct Part<'a> {
 /// calls instead, as it runs this file's [`run_part`] per variant).
 pub fn run_generate(args: GenerateArgs) -> CmdResult {
     let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
+    // A suite's folder is made by `--suite` only: a plain run would rewrite a suite variant's
+    // manifest without its suite, or add a variant outside the suite's plan.
+    if !args.estimate {
+        clevrtex_dataset::suite::refuse_plain_run(&args.run.out, &args.variant)?;
+    }
     let images = generate::Part {
         start: args.start,
         count: args.count.unwrap_or(0),

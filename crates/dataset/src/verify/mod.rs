@@ -439,7 +439,11 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
                 let remakes = rep.missing.iter().any(|&i| sibling(i))
                     || rep.broken.iter().any(|b| sibling(b.index))
                     || rep.missing_count as usize > rep.missing.len();
-                if remakes {
+                if remakes && m.suite.is_some() {
+                    // A suite's `--shard` splits the whole suite, not this variant: the
+                    // suite's command without a shard remakes what is missing.
+                    push(command::without_shard(&c));
+                } else if remakes {
                     push(with_shard(&c, k, n));
                 }
             }
