@@ -1172,8 +1172,15 @@ fn sample_refuses_rendered_samples_other_runs_files_and_a_held_range_with_nothin
     let o = sample_into(&rendered, &[]);
     let t = text(&o);
     assert_ne!(o.status.code(), Some(0), "{t}");
-    assert!(t.contains("holds rendered samples") && t.contains("CLEVRTEX_full_000000.json"), "{t}");
-    assert_eq!(tree(&rendered), tree_of(&before), "a refused run changed the dataset");
+    assert!(
+        t.contains("holds rendered samples") && t.contains("CLEVRTEX_full_000000.json"),
+        "{t}"
+    );
+    assert_eq!(
+        tree(&rendered),
+        tree_of(&before),
+        "a refused run changed the dataset"
+    );
     // A `generate` manifest names the folder a dataset's, whichever files are in the range.
     std::fs::write(rendered.join("clevrtex_full/MANIFEST-0-1-0of1.json"), b"{}").unwrap();
     let o = sample_into(&rendered, &["--start", "10"]);
@@ -1186,15 +1193,24 @@ fn sample_refuses_rendered_samples_other_runs_files_and_a_held_range_with_nothin
     let first = all_files(&out);
     for (extra, wants) in [
         (&["--seed", "9"][..], "--seed 0 vs 9"),
-        (&["--layout-stream", "shared"][..], "--layout-stream full vs shared"),
+        (
+            &["--layout-stream", "shared"][..],
+            "--layout-stream full vs shared",
+        ),
         (&["--total", "50"][..], "--total 5 vs 50"),
         (&["--start", "3", "--seed", "9"][..], "--seed 0 vs 9"),
     ] {
         let o = sample_into(&out, extra);
         let t = text(&o);
         assert_ne!(o.status.code(), Some(0), "{extra:?}: {t}");
-        assert!(t.contains(wants) && t.contains("SCENES-0-5-0of1.manifest"), "{extra:?}: {t}");
-        assert!(all_files(&out) == first, "{extra:?}: a refused run changed the folder");
+        assert!(
+            t.contains(wants) && t.contains("SCENES-0-5-0of1.manifest"),
+            "{extra:?}: {t}"
+        );
+        assert!(
+            all_files(&out) == first,
+            "{extra:?}: a refused run changed the folder"
+        );
     }
     // Without the commit (a killed run's files): the files themselves tell another run's.
     std::fs::remove_file(out.join("clevrtex_full/SCENES-0-5-0of1.manifest")).unwrap();
@@ -1203,7 +1219,10 @@ fn sample_refuses_rendered_samples_other_runs_files_and_a_held_range_with_nothin
     let t = text(&o);
     assert_ne!(o.status.code(), Some(0), "{t}");
     assert!(t.contains("is a scene file of another run (seed 0"), "{t}");
-    assert!(all_files(&out) == uncommitted, "a refused run changed the folder");
+    assert!(
+        all_files(&out) == uncommitted,
+        "a refused run changed the folder"
+    );
     // The same command again rewrites (the same bytes) and commits.
     let o = sample_into(&out, &["--seed", "0"]);
     assert!(o.status.success(), "{}", text(&o));
@@ -1240,16 +1259,40 @@ fn tree_of(files: &BTreeMap<String, Vec<u8>>) -> BTreeMap<String, Vec<u8>> {
 fn a_rerun_uncommits_its_range_before_it_replaces_a_file() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("scenes");
-    let args = ["--variant", "clevr", "-n", "20000", "--seed", "3", "-j", "1"];
-    let o = sample_into(&out, &args);
-    assert!(o.status.success(), "{}", text(&o));
+    let o_s = out.display().to_string();
+    let setup = [
+        "--variant",
+        "clevr",
+        "-n",
+        "4000",
+        "--seed",
+        "3",
+        "--out",
+        &o_s,
+    ];
+    // The rerun on one thread: a long window while it rewrites.
+    let args = [
+        "--variant",
+        "clevr",
+        "-n",
+        "4000",
+        "--seed",
+        "3",
+        "--out",
+        &o_s,
+        "-j",
+        "1",
+    ];
+    run_ok(&setup, &[]);
     let vdir = out.join("clevrtex_clevr");
-    let commit = vdir.join("SCENES-0-20000-0of1.manifest");
+    let commit = vdir.join("SCENES-0-4000-0of1.manifest");
     // A temporary a killed commit left (a dead writer of this host).
     let host = clevrtex_dataset::atomic::hostname();
-    let stale = vdir.join(format!("SCENES-0-20000-0of1.manifest.{host}.4194303.1.clevrtex-tmp"));
+    let stale = vdir.join(format!(
+        "SCENES-0-4000-0of1.manifest.{host}.4194303.1.clevrtex-tmp"
+    ));
     std::fs::write(&stale, b"{").unwrap();
-    let last = vdir.join("19/CLEVRTEX_clevr_019999.json");
+    let last = vdir.join("3/CLEVRTEX_clevr_003999.json");
     let inode = |p: &Path| std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(p).unwrap());
     let mut observed = false;
     for _ in 0..3 {
@@ -1258,8 +1301,6 @@ fn a_rerun_uncommits_its_range_before_it_replaces_a_file() {
         let mut child = clevrtex()
             .arg("sample")
             .args(args)
-            .arg("--out")
-            .arg(&out)
             .env_remove("SLURM_ARRAY_TASK_ID")
             .env_remove("JOB_COMPLETION_INDEX")
             .stderr(std::process::Stdio::null())
@@ -1276,14 +1317,19 @@ fn a_rerun_uncommits_its_range_before_it_replaces_a_file() {
         if status.success() {
             continue;
         }
-        assert!(!committed, "a file was replaced while the old commit still claimed it");
+        assert!(
+            !committed,
+            "a file was replaced while the old commit still claimed it"
+        );
         observed = true;
         break;
     }
     assert!(observed, "no rerun was caught while it rewrote its files");
-    assert!(!stale.exists(), "the killed commit's temporary was not swept");
-    let o = sample_into(&out, &args);
-    assert!(o.status.success(), "{}", text(&o));
+    assert!(
+        !stale.exists(),
+        "the killed commit's temporary was not swept"
+    );
+    run_ok(&setup, &[]);
     assert!(commit.exists() && last.exists());
 }
 
@@ -1295,9 +1341,18 @@ fn sample_refuses_requests_that_mean_nothing() {
     let out = tmp.path().join("o");
     for (extra, wants) in [
         (&["-n", "0"][..], "`-n 0` asks for no scene file"),
-        (&["--layout-stream", "nosuch"][..], "`--layout-stream nosuch` names no variant"),
-        (&["--shard-count", "3"][..], "`--shard-count 3` counts the shards of an indexed job"),
-        (&["--shard", "0/2", "--shard-count", "3"][..], "`--shard 0/2` gives the shard"),
+        (
+            &["--layout-stream", "nosuch"][..],
+            "`--layout-stream nosuch` names no variant",
+        ),
+        (
+            &["--shard-count", "3"][..],
+            "`--shard-count 3` counts the shards of an indexed job",
+        ),
+        (
+            &["--shard", "0/2", "--shard-count", "3"][..],
+            "`--shard 0/2` gives the shard",
+        ),
     ] {
         let o = sample_into(&out, extra);
         let t = text(&o);
@@ -1330,7 +1385,8 @@ fn render_warns_of_scene_files_no_run_committed() {
     std::fs::remove_file(out.join("clevrtex_full/SCENES-0-5-0of1.manifest")).unwrap();
     let t = text(&render());
     assert!(
-        t.contains("warning: 5 scene file(s) under") && t.contains("committed by no `SCENES-*.manifest`"),
+        t.contains("warning: 5 scene file(s) under")
+            && t.contains("committed by no `SCENES-*.manifest`"),
         "{t}"
     );
 }

@@ -269,7 +269,11 @@ print(json.dumps({"public": public, "ours": ours}))
     let verify = |dir: &Path| clevrtex().arg("verify").arg(dir).output().unwrap();
     for f in std::fs::read_dir(a.join("clevrtex_camo/0")).unwrap() {
         let p = f.unwrap().path();
-        if p.file_name().unwrap().to_string_lossy().starts_with("CLEVRTEX_camo_000001") {
+        if p.file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("CLEVRTEX_camo_000001")
+        {
             std::fs::remove_file(p).unwrap();
         }
     }

@@ -623,23 +623,67 @@ fn every_writer_resolves_its_output_and_writes_nothing_into_a_dataset_it_reads()
     let sneaky = |rel: &str| format!("MISSING/../D/clevrtex_full/0/{rel}");
     let d = data.display().to_string();
     let cases: Vec<Vec<String>> = vec![
-        vec!["preview".into(), d.clone(), "--out".into(), sneaky("CLEVRTEX_full_000000.png")],
-        vec!["preview".into(), d.clone(), "--out".into(), "link/CLEVRTEX_full_000000.png".into()],
+        vec![
+            "preview".into(),
+            d.clone(),
+            "--out".into(),
+            sneaky("CLEVRTEX_full_000000.png"),
+        ],
+        vec![
+            "preview".into(),
+            d.clone(),
+            "--out".into(),
+            "link/CLEVRTEX_full_000000.png".into(),
+        ],
         vec!["report".into(), d.clone(), "--out".into(), sneaky("r.html")],
-        vec!["report".into(), d.clone(), "--out".into(), "dangling/r.html".into()],
+        vec![
+            "report".into(),
+            d.clone(),
+            "--out".into(),
+            "dangling/r.html".into(),
+        ],
         vec!["export".into(), d.clone(), sneaky("wds")],
-        vec!["export".into(), "--format".into(), "coco".into(), d.clone(), "link/../coco".into()],
-        vec!["eval".into(), d.clone(), d.clone(), "--json".into(), sneaky("e.json")],
-        vec!["eval".into(), d.clone(), d.clone(), "--csv".into(), "dangling/e.csv".into()],
-        vec!["verify".into(), d.clone(), "--json".into(), sneaky("v.json")],
+        vec![
+            "export".into(),
+            "--format".into(),
+            "coco".into(),
+            d.clone(),
+            "link/../coco".into(),
+        ],
+        vec![
+            "eval".into(),
+            d.clone(),
+            d.clone(),
+            "--json".into(),
+            sneaky("e.json"),
+        ],
+        vec![
+            "eval".into(),
+            d.clone(),
+            d.clone(),
+            "--csv".into(),
+            "dangling/e.csv".into(),
+        ],
+        vec![
+            "verify".into(),
+            d.clone(),
+            "--json".into(),
+            sneaky("v.json"),
+        ],
     ];
     for args in &cases {
         let o = clevrtex().args(args).current_dir(base).output().unwrap();
         let t = text(&o);
         assert_eq!(o.status.code(), Some(1), "{args:?}: {t}");
-        assert!(t.contains("is inside the dataset") && t.contains("hint:"), "{args:?}: {t}");
+        assert!(
+            t.contains("is inside the dataset") && t.contains("hint:"),
+            "{args:?}: {t}"
+        );
         assert!(tree(&data) == before, "{args:?} changed the dataset");
-        assert!(!base.join("MISSING").exists(), "{args:?} made a folder first");
+        assert!(
+            !base.join("MISSING").exists(),
+            "{args:?} made a folder first"
+        );
         assert!(std::fs::read(&victim).is_ok());
     }
     // The same outputs outside the dataset are written.

@@ -976,7 +976,12 @@ fn a_fifo_in_the_material_folder_is_refused_without_blocking() {
         let l = lib.as_os_str();
         let o_s = out.as_os_str();
         for args in [
-            vec!["materials".as_ref(), "--materials".as_ref(), l, "list".as_ref()],
+            vec![
+                "materials".as_ref(),
+                "--materials".as_ref(),
+                l,
+                "list".as_ref(),
+            ],
             vec![
                 "sample".as_ref(),
                 "--variant".as_ref(),
@@ -1003,7 +1008,10 @@ fn a_fifo_in_the_material_folder_is_refused_without_blocking() {
             let o = crate::util::run_within(&args, 30);
             let t = text(&o);
             assert_eq!(o.status.code(), Some(1), "{args:?}: {t}");
-            assert!(t.contains(name) && t.contains("not a regular file"), "{args:?}: {t}");
+            assert!(
+                t.contains(name) && t.contains("not a regular file"),
+                "{args:?}: {t}"
+            );
         }
     }
 }

@@ -35,7 +35,8 @@ pub fn run(args: Args) -> CmdResult {
     }
     let mut dirs = vec![args.data.dir.as_path()];
     dirs.extend(args.compare.as_deref());
-    clevrtex_dataset::out_path::check(&args.data.out, "--out", &dirs).map_err(anyhow::Error::msg)?;
+    clevrtex_dataset::out_path::check(&args.data.out, "--out", &dirs)
+        .map_err(anyhow::Error::msg)?;
     let started = std::time::Instant::now();
     let options = Options {
         max_texture_samples: args.max_texture_samples,

@@ -70,7 +70,10 @@ pub fn run(args: Args) -> CmdResult {
     }
     let samples: u64 = reports.iter().map(|r| r.ok + r.broken.len() as u64).sum();
     for r in &reports {
-        print!("{}", shown(&verify::report_text(r, &args.dirs, args.remove_broken)));
+        print!(
+            "{}",
+            shown(&verify::report_text(r, &args.dirs, args.remove_broken))
+        );
     }
     // A suite (`SUITE.json`) checked as a whole: none of its variants incomplete or foreign.
     let (suite_whole, text) =

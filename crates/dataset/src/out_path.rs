@@ -130,7 +130,12 @@ mod tests {
         // A loop is an error, not a hang.
         std::os::unix::fs::symlink(base.join("loop"), base.join("loop")).unwrap();
         assert!(resolve(&base.join("loop/x")).unwrap_err().contains("links"));
-        for out in [sneaky, base.join("l/x.png"), base.join("dangling/a.html"), data.clone()] {
+        for out in [
+            sneaky,
+            base.join("l/x.png"),
+            base.join("dangling/a.html"),
+            data.clone(),
+        ] {
             let e = check(&out, "--out", &[&data]).unwrap_err();
             assert!(e.contains("is inside") && e.contains("hint:"), "{e}");
         }

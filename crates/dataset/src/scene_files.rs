@@ -203,19 +203,29 @@ pub fn uncommitted(scene_files: &[PathBuf]) -> Vec<(PathBuf, u64)> {
         Default::default();
     for f in scene_files {
         let name = f.file_name().map(|n| n.to_string_lossy().into_owned());
-        let Some((_, variant, index)) = name.as_deref().and_then(|n| crate::layout::parse_stem(n, ".json")) else {
+        let Some((_, variant, index)) = name
+            .as_deref()
+            .and_then(|n| crate::layout::parse_stem(n, ".json"))
+        else {
             continue;
         };
         let Some(vdir) = f.parent().and_then(Path::parent) else {
             continue;
         };
-        if vdir.file_name().is_none_or(|n| n.to_string_lossy() != format!("clevrtex_{variant}")) {
+        if vdir
+            .file_name()
+            .is_none_or(|n| n.to_string_lossy() != format!("clevrtex_{variant}"))
+        {
             continue;
         }
         let entry = by_dir
             .entry(vdir.to_path_buf())
             .or_insert_with(|| (manifests(vdir).into_iter().map(|(_, m)| m).collect(), 0));
-        if !entry.0.iter().any(|m| m.variant == variant && m.covers(index)) {
+        if !entry
+            .0
+            .iter()
+            .any(|m| m.variant == variant && m.covers(index))
+        {
             entry.1 += 1;
         }
     }

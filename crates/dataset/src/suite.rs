@@ -134,7 +134,12 @@ pub fn claim(out: &Path, plan: &SuitePlan) -> Result<()> {
     let lock_path = out.join(SUITE_LOCK);
     let lock = crate::run_lock::open_lock_file(&lock_path).map_err(Error::Refused)?;
     lock.lock().map_err(|e| {
-        Error::io("cannot lock", &lock_path, e, "pass a writable `--out` folder")
+        Error::io(
+            "cannot lock",
+            &lock_path,
+            e,
+            "pass a writable `--out` folder",
+        )
     })?;
     check_folder(out, plan)?;
     // What a killed write of `SUITE.json` or the card left in the folder.
@@ -290,7 +295,10 @@ pub fn verify_dirs(
         let Some(suite) = m.suite.clone() else {
             continue;
         };
-        let out = path.parent().and_then(Path::parent).unwrap_or(Path::new("."));
+        let out = path
+            .parent()
+            .and_then(Path::parent)
+            .unwrap_or(Path::new("."));
         let command = crate::verify::command::rerun_command(&m.command, out)
             .map(|c| crate::verify::command::without_shard(&c));
         if recorded.as_ref().is_none_or(|(_, c)| c.is_none()) {
