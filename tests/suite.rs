@@ -372,6 +372,14 @@ fn a_suites_bad_input_is_refused_with_nothing_written() {
     };
     for (args, wants) in [
         (
+            &["--variant", "full", "-n", "1", "--scale", "0.01"][..],
+            &["`--scale 0.01` sizes a benchmark suite, and no `--suite` is given"][..],
+        ),
+        (
+            &["--suite", "clevrtex", "--max-worker-memory", "0"][..],
+            &["`--max-worker-memory 0` is out of range"][..],
+        ),
+        (
             &["--suite", "clevrtex2"][..],
             &["unknown suite `clevrtex2`", "pass one of: clevrtex"][..],
         ),

@@ -315,7 +315,7 @@ pub fn verify_dirs(
             "suite `{}`: not whole: its runs' manifests record the suite, but no `{SUITE_FILE}` is in {}, so its variants and totals are not known\n",
             clevrtex_scene::text::printable(&suite),
             dirs.iter()
-                .map(|d| format!("`{}`", d.join(SUITE_FILE).display()))
+                .map(|d| format!("`{}`", d.display()))
                 .collect::<Vec<_>>()
                 .join(", ")
         );
