@@ -38,11 +38,12 @@ fn run_ok(args: &[&str], env: &[(&str, &str)]) {
     assert!(out.status.success(), "{}", text(&out));
 }
 
-/// Every file under `dir`, as relative path -> bytes.
+/// Every file under `dir`, as relative path -> bytes (the runs' commits and the range locks'
+/// guard left out).
 fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     all_files(dir)
         .into_iter()
-        .filter(|(rel, _)| !is_scenes_manifest(rel))
+        .filter(|(rel, _)| !is_scenes_manifest(rel) && !rel.ends_with("/.clevrtex-runs.lock"))
         .collect()
 }
 
@@ -1143,5 +1144,249 @@ fn a_killed_sample_run_is_uncommitted_and_a_rerun_commits_the_same_bytes() {
     assert_eq!(
         scenes_manifests(&killed)["clevrtex_clevr/SCENES-0-8000-0of1.manifest"]["files"],
         8000
+    );
+}
+
+/// `clevrtex sample` in `out` with `extra` (variant full, 5 images unless `extra` says).
+fn sample_into(out: &Path, extra: &[&str]) -> std::process::Output {
+    let o = out.display().to_string();
+    let mut args = vec!["--variant", "full", "--out", &o];
+    if !extra.contains(&"-n") {
+        args.extend(["-n", "5"]);
+    }
+    args.extend(extra);
+    sample_cmd(&args, &[])
+}
+
+/// Issue 48: `sample` is a writer like `generate`. Into a folder of rendered samples (their
+/// metadata files have the scene files' names), over scene files of another seed, stream or
+/// `--total` (committed or left by a killed run), or while a live run holds the range: refused,
+/// named, with nothing changed. The same command again is not refused.
+#[test]
+fn sample_refuses_rendered_samples_other_runs_files_and_a_held_range_with_nothing_changed() {
+    let tmp = tempfile::tempdir().unwrap();
+    // A dataset's sample: its metadata is `CLEVRTEX_full_000000.json`.
+    let rendered = tmp.path().join("rendered");
+    crate::util::hand_png_sample(&rendered, "full", 0, (8, 6), (8, 6));
+    let before = all_files(&rendered);
+    let o = sample_into(&rendered, &[]);
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("holds rendered samples") && t.contains("CLEVRTEX_full_000000.json"),
+        "{t}"
+    );
+    assert_eq!(
+        tree(&rendered),
+        tree_of(&before),
+        "a refused run changed the dataset"
+    );
+    // A `generate` manifest names the folder a dataset's, whichever files are in the range.
+    std::fs::write(rendered.join("clevrtex_full/MANIFEST-0-1-0of1.json"), b"{}").unwrap();
+    let o = sample_into(&rendered, &["--start", "10"]);
+    assert!(text(&o).contains("holds rendered samples"), "{}", text(&o));
+
+    // Scene files of a committed run, then runs of other settings over them.
+    let out = tmp.path().join("scenes");
+    let o = sample_into(&out, &["--seed", "0"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let first = all_files(&out);
+    for (extra, wants) in [
+        (&["--seed", "9"][..], "--seed 0 vs 9"),
+        (
+            &["--layout-stream", "shared"][..],
+            "--layout-stream full vs shared",
+        ),
+        (&["--total", "50"][..], "--total 5 vs 50"),
+        (&["--start", "3", "--seed", "9"][..], "--seed 0 vs 9"),
+    ] {
+        let o = sample_into(&out, extra);
+        let t = text(&o);
+        assert_ne!(o.status.code(), Some(0), "{extra:?}: {t}");
+        assert!(
+            t.contains(wants) && t.contains("SCENES-0-5-0of1.manifest"),
+            "{extra:?}: {t}"
+        );
+        assert!(
+            all_files(&out) == first,
+            "{extra:?}: a refused run changed the folder"
+        );
+    }
+    // Without the commit (a killed run's files): the files themselves tell another run's.
+    std::fs::remove_file(out.join("clevrtex_full/SCENES-0-5-0of1.manifest")).unwrap();
+    let uncommitted = all_files(&out);
+    let o = sample_into(&out, &["--seed", "9"]);
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(t.contains("is a scene file of another run (seed 0"), "{t}");
+    assert!(
+        all_files(&out) == uncommitted,
+        "a refused run changed the folder"
+    );
+    // The same command again rewrites (the same bytes) and commits.
+    let o = sample_into(&out, &["--seed", "0"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(all_files(&out) == first);
+
+    // A live run holding the range (here: this test, through the library's lock).
+    let lock = clevrtex_dataset::run_lock::RunLock::acquire(
+        &out.join("clevrtex_full"),
+        2,
+        4,
+        [0, 1],
+        vec!["clevrtex".into(), "generate".into()],
+    )
+    .unwrap();
+    let o = sample_into(&out, &["--seed", "0"]);
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(t.contains("overlap those of another run"), "{t}");
+    drop(lock);
+}
+
+fn tree_of(files: &BTreeMap<String, Vec<u8>>) -> BTreeMap<String, Vec<u8>> {
+    files
+        .iter()
+        .filter(|(rel, _)| !is_scenes_manifest(rel) && !rel.ends_with("/.clevrtex-runs.lock"))
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect()
+}
+
+/// Issue 48: a rerun removes its range's commit before it replaces any file, so a kill while
+/// it rewrites never leaves the commit claiming files it is replacing; and what a killed
+/// commit left beside the manifests is swept.
+#[test]
+fn a_rerun_uncommits_its_range_before_it_replaces_a_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("scenes");
+    let o_s = out.display().to_string();
+    let setup = [
+        "--variant",
+        "clevr",
+        "-n",
+        "4000",
+        "--seed",
+        "3",
+        "--out",
+        &o_s,
+    ];
+    // The rerun on one thread: a long window while it rewrites.
+    let args = [
+        "--variant",
+        "clevr",
+        "-n",
+        "4000",
+        "--seed",
+        "3",
+        "--out",
+        &o_s,
+        "-j",
+        "1",
+    ];
+    run_ok(&setup, &[]);
+    let vdir = out.join("clevrtex_clevr");
+    let commit = vdir.join("SCENES-0-4000-0of1.manifest");
+    // A temporary a killed commit left (a dead writer of this host).
+    let host = clevrtex_dataset::atomic::hostname();
+    let stale = vdir.join(format!(
+        "SCENES-0-4000-0of1.manifest.{host}.4194303.1.clevrtex-tmp"
+    ));
+    std::fs::write(&stale, b"{").unwrap();
+    let last = vdir.join("3/CLEVRTEX_clevr_003999.json");
+    let inode = |p: &Path| std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(p).unwrap());
+    let mut observed = false;
+    for _ in 0..3 {
+        let first = vdir.join("0/CLEVRTEX_clevr_000000.json");
+        let was = inode(&first);
+        let mut child = clevrtex()
+            .arg("sample")
+            .args(args)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while inode(&first) == was && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        // A file was replaced: the commit must be gone already (unless the run ended).
+        let committed = commit.exists();
+        let _ = child.kill();
+        let status = child.wait().unwrap();
+        if status.success() {
+            continue;
+        }
+        assert!(
+            !committed,
+            "a file was replaced while the old commit still claimed it"
+        );
+        observed = true;
+        break;
+    }
+    assert!(observed, "no rerun was caught while it rewrote its files");
+    assert!(
+        !stale.exists(),
+        "the killed commit's temporary was not swept"
+    );
+    run_ok(&setup, &[]);
+    assert!(commit.exists() && last.exists());
+}
+
+/// Issue 48: requests that mean nothing exit non-zero with a message: no images, a layout
+/// stream of no variant, `--shard-count` where the shard does not come from an indexed job.
+#[test]
+fn sample_refuses_requests_that_mean_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("o");
+    for (extra, wants) in [
+        (&["-n", "0"][..], "`-n 0` asks for no scene file"),
+        (
+            &["--layout-stream", "nosuch"][..],
+            "`--layout-stream nosuch` names no variant",
+        ),
+        (
+            &["--shard-count", "3"][..],
+            "`--shard-count 3` counts the shards of an indexed job",
+        ),
+        (
+            &["--shard", "0/2", "--shard-count", "3"][..],
+            "`--shard 0/2` gives the shard",
+        ),
+    ] {
+        let o = sample_into(&out, extra);
+        let t = text(&o);
+        assert!(o.status.code().is_some_and(|c| c != 0), "{extra:?}: {t}");
+        assert!(t.contains(wants) && t.contains("hint:"), "{extra:?}: {t}");
+        assert!(!out.exists(), "{extra:?} wrote {}", out.display());
+    }
+}
+
+/// Issue 48: `render` says when it reads scene files no `SCENES-*.manifest` commits (a killed
+/// `sample` run's folder), and not for a committed folder.
+#[test]
+fn render_warns_of_scene_files_no_run_committed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("scenes");
+    let o = sample_into(&out, &[]);
+    assert!(o.status.success(), "{}", text(&o));
+    let render = || {
+        clevrtex()
+            .arg("render")
+            .arg(&out)
+            .arg("--out")
+            .arg(tmp.path().join("r"))
+            .args(["--blender", "/nonexistent/blender"])
+            .output()
+            .unwrap()
+    };
+    let t = text(&render());
+    assert!(!t.contains("committed by no"), "{t}");
+    std::fs::remove_file(out.join("clevrtex_full/SCENES-0-5-0of1.manifest")).unwrap();
+    let t = text(&render());
+    assert!(
+        t.contains("warning: 5 scene file(s) under")
+            && t.contains("committed by no `SCENES-*.manifest`"),
+        "{t}"
     );
 }

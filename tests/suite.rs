@@ -232,13 +232,121 @@ print(json.dumps({"public": public, "ours": ours}))
         .unwrap();
     let t = text(&o);
     assert_ne!(o.status.code(), Some(0), "{t}");
+    // A plain `generate` in a suite's folder (issue 48): it would rewrite the variant's
+    // manifest without the suite; refused, naming `SUITE.json` and the suite's command.
     assert!(
-        t.contains("for a dataset of 25 images, and this run's total is 30")
-            && t.contains("pass `--total 25`"),
+        t.contains("SUITE.json` records suite `clevrtex`")
+            && t.contains("--suite clevrtex --scale 0.0005 --seed 0"),
         "{t}"
     );
     assert!(!marker.exists(), "Blender was started: {t}");
     assert_eq!(tree(&b), before, "the refused run wrote into the folder");
+
+    // Issue 48: every repair hint `verify` prints for a suite runs as printed (the suite, its
+    // scale and the size flags kept): a sample deleted from a two-shard suite, then the
+    // suite's plan deleted.
+    let blender_env = ("CLEVRTEX_BLENDER", blender.as_os_str());
+    let run_hints = |t: &str| {
+        let hints = printed_commands(t);
+        assert!(!hints.is_empty(), "no command printed: {t}");
+        for h in &hints {
+            assert!(
+                h.contains("--suite clevrtex --scale 0.0005") && h.contains("--width 32"),
+                "{h}"
+            );
+            let words: Vec<&str> = h.split(' ').collect();
+            assert_eq!(words[0], "clevrtex", "{h}");
+            let o = clevrtex()
+                .args(&words[1..])
+                .env(blender_env.0, blender_env.1)
+                .env_remove("SLURM_ARRAY_TASK_ID")
+                .env_remove("JOB_COMPLETION_INDEX")
+                .output()
+                .unwrap();
+            assert_eq!(o.status.code(), Some(0), "`{h}`: {}", text(&o));
+        }
+    };
+    let verify = |dir: &Path| clevrtex().arg("verify").arg(dir).output().unwrap();
+    for f in std::fs::read_dir(a.join("clevrtex_camo/0")).unwrap() {
+        let p = f.unwrap().path();
+        if p.file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with("CLEVRTEX_camo_000001")
+        {
+            std::fs::remove_file(p).unwrap();
+        }
+    }
+    let o = verify(&a);
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    run_hints(&t);
+    let o = verify(&a);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    // No `SUITE.json`: not whole, although every manifest records the suite.
+    std::fs::remove_file(a.join("SUITE.json")).unwrap();
+    let o = verify(&a);
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(t.contains("no `SUITE.json` is in"), "{t}");
+    run_hints(&t);
+    let o = verify(&a);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(t.contains("whole (6 variants, 70 images)"), "{t}");
+}
+
+/// The `clevrtex generate` commands a `verify` output offers: its indented command lines and
+/// its back-quoted `rerun `...`` ones.
+fn printed_commands(t: &str) -> Vec<String> {
+    let mut v = Vec::new();
+    for line in t.lines() {
+        let line = line.trim();
+        if line.starts_with("clevrtex generate ") {
+            v.push(line.to_string());
+        } else if let Some((_, rest)) = line.split_once("rerun `clevrtex generate ") {
+            if let Some((cmd, _)) = rest.split_once('`') {
+                v.push(format!("clevrtex generate {cmd}"));
+            }
+        }
+    }
+    v
+}
+
+/// Issue 48: two suites at different scales started together into one folder: the suite's
+/// lock lets one write `SUITE.json`, the other is refused (never the loser's plan left).
+#[test]
+fn of_two_suites_started_together_one_is_refused_and_its_plan_never_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    for attempt in 0..4 {
+        let out = tmp.path().join(format!("out{attempt}"));
+        let spawn = |scale: &str| {
+            clevrtex()
+                .args(["generate", "--suite", "clevrtex", "--scale", scale])
+                .arg("--out")
+                .arg(&out)
+                .args(["--blender", "/nonexistent/blender"])
+                .env_remove("SLURM_ARRAY_TASK_ID")
+                .env_remove("JOB_COMPLETION_INDEX")
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap()
+        };
+        let (x, y) = (spawn("0.0005"), spawn("0.001"));
+        let (x, y) = (x.wait_with_output().unwrap(), y.wait_with_output().unwrap());
+        let refused = |o: &Output| text(o).contains("holds suite `clevrtex` at scale");
+        assert!(
+            refused(&x) != refused(&y),
+            "exactly one must be refused:\n{}\n---\n{}",
+            text(&x),
+            text(&y)
+        );
+        let winner = if refused(&x) { "0.001" } else { "0.0005" };
+        let plan: Value =
+            serde_json::from_slice(&std::fs::read(out.join("SUITE.json")).unwrap()).unwrap();
+        assert_eq!(plan["plan"]["scale"].to_string(), winner, "{plan}");
+    }
 }
 
 /// A suite's bad input: an unknown suite, a scale that empties a variant or passes the index
@@ -263,6 +371,14 @@ fn a_suites_bad_input_is_refused_with_nothing_written() {
         (o.status.code(), text(&o))
     };
     for (args, wants) in [
+        (
+            &["--variant", "full", "-n", "1", "--scale", "0.01"][..],
+            &["`--scale 0.01` sizes a benchmark suite, and no `--suite` is given"][..],
+        ),
+        (
+            &["--suite", "clevrtex", "--max-worker-memory", "0"][..],
+            &["`--max-worker-memory 0` is out of range"][..],
+        ),
         (
             &["--suite", "clevrtex2"][..],
             &["unknown suite `clevrtex2`", "pass one of: clevrtex"][..],
@@ -320,4 +436,19 @@ fn a_suites_bad_input_is_refused_with_nothing_written() {
         "{t}"
     );
     assert_eq!(tree(&other), before);
+
+    // A plain `generate` into that suite's folder (issue 48): refused, naming the file.
+    let (code, t) = run(&["--variant", "full", "-n", "2"], &other);
+    assert!(code.is_some_and(|c| c != 0), "{t}");
+    assert!(
+        t.contains("SUITE.json` records suite `clevrtex`")
+            && t.contains("generate --suite clevrtex --scale 0.001 --seed 0"),
+        "{t}"
+    );
+    assert_eq!(tree(&other), before);
+    // A `SUITE.json` that cannot be read is named.
+    std::fs::write(other.join("SUITE.json"), b"{").unwrap();
+    let (code, t) = run(&["--suite", "clevrtex", "--scale", SCALE], &other);
+    assert!(code.is_some_and(|c| c != 0), "{t}");
+    assert!(t.contains("SUITE.json` is not a suite file"), "{t}");
 }

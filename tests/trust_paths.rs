@@ -604,3 +604,94 @@ fn writers_write_nothing_through_a_link_planted_at_a_temporary_name() {
         assert!(m.is_file(), "`{}` is not a regular file", out.display());
     }
 }
+
+/// Issue 48: every command that writes resolves its output path before anything is created
+/// (a missing folder followed by `..`, a link, a dangling link) and writes nothing inside a
+/// dataset it reads: `preview`, `report`, `export` (both formats), `eval --json/--csv`,
+/// `verify --json`. `preview D --out MISSING/../D/.../CLEVRTEX_full_000000.png` overwrote a
+/// sample's RGB.
+#[test]
+fn every_writer_resolves_its_output_and_writes_nothing_into_a_dataset_it_reads() {
+    let tmp = tempfile::tempdir().unwrap();
+    let base = tmp.path();
+    let data = base.join("D");
+    crate::util::hand_png_sample(&data, "full", 0, (16, 12), (16, 12));
+    let victim = data.join("clevrtex_full/0/CLEVRTEX_full_000000.png");
+    std::os::unix::fs::symlink(data.join("clevrtex_full/0"), base.join("link")).unwrap();
+    std::os::unix::fs::symlink(data.join("clevrtex_full/new"), base.join("dangling")).unwrap();
+    let before = tree(&data);
+    let sneaky = |rel: &str| format!("MISSING/../D/clevrtex_full/0/{rel}");
+    let d = data.display().to_string();
+    let cases: Vec<Vec<String>> = vec![
+        vec![
+            "preview".into(),
+            d.clone(),
+            "--out".into(),
+            sneaky("CLEVRTEX_full_000000.png"),
+        ],
+        vec![
+            "preview".into(),
+            d.clone(),
+            "--out".into(),
+            "link/CLEVRTEX_full_000000.png".into(),
+        ],
+        vec!["report".into(), d.clone(), "--out".into(), sneaky("r.html")],
+        vec![
+            "report".into(),
+            d.clone(),
+            "--out".into(),
+            "dangling/r.html".into(),
+        ],
+        vec!["export".into(), d.clone(), sneaky("wds")],
+        vec![
+            "export".into(),
+            "--format".into(),
+            "coco".into(),
+            d.clone(),
+            "link/../coco".into(),
+        ],
+        vec![
+            "eval".into(),
+            d.clone(),
+            d.clone(),
+            "--json".into(),
+            sneaky("e.json"),
+        ],
+        vec![
+            "eval".into(),
+            d.clone(),
+            d.clone(),
+            "--csv".into(),
+            "dangling/e.csv".into(),
+        ],
+        vec![
+            "verify".into(),
+            d.clone(),
+            "--json".into(),
+            sneaky("v.json"),
+        ],
+    ];
+    for args in &cases {
+        let o = clevrtex().args(args).current_dir(base).output().unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {t}");
+        assert!(
+            t.contains("is inside the dataset") && t.contains("hint:"),
+            "{args:?}: {t}"
+        );
+        assert!(tree(&data) == before, "{args:?} changed the dataset");
+        assert!(
+            !base.join("MISSING").exists(),
+            "{args:?} made a folder first"
+        );
+        assert!(std::fs::read(&victim).is_ok());
+    }
+    // The same outputs outside the dataset are written.
+    let o = clevrtex()
+        .args(["preview", &d, "--out", "MISSING/../sheet.png"])
+        .current_dir(base)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(base.join("sheet.png").is_file());
+}

@@ -960,3 +960,58 @@ fn every_missing_texture_of_a_library_is_named_at_once() {
         "{t}"
     );
 }
+
+/// Issue 48: a FIFO named like a material (`x.json`, `y.blend`) in `--materials` is refused,
+/// named, without blocking: `materials list`, `sample` and `generate` hung for good opening it.
+#[test]
+fn a_fifo_in_the_material_folder_is_refused_without_blocking() {
+    let tmp = tempfile::tempdir().unwrap();
+    for name in ["x.json", "y.blend"] {
+        let lib = tmp.path().join(name.replace('.', "_"));
+        std::fs::create_dir_all(&lib).unwrap();
+        let fifo = lib.join(name);
+        let st = Command::new("mkfifo").arg(&fifo).status().unwrap();
+        assert!(st.success());
+        let out = tmp.path().join("out");
+        let l = lib.as_os_str();
+        let o_s = out.as_os_str();
+        for args in [
+            vec![
+                "materials".as_ref(),
+                "--materials".as_ref(),
+                l,
+                "list".as_ref(),
+            ],
+            vec![
+                "sample".as_ref(),
+                "--variant".as_ref(),
+                "full".as_ref(),
+                "-n".as_ref(),
+                "1".as_ref(),
+                "--materials".as_ref(),
+                l,
+                "--out".as_ref(),
+                o_s,
+            ],
+            vec![
+                "generate".as_ref(),
+                "-n".as_ref(),
+                "1".as_ref(),
+                "--materials".as_ref(),
+                l,
+                "--blender".as_ref(),
+                "/nonexistent/blender".as_ref(),
+                "--out".as_ref(),
+                o_s,
+            ],
+        ] {
+            let o = crate::util::run_within(&args, 30);
+            let t = text(&o);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {t}");
+            assert!(
+                t.contains(name) && t.contains("not a regular file"),
+                "{args:?}: {t}"
+            );
+        }
+    }
+}

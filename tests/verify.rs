@@ -1014,3 +1014,31 @@ fn verify_against_another_dataset_of_the_same_command_compares_image_by_image() 
     }
     assert!(!t.contains("mask differs"), "images not compared: {t}");
 }
+
+/// Issue 48: a manifest whose range lies far past the samples found does not count them as
+/// its run's: `0 of 1 expected`, the samples listed as outside the run's indices (it read
+/// `2 of 1 expected samples whole`).
+#[test]
+fn samples_outside_every_runs_range_are_not_counted_as_expected() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    for i in 0..2 {
+        crate::util::hand_png_sample(&out, "clevr", i, (8, 6), (8, 6));
+    }
+    let manifest = serde_json::json!({
+        "format": "clevrtex-manifest", "version": 1, "variant": "clevr", "seed": 0,
+        "config_hash": "0", "start": 1000000, "end": 1000001, "total": 1000001,
+        "shard": [0, 1], "passes": ["rgb", "mask"], "tool_version": "0.1.0",
+        "blender_version": "3.4.1", "command": ["clevrtex", "generate"], "files": {},
+    });
+    std::fs::write(
+        out.join("clevrtex_clevr/MANIFEST-1000000-1000001-0of1.json"),
+        manifest.to_string(),
+    )
+    .unwrap();
+    let (o, t) = verify(&[&out]);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(!t.contains("2 of 1 expected"), "{t}");
+    assert!(t.contains("clevr: 0 of 1 expected samples whole"), "{t}");
+    assert!(t.contains("outside the run's indices (2"), "{t}");
+}

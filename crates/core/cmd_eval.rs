@@ -119,6 +119,13 @@ fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
 
 /// Run `clevrtex eval`.
 pub fn run(args: Args) -> CmdResult {
+    // Before the (long) evaluation: no report is written into the inputs.
+    for (flag, path) in [("--json", &args.json), ("--csv", &args.csv)] {
+        if let Some(p) = path {
+            clevrtex_dataset::out_path::check(p, flag, &[&args.gt, &args.preds])
+                .map_err(anyhow::Error::msg)?;
+        }
+    }
     let opts = Options {
         protocol: match args.protocol {
             ProtocolArg::Clevrtex => Protocol::Clevrtex,
@@ -165,9 +172,12 @@ pub fn run(args: Args) -> CmdResult {
     if let Some(path) = &args.csv {
         write_atomic(path, &output::to_csv(&report))?;
     }
-    print!("{}", output::to_table(&report));
+    print!(
+        "{}",
+        clevrtex_scene::text::printable_lines(&output::to_table(&report))
+    );
     for line in output::warnings(&report) {
-        eprintln!("{line}");
+        eprintln!("{}", clevrtex_scene::text::printable_lines(&line));
     }
     Ok(OK)
 }

@@ -112,14 +112,14 @@ pub fn run(args: Args) -> CmdResult {
         eprintln!(
             "removed {} temporary shard(s) of killed exports: {}",
             r.dead_temps.len(),
-            r.dead_temps.join(", ")
+            clevrtex_scene::text::printable(&r.dead_temps.join(", "))
         );
     }
     if !r.stale.is_empty() {
         eprintln!(
             "removed {} shard(s) of an earlier export that this one did not write: {}",
             r.stale.len(),
-            r.stale.join(", ")
+            clevrtex_scene::text::printable(&r.stale.join(", "))
         );
     }
     let secs = started.elapsed().as_secs_f64();
@@ -183,7 +183,7 @@ fn run_coco(args: Args) -> CmdResult {
 fn skipped_warning(skipped: &[impl std::fmt::Display], why: &str) -> u8 {
     match clevrtex_dataset::export::skipped_text(skipped, why) {
         Some(text) => {
-            eprintln!("{text}");
+            eprintln!("{}", clevrtex_scene::text::printable_lines(&text));
             exit::PARTIAL
         }
         None => exit::OK,

@@ -132,7 +132,17 @@ pub(crate) struct Part<'a> {
 /// Run `clevrtex generate` (one variant; `--suite` is `crate::suite::run`, which `main.rs`
 /// calls instead, as it runs this file's [`run_part`] per variant).
 pub fn run_generate(args: GenerateArgs) -> CmdResult {
+    // `--scale` sizes a suite: without `--suite` it would be ignored (a 320x240 run of the
+    // default count instead of the try asked for).
+    if let Some(scale) = args.scale {
+        anyhow::bail!("`--scale {scale}` sizes a benchmark suite, and no `--suite` is given: it would be ignored\nhint: pass `--suite clevrtex --scale {scale}`, or leave `--scale` out");
+    }
     let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
+    // A suite's folder is made by `--suite` only: a plain run would rewrite a suite variant's
+    // manifest without its suite, or add a variant outside the suite's plan.
+    if !args.estimate {
+        clevrtex_dataset::suite::refuse_plain_run(&args.run.out, &args.variant)?;
+    }
     let images = generate::Part {
         start: args.start,
         count: args.count.unwrap_or(0),

@@ -180,7 +180,15 @@ pub fn run(args: Args) -> CmdResult {
             let _ = writeln!(std::io::stdout().lock(), "{}", cat.resolved_json());
             Ok(OK)
         }
-        Sub::Sheet(a) => sheet(&cat, a),
+        Sub::Sheet(a) => {
+            // Not into the user materials read, nor into the cell cache.
+            let cache = sheet::cache_dir(a.cache.clone());
+            let mut read = vec![cache.as_path()];
+            read.extend(args.materials.as_deref());
+            clevrtex_dataset::out_path::check(&a.out, "--out", &read)
+                .map_err(anyhow::Error::msg)?;
+            sheet(&cat, a)
+        }
         Sub::Check(a) => check(&cat, a),
         Sub::Stats(a) => stats(&cat, a),
         Sub::Cost(a) => cost(&cat, a),

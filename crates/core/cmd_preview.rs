@@ -2,7 +2,6 @@
 //! `clevrtex_report::preview` draw and write the contact sheet, and prints what was drawn and
 //! what was left out.
 
-use clevrtex_report::output::refuse_output_inside;
 use clevrtex_report::preview::{draw, save, Options, Sheet};
 
 use crate::exit::{self, CmdResult};
@@ -28,7 +27,8 @@ pub struct Args {
 
 /// Run `clevrtex preview`.
 pub fn run(args: Args) -> CmdResult {
-    refuse_output_inside(&args.data.out, &[&args.data.dir])?;
+    clevrtex_dataset::out_path::check(&args.data.out, "--out", &[&args.data.dir])
+        .map_err(anyhow::Error::msg)?;
     let options = Options {
         dir: args.data.dir.clone(),
         n: args.n,

@@ -4,7 +4,6 @@
 
 use std::path::PathBuf;
 
-use clevrtex_report::output::refuse_output_inside;
 use clevrtex_report::report::{make, write_page, Options};
 
 use crate::exit::{self, CmdResult};
@@ -36,7 +35,8 @@ pub fn run(args: Args) -> CmdResult {
     }
     let mut dirs = vec![args.data.dir.as_path()];
     dirs.extend(args.compare.as_deref());
-    refuse_output_inside(&args.data.out, &dirs)?;
+    clevrtex_dataset::out_path::check(&args.data.out, "--out", &dirs)
+        .map_err(anyhow::Error::msg)?;
     let started = std::time::Instant::now();
     let options = Options {
         max_texture_samples: args.max_texture_samples,

@@ -97,6 +97,9 @@ fn read_config(args: &Args, cat: &clevrtex_materials::Catalogue) -> anyhow::Resu
 /// Run `clevrtex sample`.
 pub fn run(args: Args) -> CmdResult {
     let started = Instant::now();
+    if args.count == 0 {
+        bail!("`-n 0` asks for no scene file\nhint: pass the number of images to sample, e.g. `-n 100`");
+    }
     let config = load_config(&args)?;
     let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
     let end = args.start.checked_add(args.count).with_context(|| {
@@ -124,6 +127,7 @@ pub fn run(args: Args) -> CmdResult {
         total,
         shard,
         threads: args.jobs.unwrap_or(0),
+        command: std::env::args().collect(),
     };
     let result = sample_run::run(&req, &interrupted, &|| progress.inc(1));
     progress.finish_and_clear();

@@ -40,6 +40,12 @@ pub struct Args {
 pub fn run(args: Args) -> CmdResult {
     let threads = args.jobs.unwrap_or(0);
     let started = std::time::Instant::now();
+    if let Some(json) = &args.json {
+        // The report is no file of the datasets it checks (a stray file there fails verify).
+        let mut read: Vec<&std::path::Path> = args.dirs.iter().map(PathBuf::as_path).collect();
+        read.extend(args.against.as_deref());
+        clevrtex_dataset::out_path::check(json, "--json", &read).map_err(anyhow::Error::msg)?;
+    }
     let opts = VerifyOptions {
         variant: args.variant.clone(),
     };
@@ -64,13 +70,16 @@ pub fn run(args: Args) -> CmdResult {
     }
     let samples: u64 = reports.iter().map(|r| r.ok + r.broken.len() as u64).sum();
     for r in &reports {
-        print!("{}", verify::report_text(r, &args.dirs, args.remove_broken));
+        print!(
+            "{}",
+            shown(&verify::report_text(r, &args.dirs, args.remove_broken))
+        );
     }
     // A suite (`SUITE.json`) checked as a whole: none of its variants incomplete or foreign.
     let (suite_whole, text) =
         clevrtex_dataset::suite::verify_dirs(&args.dirs, &reports, args.variant.is_some())
             .map_err(anyhow::Error::msg)?;
-    print!("{text}");
+    print!("{}", shown(&text));
     let secs = started.elapsed().as_secs_f64();
     eprintln!(
         "checked {samples} samples in {secs:.1} s ({:.0} samples/s)",
@@ -85,7 +94,7 @@ pub fn run(args: Args) -> CmdResult {
         None => Vec::new(),
     };
     for c in &comparisons {
-        print!("{}", verify::comparison_text(c));
+        print!("{}", shown(&verify::comparison_text(c)));
     }
     if let Some(path) = &args.json {
         let text = if args.against.is_some() {
@@ -104,7 +113,7 @@ pub fn run(args: Args) -> CmdResult {
         for r in &reports {
             let done = verify::remove_broken(r).context("cannot remove a broken sample's file")?;
             removed += done.files;
-            print!("{}", verify::removal_text(&r.variant, &done));
+            print!("{}", shown(&verify::removal_text(&r.variant, &done)));
         }
         println!("removed {removed} file(s) of broken samples and temporary files");
     }
@@ -118,4 +127,10 @@ pub fn run(args: Args) -> CmdResult {
             exit::PARTIAL
         },
     )
+}
+
+/// What verify prints, which quotes both datasets' files (manifests, metadata, names): control
+/// and bidirectional characters escaped, newlines kept (docs/security.md).
+fn shown(text: &str) -> std::borrow::Cow<'_, str> {
+    clevrtex_scene::text::printable_lines(text)
 }

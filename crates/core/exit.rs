@@ -43,7 +43,10 @@ pub fn report(result: CmdResult) -> u8 {
     match result {
         Ok(code) => code,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            // A message may quote any file's text (a manifest, a scene file, a lock): its
+            // control and bidirectional characters escaped, whatever the command forgot.
+            let text = format!("{err:#}");
+            eprintln!("error: {}", clevrtex_scene::text::printable_lines(&text));
             // A command that stopped because of a signal, whatever error the stop surfaced
             // as (a worker's start cut short, a render's `interrupted`), exits with the
             // signal's code, not 1.

@@ -174,7 +174,7 @@ pub(crate) fn run_jobs(
 
 /// The numbers given as flags, checked (before Blender is looked for): `--timeout` and
 /// `--startup-timeout` as durations, `--workers` in range.
-fn checked_numbers(args: &RunArgs) -> anyhow::Result<(Option<Duration>, Duration)> {
+pub(crate) fn checked_numbers(args: &RunArgs) -> anyhow::Result<(Option<Duration>, Duration)> {
     let timeout = args
         .timeout
         .map(|t| run_args::seconds("--timeout", t))
@@ -188,6 +188,7 @@ fn checked_numbers(args: &RunArgs) -> anyhow::Result<(Option<Duration>, Duration
             .map_err(anyhow::Error::msg)?;
     }
     let startup_timeout = run_args::seconds("--startup-timeout", args.startup_timeout)?;
+    batch::memory_bound(args.max_worker_memory).map_err(anyhow::Error::msg)?;
     Ok((timeout, startup_timeout))
 }
 

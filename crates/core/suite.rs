@@ -14,10 +14,13 @@ pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
     let plan = suite.plan(scale, args.seed).map_err(anyhow::Error::msg)?;
     let shard = clevrtex_scene::shard::resolve(args.shard.as_deref(), args.shard_count)?;
     let out = &args.run.out;
+    // The numbers given as flags before anything is written (`SUITE.json` included).
+    crate::run::checked_numbers(&args.run)?;
     if !args.estimate {
-        // Nothing is written into a folder of another suite or with a foreign variant.
-        clevrtex_dataset::suite::check_folder(out, &plan)?;
-        clevrtex_dataset::suite::write(out, &plan)?;
+        // Nothing is written into a folder of another suite or with a foreign variant; the
+        // check and the write under the suite's lock, so of two suites started at once into
+        // one folder the second is refused and its plan never written.
+        clevrtex_dataset::suite::claim(out, &plan)?;
     }
     println!(
         "suite `{}` at scale {}: {} images ({}), seed {}, shard {}/{}",

@@ -266,21 +266,8 @@ pub fn open_source(
         other => other.into(),
     })?;
     // Files written into the dataset would become stray files of it (and a later export of
-    // it would pack them): refused, as `preview` and `report` refuse an `--out` there.
-    let existing = out
-        .ancestors()
-        .find(|p| p.exists())
-        .unwrap_or(Path::new("."));
-    if existing
-        .canonicalize()
-        .is_ok_and(|o| o.starts_with(&ds.root))
-    {
-        return Err(ExportError::Message(format!(
-            "`{}` is inside the dataset `{}`: what export writes would become files of the dataset\nhint: export into a folder outside the dataset",
-            out.display(),
-            dir.display()
-        )));
-    }
+    // it would pack them): refused, resolved as the file system will (the one output check).
+    crate::out_path::check(out, "OUT", &[dir]).map_err(ExportError::Message)?;
     let mut skipped = Vec::new();
     let wanted = |v: &str| variant.is_none_or(|want| want == v);
     // A `clevrtex_<variant>` folder given itself is not an output folder: nothing under it.

@@ -1,6 +1,8 @@
 //! `clevrtex sample`'s run: the scene files of a range (one shard of it) sampled in parallel
 //! and written ([`run`]), streamed in chunks so memory stays bounded whatever the count, then
-//! made durable and committed by the range's manifest (`crate::scene_files`).
+//! made durable and committed by the range's manifest (`crate::scene_files`). A writer like
+//! `generate`: under the range's lock (`crate::run_lock`), the folder checked and the range's
+//! commit removed before any file is replaced ([`run`]).
 
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -33,6 +35,8 @@ pub struct Request<'a> {
     pub shard: Shard,
     /// Worker threads (0: one per core).
     pub threads: usize,
+    /// This process's command line, recorded in the range's lock.
+    pub command: Vec<String>,
 }
 
 /// How a run ended.
@@ -45,7 +49,10 @@ pub enum Sampled {
 }
 
 /// Sample and write the scene files `req` asks for; `written_one` is called after each image,
-/// `interrupted` (Ctrl-C) finishes the files being written and stops.
+/// `interrupted` (Ctrl-C) finishes the files being written and stops. Under the range's lock
+/// (a live overlapping `sample` or `generate` refuses it), and refused with nothing changed
+/// when the folder holds rendered samples or scene files of another run
+/// ([`scene_files::check_folder`], [`check_replaced`]).
 pub fn run(
     req: &Request,
     interrupted: &AtomicBool,
@@ -55,13 +62,46 @@ pub fn run(
         config, out, seed, ..
     } = *req;
     let (shard, total) = (req.shard, req.total);
-    // First index >= start with index % n == k, then every n-th, streamed in chunks: memory
-    // stays bounded whatever `-n` is, and files appear in index order chunk by chunk.
-    let mut indices = shard.iter(req.start, req.end).peekable();
+    let vdir = crate::layout::variant_dir(out, &config.name);
+    let mut manifest = scene_files::ScenesManifest {
+        format: scene_files::FORMAT.into(),
+        version: 1,
+        variant: config.name.clone(),
+        seed,
+        layout_stream: config.layout_stream().to_string(),
+        start: req.start,
+        end: req.end,
+        total,
+        shard: [shard.k, shard.n],
+        files: 0,
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(req.threads)
         .build()
         .map_err(|e| format!("cannot start worker threads: {e}"))?;
+    // One writer per range, as `generate`: the lock makes the variant folder (not a link out
+    // of `--out`); under it, nothing is replaced that this run did not write.
+    let _lock = crate::run_lock::RunLock::acquire(
+        &vdir,
+        req.start,
+        req.end,
+        manifest.shard,
+        req.command.clone(),
+    )?;
+    scene_files::check_folder(&vdir, &manifest)?;
+    // What a killed commit left beside the manifests.
+    crate::atomic::remove_stale_temps(&vdir);
+    pool.install(|| check_replaced(req, &manifest))?;
+    scene_files::invalidate(&vdir, &manifest).map_err(|e| {
+        format!(
+            "cannot remove the earlier commit `{}`: {e}\nhint: check permissions under `--out`",
+            vdir.join(manifest.name()).display()
+        )
+    })?;
+    // First index >= start with index % n == k, then every n-th, streamed in chunks: memory
+    // stays bounded whatever `-n` is, and files appear in index order chunk by chunk.
+    let mut indices = shard.iter(req.start, req.end).peekable();
     let stop = AtomicBool::new(false);
     let mut written = 0u64;
     let mut last_dir = None;
@@ -112,20 +152,7 @@ pub fn run(
         written += chunk.len() as u64;
     }
     // Durable once for the whole run, then committed by its manifest.
-    let vdir = crate::layout::variant_dir(out, &config.name);
-    let manifest = scene_files::ScenesManifest {
-        format: scene_files::FORMAT.into(),
-        version: 1,
-        variant: config.name.clone(),
-        seed,
-        layout_stream: config.layout_stream().to_string(),
-        start: req.start,
-        end: req.end,
-        total,
-        shard: [shard.k, shard.n],
-        files: written,
-        tool_version: env!("CARGO_PKG_VERSION").into(),
-    };
+    manifest.files = written;
     if written > 0 {
         scene_files::commit(&vdir, &manifest).map_err(|e| {
             format!(
@@ -135,6 +162,65 @@ pub fn run(
         })?;
     }
     Ok(Sampled::Done(written))
+}
+
+/// Refuse, before anything is written, a run that would replace a file it would not write
+/// itself: each existing file of the run's indices is compared with the scene this run
+/// samples for its index. Equal bytes (a rerun, or a killed run of the same command) and a
+/// file that is not JSON (a crash's leftover) are rewritten; a scene file of other bytes was
+/// sampled by another run (another seed, stream, config or split), and any other JSON is a
+/// rendered sample's metadata: both refused, named.
+fn check_replaced(req: &Request, run: &scene_files::ScenesManifest) -> Result<(), String> {
+    let found = scene_files::existing(req.out, run)?;
+    let vdir = crate::layout::variant_dir(req.out, &req.config.name);
+    let root = crate::dataset::files::root(&vdir)
+        .map_err(|e| format!("cannot read `{}`: {e}", vdir.display()))?;
+    let problems: Vec<String> = found
+        .par_iter()
+        .filter_map(|(index, path)| {
+            let Ok(bytes) = crate::dataset::files::read(&root, path, 4 << 20) else {
+                // Not a regular file, a link out, too large: never written through (the
+                // atomic writer renames over it) and not a file of this run.
+                return Some(format!(
+                    "`{}` is not a scene file this run wrote\nhint: move it away, or pass another `--out`",
+                    path.display()
+                ));
+            };
+            let ours = sample(
+                req.config,
+                &SampleRequest {
+                    seed: req.seed,
+                    index: *index,
+                    attempt: 0,
+                    total: req.total,
+                },
+            )
+            .ok()
+            .and_then(|s| clevrtex_scene::to_pretty_json(&s).ok());
+            if ours.as_deref().map(str::as_bytes) == Some(&bytes[..]) {
+                return None;
+            }
+            let value: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
+            if value["format"] != clevrtex_scene::scene_file::SCENE_FORMAT {
+                return Some(scene_files::rendered_here(&vdir, path));
+            }
+            let show = |k: &str| clevrtex_scene::text::printable(&value[k].to_string()).into_owned();
+            Some(format!(
+                "`{}` is a scene file of another run (seed {}, layout stream {}, split {}), not the one this run samples (seed {}, layout stream {}, `--total {}`): sampling here would replace it\nhint: pass another `--out` for these settings, or rerun with that run's settings",
+                path.display(),
+                show("seed"),
+                show("layout_stream"),
+                show("split"),
+                run.seed,
+                run.layout_stream,
+                run.total
+            ))
+        })
+        .collect();
+    match problems.into_iter().next() {
+        Some(p) => Err(p),
+        None => Ok(()),
+    }
 }
 
 /// Write one scene file with the one atomic writer, made durable with the others at the end

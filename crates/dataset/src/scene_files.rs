@@ -6,12 +6,24 @@
 //! (whole, but after a power loss possibly empty or missing): rerunning the same command
 //! rewrites every file and commits them. The manifest's name does not end in `.json`, so
 //! `clevrtex render DIR` never takes it for a scene file.
+//!
+//! A run is a writer like `generate` (under the range's lock, `crate::run_lock`): before
+//! anything is replaced, [`check_folder`] refuses a folder of rendered samples (their metadata
+//! files have the scene files' names) and a run over scene files another run wrote (another
+//! seed, stream, config or `--total`), and [`invalidate`] removes the range's own commit, so a
+//! kill while files are rewritten leaves them uncommitted. [`uncommitted`] tells `render` which
+//! files no manifest commits.
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use crate::atomic;
+use crate::dataset::files;
+use clevrtex_scene::text::printable;
+
+/// The largest scene-files manifest read (one is a few hundred bytes).
+const MAX_MANIFEST_BYTES: u64 = 64 * 1024;
 
 /// `format` of a scene-files manifest.
 pub const FORMAT: &str = "clevrtex-scenes";
@@ -54,6 +66,174 @@ impl ScenesManifest {
             self.start, self.end, self.shard[0], self.shard[1]
         )
     }
+
+    /// Whether the run made `index` (its range and shard).
+    pub fn covers(&self, index: u64) -> bool {
+        (self.start..self.end).contains(&index) && index % self.shard[1].max(1) == self.shard[0]
+    }
+
+    /// Whether some index is made by both runs.
+    fn overlaps(&self, other: &ScenesManifest) -> bool {
+        crate::run_lock::overlaps(
+            (self.start, self.end, self.shard),
+            (other.start, other.end, other.shard),
+        )
+    }
+}
+
+/// The scene-files manifests of `variant_dir` (each read capped and parsed), with their paths;
+/// one that cannot be read is left out (it commits nothing).
+pub fn manifests(variant_dir: &Path) -> Vec<(PathBuf, ScenesManifest)> {
+    let Ok(root) = files::root(variant_dir) else {
+        return Vec::new();
+    };
+    let mut found = Vec::new();
+    for (name, path, kind) in files::list(&root, variant_dir).unwrap_or_default() {
+        if kind != files::Kind::File || !(name.starts_with("SCENES-") && name.ends_with(SUFFIX)) {
+            continue;
+        }
+        let m = files::read(&root, &path, MAX_MANIFEST_BYTES)
+            .and_then(|b| serde_json::from_slice::<ScenesManifest>(&b).map_err(|e| e.to_string()));
+        if let Some(m) = m.ok().filter(|m| m.format == FORMAT && m.name() == name) {
+            found.push((path, m));
+        }
+    }
+    found
+}
+
+/// Refuse, before anything is written, to sample `run` into `variant_dir` (an existing
+/// variant folder, held under the range's lock) when the folder holds rendered samples (a
+/// `generate` manifest: sample's files would replace their metadata files, which have the
+/// same names) or a scene-files manifest of another `--total`, or of another seed or layout
+/// stream over indices of this run. The message names the file and says what to do.
+pub fn check_folder(variant_dir: &Path, run: &ScenesManifest) -> Result<(), String> {
+    let root = files::root(variant_dir)
+        .map_err(|e| format!("cannot read `{}`: {e}", variant_dir.display()))?;
+    for (name, path, _) in files::list(&root, variant_dir).unwrap_or_default() {
+        if crate::manifest::is_manifest_name(&name) {
+            return Err(rendered_here(variant_dir, &path));
+        }
+    }
+    for (path, m) in manifests(variant_dir) {
+        let mut differ = Vec::new();
+        // As `generate`: another total changes the recorded splits (never a test-only
+        // variant's).
+        let test_only =
+            crate::layout::variant_splits(&run.variant) == clevrtex_scene::names::Splits::TestOnly;
+        if m.total != run.total && !test_only {
+            differ.push(format!("--total {} vs {}", m.total, run.total));
+        }
+        if m.overlaps(run) {
+            if m.seed != run.seed {
+                differ.push(format!("--seed {} vs {}", m.seed, run.seed));
+            }
+            if m.layout_stream != run.layout_stream {
+                differ.push(format!(
+                    "--layout-stream {} vs {}",
+                    printable(&m.layout_stream),
+                    run.layout_stream
+                ));
+            }
+        }
+        if !differ.is_empty() {
+            return Err(format!(
+                "`{}` commits scene files of indices {}..{} sampled with other settings (that run vs this one: {}): sampling here would mix two sets of scenes\nhint: pass another `--out` for these settings, or rerun with the settings of that run",
+                path.display(),
+                m.start,
+                m.end,
+                differ.join(", ")
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The refusal of a folder holding rendered samples (`found` one of their files).
+pub fn rendered_here(variant_dir: &Path, found: &Path) -> String {
+    format!(
+        "`{}` holds rendered samples (`{}`): `clevrtex sample` would replace their metadata files, which have the scene files' names\nhint: pass another `--out` for scene files (`clevrtex render` reads them from there)",
+        variant_dir.display(),
+        found.display()
+    )
+}
+
+/// The files of the layout named `CLEVRTEX_<variant>_<index>.json` under `out` that `run`
+/// would write (its range and shard), by index: what a run replaces, checked before it starts.
+pub fn existing(out: &Path, run: &ScenesManifest) -> Result<Vec<(u64, PathBuf)>, String> {
+    let vdir = crate::layout::variant_dir(out, &run.variant);
+    let root = files::root(&vdir).map_err(|e| format!("cannot read `{}`: {e}", vdir.display()))?;
+    let mut found = Vec::new();
+    if run.start >= run.end {
+        return Ok(found);
+    }
+    for bucket in run.start / 1000..=(run.end - 1) / 1000 {
+        let dir = crate::layout::sample_dir(out, &run.variant, bucket * 1000);
+        if files::classify(&root, &dir) != files::Kind::Dir {
+            continue;
+        }
+        for (name, path, _) in files::list(&root, &dir).unwrap_or_default() {
+            if let Some((_, v, index)) = crate::layout::parse_stem(&name, ".json") {
+                if v == run.variant && run.covers(index) {
+                    found.push((index, path));
+                }
+            }
+        }
+    }
+    Ok(found)
+}
+
+/// Remove the commit of `run`'s own range and shard from `variant_dir` (a rerun of it), made
+/// durable before any file is replaced: a kill while the run rewrites its files then leaves
+/// them uncommitted, never committed by a manifest of other bytes.
+pub fn invalidate(variant_dir: &Path, run: &ScenesManifest) -> std::io::Result<()> {
+    let path = variant_dir.join(run.name());
+    match std::fs::remove_file(&path) {
+        Ok(()) => std::fs::File::open(variant_dir)?.sync_all(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(e),
+    }
+}
+
+/// Of `scene_files` (paths of the layout, `OUT/clevrtex_<v>/<bucket>/CLEVRTEX_<v>_<i>.json`),
+/// those no scene-files manifest of their variant folder commits, counted by variant folder:
+/// files of a killed or running `clevrtex sample` (whole, but after a power loss possibly
+/// empty), or written by something else. Files outside the layout are not counted.
+pub fn uncommitted(scene_files: &[PathBuf]) -> Vec<(PathBuf, u64)> {
+    let mut by_dir: std::collections::BTreeMap<PathBuf, (Vec<ScenesManifest>, u64)> =
+        Default::default();
+    for f in scene_files {
+        let name = f.file_name().map(|n| n.to_string_lossy().into_owned());
+        let Some((_, variant, index)) = name
+            .as_deref()
+            .and_then(|n| crate::layout::parse_stem(n, ".json"))
+        else {
+            continue;
+        };
+        let Some(vdir) = f.parent().and_then(Path::parent) else {
+            continue;
+        };
+        if vdir
+            .file_name()
+            .is_none_or(|n| n.to_string_lossy() != format!("clevrtex_{variant}"))
+        {
+            continue;
+        }
+        let entry = by_dir
+            .entry(vdir.to_path_buf())
+            .or_insert_with(|| (manifests(vdir).into_iter().map(|(_, m)| m).collect(), 0));
+        if !entry
+            .0
+            .iter()
+            .any(|m| m.variant == variant && m.covers(index))
+        {
+            entry.1 += 1;
+        }
+    }
+    by_dir
+        .into_iter()
+        .filter(|(_, (_, n))| *n > 0)
+        .map(|(d, (_, n))| (d, n))
+        .collect()
 }
 
 /// Write scene file `path` (its folder exists) with `bytes`, atomically but without a sync:

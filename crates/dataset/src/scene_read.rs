@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use clevrtex_scene::SceneFile;
 
 /// The scene files of `paths` (files as given, folders searched recursively for `*.json`,
-/// sorted per folder); `warn` gets a line per file skipped (a link out of its folder).
+/// sorted per folder); `warn` gets a line per file skipped (a link out of its folder) and one
+/// per variant folder holding files no scene-files manifest commits.
 pub fn collect(paths: &[PathBuf], warn: &mut dyn FnMut(String)) -> Result<Vec<PathBuf>, String> {
     let mut files = Vec::new();
     for p in paths {
@@ -37,6 +38,14 @@ pub fn collect(paths: &[PathBuf], warn: &mut dyn FnMut(String)) -> Result<Vec<Pa
         return Err(format!(
             "no `*.json` scene files found in {}\nhint: make some with `clevrtex sample --out DIR` and pass that `DIR`",
             searched.join(", ")
+        ));
+    }
+    // Files of a killed or running `clevrtex sample` (or put there by hand) are whole but not
+    // known to be durable nor to be one run's: rendered, but said.
+    for (dir, n) in crate::scene_files::uncommitted(&files) {
+        warn(format!(
+            "warning: {n} scene file(s) under `{}` are committed by no `SCENES-*.manifest`: a `clevrtex sample` run was killed (or is still running) there, or the files were put there otherwise\nhint: rerun the `clevrtex sample` command that wrote them (it rewrites and commits them), then `clevrtex render` again",
+            clevrtex_scene::text::printable(&dir.display().to_string())
         ));
     }
     Ok(files)

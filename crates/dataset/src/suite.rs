@@ -31,8 +31,10 @@ pub fn read(out: &Path) -> std::result::Result<Option<SuitePlan>, String> {
     if std::fs::symlink_metadata(&path).is_err() {
         return Ok(None);
     }
-    let root = crate::dataset::files::root(out).map_err(|e| e.to_string())?;
-    let bytes = crate::dataset::files::read(&root, &path, 1 << 20)?;
+    let root = crate::dataset::files::root(out)
+        .map_err(|e| format!("cannot read `{}`: {e}", path.display()))?;
+    let bytes = crate::dataset::files::read(&root, &path, 1 << 20)
+        .map_err(|why| format!("`{}` cannot be read: {why}", path.display()))?;
     let file: SuiteFile = serde_json::from_slice(&bytes)
         .map_err(|e| format!("`{}` is not a suite file: {e}", path.display()))?;
     if file.format != FORMAT || file.version != 1 {
@@ -108,6 +110,97 @@ pub fn check_folder(out: &Path, plan: &SuitePlan) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The suite's lock in its folder: held while the folder is checked and its plan written, so
+/// of two suites started together into one folder only the first writes `SUITE.json`.
+pub const SUITE_LOCK: &str = ".clevrtex-suite.lock";
+
+/// Check `out` for `plan` ([`check_folder`]) and record the plan ([`write`]), both under the
+/// suite's lock ([`SUITE_LOCK`], an exclusive `flock`): a second suite (another scale or seed)
+/// started at the same time then finds the first's `SUITE.json` and is refused, nothing of it
+/// written. The lock file is kept (as the range locks' guard).
+pub fn claim(out: &Path, plan: &SuitePlan) -> Result<()> {
+    // First without the lock: a folder refused outright gets nothing, not even the lock file.
+    check_folder(out, plan)?;
+    std::fs::create_dir_all(out).map_err(|e| {
+        Error::io(
+            "cannot make",
+            out,
+            e,
+            "pass an `--out` folder that can be made",
+        )
+    })?;
+    let lock_path = out.join(SUITE_LOCK);
+    let lock = crate::run_lock::open_lock_file(&lock_path).map_err(Error::Refused)?;
+    lock.lock().map_err(|e| {
+        Error::io(
+            "cannot lock",
+            &lock_path,
+            e,
+            "pass a writable `--out` folder",
+        )
+    })?;
+    check_folder(out, plan)?;
+    // What a killed write of `SUITE.json` or the card left in the folder.
+    crate::atomic::remove_stale_temps(out);
+    write(out, plan)
+}
+
+/// Refuse a `generate` without `--suite` of `variant` into `out` when `out` is a suite's
+/// folder (its `SUITE.json`, or a manifest of the variant that records a suite): the run would
+/// rewrite a suite variant's manifest without its suite, or add a variant outside the plan.
+pub fn refuse_plain_run(out: &Path, variant: &str) -> Result<()> {
+    let rerun = |p: &SuitePlan| {
+        format!(
+            "clevrtex generate --suite {} --scale {} --seed {} --out {}",
+            p.suite,
+            p.scale,
+            p.seed,
+            crate::verify::shell_words(&[out.display().to_string()])
+        )
+    };
+    let suite = match read(out) {
+        Ok(Some(plan)) => Some((
+            plan.suite.clone(),
+            out.join(SUITE_FILE),
+            format!("make or repair the suite with `{}` (its size flags as before)", rerun(&plan)),
+        )),
+        Err(e) => {
+            return Err(Error::Refused(format!(
+                "{e}: this may be a suite's folder, which only `generate --suite` writes into\nhint: pass another `--out`, or repair the suite with its `generate --suite` command"
+            )))
+        }
+        Ok(None) => {
+            let vdir = crate::layout::variant_dir(out, variant);
+            let root = crate::dataset::files::root(&vdir).ok();
+            let entries = root
+                .as_ref()
+                .and_then(|r| crate::dataset::files::list(r, &vdir).ok())
+                .unwrap_or_default();
+            entries.into_iter().find_map(|(name, path, _)| {
+                if !crate::manifest::is_manifest_name(&name) {
+                    return None;
+                }
+                let m = crate::manifest::Manifest::read(&path).ok()?;
+                let suite = m.suite?;
+                Some((
+                    suite,
+                    path,
+                    "rerun that manifest's `generate --suite` command (its `command`)".to_string(),
+                ))
+            })
+        }
+    };
+    match suite {
+        Some((suite, path, what)) => Err(Error::Refused(format!(
+            "`{}` records suite `{}`: a `generate` without `--suite` would write variant `{}` of the suite's folder outside the suite (its manifest without the suite)\nhint: {what}, or pass another `--out` for a run of one variant",
+            path.display(),
+            clevrtex_scene::text::printable(&suite),
+            clevrtex_scene::text::printable(variant)
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// Record `plan` in `out` (made if needed), atomically; a file with the same plan is kept.
@@ -189,8 +282,57 @@ pub fn verify_dirs(
             _ => {}
         }
     }
-    let Some(plan) = plan.filter(|_| !one_variant) else {
+    if one_variant {
         return Ok((true, String::new()));
+    }
+    // What the manifests record: the suite their runs were made for, and the rerun command
+    // of one (its size flags kept, `--out` the folder verified, no shard: the whole suite).
+    let mut recorded: Option<(String, Option<Vec<String>>)> = None;
+    for path in reports.iter().flat_map(|r| r.manifests.iter()) {
+        let Ok(m) = crate::manifest::Manifest::read(path) else {
+            continue;
+        };
+        let Some(suite) = m.suite.clone() else {
+            continue;
+        };
+        let out = path
+            .parent()
+            .and_then(Path::parent)
+            .unwrap_or(Path::new("."));
+        let command = crate::verify::command::rerun_command(&m.command, out)
+            .map(|c| crate::verify::command::without_shard(&c));
+        if recorded.as_ref().is_none_or(|(_, c)| c.is_none()) {
+            recorded = Some((suite, command));
+        }
+    }
+    let Some(plan) = plan else {
+        // No `SUITE.json`: a suite's folder with its plan gone is not whole (which variants
+        // and totals it should hold is no longer known).
+        let Some((suite, command)) = recorded else {
+            return Ok((true, String::new()));
+        };
+        let mut text = format!(
+            "suite `{}`: not whole: its runs' manifests record the suite, but no `{SUITE_FILE}` is in {}, so its variants and totals are not known\n",
+            clevrtex_scene::text::printable(&suite),
+            dirs.iter()
+                .map(|d| format!("`{}`", d.display()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        if let Ok(s) = clevrtex_scene::suite::find(&suite) {
+            for (v, _) in s.variants {
+                if !reports.iter().any(|r| r.variant == *v) {
+                    text += &format!("  `{v}`: no folder\n");
+                }
+            }
+        }
+        if let Some(c) = command {
+            text += &format!(
+                "  to repair: rerun `{}` (it writes `{SUITE_FILE}` again; complete samples are skipped)\n",
+                crate::verify::shell_words(&c)
+            );
+        }
+        return Ok((false, text));
     };
     let lines = check(&plan, reports);
     let (suite, scale) = (&plan.suite, plan.scale);
@@ -210,9 +352,18 @@ pub fn verify_dirs(
     for l in &lines {
         text += &format!("  {l}\n");
     }
-    text += &format!(
-        "  to repair: rerun `clevrtex generate --suite {suite} --scale {scale} --seed {} --out DIR` (complete samples are skipped)\n",
-        plan.seed
-    );
+    // The runs' own command (their size flags kept) where a manifest records one.
+    let command = match recorded.and_then(|(_, c)| c) {
+        Some(c) => crate::verify::shell_words(&c),
+        None => format!(
+            "clevrtex generate --suite {suite} --scale {scale} --seed {} --out {}",
+            plan.seed,
+            crate::verify::shell_words(&[dirs
+                .first()
+                .map(|d| d.display().to_string())
+                .unwrap_or_default()])
+        ),
+    };
+    text += &format!("  to repair: rerun `{command}` (complete samples are skipped)\n");
     Ok((false, text))
 }

@@ -40,7 +40,7 @@ pub fn content_hash_of_parts(part_hashes: &[u64]) -> u64 {
 /// xxh3-64 of a file's bytes (`content_hash(&[bytes])`), read in 1 MiB pieces: a texture map
 /// of gigabytes costs no more memory than a small one.
 pub fn file_hash(path: &Path) -> std::io::Result<u64> {
-    let mut f = std::fs::File::open(path)?;
+    let mut f = open_regular(path)?;
     let mut h = Xxh3::new();
     let mut buf = vec![0u8; 1 << 20];
     loop {
@@ -50,6 +50,30 @@ pub fn file_hash(path: &Path) -> std::io::Result<u64> {
         }
         h.update(&buf[..n]);
     }
+}
+
+/// `O_NONBLOCK` (Linux's value; the BSDs' elsewhere).
+#[cfg(target_os = "linux")]
+const O_NONBLOCK: i32 = 0o4000;
+#[cfg(not(target_os = "linux"))]
+const O_NONBLOCK: i32 = 0x0004;
+
+/// Open `path` to read it, only if it is a regular file (links followed): the open never
+/// blocks (a FIFO named `x.blend` or `x.json` in `--materials` hung `materials list`,
+/// `sample` and `generate` for good), and anything but a regular file is refused.
+pub fn open_regular(path: &Path) -> std::io::Result<std::fs::File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(O_NONBLOCK)
+        .open(path)?;
+    if !f.metadata()?.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file (a FIFO, socket, device or folder); not read",
+        ));
+    }
+    Ok(f)
 }
 
 #[cfg(test)]

@@ -43,7 +43,7 @@ use std::sync::OnceLock;
 use serde_json::Value;
 
 pub use error::{Error, ErrorKind};
-pub use hash::{content_hash, content_hash_of_parts, file_hash};
+pub use hash::{content_hash, content_hash_of_parts, file_hash, open_regular};
 use schema::Schema;
 pub use user::{blend_file_problem, ClevrBase, CLEVR_BASE};
 

@@ -185,6 +185,10 @@ pub(crate) fn blend_header_problem(head: &[u8]) -> Option<String> {
 pub(crate) fn blend_size_problem(path: &Path) -> Option<String> {
     match std::fs::metadata(path) {
         Err(e) => Some(format!("cannot read the `.blend` file: {e}")),
+        Ok(m) if !m.is_file() => Some(
+            "the `.blend` file is not a regular file (a FIFO, socket or device); not read"
+                .to_string(),
+        ),
         Ok(m) if m.len() > MAX_BLEND_BYTES => Some(format!(
             "the `.blend` file is {} bytes, more than the {MAX_BLEND_BYTES} allowed",
             m.len()

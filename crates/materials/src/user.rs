@@ -111,7 +111,7 @@ impl Catalogue {
         for path in &files {
             if path.extension().is_some_and(|e| e == "json") {
                 let shown = path.display().to_string();
-                let text = std::fs::read_to_string(path).map_err(|e| {
+                let text = read_text(path).map_err(|e| {
                     Error::new(
                         ErrorKind::Io,
                         &shown,
@@ -276,11 +276,19 @@ fn user_name(path: &Path) -> String {
         .collect()
 }
 
+/// The text of `path`, a regular file only, opened without blocking
+/// ([`crate::hash::open_regular`]).
+fn read_text(path: &Path) -> std::io::Result<String> {
+    let mut text = String::new();
+    std::io::Read::read_to_string(&mut crate::hash::open_regular(path)?, &mut text)?;
+    Ok(text)
+}
+
 /// Why `path` is not a `.blend` file, if it is not: unreadable, or a header that is neither
 /// Blender's `BLENDER` nor gzip or zstd compression (which Blender uses for compressed files).
 pub fn blend_file_problem(path: &Path) -> Option<String> {
     let mut head = [0u8; 7];
-    let read = std::fs::File::open(path)
+    let read = crate::hash::open_regular(path)
         .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head).map(|()| head));
     match read {
         Err(e) => Some(format!("cannot read the `.blend` file: {e}")),

@@ -220,6 +220,10 @@ pub fn run(
             // Under the lock, before anything is written: a folder of a run with other
             // settings is refused.
             p.check_settings(&out, opts.overwrite)?;
+            // What a killed commit left beside the manifests and the card (the sample
+            // folders are swept as their jobs start).
+            clevrtex_dataset::atomic::remove_stale_temps(&p.variant_dir(&out));
+            clevrtex_dataset::atomic::remove_stale_temps(&out);
             p.write_plan(&out)?;
             card(&out);
             Some(lock)

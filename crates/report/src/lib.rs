@@ -9,6 +9,5 @@
 
 pub mod font;
 pub mod materials;
-pub mod output;
 pub mod preview;
 pub mod report;

@@ -82,7 +82,31 @@ fn env_u64(name: &str) -> Result<Option<u64>, ShardError> {
 }
 
 /// `--shard`, else SLURM array variables, else JOB_COMPLETION_INDEX, else everything.
+/// `--shard-count` (the flag, not `CLEVRTEX_SHARD_COUNT`, which a job's whole environment may
+/// carry) where the shard does not come from JOB_COMPLETION_INDEX means nothing: refused.
 pub fn resolve(shard: Option<&str>, shard_count: Option<u64>) -> Result<Shard, ShardError> {
+    let resolved = resolve_any(shard, shard_count)?;
+    let from_index = shard.is_none()
+        && std::env::var_os("SLURM_ARRAY_TASK_ID").is_none()
+        && std::env::var_os("JOB_COMPLETION_INDEX").is_some();
+    if let (Some(n), false) = (shard_count, from_index) {
+        if std::env::var_os("CLEVRTEX_SHARD_COUNT").is_none() {
+            let source = match shard {
+                Some(s) => format!("`--shard {s}` gives the shard"),
+                None if std::env::var_os("SLURM_ARRAY_TASK_ID").is_some() => {
+                    "the SLURM array variables give the shard".to_string()
+                }
+                None => "JOB_COMPLETION_INDEX is not set".to_string(),
+            };
+            return Err(ShardError(format!(
+                "`--shard-count {n}` counts the shards of an indexed job (JOB_COMPLETION_INDEX), and {source}: the flag would be ignored\nhint: pass `--shard K/N` to make one shard here, or leave `--shard-count` out"
+            )));
+        }
+    }
+    Ok(resolved)
+}
+
+fn resolve_any(shard: Option<&str>, shard_count: Option<u64>) -> Result<Shard, ShardError> {
     if let Some(s) = shard {
         return parse_shard(s, "`--shard`");
     }

@@ -34,8 +34,13 @@ pub(super) fn with_out(command: &[String], out: &Path) -> Vec<String> {
 /// Flags of `clevrtex generate` a rerun command offered by `verify` may carry, with whether
 /// each takes a value. None of them names a program (`--blender` is left out: the rerun
 /// uses the user's own Blender); `--out` is set to the folder verified.
-const RERUN_FLAGS: [(&str, bool); 24] = [
+const RERUN_FLAGS: [(&str, bool); 29] = [
     ("--variant", true),
+    ("--suite", true),
+    ("--scale", true),
+    ("--layout-stream", true),
+    ("--material-set", true),
+    ("--materials", true),
     ("--config", true),
     ("-n", true),
     ("--count", true),
@@ -73,7 +78,7 @@ pub(super) fn safe_value(v: &str) -> bool {
 /// The rerun command of a manifest's `command` (untrusted): `clevrtex generate` with only the
 /// flags of [`RERUN_FLAGS`] whose values are [`safe_value`]s, `--out` set to `out`; `None`
 /// when it is not a `generate` command.
-pub(super) fn rerun_command(command: &[String], out: &Path) -> Option<Vec<String>> {
+pub(crate) fn rerun_command(command: &[String], out: &Path) -> Option<Vec<String>> {
     if command.get(1).map(String::as_str) != Some("generate") {
         return None;
     }
@@ -107,7 +112,16 @@ pub(super) fn rerun_command(command: &[String], out: &Path) -> Option<Vec<String
 
 /// `command` with `--shard k/n` (replacing its `--shard` and `--shard-count`).
 pub(super) fn with_shard(command: &[String], k: u64, n: u64) -> Vec<String> {
-    let mut v = Vec::with_capacity(command.len() + 2);
+    let mut v = without_shard(command);
+    v.push("--shard".into());
+    v.push(format!("{k}/{n}"));
+    v
+}
+
+/// `command` without its `--shard` and `--shard-count`: every shard's indices (a suite's
+/// rerun, whose shards are the suite's, not a variant's).
+pub(crate) fn without_shard(command: &[String]) -> Vec<String> {
+    let mut v = Vec::with_capacity(command.len());
     let mut it = command.iter();
     while let Some(a) = it.next() {
         if a == "--shard" || a == "--shard-count" {
@@ -116,8 +130,6 @@ pub(super) fn with_shard(command: &[String], k: u64, n: u64) -> Vec<String> {
             v.push(a.clone());
         }
     }
-    v.push("--shard".into());
-    v.push(format!("{k}/{n}"));
     v
 }
 

@@ -263,6 +263,18 @@ impl Config {
                 crate::rng::SHARED_STREAM
             ));
         }
+        // A stream is a variant's layouts: a name of no variant shares nothing (`nosuch` would
+        // silently draw unrelated layouts).
+        let known = Config::variant_names();
+        if stream != self.name && stream != crate::rng::SHARED_STREAM && !known.contains(&stream) {
+            return Err(format!(
+                "`--layout-stream {}` names no variant\nhint: name a variant whose layouts to share ({}, or this config's `{}`), or `{}` for the one stream of clevrtex 0.1",
+                crate::text::printable(stream),
+                known.join(", "),
+                crate::text::printable(&self.name),
+                crate::rng::SHARED_STREAM
+            ));
+        }
         self.layout_stream = (stream != self.name).then(|| stream.to_string());
         Ok(())
     }
