@@ -15,6 +15,16 @@ on, rendered twice at 64x48, 1 sample. Between the two renders CASE changes one 
     light:none    a light's energy
     frame:none    the frame, with an auto-refresh image sequence (black, white) in the material
     frame:set     the same through scene.frame_set
+    shadowvis:other   a second, plain cube's shadow-ray visibility (`visible_shadow`) off
+    shadowvis:self    the displaced cube's own shadow-ray visibility off
+    shadowvis:raw     the same set through foreach_set (no RNA update), then an OBJECT tag
+    lightshadow:none  the light casts no shadows (`cast_shadow` / `use_shadow`)
+    samples:none      scene.cycles.samples (1 -> 2; Cycles' "Sample 1/N" says whether seen)
+    samples:light     the same, and a light's energy set to its own value
+    bounces:none      scene.cycles.max_bounces
+    bounces:light     the same, and a light's energy set to its own value
+    filter:none       scene.cycles.filter_width
+    passes:none       the view layer's diffuse direct pass on
 
 Cycles prints "Computing Displacement" for each displacement it computes; "RESULT b max red"
 says whether the second render saw the switch (0.812 against 0.278).
@@ -24,6 +34,10 @@ import sys
 import time
 
 import bpy
+
+sys.path.insert(0, __import__("os").path.join(__import__("os").path.dirname(
+    __import__("os").path.abspath(__file__)), ".."))
+import compat  # noqa: E402
 
 mode = sys.argv[sys.argv.index("--") + 1] if "--" in sys.argv else "same"
 what, _, how = mode.partition(":")
@@ -69,6 +83,10 @@ scene.world = world
 light = bpy.data.objects.new("L", bpy.data.lights.new("L", "POINT"))
 scene.collection.objects.link(light)
 light.location = (0, -3, 2)
+other = None
+if what == "shadowvis":
+    bpy.ops.mesh.primitive_cube_add(location=(0, -2.5, 1), size=0.5)
+    other = bpy.context.object
 if what == "noattr":
     nt.links.remove(attr.outputs["Fac"].links[0])
 if what == "frame":
@@ -106,6 +124,28 @@ if what in ("world", "scene", "noattr"):
         holder.update_tag()
 elif what == "light":
     light.data.energy = 500.0
+elif what == "shadowvis" and how == "raw":
+    bpy.data.objects.foreach_set("visible_shadow", [o != obj for o in bpy.data.objects])
+    obj.update_tag(refresh={"OBJECT"})
+elif what == "shadowvis":
+    compat.set_cast_shadow(obj if how == "self" else other, False)
+elif what == "lightshadow":
+    if hasattr(light.data, "use_shadow"):
+        light.data.use_shadow = False
+    else:
+        light.data.cycles.cast_shadow = False
+elif what == "samples":
+    scene.cycles.samples = 2
+    if how == "light":
+        light.data.energy = light.data.energy
+elif what == "bounces":
+    scene.cycles.max_bounces = 0
+    if how == "light":
+        light.data.energy = light.data.energy
+elif what == "filter":
+    scene.cycles.filter_width = 0.01
+elif what == "passes":
+    bpy.context.view_layer.use_pass_diffuse_direct = True
 elif what == "frame":
     if how == "set":
         scene.frame_set(2)
