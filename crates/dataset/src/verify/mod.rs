@@ -20,6 +20,7 @@ pub(crate) mod against;
 pub(crate) mod checks;
 pub(crate) mod command;
 pub(crate) mod mixed;
+pub(crate) mod rederive;
 pub(crate) mod remove;
 pub(crate) mod report;
 #[cfg(test)]
@@ -350,6 +351,21 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
             })
             .collect()
     };
+    // Each run's config rebuilt once, to draw its samples' layouts again.
+    let configs: Configs = manifests
+        .iter()
+        .filter(|(_, m, _)| m.variant == variant)
+        .map(|(p, m, _)| (p.clone(), rederive::config_of(m)))
+        .collect();
+    for (p, c) in &configs {
+        if let Err(why) = c {
+            rep.not_rederived.push(format!(
+                "`{}`: {}",
+                p.display(),
+                clevrtex_scene::text::printable(why)
+            ));
+        }
+    }
     let checked: Vec<(Option<layout::Split>, Result<(), Broken>)> = singles
         .par_iter()
         .map(|(index, (stem, f), listed)| {
@@ -365,6 +381,7 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
                 &entries,
                 *listed,
                 &claims,
+                &configs,
                 &run_split(*index),
             )
         })
@@ -383,6 +400,16 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
             _ => ranges.push([*index, *index]),
         }
     }
+    let rederived = singles
+        .iter()
+        .filter(|(index, _, _)| {
+            manifests.iter().any(|(p, m, _)| {
+                m.variant == variant
+                    && m.covers(*index)
+                    && configs.get(p).is_some_and(Result::is_ok)
+            })
+        })
+        .count() as u64;
     for (_, c) in checked {
         match c {
             Ok(()) => rep.ok += 1,
@@ -446,6 +473,9 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
         }
     }
     rep.commands = commands;
+    rep.rederived = rederived
+        .saturating_sub(rep.broken.len() as u64)
+        .min(rep.ok);
     rep
 }
 

@@ -16,6 +16,19 @@ pub fn report_text(r: &VariantReport, dirs: &[PathBuf], remove: bool) -> String 
         "{}: {} of {} expected samples whole ({})",
         r.variant, r.ok, r.expected, r.expected_from
     );
+    if r.rederived > 0 {
+        let _ = writeln!(
+            out,
+            "  {} sample(s) re-derived: their layouts drawn again from their run's seed and config equal their metadata",
+            r.rederived
+        );
+    }
+    for why in &r.not_rederived {
+        let _ = writeln!(
+            out,
+            "  not re-derived (checked against the manifest's hashes and settings only): {why}"
+        );
+    }
     // What the dataset was made from, beyond the built-in catalogue (from the manifests).
     for (name, m) in &r.user_materials {
         let p = clevrtex_scene::text::printable;
