@@ -216,13 +216,18 @@ impl Plan {
     /// ledger) lost its files after it was written or skipped as complete (deleted by
     /// another process): the manifest is then written unfinished and `Err` names those
     /// indices, so the run never calls a dataset finished that is not. `stop` (Ctrl-C, SIGTERM)
-    /// is checked at every index: `Err` when raised, nothing written.
+    /// is checked at every index: `Err` when raised, nothing written. `checked`: the files of
+    /// the samples the run skipped as complete, with the hashes it checked them at
+    /// ([`crate::verify::ResumeCheck`]); a skipped sample whose files now hash otherwise (or
+    /// that was not checked) is not recorded: the manifest records no hash the run did not
+    /// check, and is written unfinished.
     pub fn write(
         &self,
         out: &Path,
         seconds: &BTreeMap<u64, f64>,
         failed: &std::collections::BTreeSet<u64>,
         stop: &std::sync::atomic::AtomicBool,
+        checked: Option<&BTreeMap<String, FileEntry>>,
     ) -> Result<PathBuf> {
         use crate::layout;
         let vdir = self.variant_dir(out);
@@ -265,7 +270,29 @@ impl Plan {
             let sub = (index / 1000).to_string();
             files.extend(names.into_iter().map(|n| format!("{sub}/{n}")));
         }
-        let files = hash_files(&vdir, &files)?;
+        let mut files = hash_files(&vdir, &files)?;
+        if let Some(checked) = checked {
+            // A sample this run did not make (not in `seconds`) is recorded only with the
+            // hashes it was checked at when it was skipped.
+            let mut unchecked = std::collections::BTreeSet::new();
+            for (rel, e) in &files {
+                let name = rel.rsplit('/').next().unwrap_or(rel);
+                let Some((_, _, index)) = layout::parse_file_name(name) else {
+                    continue;
+                };
+                if !seconds.contains_key(&index) && checked.get(rel) != Some(e) {
+                    unchecked.insert(index);
+                }
+            }
+            files.retain(|rel, _| {
+                let name = rel.rsplit('/').next().unwrap_or(rel);
+                layout::parse_file_name(name).is_none_or(|(_, _, i)| !unchecked.contains(&i))
+            });
+            sample_seconds.retain(|stem, _| {
+                layout::parse_stem(stem, "").is_none_or(|(_, _, i)| !unchecked.contains(&i))
+            });
+            lost.extend(unchecked);
+        }
         let finished = lost.is_empty();
         let manifest = self.manifest(
             finished,

@@ -23,6 +23,7 @@ pub(crate) mod mixed;
 pub(crate) mod rederive;
 pub(crate) mod remove;
 pub(crate) mod report;
+pub(crate) mod resume;
 #[cfg(test)]
 mod tests;
 pub(crate) mod text;
@@ -32,6 +33,7 @@ pub use command::{index_ranges, shell_words};
 pub use mixed::run_differences;
 pub use remove::*;
 pub use report::*;
+pub use resume::ResumeCheck;
 pub use text::{comparison_text, removal_text, report_text};
 
 use checks::*;
