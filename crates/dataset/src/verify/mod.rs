@@ -114,7 +114,9 @@ pub fn verify(roots: &[PathBuf], opts: &VerifyOptions) -> Result<Vec<VariantRepo
     Ok(reports)
 }
 
-fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantReport {
+/// Verify one variant found in `dirs` (each with the dataset it was found in): `verify`'s
+/// report, also what every export leaves out ([`crate::export::samples`]).
+pub(crate) fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantReport {
     let mut rep = VariantReport {
         variant: variant.to_string(),
         ..VariantReport::default()
