@@ -240,6 +240,7 @@ impl Plan {
         let mut blender_version = String::new();
         let mut blender_compat = BTreeMap::new();
         let mut lost = Vec::new();
+        let mut changed = Vec::new();
         for index in self.run.indices() {
             if stop.load(std::sync::atomic::Ordering::Relaxed) {
                 return Err(Error::Refused(
@@ -291,9 +292,9 @@ impl Plan {
             sample_seconds.retain(|stem, _| {
                 layout::parse_stem(stem, "").is_none_or(|(_, _, i)| !unchecked.contains(&i))
             });
-            lost.extend(unchecked);
+            changed.extend(unchecked);
         }
-        let finished = lost.is_empty();
+        let finished = lost.is_empty() && changed.is_empty();
         let manifest = self.manifest(
             finished,
             blender_version,
@@ -302,6 +303,16 @@ impl Plan {
             sample_seconds,
         );
         let path = manifest.write(&vdir)?;
+        if !changed.is_empty() {
+            let shown: Vec<String> = changed.iter().take(20).map(ToString::to_string).collect();
+            return Err(Error::Refused(format!(
+                "{} sample(s) this run skipped as complete are not what it checked (index {}{}): their files changed after the check, or were never checked; the manifest `{}` records none of them and is written as unfinished\nhint: rerun the same command to check them again (a sample that fails the check is made again), then check with `clevrtex verify`",
+                changed.len(),
+                shown.join(", "),
+                if changed.len() > 20 { ", ..." } else { "" },
+                path.display()
+            )));
+        }
         if !finished {
             let shown: Vec<String> = lost.iter().take(20).map(ToString::to_string).collect();
             return Err(Error::Refused(format!(
@@ -334,6 +345,43 @@ mod tests {
             passes: Vec::new(),
             keep_exr: false,
         }
+    }
+
+    /// Issue 48: a sample the run did not make is recorded only with the hashes it was
+    /// checked at; one whose bytes changed since (or that was never checked) is left out and
+    /// the manifest is unfinished.
+    #[test]
+    fn the_manifest_records_no_hash_the_run_did_not_check() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        let mut p = plan(0, 1, 1);
+        p.passes = vec![clevrtex_scene::Pass::Mask];
+        let sub = p.variant_dir(out).join("0");
+        std::fs::create_dir_all(&sub).unwrap();
+        let stem = crate::layout::stem("camo", 0);
+        let names = crate::layout::expected_files(&stem, &p.passes, false);
+        for n in &names {
+            std::fs::write(sub.join(n), b"checked").unwrap();
+        }
+        let rels: Vec<String> = names.iter().map(|n| format!("0/{n}")).collect();
+        let checked = hash_files(&p.variant_dir(out), &rels).unwrap();
+        let none = (BTreeMap::new(), std::collections::BTreeSet::new());
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        let path = p
+            .write(out, &none.0, &none.1, &stop, Some(&checked))
+            .unwrap();
+        assert_eq!(Manifest::read(&path).unwrap().files, checked);
+        // A file changed after the check: not recorded, unfinished.
+        std::fs::write(sub.join(&names[0]), b"changed").unwrap();
+        let e = p
+            .write(out, &none.0, &none.1, &stop, Some(&checked))
+            .unwrap_err();
+        assert!(
+            e.to_string().contains("not what it checked (index 0)"),
+            "{e}"
+        );
+        let m = Manifest::read(&path).unwrap();
+        assert!(!m.finished && m.files.is_empty(), "{m:?}");
     }
 
     /// Issue 41: growing with another `--total` is refused, but the same command again (the
