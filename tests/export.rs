@@ -1048,3 +1048,93 @@ fn webdataset_shards_of_several_variants_load_together_in_hugging_face() {
     assert_eq!(code, Some(1), "{t}");
     assert!(t.contains("has 4 objects, more than `--objects 3`"), "{t}");
 }
+
+/// Issue 48: the exports leave out exactly what `verify` refuses, named, with a non-zero exit:
+/// a sample of a `generate` run whose recorded split was forged (the manifest's hashes
+/// rewritten to match) no longer lands in the test split's COCO file, and one whose metadata
+/// gives an object another box than its mask is left out; COCO's `attributes.bbox` is the
+/// mask's box.
+#[test]
+fn exports_leave_out_what_verify_refuses() {
+    let Some(blender) = blender_or_skip("exports leave out what verify refuses") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let o = clevrtex()
+        .args(["generate", "--variant", "clevr", "-n", "3", "--seed", "2"])
+        .args(["--width", "32", "--height", "24", "--samples", "1"])
+        .args(["--passes", "rgb,mask", "--workers", "1", "--blender"])
+        .arg(&blender)
+        .arg("--out")
+        .arg(&data)
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let vdir = data.join("clevrtex_clevr");
+    let manifest = vdir.join("MANIFEST-0-3-0of1.json");
+    let forge = |index: u64, f: &dyn Fn(&mut serde_json::Value)| {
+        let rel = format!("0/CLEVRTEX_clevr_{index:06}.json");
+        let p = vdir.join(&rel);
+        let mut m: serde_json::Value = serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap();
+        f(&mut m);
+        let bytes = serde_json::to_vec_pretty(&m).unwrap();
+        std::fs::write(&p, &bytes).unwrap();
+        let mut man: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+        man["files"][&rel]["xxh3"] = clevrtex_dataset::manifest::hash_hex(&bytes).into();
+        man["files"][&rel]["size"] = bytes.len().into();
+        std::fs::write(&manifest, serde_json::to_vec_pretty(&man).unwrap()).unwrap();
+    };
+    // Untouched: every sample exported, and the attributes' box is the mask's.
+    let out = dir.path().join("coco0");
+    let (code, t) = export(&data, &out, &["--format", "coco"]);
+    assert_eq!(code, Some(0), "{t}");
+    let doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("clevr-train.json")).unwrap()).unwrap();
+    for a in doc["annotations"].as_array().unwrap() {
+        let b: Vec<u64> = a["bbox"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        assert_eq!(
+            a["attributes"]["bbox"],
+            serde_json::json!([b[0], b[1], b[0] + b[2] - 1, b[1] + b[3] - 1]),
+            "{a}"
+        );
+    }
+
+    forge(1, &|m| m["split"] = "test".into());
+    forge(2, &|m| {
+        m["objects"][0]["bbox"] = serde_json::json!([0, 0, 1, 1])
+    });
+    let o = crate::util::run(&["verify", data.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(3), "{}", text(&o));
+    for format in ["coco", "webdataset"] {
+        let out = dir.path().join(format!("out-{format}"));
+        let (code, t) = export(&data, &out, &["--format", format]);
+        assert_ne!(code, Some(0), "{format}: {t}");
+        for stem in ["CLEVRTEX_clevr_000001", "CLEVRTEX_clevr_000002"] {
+            assert!(
+                t.contains(&format!("sample `{stem}` is refused by `clevrtex verify`")),
+                "{format}: {stem} not named: {t}"
+            );
+        }
+        if format == "coco" {
+            let test = out.join("clevr-test.json");
+            if test.exists() {
+                let doc = std::fs::read_to_string(&test).unwrap();
+                assert!(!doc.contains("CLEVRTEX_clevr_000001"), "{doc}");
+            }
+            let train = std::fs::read_to_string(out.join("clevr-train.json")).unwrap();
+            assert!(
+                train.contains("CLEVRTEX_clevr_000000") && !train.contains("CLEVRTEX_clevr_000002"),
+                "{train}"
+            );
+        }
+    }
+}

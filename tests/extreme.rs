@@ -414,6 +414,7 @@ fn render(blender: PathBuf, out: &Path, scenes: &[SceneFile]) -> Vec<SampleStats
         interrupt: Arc::new(AtomicBool::new(false)),
         devices: Vec::new(),
         recycle: Default::default(),
+        resume: None,
     };
     let stats = Mutex::new(Vec::new());
     let report = pool::run(&opts, jobs, &|ev| {

@@ -452,6 +452,7 @@ pub(crate) fn render_fixtures(
         interrupt: Arc::new(AtomicBool::new(false)),
         devices: Vec::new(),
         recycle: Default::default(),
+        resume: None,
     };
     let stats = Mutex::new(Vec::new());
     let report = pool::run(&opts, jobs, &|ev| {

@@ -334,3 +334,84 @@ fn a_run_at_the_index_cap_makes_no_folder_up_front_and_stops_on_sigterm() {
         "folders made before any image: {folders:?}"
     );
 }
+
+/// Issue 48: a rerun never blesses bytes it did not write. A metadata file changed after the
+/// run (`verify` fails), then the run's own command again: the sample is not "already
+/// complete" (with `--blender /bin/false` the run fails instead of passing, and its manifest
+/// records no hash of the changed file); with Blender it is made again, byte-identical to
+/// the first, and `verify` passes. The same with the manifest's hashes rewritten to match the
+/// change (the sample's layout does not re-derive).
+#[test]
+fn a_rerun_remakes_a_changed_sample_instead_of_blessing_it() {
+    let Some(blender) = blender_or_skip("a rerun remakes a changed sample") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data");
+    let generate = |blender: &Path| {
+        clevrtex()
+            .args(["generate", "--variant", "clevr", "-n", "2", "--seed", "5"])
+            .args(["--width", "32", "--height", "24", "--samples", "1"])
+            .args(["--passes", "rgb,mask", "--workers", "1", "--blender"])
+            .arg(blender)
+            .arg("--out")
+            .arg(&out)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .unwrap()
+    };
+    let verify = || {
+        let o = clevrtex().arg("verify").arg(&out).output().unwrap();
+        (o.status.code(), text(&o))
+    };
+    let o = generate(&blender);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let meta = out.join("clevrtex_clevr/0/CLEVRTEX_clevr_000000.json");
+    let manifest = out.join("clevrtex_clevr/MANIFEST-0-2-0of1.json");
+    let original = std::fs::read(&meta).unwrap();
+    for rehash in [false, true] {
+        let mut m: serde_json::Value = serde_json::from_slice(&original).unwrap();
+        m["ground_material"] = "forged".into();
+        let forged = serde_json::to_vec_pretty(&m).unwrap();
+        std::fs::write(&meta, &forged).unwrap();
+        let forged_hash = clevrtex_dataset::manifest::hash_hex(&forged);
+        if rehash {
+            let mut man: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+            man["files"]["0/CLEVRTEX_clevr_000000.json"]["xxh3"] = forged_hash.clone().into();
+            man["files"]["0/CLEVRTEX_clevr_000000.json"]["size"] = forged.len().into();
+            std::fs::write(&manifest, serde_json::to_vec_pretty(&man).unwrap()).unwrap();
+        }
+        let (code, t) = verify();
+        assert_eq!(code, Some(3), "rehash {rehash}: {t}");
+
+        let o = generate(Path::new("/bin/false"));
+        let t = text(&o);
+        assert_ne!(o.status.code(), Some(0), "rehash {rehash}: blessed: {t}");
+        let man = std::fs::read_to_string(&manifest).unwrap();
+        if !rehash {
+            assert!(!man.contains(&forged_hash), "rehash {rehash}: {man}");
+        }
+        let (code, t) = verify();
+        assert_eq!(code, Some(3), "rehash {rehash}: {t}");
+
+        let o = generate(&blender);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(0), "rehash {rehash}: {t}");
+        assert!(
+            t.contains("did not pass `clevrtex verify`'s check, so they were made again")
+                && t.contains("CLEVRTEX_clevr_000000"),
+            "rehash {rehash}: {t}"
+        );
+        assert_eq!(
+            std::fs::read(&meta).unwrap(),
+            original,
+            "rehash {rehash}: made again, byte-identical"
+        );
+        let man = std::fs::read_to_string(&manifest).unwrap();
+        assert!(!man.contains(&forged_hash), "rehash {rehash}: {man}");
+        let (code, t) = verify();
+        assert_eq!(code, Some(0), "rehash {rehash}: {t}");
+    }
+}

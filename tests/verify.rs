@@ -776,8 +776,7 @@ fn rehash_manifest(out: &Path) {
 /// Issue 34: `generate` records the run's config hash in each sample's metadata (its
 /// manifest's `config_hash`) and `verify` compares the two, as it does the seed: a sample
 /// whose `config_hash` is another config's is named, and the dataset is not whole, even with
-/// the manifest's file hashes made to match. A metadata file without the key (older datasets,
-/// the published ClevrTex) is not compared and passes.
+/// the manifest's file hashes made to match; one without the key is named too (issue 48).
 #[test]
 fn verify_names_a_sample_made_from_another_config_than_its_manifest() {
     let Some((_dir, a, b)) = copy() else { return };
@@ -822,14 +821,16 @@ fn verify_names_a_sample_made_from_another_config_than_its_manifest() {
         );
     }
 
+    // Issue 48: a sample of a `generate` run records its run's config hash; one dropped is
+    // not "anything".
     meta.as_object_mut().unwrap().remove("config_hash");
     std::fs::write(&f, serde_json::to_vec_pretty(&meta).unwrap()).unwrap();
     rehash_manifest(&b);
     let (out, t) = verify(&[&a, &b]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "no `config_hash`: not compared: {t}"
+    assert_eq!(out.status.code(), Some(3), "no `config_hash`: {t}");
+    assert!(
+        t.contains(&format!("config_hash {run_hash} vs (absent)")),
+        "{t}"
     );
 }
 
@@ -929,21 +930,7 @@ fn runs_of_other_settings_in_one_folder_fail_verify_unless_mixed_on_purpose() {
 #[test]
 fn verify_against_another_dataset_of_the_same_command_compares_image_by_image() {
     let Some((_dir, a, b)) = copy() else { return };
-    let blender = blender_or_skip("verify --against").unwrap();
-    let tmp = tempfile::tempdir().unwrap();
-    let c = tmp.path().join("c");
-    let o = clevrtex()
-        .args(["generate", "--variant", "clevr", "-n", "4", "--seed", "3"])
-        .args(["--width", "48", "--height", "36", "--samples", "1"])
-        .args(["--passes", "rgb,mask,depth", "--workers", "1", "--blender"])
-        .arg(&blender)
-        .arg("--out")
-        .arg(&c)
-        .env_remove("SLURM_ARRAY_TASK_ID")
-        .env_remove("JOB_COMPLETION_INDEX")
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let (tmp, c) = unsharded_copy().unwrap();
     let against = |other: &Path| {
         let o = clevrtex()
             .arg("verify")
@@ -1041,4 +1028,220 @@ fn samples_outside_every_runs_range_are_not_counted_as_expected() {
     assert!(!t.contains("2 of 1 expected"), "{t}");
     assert!(t.contains("clevr: 0 of 1 expected samples whole"), "{t}");
     assert!(t.contains("outside the run's indices (2"), "{t}");
+}
+
+/// The shards' run made unsharded into one folder (the same command without `--shard`), once.
+fn unsharded() -> Option<&'static (tempfile::TempDir, PathBuf)> {
+    static S: OnceLock<Option<(tempfile::TempDir, PathBuf)>> = OnceLock::new();
+    S.get_or_init(|| {
+        let blender = blender_or_skip("verify --against")?;
+        let dir = tempfile::tempdir().unwrap();
+        let c = dir.path().join("c");
+        let o = clevrtex()
+            .args(["generate", "--variant", "clevr", "-n", "4", "--seed", "3"])
+            .args(["--width", "48", "--height", "36", "--samples", "1"])
+            .args(["--passes", "rgb,mask,depth", "--workers", "1", "--blender"])
+            .arg(&blender)
+            .arg("--out")
+            .arg(&c)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+        Some((dir, c))
+    })
+    .as_ref()
+}
+
+/// A fresh copy of [`unsharded`]'s folder (in a temporary folder returned with it).
+fn unsharded_copy() -> Option<(tempfile::TempDir, PathBuf)> {
+    let (_, c) = unsharded()?;
+    let dir = tempfile::tempdir().unwrap();
+    let to = dir.path().join("c");
+    let st = std::process::Command::new("cp")
+        .arg("-a")
+        .arg(c)
+        .arg(&to)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    Some((dir, to))
+}
+
+/// Issue 48: `verify A --against B` reads B's files, not only B's manifests: a mask pixel
+/// changed in B, a sample deleted from B, a metadata field changed in B (with B's manifests
+/// left as they were) are each a difference (exit 3, the sample and file named); a metadata
+/// file whose floats are written another way (`1.5` as `1.50`) is the same; against B's
+/// manifests alone the report says it compared claims, not files.
+#[test]
+fn verify_against_reads_the_other_datasets_files() {
+    let Some((_dir, a, b)) = copy() else { return };
+    let against = |other: &Path| {
+        let o = clevrtex()
+            .arg("verify")
+            .args([&a, &b])
+            .arg("--against")
+            .arg(other)
+            .output()
+            .unwrap();
+        (o.status.code(), text(&o))
+    };
+    // Untouched: the same, files read.
+    let (_t0, c) = unsharded_copy().unwrap();
+    let (code, t) = against(&c);
+    assert_eq!(code, Some(0), "{t}");
+    assert!(
+        t.contains("same layouts, masks and metadata") && !t.contains("claims"),
+        "{t}"
+    );
+
+    // One mask pixel changed in B, B's manifest left as it was.
+    let mask = sample(&c, 2, "_flat.png");
+    let png = post::decode_png(&mask).unwrap();
+    let mut ids: Vec<u8> = png.data.iter().map(|&v| v as u8).collect();
+    ids[0] = if ids[0] == 0 { 1 } else { 0 };
+    std::fs::write(
+        &mask,
+        post::encode_png(PngKind::Palette8, png.width, png.height, &ids, &[]).unwrap(),
+    )
+    .unwrap();
+    let (code, t) = against(&c);
+    assert_eq!(code, Some(3), "a mask pixel changed in B: {t}");
+    assert!(
+        t.contains("CLEVRTEX_clevr_000002:")
+            && t.contains("`CLEVRTEX_clevr_000002_flat.png` there differs from its manifest"),
+        "{t}"
+    );
+    assert!(!t.contains("same layouts"), "{t}");
+
+    // A sample deleted from B.
+    let (_t1, c) = unsharded_copy().unwrap();
+    for suffix in [".png", "_flat.png", "_depth_0001.png", ".json"] {
+        std::fs::remove_file(sample(&c, 3, suffix)).unwrap();
+    }
+    let (code, t) = against(&c);
+    assert_eq!(code, Some(3), "a sample deleted from B: {t}");
+    assert!(
+        t.contains("`CLEVRTEX_clevr_000003.json` is in a manifest there but missing"),
+        "{t}"
+    );
+
+    // A metadata field changed in B: named, and the fingerprints differ.
+    let (_t2, c) = unsharded_copy().unwrap();
+    let f = sample(&c, 1, ".json");
+    let mut meta: Value = serde_json::from_slice(&std::fs::read(&f).unwrap()).unwrap();
+    meta["ground_material"] = "forged".into();
+    std::fs::write(&f, serde_json::to_vec_pretty(&meta).unwrap()).unwrap();
+    let (code, t) = against(&c);
+    assert_eq!(code, Some(3), "a metadata field changed in B: {t}");
+    assert!(t.contains("metadata differs in ground_material"), "{t}");
+
+    // Floats written another way (a trailing zero), the manifest rehashed: the same values.
+    let (_t3, c) = unsharded_copy().unwrap();
+    let f = sample(&c, 1, ".json");
+    let text0 = std::fs::read_to_string(&f).unwrap();
+    let key = "\"focal_length_mm\": ";
+    let at = text0.find(key).unwrap() + key.len();
+    let end = at + text0[at..].find([',', '\n']).unwrap();
+    assert!(text0[at..end].contains('.'), "a float: {}", &text0[at..end]);
+    let respelled = format!("{}{}0{}", &text0[..at], &text0[at..end], &text0[end..]);
+    std::fs::write(&f, respelled).unwrap();
+    rehash_manifest(&c);
+    let (code, t) = against(&c);
+    assert_eq!(
+        code,
+        Some(0),
+        "a float written with a trailing zero is the same: {t}"
+    );
+
+    // B's manifests alone (an untouched run's): compared as claims, and said so.
+    let (_, c) = unsharded().unwrap();
+    let m = _t3.path().join("m/clevrtex_clevr");
+    std::fs::create_dir_all(&m).unwrap();
+    std::fs::copy(manifest_of(c), m.join(manifest_of(c).file_name().unwrap())).unwrap();
+    let (code, t) = against(m.parent().unwrap());
+    assert_eq!(code, Some(0), "{t}");
+    assert!(
+        t.contains("manifests' claims, not its files")
+            && t.contains("the same layouts, masks and metadata claimed"),
+        "{t}"
+    );
+}
+
+/// Issue 48: `verify` draws each sample's layout again from its run's seed and config and
+/// compares it with the metadata: a forged field (an object's rotation, the ground material,
+/// the camera) is named even with the manifest's hashes rewritten to match; a metadata file
+/// whose `visibility_threshold_px` is 0 or absent, or without `layout_stream`, fails; a
+/// manifest whose `passes` is empty is not "any passes".
+#[test]
+fn verify_rederives_each_layout_from_its_seed_and_config() {
+    let Some((_dir, a, b)) = copy() else { return };
+    let (out, t) = verify(&[&a, &b]);
+    assert_eq!(out.status.code(), Some(0), "{t}");
+    assert!(t.contains("4 sample(s) re-derived"), "{t}");
+    let edit = |dir: &Path, index: u64, f: &dyn Fn(&mut Value)| {
+        let p = sample(dir, index, ".json");
+        let mut meta: Value = serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap();
+        f(&mut meta);
+        std::fs::write(&p, serde_json::to_vec_pretty(&meta).unwrap()).unwrap();
+        rehash_manifest(dir);
+    };
+    type Edit<'a> = &'a dyn Fn(&mut Value);
+    let cases: [(&str, Edit, &str); 6] = [
+        (
+            "rotation",
+            &|m| {
+                let r = m["objects"][0]["rotation"].as_f64().unwrap();
+                m["objects"][0]["rotation"] = (r + 10.0).into();
+            },
+            "`objects[0].rotation`",
+        ),
+        (
+            "ground material",
+            &|m| m["ground_material"] = "forged".into(),
+            "`ground_material` \"forged\"",
+        ),
+        (
+            "camera",
+            &|m| m["camera"]["focal_length_mm"] = 50.5.into(),
+            "`camera`",
+        ),
+        (
+            "threshold 0",
+            &|m| m["visibility_threshold_px"] = 0.into(),
+            "metadata `visibility_threshold_px` is 0",
+        ),
+        (
+            "threshold dropped",
+            &|m| {
+                m.as_object_mut().unwrap().remove("visibility_threshold_px");
+            },
+            "metadata `visibility_threshold_px` is absent",
+        ),
+        (
+            "layout stream dropped",
+            &|m| {
+                m.as_object_mut().unwrap().remove("layout_stream");
+            },
+            "layout_stream clevr vs null",
+        ),
+    ];
+    for (what, f, want) in cases {
+        let Some((_d, a, b)) = copy() else { return };
+        edit(&b, 1, f);
+        let (out, t) = verify(&[&a, &b]);
+        assert_eq!(out.status.code(), Some(3), "{what}: {t}");
+        assert!(t.contains("CLEVRTEX_clevr_000001 "), "{what}: {t}");
+        assert!(t.contains(want), "{what}: {want:?} not in: {t}");
+    }
+    // A manifest naming no pass.
+    let Some((_d, a, b)) = copy() else { return };
+    let mp = manifest_of(&b);
+    let mut m: Value = serde_json::from_slice(&std::fs::read(&mp).unwrap()).unwrap();
+    m["passes"] = serde_json::json!([]);
+    std::fs::write(&mp, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
+    let (out, t) = verify(&[&a, &b]);
+    assert_eq!(out.status.code(), Some(3), "{t}");
+    assert!(t.contains("passes (none) vs depth,mask,rgb"), "{t}");
 }

@@ -124,10 +124,46 @@ pub fn samples(
         )));
     }
     skipped.extend(vd.skipped_for_metadata().map(ToString::to_string));
+    // A dataset `generate` made (its variant folder has run manifests): exactly what
+    // `verify` refuses is left out, named: its check of every sample (files against the
+    // manifests, metadata re-derived, mask against metadata, recorded split) and every index
+    // found more than once. Without manifests (the downloaded ClevrTex, whose metadata
+    // `verify` cannot vouch for) the readers' checks below are all there is.
+    let mut refused: BTreeMap<(std::path::PathBuf, String), String> = BTreeMap::new();
+    let verdict = if vd.manifests.is_empty() {
+        crate::verify::VariantReport::default()
+    } else {
+        crate::verify::verify_variant(&vd.variant, &[(ds, vd)])
+    };
+    refused.extend(
+        verdict
+            .broken
+            .iter()
+            .map(|b| ((b.dir.clone(), b.stem.clone()), b.problems.join("; "))),
+    );
+    for (index, places) in &verdict.duplicates {
+        for s in vd.samples.iter().filter(|s| s.index == *index) {
+            refused.insert(
+                (s.dir.clone(), s.stem.clone()),
+                format!("index {index} is found {} times", places.len()),
+            );
+        }
+    }
     let found: BTreeMap<u64, &SampleRef> = vd
         .samples
         .iter()
         .filter(|s| s.has_metadata())
+        .filter(|s| match refused.get(&(s.dir.clone(), s.stem.clone())) {
+            Some(why) => {
+                skipped.push(format!(
+                    "sample `{}` is refused by `clevrtex verify`: {}",
+                    s.stem,
+                    clevrtex_scene::text::printable(why)
+                ));
+                false
+            }
+            None => true,
+        })
         .map(|s| (s.index, s))
         .collect();
     let mut out = Vec::new();

@@ -138,6 +138,7 @@ pub fn plan(
                 .or_else(|| pool::default_max_rss(workers)),
             after_images: s.recycle_after,
         },
+        resume: None,
     };
     Ok(Planned { opts, user, notes })
 }
@@ -186,7 +187,6 @@ pub fn run(
         // another config than the manifest claiming it.
         planned.opts.config_hash = Some(plan.run.config_hash.clone());
     }
-    let opts = &planned.opts;
     // Seconds per finished sample, by index, for the manifest (`clevrtex report` plots them).
     let seconds = Mutex::new(BTreeMap::<u64, f64>::new());
     let on_event = |ev: &PoolEvent| {
@@ -206,6 +206,7 @@ pub fn run(
     };
     // One writer per range: a run whose indices overlap a live run's refuses here, before
     // anything is written; then the plan, so even a run that never ends is known to `verify`.
+    let mut resume = None;
     let _lock = match &plan {
         Some(p) => {
             let lock = clevrtex_dataset::run_lock::RunLock::acquire(
@@ -219,17 +220,27 @@ pub fn run(
             // The lock made the variant folder (`layout::make_dir`: not a link out of `--out`).
             // Under the lock, before anything is written: a folder of a run with other
             // settings is refused.
-            p.check_settings(&out, opts.overwrite)?;
+            p.check_settings(&out, planned.opts.overwrite)?;
             // What a killed commit left beside the manifests and the card (the sample
             // folders are swept as their jobs start).
             clevrtex_dataset::atomic::remove_stale_temps(&p.variant_dir(&out));
             clevrtex_dataset::atomic::remove_stale_temps(&out);
+            // A sample is skipped as complete only when it passes `verify`'s check against
+            // the manifests as they are before this run's plan replaces its own.
+            if !planned.opts.overwrite {
+                resume = Some(Arc::new(clevrtex_dataset::verify::ResumeCheck::new(
+                    &out,
+                    &p.run.variant,
+                )));
+            }
             p.write_plan(&out)?;
             card(&out);
             Some(lock)
         }
         None => None,
     };
+    planned.opts.resume = resume.clone();
+    let opts = &planned.opts;
     let report = match pool::run(opts, jobs, &on_event) {
         Ok(r) => r,
         Err(RenderError::Interrupted) => return Ok(Ended::Interrupted { report: None }),
@@ -243,7 +254,20 @@ pub fn run(
     };
     let seconds = seconds.into_inner().unwrap_or_else(|e| e.into_inner());
     let failed: BTreeSet<u64> = report.failed.iter().map(|(i, _)| *i).collect();
-    let path = match p.write(&out, &seconds, &failed, &opts.interrupt) {
+    if let Some(r) = &resume {
+        let remade = r.remade();
+        if !remade.is_empty() {
+            (hooks.warn)(format!(
+                "warning: {} sample(s) had every file but did not pass `clevrtex verify`'s check, so they were made again (a rerun never keeps what it cannot check):",
+                remade.len()
+            ));
+            for line in remade.iter().take(10) {
+                (hooks.warn)(format!("  {}", clevrtex_scene::text::printable(line)));
+            }
+        }
+    }
+    let checked = resume.as_ref().map(|r| r.checked());
+    let path = match p.write(&out, &seconds, &failed, &opts.interrupt, checked.as_ref()) {
         Ok(path) => path,
         Err(_) if opts.interrupt.load(Ordering::SeqCst) => {
             return Ok(Ended::Interrupted {

@@ -177,7 +177,7 @@ pub fn prepare(req: Request) -> Result<Prepared, String> {
             variant: variant.clone(),
             seed,
             layout_stream: Some(config.layout_stream().to_string()),
-            config_hash: manifest::hash_hex(format!("{config:?}").as_bytes()),
+            config_hash: config.content_hash(),
             render: serde_json::to_value(&config.base.render).ok(),
             start,
             end,

@@ -68,6 +68,10 @@ pub struct PoolOptions {
     pub devices: Vec<crate::device::Placement>,
     /// When a worker is replaced between images.
     pub recycle: Recycle,
+    /// A `generate` run's check of each sample it would skip as complete (`verify`'s check
+    /// of one sample, against the manifests found before the run): one that fails is made
+    /// again. `None` (`render`, `--overwrite`): every file present is complete.
+    pub resume: Option<Arc<clevrtex_dataset::verify::ResumeCheck>>,
 }
 
 /// Without `--timeout`, a worker that prints nothing at all for this long is hung (Cycles
@@ -366,7 +370,12 @@ impl Shared<'_> {
             layout::make_dir(&opts.out, &dir).map_err(RenderError::Refused)?;
             output::remove_stale_temps(&dir);
         }
-        Ok(!opts.overwrite && output::is_complete(&dir, &job.stem, &job.passes, opts.keep_exr))
+        Ok(!opts.overwrite
+            && output::is_complete(&dir, &job.stem, &job.passes, opts.keep_exr)
+            && opts
+                .resume
+                .as_ref()
+                .is_none_or(|r| r.intact(job.index, &job.stem, &job.passes, opts.keep_exr)))
     }
 
     fn stopping(&self) -> bool {

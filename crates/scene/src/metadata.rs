@@ -159,6 +159,79 @@ pub fn metadata(scene: &SceneFile) -> ClevrMetadata {
     }
 }
 
+/// Camera intrinsics `K` (pixels, origin at the top-left corner, y down, principal point at
+/// the centre; Blender's sensor fit `AUTO`).
+pub fn intrinsics(scene: &SceneFile) -> [[f64; 3]; 3] {
+    let (w, h) = (scene.render.width, scene.render.height);
+    let f = crate::camera::focal_px(&scene.camera, w, h);
+    [
+        [f, 0.0, w as f64 / 2.0],
+        [0.0, f, h as f64 / 2.0],
+        [0.0, 0.0, 1.0],
+    ]
+}
+
+/// World-to-camera extrinsics in the OpenCV convention (x right, y down, z forward), so that
+/// `K * (E * [X, 1])` divided by its z gives the same pixel coordinates as `pixel_coords`.
+pub fn extrinsics_opencv(scene: &SceneFile) -> [[f64; 4]; 4] {
+    let m = &scene.camera.matrix_world;
+    let t = [m[0][3], m[1][3], m[2][3]];
+    // Blender camera axes are the columns of m: right, up, backward. OpenCV: right, down, forward.
+    let axes = [
+        [m[0][0], m[1][0], m[2][0]],
+        [-m[0][1], -m[1][1], -m[2][1]],
+        [-m[0][2], -m[1][2], -m[2][2]],
+    ];
+    let mut e = [[0.0; 4]; 4];
+    for (r, a) in axes.iter().enumerate() {
+        e[r][..3].copy_from_slice(a);
+        e[r][3] = -(a[0] * t[0] + a[1] * t[1] + a[2] * t[2]);
+    }
+    e[3][3] = 1.0;
+    e
+}
+
+/// The camera, in both conventions (`camera` of the metadata).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CameraMetadata {
+    /// Intrinsics `K`, see [`intrinsics`].
+    pub intrinsics: [[f64; 3]; 3],
+    /// World to camera, OpenCV axes, see [`extrinsics_opencv`].
+    pub extrinsics: [[f64; 4]; 4],
+    /// How to read `extrinsics`.
+    pub extrinsics_convention: &'static str,
+    /// Camera to world, Blender axes (the scene file's matrix).
+    pub matrix_world: [[f64; 4]; 4],
+    /// How to read `matrix_world`.
+    pub matrix_world_convention: &'static str,
+    /// Focal length.
+    pub focal_length_mm: f64,
+    /// Sensor width.
+    pub sensor_width_mm: f64,
+    /// Blender's sensor fit.
+    pub sensor_fit: &'static str,
+    /// Clip start and end.
+    pub clip: [f64; 2],
+}
+
+impl CameraMetadata {
+    /// The camera of `scene` at its render size.
+    pub fn of(scene: &SceneFile) -> CameraMetadata {
+        let cam = &scene.camera;
+        CameraMetadata {
+                intrinsics: intrinsics(scene),
+                extrinsics: extrinsics_opencv(scene),
+                extrinsics_convention: "world to camera, OpenCV axes (x right, y down, z forward); pixel = K * (E * X) / z, origin at the top-left image corner",
+                matrix_world: cam.matrix_world,
+                matrix_world_convention: "camera to world, Blender axes (x right, y up, looking along -z)",
+                focal_length_mm: cam.focal_length_mm,
+                sensor_width_mm: cam.sensor_width_mm,
+                sensor_fit: "AUTO",
+                clip: [cam.clip_start, cam.clip_end],
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

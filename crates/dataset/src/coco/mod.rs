@@ -248,6 +248,10 @@ fn image(
         })?;
         let mut attributes = obj.as_object().cloned().unwrap_or_default();
         attributes.remove("shape");
+        // The box and pixels the mask gives (verify checks the metadata's against it).
+        let [x0, y0, x1, y1] = r.extent;
+        attributes.insert("bbox".into(), json!([x0, y0, x1, y1]));
+        attributes.insert("visible_pixels".into(), json!(r.area));
         objs.push(Object {
             index: i,
             shape: shape.to_string(),

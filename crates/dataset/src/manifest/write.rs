@@ -216,13 +216,18 @@ impl Plan {
     /// ledger) lost its files after it was written or skipped as complete (deleted by
     /// another process): the manifest is then written unfinished and `Err` names those
     /// indices, so the run never calls a dataset finished that is not. `stop` (Ctrl-C, SIGTERM)
-    /// is checked at every index: `Err` when raised, nothing written.
+    /// is checked at every index: `Err` when raised, nothing written. `checked`: the files of
+    /// the samples the run skipped as complete, with the hashes it checked them at
+    /// ([`crate::verify::ResumeCheck`]); a skipped sample whose files now hash otherwise (or
+    /// that was not checked) is not recorded: the manifest records no hash the run did not
+    /// check, and is written unfinished.
     pub fn write(
         &self,
         out: &Path,
         seconds: &BTreeMap<u64, f64>,
         failed: &std::collections::BTreeSet<u64>,
         stop: &std::sync::atomic::AtomicBool,
+        checked: Option<&BTreeMap<String, FileEntry>>,
     ) -> Result<PathBuf> {
         use crate::layout;
         let vdir = self.variant_dir(out);
@@ -235,6 +240,7 @@ impl Plan {
         let mut blender_version = String::new();
         let mut blender_compat = BTreeMap::new();
         let mut lost = Vec::new();
+        let mut changed = Vec::new();
         for index in self.run.indices() {
             if stop.load(std::sync::atomic::Ordering::Relaxed) {
                 return Err(Error::Refused(
@@ -265,8 +271,30 @@ impl Plan {
             let sub = (index / 1000).to_string();
             files.extend(names.into_iter().map(|n| format!("{sub}/{n}")));
         }
-        let files = hash_files(&vdir, &files)?;
-        let finished = lost.is_empty();
+        let mut files = hash_files(&vdir, &files)?;
+        if let Some(checked) = checked {
+            // A sample this run did not make (not in `seconds`) is recorded only with the
+            // hashes it was checked at when it was skipped.
+            let mut unchecked = std::collections::BTreeSet::new();
+            for (rel, e) in &files {
+                let name = rel.rsplit('/').next().unwrap_or(rel);
+                let Some((_, _, index)) = layout::parse_file_name(name) else {
+                    continue;
+                };
+                if !seconds.contains_key(&index) && checked.get(rel) != Some(e) {
+                    unchecked.insert(index);
+                }
+            }
+            files.retain(|rel, _| {
+                let name = rel.rsplit('/').next().unwrap_or(rel);
+                layout::parse_file_name(name).is_none_or(|(_, _, i)| !unchecked.contains(&i))
+            });
+            sample_seconds.retain(|stem, _| {
+                layout::parse_stem(stem, "").is_none_or(|(_, _, i)| !unchecked.contains(&i))
+            });
+            changed.extend(unchecked);
+        }
+        let finished = lost.is_empty() && changed.is_empty();
         let manifest = self.manifest(
             finished,
             blender_version,
@@ -275,6 +303,16 @@ impl Plan {
             sample_seconds,
         );
         let path = manifest.write(&vdir)?;
+        if !changed.is_empty() {
+            let shown: Vec<String> = changed.iter().take(20).map(ToString::to_string).collect();
+            return Err(Error::Refused(format!(
+                "{} sample(s) this run skipped as complete are not what it checked (index {}{}): their files changed after the check, or were never checked; the manifest `{}` records none of them and is written as unfinished\nhint: rerun the same command to check them again (a sample that fails the check is made again), then check with `clevrtex verify`",
+                changed.len(),
+                shown.join(", "),
+                if changed.len() > 20 { ", ..." } else { "" },
+                path.display()
+            )));
+        }
         if !finished {
             let shown: Vec<String> = lost.iter().take(20).map(ToString::to_string).collect();
             return Err(Error::Refused(format!(
@@ -307,6 +345,43 @@ mod tests {
             passes: Vec::new(),
             keep_exr: false,
         }
+    }
+
+    /// Issue 48: a sample the run did not make is recorded only with the hashes it was
+    /// checked at; one whose bytes changed since (or that was never checked) is left out and
+    /// the manifest is unfinished.
+    #[test]
+    fn the_manifest_records_no_hash_the_run_did_not_check() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path();
+        let mut p = plan(0, 1, 1);
+        p.passes = vec![clevrtex_scene::Pass::Mask];
+        let sub = p.variant_dir(out).join("0");
+        std::fs::create_dir_all(&sub).unwrap();
+        let stem = crate::layout::stem("camo", 0);
+        let names = crate::layout::expected_files(&stem, &p.passes, false);
+        for n in &names {
+            std::fs::write(sub.join(n), b"checked").unwrap();
+        }
+        let rels: Vec<String> = names.iter().map(|n| format!("0/{n}")).collect();
+        let checked = hash_files(&p.variant_dir(out), &rels).unwrap();
+        let none = (BTreeMap::new(), std::collections::BTreeSet::new());
+        let stop = std::sync::atomic::AtomicBool::new(false);
+        let path = p
+            .write(out, &none.0, &none.1, &stop, Some(&checked))
+            .unwrap();
+        assert_eq!(Manifest::read(&path).unwrap().files, checked);
+        // A file changed after the check: not recorded, unfinished.
+        std::fs::write(sub.join(&names[0]), b"changed").unwrap();
+        let e = p
+            .write(out, &none.0, &none.1, &stop, Some(&checked))
+            .unwrap_err();
+        assert!(
+            e.to_string().contains("not what it checked (index 0)"),
+            "{e}"
+        );
+        let m = Manifest::read(&path).unwrap();
+        assert!(!m.finished && m.files.is_empty(), "{m:?}");
     }
 
     /// Issue 41: growing with another `--total` is refused, but the same command again (the

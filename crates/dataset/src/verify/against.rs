@@ -5,10 +5,14 @@
 //! rendered passes (RGB, depth, normals, albedo, shadow, kept EXRs) carry render noise, so
 //! their differences are counted as such, not as failures.
 //!
-//! Each side is read from its run manifests (the file hashes of their finished runs): OTHER
-//! may be just its manifests (`MANIFEST-*.json` in `clevrtex_<variant>/` folders). Where a
-//! metadata file's bytes differ and both sides have the file, the two are compared without
-//! their provenance fields, naming the keys that differ. Runs made with other settings (seed,
+//! Each side is read by the one walk ([`Dataset::open`]) and its run manifests. Where a side's
+//! files are present, every mask and metadata file is read and hashed as `verify` hashes
+//! them, and checked against that side's own manifests: a file that differs from its
+//! manifest, a file a manifest claims that is missing, a file no finished manifest claims is
+//! a difference, as are a differing mask, metadata (compared as values, provenance left out:
+//! `1.5` and `1.50` are the same) and layout fingerprint. A side of manifests only (OTHER may
+//! be just its `MANIFEST-*.json` in `clevrtex_<variant>/` folders) is compared by its claims,
+//! and the report says so ([`Comparison::claims_only`]). Runs made with other settings (seed,
 //! config, render settings, passes, user materials, suite, `--total`) are named and their
 //! images not compared.
 
@@ -20,8 +24,9 @@ use serde::Serialize;
 use crate::dataset::{self, Dataset};
 use crate::fingerprint;
 use crate::layout;
-use crate::manifest::Manifest;
+use crate::manifest::{self, Manifest};
 use clevrtex_scene::Pass;
+use rayon::prelude::*;
 
 /// The most differing images named one by one (all are counted).
 const MAX_NAMED: usize = 50;
@@ -51,8 +56,12 @@ pub struct Comparison {
     /// Indices only the other dataset's finished runs hold.
     pub only_there: Vec<u64>,
     /// The layout fingerprints of the two sides (empty where the metadata cannot be read:
-    /// a side of manifests only).
+    /// a side of manifests only). Two that differ are a difference.
     pub fingerprints: [String; 2],
+    /// Whether each side (this dataset's, the other's) was compared by its manifests' claims
+    /// alone: no sample's files were found, so its files were not read and nothing about them
+    /// is proven.
+    pub claims_only: [bool; 2],
 }
 
 impl Comparison {
@@ -63,22 +72,70 @@ impl Comparison {
             && self.only_here.is_empty()
             && self.only_there.is_empty()
             && self.compared > 0
+            && (self.fingerprints[0].is_empty()
+                || self.fingerprints[1].is_empty()
+                || self.fingerprints[0] == self.fingerprints[1])
     }
 }
 
-/// One side's finished files of a variant: stem -> file name -> (xxh3, path, dataset root).
-type Files = BTreeMap<(u64, String), BTreeMap<String, (String, PathBuf, PathBuf)>>;
+/// One file of one sample on one side: what its finished manifest claims and, where the
+/// side's files are present, what is on disk.
+#[derive(Debug, Clone, Default)]
+struct SideFile {
+    /// The xxh3 a finished manifest of the side records for it.
+    claimed: Option<String>,
+    /// Whether it was found on disk (a regular file of the sample's folder).
+    present: bool,
+    /// Mask and metadata only: the xxh3 of its bytes as read, or why they were not read.
+    read: Option<Result<String, String>>,
+    /// Its path, and the dataset root it is read beneath.
+    path: PathBuf,
+    root: PathBuf,
+}
 
-/// One side of a variant: its manifests (path, contents, dataset root) and their files.
+/// A file found on disk: index, stem, name, path, and its hash as read (mask and metadata).
+type OnDisk = (u64, String, String, PathBuf, Option<Result<String, String>>);
+
+/// One side's files of a variant: (index, stem) -> file name -> what is known of it.
+type Files = BTreeMap<(u64, String), BTreeMap<String, SideFile>>;
+
+/// One side of a variant: its manifests (path, contents, dataset root), their files, and
+/// whether any sample's files were found on disk (else it is compared by its manifests'
+/// claims alone).
 #[derive(Default)]
 struct Side {
     manifests: Vec<(PathBuf, Manifest, PathBuf)>,
     files: Files,
+    has_files: bool,
+}
+
+impl Side {
+    /// The xxh3 this side holds for a file: what is on disk where the side's files are
+    /// present (mask and metadata read; `None` when missing or unreadable), else its claim.
+    fn hash(&self, f: &SideFile) -> Option<String> {
+        if self.has_files {
+            match &f.read {
+                Some(Ok(h)) => Some(h.clone()),
+                Some(Err(_)) => None,
+                None if f.present => f.claimed.clone(),
+                None => None,
+            }
+        } else {
+            f.claimed.clone()
+        }
+    }
+}
+
+/// Whether `name` is a file whose bytes `--against` compares (mask and metadata), as opposed
+/// to a rendered pass (render noise).
+fn compared_bytes(stem: &str, name: &str) -> bool {
+    name == layout::metadata_file(stem) || name == layout::pass_file(stem, Pass::Mask)
 }
 
 fn sides(roots: &[PathBuf]) -> Result<BTreeMap<String, Side>, String> {
     let mut out: BTreeMap<String, Side> = BTreeMap::new();
     let mut seen = BTreeSet::new();
+    let mut seen_dirs = BTreeSet::new();
     for r in roots {
         if !r.is_dir() {
             return Err(format!("`{}` is not a folder", r.display()));
@@ -99,21 +156,86 @@ fn sides(roots: &[PathBuf]) -> Result<BTreeMap<String, Side>, String> {
                             continue;
                         }
                         if let Some((stem, _, index)) = layout::parse_file_name(name) {
-                            side.files
+                            let f = side
+                                .files
                                 .entry((index, stem.to_string()))
                                 .or_default()
-                                .insert(
-                                    name.to_string(),
-                                    (e.xxh3.clone(), vdir.join(rel), ds.root.clone()),
-                                );
+                                .entry(name.to_string())
+                                .or_default();
+                            f.claimed = Some(e.xxh3.clone());
+                            if f.path.as_os_str().is_empty() {
+                                f.path = vdir.join(rel);
+                                f.root = ds.root.clone();
+                            }
                         }
                     }
                 }
                 side.manifests.push((p.clone(), m, ds.root.clone()));
             }
+            // The files on disk, read by the one walk: every mask and metadata file read and
+            // hashed as `verify` hashes them.
+            if !seen_dirs.insert(dataset::root(&vd.dir).unwrap_or_else(|_| vd.dir.clone())) {
+                continue;
+            }
+            let side = out.entry(vd.variant.clone()).or_default();
+            let samples: Vec<&dataset::SampleRef> = vd
+                .samples
+                .iter()
+                .filter(|s| s.variant == vd.variant)
+                .collect();
+            side.has_files |= !samples.is_empty();
+            let read: Vec<OnDisk> = samples
+                .par_iter()
+                .flat_map_iter(|s| {
+                    s.files.iter().map(|name| {
+                        let path = s.path(name);
+                        let read = compared_bytes(&s.stem, name).then(|| {
+                            dataset::read(&ds.root, &path, dataset::MAX_FILE_BYTES)
+                                .map(|b| manifest::hash_hex(&b))
+                        });
+                        (s.index, s.stem.clone(), name.clone(), path, read)
+                    })
+                })
+                .collect();
+            for (index, stem, name, path, read) in read {
+                let f = side
+                    .files
+                    .entry((index, stem))
+                    .or_default()
+                    .entry(name)
+                    .or_default();
+                f.present = true;
+                f.read = read;
+                f.path = path;
+                f.root = ds.root.clone();
+            }
         }
     }
     Ok(out)
+}
+
+/// What of one sample a side holds that its own manifests do not say (where its files are
+/// present): a file claimed but missing, a mask or metadata file of other bytes than claimed
+/// or unreadable, a file no finished manifest claims. `side` names it (`here`, `there`).
+fn own_problems(side: &Side, files: &BTreeMap<String, SideFile>, who: &str) -> Vec<String> {
+    if !side.has_files {
+        return Vec::new();
+    }
+    let mut out = Vec::new();
+    for (name, f) in files {
+        let name = clevrtex_scene::text::printable(name);
+        match (&f.claimed, f.present, &f.read) {
+            (Some(_), false, _) => out.push(format!("`{name}` is in a manifest {who} but missing")),
+            (_, true, Some(Err(why))) => out.push(format!("`{name}` {who} {why}")),
+            (Some(c), true, Some(Ok(h))) if c != h => out.push(format!(
+                "`{name}` {who} differs from its manifest (xxh3 {h}; manifest: {})",
+                clevrtex_scene::text::printable(c)
+            )),
+            (None, true, _) => out.push(format!("`{name}` {who} is in no finished manifest")),
+            _ => {}
+        }
+    }
+    out
 }
 
 /// The suite a manifest names (`generate --suite`), read from its JSON.
@@ -143,14 +265,33 @@ fn settings(here: &Side, there: &Side) -> Vec<String> {
         .collect()
 }
 
-/// The top-level keys in which two metadata files differ, provenance left out; `None` when
-/// one cannot be read (a side of manifests only).
-fn metadata_keys(
-    a: &(String, PathBuf, PathBuf),
-    b: &(String, PathBuf, PathBuf),
-) -> Option<Vec<String>> {
-    let read = |(_, path, root): &(String, PathBuf, PathBuf)| {
-        dataset::read(root, path, dataset::MAX_METADATA_BYTES)
+/// Whether two JSON values are the same value: numbers compared as numbers (`1.5`, `1.50`
+/// and `15e-1` are one value; `2` and `2.0` too), objects key by key, arrays item by item.
+pub(crate) fn same_value(a: &serde_json::Value, b: &serde_json::Value) -> bool {
+    use serde_json::Value as V;
+    match (a, b) {
+        (V::Number(x), V::Number(y)) => match (x.as_u64(), y.as_u64(), x.as_i64(), y.as_i64()) {
+            (Some(p), Some(q), _, _) => p == q,
+            (_, _, Some(p), Some(q)) => p == q,
+            _ => x.as_f64() == y.as_f64(),
+        },
+        (V::Array(x), V::Array(y)) => {
+            x.len() == y.len() && x.iter().zip(y).all(|(p, q)| same_value(p, q))
+        }
+        (V::Object(x), V::Object(y)) => {
+            x.len() == y.len()
+                && x.iter()
+                    .all(|(k, v)| y.get(k).is_some_and(|w| same_value(v, w)))
+        }
+        _ => a == b,
+    }
+}
+
+/// The top-level keys in which two metadata files differ as values, provenance left out;
+/// `None` when one cannot be read (a side of manifests only).
+fn metadata_keys(a: &SideFile, b: &SideFile) -> Option<Vec<String>> {
+    let read = |f: &SideFile| {
+        dataset::read(&f.root, &f.path, dataset::MAX_METADATA_BYTES)
             .ok()
             .and_then(|bytes| fingerprint::layout_of(&bytes))
     };
@@ -163,7 +304,10 @@ fn metadata_keys(
     let keys: BTreeSet<&String> = x.keys().chain(y.keys()).collect();
     Some(
         keys.into_iter()
-            .filter(|k| x.get(*k) != y.get(*k))
+            .filter(|k| match (x.get(*k), y.get(*k)) {
+                (Some(p), Some(q)) => !same_value(p, q),
+                _ => true,
+            })
             .map(|k| clevrtex_scene::text::printable(k).into_owned())
             .collect(),
     )
@@ -175,6 +319,10 @@ fn compare(variant: &str, other: &Path, here: &Side, there: &Side) -> Comparison
         variant: variant.to_string(),
         other: other.to_path_buf(),
         settings: settings(here, there),
+        claims_only: [
+            !here.has_files && !here.manifests.is_empty(),
+            !there.has_files && !there.manifests.is_empty(),
+        ],
         ..Comparison::default()
     };
     let layouts = |s: &Side| {
@@ -205,6 +353,29 @@ fn compare(variant: &str, other: &Path, here: &Side, there: &Side) -> Comparison
             c.only_there.push(key.0);
         }
     }
+    let name_one = |c: &mut Comparison, stem: &str, problems: Vec<String>| {
+        c.differ_count += 1;
+        if c.differ.len() < MAX_NAMED {
+            c.differ.push(format!("{stem}: {}", problems.join("; ")));
+        }
+    };
+    // What each side holds that its own manifests do not say, also of images only one side has.
+    for (key, files) in &here.files {
+        if !there.files.contains_key(key) {
+            let p = own_problems(here, files, "here");
+            if !p.is_empty() {
+                name_one(&mut c, &key.1, p);
+            }
+        }
+    }
+    for (key, files) in &there.files {
+        if !here.files.contains_key(key) {
+            let p = own_problems(there, files, "there");
+            if !p.is_empty() {
+                name_one(&mut c, &key.1, p);
+            }
+        }
+    }
     // The images both hold.
     for (key, h) in &here.files {
         let Some(t) = there.files.get(key) else {
@@ -212,25 +383,29 @@ fn compare(variant: &str, other: &Path, here: &Side, there: &Side) -> Comparison
         };
         let stem = &key.1;
         c.compared += 1;
-        let mut problems = Vec::new();
+        let mut problems = own_problems(here, h, "here");
+        problems.extend(own_problems(there, t, "there"));
         let names: BTreeSet<&String> = h.keys().chain(t.keys()).collect();
         for name in names {
-            let (Some(a), Some(b)) = (h.get(name), t.get(name)) else {
-                problems.push(format!(
-                    "`{name}` only {}",
-                    if h.contains_key(name) {
-                        "here"
-                    } else {
-                        "there"
-                    }
-                ));
+            let (a, b) = (
+                h.get(name).and_then(|f| here.hash(f).map(|x| (f, x))),
+                t.get(name).and_then(|f| there.hash(f).map(|x| (f, x))),
+            );
+            let (Some((fa, a)), Some((fb, b))) = (a, b) else {
+                let shown = clevrtex_scene::text::printable(name);
+                match (h.contains_key(name), t.contains_key(name)) {
+                    (true, false) => problems.push(format!("`{shown}` only here")),
+                    (false, true) => problems.push(format!("`{shown}` only there")),
+                    // Held by both sides' lists but missing or unreadable on one: named above.
+                    _ => {}
+                }
                 continue;
             };
-            if a.0 == b.0 {
+            if a == b {
                 continue;
             }
             if *name == layout::metadata_file(stem) {
-                match metadata_keys(a, b) {
+                match metadata_keys(fa, fb) {
                     Some(keys) if keys.is_empty() => {}
                     Some(keys) => problems.push(format!(
                         "metadata differs in {}",
@@ -238,11 +413,16 @@ fn compare(variant: &str, other: &Path, here: &Side, there: &Side) -> Comparison
                     )),
                     None => problems.push(format!(
                         "metadata bytes differ (xxh3 {} vs {}; a side of manifests only cannot tell a provenance field from the layout: compare with both datasets' files)",
-                        a.0, b.0
+                        clevrtex_scene::text::printable(&a),
+                        clevrtex_scene::text::printable(&b)
                     )),
                 }
             } else if *name == layout::pass_file(stem, Pass::Mask) {
-                problems.push(format!("mask differs (xxh3 {} vs {})", a.0, b.0));
+                problems.push(format!(
+                    "mask differs (xxh3 {} vs {})",
+                    clevrtex_scene::text::printable(&a),
+                    clevrtex_scene::text::printable(&b)
+                ));
             } else {
                 let pass = Pass::ALL
                     .iter()
@@ -254,10 +434,7 @@ fn compare(variant: &str, other: &Path, here: &Side, there: &Side) -> Comparison
         if problems.is_empty() {
             c.identical += 1;
         } else {
-            c.differ_count += 1;
-            if c.differ.len() < MAX_NAMED {
-                c.differ.push(format!("{stem}: {}", problems.join("; ")));
-            }
+            name_one(&mut c, stem, problems);
         }
     }
     c

@@ -59,6 +59,7 @@ pub(super) fn check_sample(
     entries: &Entries,
     listed_run: bool,
     claims: &[&ReadManifest],
+    configs: &Configs,
     runs: &[(layout::Split, String)],
 ) -> (Option<layout::Split>, Result<(), Broken>) {
     let mut recorded = None;
@@ -136,12 +137,9 @@ pub(super) fn check_sample(
             return (recorded, Err(broken(index, stem, f, problems)));
         }
     };
-    let (w, h, n, threshold) = (
-        view.width,
-        view.height,
-        view.num_objects,
-        view.visibility_threshold_px,
-    );
+    let (w, h, n) = (view.width, view.height, view.num_objects);
+    // Objects are checked against the image size's threshold, not the one the file claims.
+    let threshold = clevrtex_scene::visibility::threshold(w, h);
     let visible = &view.visible_pixels;
     // Decoding costs ~12 bytes a pixel over a sample's passes: however many threads check
     // samples, at most `PIXEL_BUDGET` pixels are decoded at once (about 0.8 GB), so that
@@ -156,6 +154,30 @@ pub(super) fn check_sample(
                 differ.join(", ")
             ));
         }
+    }
+    // The layout drawn again from the run's seed and config (verify by regeneration): a
+    // forged field is found even where the manifest's hashes were rewritten to match.
+    for (path, m, _) in claims {
+        if let Some(Ok(config)) = configs.get(path) {
+            let differ = super::rederive::differences(&meta, index, m, config);
+            if !differ.is_empty() {
+                problems.push(format!(
+                    "does not re-derive from the seed and config of the manifest `{}` (metadata vs re-derived: {})",
+                    path.display(),
+                    differ.join(", ")
+                ));
+            }
+        }
+    }
+    // The threshold every object was checked against is the image size's, whatever the
+    // metadata says (0, or absent, would let any object pass).
+    let want = clevrtex_scene::visibility::threshold(w, h);
+    if meta.get("visibility_threshold_px").and_then(Value::as_u64) != Some(want) {
+        problems.push(format!(
+            "metadata `visibility_threshold_px` is {}, but a {w}x{h} image's is {want}",
+            meta.get("visibility_threshold_px")
+                .map_or("absent".to_string(), dataset::short)
+        ));
     }
     // The recorded split (authoritative for every reader) must be the one the run that made
     // the sample gave it: the position rule over the run's `total`.
@@ -215,8 +237,39 @@ pub(super) fn check_sample(
         };
         if pass == Pass::Mask {
             let mut counts = vec![0u64; 256];
-            for &v in &png.data {
-                counts[(v as usize).min(255)] += 1;
+            let mut boxes: Vec<Option<[u64; 4]>> = vec![None; 256];
+            let width = (w as usize).max(1);
+            for (at, &v) in png.data.iter().enumerate() {
+                let id = (v as usize).min(255);
+                counts[id] += 1;
+                let (x, y) = ((at % width) as u64, (at / width) as u64);
+                boxes[id] = Some(match boxes[id] {
+                    None => [x, y, x, y],
+                    Some([x0, y0, x1, y1]) => [x0.min(x), y0.min(y), x1.max(x), y1.max(y)],
+                });
+            }
+            // Each object's box, where the metadata gives one, is the mask's (the COCO
+            // export's boxes come from the mask).
+            let objects = meta["objects"].as_array().map(Vec::as_slice).unwrap_or(&[]);
+            for (i, o) in objects.iter().enumerate().take(n) {
+                let Some(b) = o.get("bbox") else { continue };
+                let listed: Option<Vec<u64>> = b
+                    .as_array()
+                    .map(|a| a.iter().filter_map(Value::as_u64).collect());
+                let want = boxes[i + 1].map(|b| b.to_vec());
+                let agrees = match (&listed, &want) {
+                    (_, None) => b.is_null(),
+                    (Some(l), Some(w)) => l == w,
+                    _ => false,
+                };
+                if !agrees {
+                    problems.push(format!(
+                        "object {} has the box {} in the mask but {} in the metadata",
+                        i + 1,
+                        want.map_or("null".to_string(), |w| format!("{w:?}")),
+                        dataset::short(b)
+                    ));
+                }
             }
             for i in 1..=n {
                 let listed = visible[i - 1];
@@ -243,8 +296,9 @@ pub(super) fn check_sample(
 }
 
 /// What of a sample's metadata differs from the run settings of the manifest `m` that claims
-/// it: variant, seed, config hash (when the metadata records one), passes, each render setting
-/// (size, samples, ...), one phrase each.
+/// it: variant, seed, layout stream, config hash (absent is a difference), passes (a manifest
+/// naming none is one too), each render setting (size, samples, ...), the user materials the
+/// sample draws and records, one phrase each.
 pub(super) fn differs_from_manifest(
     meta: &Value,
     view: &MetadataView,
@@ -265,32 +319,75 @@ pub(super) fn differs_from_manifest(
             dataset::short(&meta["seed"])
         ));
     }
-    // Absent from older datasets (and `render`'s samples): not compared.
-    if view
-        .config_hash
-        .as_ref()
-        .is_some_and(|h| *h != m.config_hash)
-    {
+    if meta["layout_stream"].as_str() != Some(m.layout_stream()) {
         d.push(format!(
-            "config_hash {} vs {}",
-            m.config_hash,
-            dataset::short(&meta["config_hash"])
+            "layout_stream {} vs {}",
+            clevrtex_scene::text::printable(m.layout_stream()),
+            dataset::short(&meta["layout_stream"])
         ));
     }
-    if !m.passes.is_empty() {
-        let mut want: Vec<&str> = m.passes.iter().map(String::as_str).collect();
-        let mut have: Vec<&str> = view.passes.iter().map(|p| p.name()).collect();
-        want.sort_unstable();
-        have.sort_unstable();
-        if want != have {
-            d.push(format!("passes {} vs {}", want.join(","), have.join(",")));
-        }
+    // Every sample a `generate` run made records its run's config hash: one absent is not
+    // "anything".
+    if view.config_hash.as_deref() != Some(m.config_hash.as_str()) {
+        d.push(format!(
+            "config_hash {} vs {}",
+            clevrtex_scene::text::printable(&m.config_hash),
+            view.config_hash
+                .as_ref()
+                .map_or("(absent)".to_string(), |_| dataset::short(
+                    &meta["config_hash"]
+                ))
+        ));
+    }
+    // The passes: an empty list in the manifest is a manifest that names none, not "anything".
+    let mut want: Vec<&str> = m.passes.iter().map(String::as_str).collect();
+    let mut have: Vec<&str> = view.passes.iter().map(|p| p.name()).collect();
+    want.sort_unstable();
+    have.sort_unstable();
+    if want != have || want.is_empty() {
+        d.push(format!(
+            "passes {} vs {}",
+            if want.is_empty() {
+                "(none)".to_string()
+            } else {
+                clevrtex_scene::text::printable(&want.join(",")).into_owned()
+            },
+            have.join(",")
+        ));
     }
     if let Some(render) = &m.render {
         d.extend(manifest::render_differences(render, &meta["render"]));
     }
     // Each user material the sample records must be the manifest's, by content hash (absent
     // from samples of built-in materials only: not compared).
+    // The user materials the sample draws (its ground and objects' materials that the run's
+    // manifest lists as user materials) must be the ones it records: none dropped.
+    let drawn: std::collections::BTreeSet<&str> = std::iter::once(&meta["ground_material"])
+        .chain(
+            meta["objects"]
+                .as_array()
+                .map(Vec::as_slice)
+                .unwrap_or(&[])
+                .iter()
+                .map(|o| &o["material"]),
+        )
+        .filter_map(Value::as_str)
+        .filter(|n| m.user_materials.contains_key(*n))
+        .collect();
+    let recorded: std::collections::BTreeSet<&str> = meta
+        .get("user_materials")
+        .and_then(Value::as_object)
+        .map(|um| um.keys().map(String::as_str).collect())
+        .unwrap_or_default();
+    if drawn != recorded {
+        d.push(format!(
+            "user materials drawn {} vs recorded {}",
+            clevrtex_scene::text::printable(&drawn.iter().copied().collect::<Vec<_>>().join(",")),
+            clevrtex_scene::text::printable(
+                &recorded.iter().copied().collect::<Vec<_>>().join(",")
+            )
+        ));
+    }
     match meta.get("user_materials") {
         None => {}
         Some(serde_json::Value::Object(um)) => {

@@ -20,8 +20,10 @@ pub(crate) mod against;
 pub(crate) mod checks;
 pub(crate) mod command;
 pub(crate) mod mixed;
+pub(crate) mod rederive;
 pub(crate) mod remove;
 pub(crate) mod report;
+pub(crate) mod resume;
 #[cfg(test)]
 mod tests;
 pub(crate) mod text;
@@ -31,6 +33,7 @@ pub use command::{index_ranges, shell_words};
 pub use mixed::run_differences;
 pub use remove::*;
 pub use report::*;
+pub use resume::ResumeCheck;
 pub use text::{comparison_text, removal_text, report_text};
 
 use checks::*;
@@ -111,7 +114,9 @@ pub fn verify(roots: &[PathBuf], opts: &VerifyOptions) -> Result<Vec<VariantRepo
     Ok(reports)
 }
 
-fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantReport {
+/// Verify one variant found in `dirs` (each with the dataset it was found in): `verify`'s
+/// report, also what every export leaves out ([`crate::export::samples`]).
+pub(crate) fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantReport {
     let mut rep = VariantReport {
         variant: variant.to_string(),
         ..VariantReport::default()
@@ -350,6 +355,21 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
             })
             .collect()
     };
+    // Each run's config rebuilt once, to draw its samples' layouts again.
+    let configs: Configs = manifests
+        .iter()
+        .filter(|(_, m, _)| m.variant == variant)
+        .map(|(p, m, _)| (p.clone(), rederive::config_of(m)))
+        .collect();
+    for (p, c) in &configs {
+        if let Err(why) = c {
+            rep.not_rederived.push(format!(
+                "`{}`: {}",
+                p.display(),
+                clevrtex_scene::text::printable(why)
+            ));
+        }
+    }
     let checked: Vec<(Option<layout::Split>, Result<(), Broken>)> = singles
         .par_iter()
         .map(|(index, (stem, f), listed)| {
@@ -365,6 +385,7 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
                 &entries,
                 *listed,
                 &claims,
+                &configs,
                 &run_split(*index),
             )
         })
@@ -383,6 +404,16 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
             _ => ranges.push([*index, *index]),
         }
     }
+    let rederived = singles
+        .iter()
+        .filter(|(index, _, _)| {
+            manifests.iter().any(|(p, m, _)| {
+                m.variant == variant
+                    && m.covers(*index)
+                    && configs.get(p).is_some_and(Result::is_ok)
+            })
+        })
+        .count() as u64;
     for ((index, _, _), (_, c)) in singles.iter().zip(checked) {
         match c {
             // A whole sample outside every run's indices is listed (`unexpected`), not
@@ -453,6 +484,9 @@ fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) -> VariantRep
         }
     }
     rep.commands = commands;
+    rep.rederived = rederived
+        .saturating_sub(rep.broken.len() as u64)
+        .min(rep.ok);
     rep
 }
 

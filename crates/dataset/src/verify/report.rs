@@ -96,6 +96,15 @@ pub struct VariantReport {
     /// Left out of the JSON when empty.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub mixed_on_purpose: Vec<String>,
+    /// Runs whose samples' layouts were not drawn again (their config cannot be rebuilt from
+    /// the manifest: a `--config` file, user materials), one line each naming the manifest:
+    /// their samples are checked against the manifest's hashes and settings only. Left out of
+    /// the JSON when empty.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub not_rederived: Vec<String>,
+    /// Samples whose layout was drawn again from their run's seed and config and found equal
+    /// to their metadata.
+    pub rederived: u64,
     /// The canonical roots of the datasets the variant was found in: what every delete of
     /// [`super::remove_broken`] is made relative to.
     #[serde(skip)]
@@ -128,6 +137,10 @@ pub struct VerifyOptions {
 
 /// A manifest read: its path, its contents and the folder its run's rerun writes into.
 pub(super) type ReadManifest = (PathBuf, Manifest, PathBuf);
+
+/// The config of each manifest's run rebuilt from its settings (by the manifest's path), or
+/// why it cannot be ([`super::rederive::config_of`]).
+pub(super) type Configs = BTreeMap<PathBuf, Result<clevrtex_scene::Config, String>>;
 
 /// Manifest entries by (variant folder, stem): file name -> the entries of every finished
 /// manifest that lists it (a later run with `--overwrite` may have changed the bytes).

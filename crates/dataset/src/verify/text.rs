@@ -16,6 +16,19 @@ pub fn report_text(r: &VariantReport, dirs: &[PathBuf], remove: bool) -> String 
         "{}: {} of {} expected samples whole ({})",
         r.variant, r.ok, r.expected, r.expected_from
     );
+    if r.rederived > 0 {
+        let _ = writeln!(
+            out,
+            "  {} sample(s) re-derived: their layouts drawn again from their run's seed and config equal their metadata",
+            r.rederived
+        );
+    }
+    for why in &r.not_rederived {
+        let _ = writeln!(
+            out,
+            "  not re-derived (checked against the manifest's hashes and settings only): {why}"
+        );
+    }
     // What the dataset was made from, beyond the built-in catalogue (from the manifests).
     for (name, m) in &r.user_materials {
         let p = clevrtex_scene::text::printable;
@@ -207,6 +220,18 @@ pub fn comparison_text(c: &Comparison) -> String {
             )
         }
     );
+    for (claims, side) in c
+        .claims_only
+        .iter()
+        .zip(["this dataset", "the other dataset"])
+    {
+        if *claims {
+            let _ = writeln!(
+                out,
+                "  compared with {side}'s manifests' claims, not its files: no sample's files were found there, so nothing about its files is proven"
+            );
+        }
+    }
     if !c.fingerprints[0].is_empty() || !c.fingerprints[1].is_empty() {
         let show = |f: &str| {
             if f.is_empty() {
@@ -248,8 +273,18 @@ pub fn comparison_text(c: &Comparison) -> String {
             index_ranges(&c.only_there)
         );
     }
-    if c.same() {
+    if c.same() && c.claims_only.iter().any(|x| *x) {
+        let _ = writeln!(out, "  the same layouts, masks and metadata claimed");
+    } else if c.same() {
         let _ = writeln!(out, "  same layouts, masks and metadata");
+    } else if !c.fingerprints[0].is_empty()
+        && !c.fingerprints[1].is_empty()
+        && c.fingerprints[0] != c.fingerprints[1]
+    {
+        let _ = writeln!(
+            out,
+            "  the layout fingerprints differ: not the same layouts"
+        );
     } else if c.compared == 0 && c.only_here.is_empty() && c.only_there.is_empty() {
         let _ = writeln!(out, "  no finished image on either side to compare");
     }

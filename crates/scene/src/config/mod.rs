@@ -20,7 +20,9 @@ pub use crate::names::{Splits, KNOWN_SHAPES};
 
 mod overrides;
 mod types;
-pub use overrides::{check_index_end, parse_passes, parse_set, positive, within, Overrides};
+pub use overrides::{
+    check_index_end, parse_passes, parse_set, positive, recorded, within, Overrides,
+};
 pub use types::*;
 
 /// The built-in base scene (the values of the public generator's `clevrtex-gen/generate.py`

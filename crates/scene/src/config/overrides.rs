@@ -106,6 +106,50 @@ impl Config {
     }
 }
 
+/// The config a `generate` run used, rebuilt from what its manifest records (`verify`
+/// re-derives each sample's layout from it): the built-in `variant` with the run's material
+/// set (none, `main` or `ood`, each tried as `--material-set` applies it), `--layout-stream`,
+/// render settings and passes, as `generate` applies them; the one whose
+/// [`Config::content_hash`] is `config_hash`. `Err` says why none is: a config given with
+/// `--config`, user materials (`--materials`), a variant that is not built in, or another
+/// version's configs.
+pub fn recorded(
+    variant: &str,
+    layout_stream: Option<&str>,
+    render: &crate::scene_file::RenderSettings,
+    passes: &[Pass],
+    config_hash: &str,
+) -> Result<Config, String> {
+    let base = Config::builtin(variant).map_err(|e| {
+        format!(
+            "variant `{}` is not built in ({})",
+            crate::text::printable(variant),
+            e.problem
+        )
+    })?;
+    for set in [None, Some(Set::Main), Some(Set::Ood)] {
+        let mut c = base.clone();
+        if let Some(set) = set {
+            if !c.use_material_set(super::catalogue(), set).unwrap_or(false) {
+                continue;
+            }
+        }
+        if let Some(stream) = layout_stream {
+            c.set_layout_stream(stream)?;
+        }
+        c.base.render = render.clone();
+        c.base.passes = passes.to_vec();
+        if c.content_hash() == config_hash {
+            return Ok(c);
+        }
+    }
+    Err(format!(
+        "no built-in config of `{}` with the run's settings hashes as its `config_hash` {} (a config given with `--config`, user materials, or another version's configs)",
+        crate::text::printable(variant),
+        crate::text::printable(config_hash)
+    ))
+}
+
 /// `--passes`: the passes named, each once, in the pass table's order.
 pub fn parse_passes(list: &[String]) -> Result<Vec<Pass>, String> {
     let mut out = Vec::new();

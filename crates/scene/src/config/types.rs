@@ -279,6 +279,16 @@ impl Config {
         Ok(())
     }
 
+    /// The config's hash (xxh3 of its debug form, 16 hex digits): a run's `config_hash`,
+    /// recorded in its manifest and each sample's metadata, over the config with the command
+    /// line's changes and passes applied.
+    pub fn content_hash(&self) -> String {
+        format!(
+            "{:016x}",
+            clevrtex_materials::content_hash(&[format!("{self:?}").as_bytes()])
+        )
+    }
+
     /// Whether the variant's objects are plain-coloured (its config lists `objects.colors`, as
     /// `vbg` and `clevr` do): their colour is then a property worth scoring by, so `eval` and
     /// the Python `Dataset` break results down and report metadata by colour.
