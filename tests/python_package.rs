@@ -78,7 +78,8 @@ fn toy_training_loop_runs_end_to_end() {
 /// Issue 49: the wheel that `scripts/build_wheel.sh` made (`dist/`, as `scripts/setup.sh
 /// --test-venv` builds it) installs with pip into a fresh venv, offline and without Rust or a
 /// build, and the package it installs is that venv's own and scores. numpy comes from the test
-/// venv (a `.pth` line after the fresh venv's own site-packages, so its `clevrtex` comes first).
+/// venv (a `.pth` line written after the install, after the fresh venv's own site-packages, so
+/// its `clevrtex` comes first).
 /// Skipped visibly without the wheel or the test venv; required in CI.
 #[test]
 fn the_wheel_installs_into_a_fresh_venv() {
@@ -129,11 +130,6 @@ fn the_wheel_installs_into_a_fresh_venv() {
         "-c",
         "import sysconfig; print(sysconfig.get_paths()['purelib'])",
     ]));
-    std::fs::write(
-        std::path::Path::new(&site).join("lend_numpy.pth"),
-        format!("{lend}\n"),
-    )
-    .unwrap();
     run(std::process::Command::new(&fresh)
         .args([
             "-m",
@@ -145,14 +141,20 @@ fn the_wheel_installs_into_a_fresh_venv() {
             "--no-deps",
         ])
         .arg(&wheel));
+    // Lent after the install: pip would otherwise take the test venv's `clevrtex` as installed.
+    std::fs::write(
+        std::path::Path::new(&site).join("lend_numpy.pth"),
+        format!("{lend}\n"),
+    )
+    .unwrap();
     let code = "import clevrtex, numpy as np, sys\n\
                 gt = np.array([[0, 1, 1], [0, 2, 2]], dtype=np.uint8)[None]\n\
                 r = clevrtex.evaluate(gt, gt)\n\
                 print(clevrtex.__file__.startswith(sys.prefix), r['mIoU'], r['ARI'])\n";
     let said = run(std::process::Command::new(&fresh).args(["-c", code]));
     assert_eq!(
-        said, "True 100.0 100.0",
-        "the fresh venv's clevrtex (from `{}`) must be its own and score a mask against itself as 100",
+        said, "True 1.0 1.0",
+        "the fresh venv's clevrtex (from `{}`) must be its own and score a mask against itself as 1",
         wheel.display()
     );
 }

@@ -325,12 +325,18 @@ fn generate_and_sample_write_nothing_through_a_folder_linked_out_of_out() {
         refused(&output_within(c, 60), &link);
         assert_eq!(tree(&outside), before, "changed through the link");
     }
+    // `sample` in a folder of its own with the same link (the refused `generate` above left
+    // its plan in `out`, a folder `sample` refuses as one of rendered samples before any link).
+    let out_s = dir.path().join("data_s");
+    std::fs::create_dir_all(out_s.join("clevrtex_clevr")).unwrap();
+    let link_s = out_s.join("clevrtex_clevr/0");
+    std::os::unix::fs::symlink(&outside, &link_s).unwrap();
     let o = clevrtex()
         .args(["sample", "--variant", "clevr", "-n", "2", "--out"])
-        .arg(&out)
+        .arg(&out_s)
         .output()
         .unwrap();
-    refused(&o, &link);
+    refused(&o, &link_s);
     assert_eq!(tree(&outside), before, "changed through the link");
 
     // The variant folder itself linked out (to an empty folder): nothing appears there.

@@ -119,11 +119,12 @@ fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
 
 /// Run `clevrtex eval`.
 pub fn run(args: Args) -> CmdResult {
-    // Before the (long) evaluation: no report is written into the inputs.
+    // Before the (long) evaluation: no report is written into the ground-truth dataset. The
+    // predictions' folder is the user's own, not a dataset: a report beside them (`preds/r.json`)
+    // is read by nothing that reads predictions (`<stem>_mask.png|.npy|.npz`).
     for (flag, path) in [("--json", &args.json), ("--csv", &args.csv)] {
         if let Some(p) = path {
-            clevrtex_dataset::out_path::check(p, flag, &[&args.gt, &args.preds])
-                .map_err(anyhow::Error::msg)?;
+            clevrtex_dataset::out_path::check(p, flag, &[&args.gt]).map_err(anyhow::Error::msg)?;
         }
     }
     let opts = Options {
