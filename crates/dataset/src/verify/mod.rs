@@ -240,18 +240,7 @@ pub(crate) fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) ->
                     .entry((*start, *end, *n))
                     .or_default()
                     .insert(m.shard[0]);
-                let vdir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-                for (rel, e) in &m.files {
-                    let name = rel.rsplit('/').next().unwrap_or(rel);
-                    if let Some((stem, _, _)) = layout::parse_file_name(name) {
-                        entries
-                            .entry((vdir.clone(), stem.to_string()))
-                            .or_default()
-                            .entry(name.to_string())
-                            .or_default()
-                            .push(e.clone());
-                    }
-                }
+                report::add_entries(&mut entries, path, m);
             }
             // A shard with no index in the range (e.g. shard 1/2 of a one-image run, as a
             // suite's small variant gets) makes nothing and needs no manifest.

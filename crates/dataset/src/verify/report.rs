@@ -145,3 +145,27 @@ pub(super) type Configs = BTreeMap<PathBuf, Result<clevrtex_scene::Config, Strin
 /// Manifest entries by (variant folder, stem): file name -> the entries of every finished
 /// manifest that lists it (a later run with `--overwrite` may have changed the bytes).
 pub(super) type Entries = BTreeMap<(PathBuf, String), BTreeMap<String, Vec<FileEntry>>>;
+
+/// Add the files that the manifest `m` (read from `path`) records to `entries`, under its
+/// variant folder and each file's stem (names that are no sample's file are left out).
+pub(super) fn add_entries(
+    entries: &mut Entries,
+    path: &std::path::Path,
+    m: &crate::manifest::Manifest,
+) {
+    let vdir = path
+        .parent()
+        .unwrap_or(std::path::Path::new("."))
+        .to_path_buf();
+    for (rel, e) in &m.files {
+        let name = rel.rsplit('/').next().unwrap_or(rel);
+        if let Some((stem, _, _)) = crate::layout::parse_file_name(name) {
+            entries
+                .entry((vdir.clone(), stem.to_string()))
+                .or_default()
+                .entry(name.to_string())
+                .or_default()
+                .push(e.clone());
+        }
+    }
+}

@@ -58,18 +58,7 @@ impl ResumeCheck {
                 continue;
             }
             finished.push(i);
-            let vdir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-            for (rel, e) in &m.files {
-                let name = rel.rsplit('/').next().unwrap_or(rel);
-                if let Some((stem, _, _)) = layout::parse_file_name(name) {
-                    entries
-                        .entry((vdir.clone(), stem.to_string()))
-                        .or_default()
-                        .entry(name.to_string())
-                        .or_default()
-                        .push(e.clone());
-                }
-            }
+            super::report::add_entries(&mut entries, path, m);
         }
         let configs = manifests
             .iter()
