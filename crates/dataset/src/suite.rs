@@ -123,14 +123,7 @@ pub const SUITE_LOCK: &str = ".clevrtex-suite.lock";
 pub fn claim(out: &Path, plan: &SuitePlan) -> Result<()> {
     // First without the lock: a folder refused outright gets nothing, not even the lock file.
     check_folder(out, plan)?;
-    std::fs::create_dir_all(out).map_err(|e| {
-        Error::io(
-            "cannot make",
-            out,
-            e,
-            "pass an `--out` folder that can be made",
-        )
-    })?;
+    make_out(out)?;
     let lock_path = out.join(SUITE_LOCK);
     let lock = crate::run_lock::open_lock_file(&lock_path).map_err(Error::Refused)?;
     lock.lock().map_err(|e| {
@@ -203,11 +196,8 @@ pub fn refuse_plain_run(out: &Path, variant: &str) -> Result<()> {
     }
 }
 
-/// Record `plan` in `out` (made if needed), atomically; a file with the same plan is kept.
-pub fn write(out: &Path, plan: &SuitePlan) -> Result<()> {
-    if matches!(read(out), Ok(Some(found)) if &found == plan) {
-        return Ok(());
-    }
+/// Make the suite's folder `out` (and its parents), or say which cannot be made.
+fn make_out(out: &Path) -> Result<()> {
     std::fs::create_dir_all(out).map_err(|e| {
         Error::io(
             "cannot make",
@@ -215,7 +205,15 @@ pub fn write(out: &Path, plan: &SuitePlan) -> Result<()> {
             e,
             "pass an `--out` folder that can be made",
         )
-    })?;
+    })
+}
+
+/// Record `plan` in `out` (made if needed), atomically; a file with the same plan is kept.
+pub fn write(out: &Path, plan: &SuitePlan) -> Result<()> {
+    if matches!(read(out), Ok(Some(found)) if &found == plan) {
+        return Ok(());
+    }
+    make_out(out)?;
     let path = out.join(SUITE_FILE);
     let file = SuiteFile {
         format: FORMAT.into(),
