@@ -91,6 +91,27 @@ pub fn read(root: &Path, path: &Path, cap: u64) -> Result<Vec<u8>, String> {
 /// folder handle ([`open_beneath`]: no link leading out of the root followed, on any
 /// component, whatever was swapped since the walk); a regular file only, at most `cap` bytes.
 pub fn read_beneath(root: &Path, path: &Path, cap: u64) -> Result<Vec<u8>, ReadError> {
+    read_open(open_file_beneath(root, path)?, cap)
+}
+
+/// `path` opened as [`read`] opens it (beneath `root`, [`open_beneath`]), for a reader that
+/// streams it instead of holding its bytes: a regular file of at most `cap` bytes, read
+/// through a [`std::io::Take`] of `cap + 1` bytes, so a file that grows past `cap` while it is
+/// read still ends; `Err` says why not, in one line.
+pub fn open_capped(
+    root: &Path,
+    path: &Path,
+    cap: u64,
+) -> Result<std::io::Take<std::fs::File>, String> {
+    if let Kind::Skipped(why) = classify(root, path) {
+        return Err(why);
+    }
+    let f = open_file_beneath(root, path).map_err(|e| e.to_string())?;
+    checked_len(&f, cap).map_err(|e| e.to_string())?;
+    Ok(f.take(cap + 1))
+}
+
+fn open_file_beneath(root: &Path, path: &Path) -> Result<std::fs::File, ReadError> {
     let rel = relative_to_root(root, path).ok_or(ReadError::LeadsOut)?;
     let fd = open_beneath(
         root,
@@ -104,7 +125,7 @@ pub fn read_beneath(root: &Path, path: &Path, cap: u64) -> Result<Vec<u8>, ReadE
             ReadError::Io(e)
         }
     })?;
-    read_open(std::fs::File::from(fd), cap)
+    Ok(std::fs::File::from(fd))
 }
 
 /// `path` relative to the canonical `root`: its part after the deepest ancestor that resolves
@@ -341,7 +362,8 @@ pub fn read_regular(path: &Path, cap: u64) -> Result<Vec<u8>, ReadError> {
 }
 
 /// [`read_regular`] of a file already opened.
-fn read_open(f: std::fs::File, cap: u64) -> Result<Vec<u8>, ReadError> {
+/// The length of the open file `f`: a regular file of at most `cap` bytes.
+fn checked_len(f: &std::fs::File, cap: u64) -> Result<u64, ReadError> {
     let meta = f.metadata().map_err(ReadError::Io)?;
     if !meta.is_file() {
         return Err(ReadError::NotRegular);
@@ -350,7 +372,12 @@ fn read_open(f: std::fs::File, cap: u64) -> Result<Vec<u8>, ReadError> {
         let len = Some(meta.len());
         return Err(ReadError::TooLarge { len, cap });
     }
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    Ok(meta.len())
+}
+
+fn read_open(f: std::fs::File, cap: u64) -> Result<Vec<u8>, ReadError> {
+    let len = checked_len(&f, cap)?;
+    let mut bytes = Vec::with_capacity(len as usize);
     f.take(cap + 1)
         .read_to_end(&mut bytes)
         .map_err(ReadError::Io)?;

@@ -28,12 +28,94 @@ pub const MANIFEST_VERSION: u32 = 1;
 pub const MAX_RUN_INDICES: u64 = clevrtex_scene::bounds::INDEX_END;
 
 /// One file of the manifest.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct FileEntry {
     /// Size in bytes.
     pub size: u64,
-    /// xxh3-64 of the bytes, 16 hex digits.
-    pub xxh3: String,
+    /// xxh3-64 of the bytes, written as 16 hex digits.
+    pub xxh3: Xxh3,
+}
+
+/// An xxh3-64 content hash ([`clevrtex_materials::content_hash`]), kept as its number (8
+/// bytes, where its text took 40: a manifest of a million files is read in memory of the
+/// order of its size) and written as 16 lowercase hex digits, the only form read: anything
+/// else in a manifest makes it unreadable, with the value named.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Xxh3(pub u64);
+
+impl Xxh3 {
+    /// The hash of `bytes`.
+    pub fn of(bytes: &[u8]) -> Xxh3 {
+        Xxh3(clevrtex_materials::content_hash(&[bytes]))
+    }
+
+    /// Parse 16 lowercase hex digits (the form [`std::fmt::Display`] writes).
+    pub fn parse(text: &str) -> Option<Xxh3> {
+        let ok = text.len() == 16 && text.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'));
+        ok.then(|| u64::from_str_radix(text, 16).ok().map(Xxh3))
+            .flatten()
+    }
+}
+
+impl std::fmt::Display for Xxh3 {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:016x}", self.0)
+    }
+}
+
+impl Serialize for Xxh3 {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for Xxh3 {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Xxh3, D::Error> {
+        struct Visit;
+        impl serde::de::Visitor<'_> for Visit {
+            type Value = Xxh3;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("an xxh3 hash: 16 lowercase hex digits")
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Xxh3, E> {
+                Xxh3::parse(v).ok_or_else(|| {
+                    E::custom(format!(
+                        "`{}` is not an xxh3 hash (16 lowercase hex digits)",
+                        clevrtex_scene::text::printable(&v.chars().take(40).collect::<String>())
+                    ))
+                })
+            }
+        }
+        d.deserialize_str(Visit)
+    }
+}
+
+/// A map read as a list and built at once ([`BTreeMap::from_iter`] packs its nodes full): a
+/// manifest's `files` and `sample_seconds` by serde's default insert one key at a time and
+/// leave the tree's nodes about half empty. Duplicate keys keep one value, as before.
+fn packed_map<'de, D, V>(d: D) -> Result<BTreeMap<String, V>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    V: Deserialize<'de>,
+{
+    struct Visit<V>(std::marker::PhantomData<V>);
+    impl<'de, V: Deserialize<'de>> serde::de::Visitor<'de> for Visit<V> {
+        type Value = BTreeMap<String, V>;
+        fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("an object")
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(
+            self,
+            mut a: A,
+        ) -> Result<BTreeMap<String, V>, A::Error> {
+            let mut list = Vec::new();
+            while let Some((k, v)) = a.next_entry::<String, V>()? {
+                list.push((k, v));
+            }
+            Ok(list.into_iter().collect())
+        }
+    }
+    d.deserialize_map(Visit(std::marker::PhantomData))
 }
 
 /// A user material (`--materials DIR`) a run could draw, as its manifest records it.
@@ -111,11 +193,16 @@ pub struct Manifest {
     #[serde(default = "finished_default")]
     pub finished: bool,
     /// Every file of the run's complete samples, by path relative to the variant folder.
+    #[serde(deserialize_with = "packed_map")]
     pub files: BTreeMap<String, FileEntry>,
     /// Seconds one worker spent on each complete sample, by stem: its visibility passes,
     /// rejected layouts, final render and writing (what `clevrtex report` plots). Kept from
     /// the previous manifest for samples an earlier run made; absent in older manifests.
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    #[serde(
+        default,
+        skip_serializing_if = "BTreeMap::is_empty",
+        deserialize_with = "packed_map"
+    )]
     pub sample_seconds: BTreeMap<String, f64>,
     /// The user materials (`--materials DIR`) the run could draw, by name; absent when it
     /// drew only built-in ones (and in older manifests).
@@ -154,7 +241,7 @@ pub fn render_differences(a: &serde_json::Value, b: &serde_json::Value) -> Vec<S
 /// xxh3-64 of `bytes` as 16 hex digits ([`clevrtex_materials::content_hash`], the one content
 /// hash of the project).
 pub fn hash_hex(bytes: &[u8]) -> String {
-    format!("{:016x}", clevrtex_materials::content_hash(&[bytes]))
+    Xxh3::of(bytes).to_string()
 }
 
 fn finished_default() -> bool {
@@ -221,9 +308,11 @@ impl Manifest {
     pub fn read(path: &Path) -> Result<Manifest, String> {
         let dir = path.parent().unwrap_or(Path::new("."));
         let root = crate::dataset::files::root(dir).map_err(|e| e.to_string())?;
-        let bytes =
-            crate::dataset::files::read(&root, path, crate::dataset::files::MAX_FILE_BYTES)?;
-        let m: Manifest = serde_json::from_slice(&bytes).map_err(|e| e.to_string())?;
+        // Streamed, not read whole first: what is held is the parsed manifest alone.
+        let file =
+            crate::dataset::files::open_capped(&root, path, crate::dataset::files::MAX_FILE_BYTES)?;
+        let m: Manifest = serde_json::from_reader(std::io::BufReader::with_capacity(1 << 16, file))
+            .map_err(|e| e.to_string())?;
         if m.format != MANIFEST_FORMAT || m.version != MANIFEST_VERSION {
             return Err(format!(
                 "not a version {MANIFEST_VERSION} clevrtex manifest (format `{}`, version {})",
@@ -403,5 +492,46 @@ mod tests {
         assert_eq!(r, [(0, 8), (10, 12)]);
         assert!(in_ranges(&r, 0) && in_ranges(&r, 7) && in_ranges(&r, 11));
         assert!(!in_ranges(&r, 8) && !in_ranges(&r, 12) && !in_ranges(&r, u64::MAX));
+    }
+
+    #[test]
+    fn a_hash_is_read_as_written_and_nothing_else() {
+        let h = Xxh3::of(b"clevrtex");
+        let text = serde_json::to_string(&FileEntry { size: 8, xxh3: h }).unwrap();
+        assert_eq!(
+            text,
+            format!("{{\"size\":8,\"xxh3\":\"{}\"}}", hash_hex(b"clevrtex"))
+        );
+        let back: FileEntry = serde_json::from_str(&text).unwrap();
+        assert_eq!(back.xxh3, h);
+        for bad in [
+            "",
+            "0123",
+            "0123456789ABCDEF",
+            "0123456789abcdeg",
+            "0123456789abcdef0",
+            "\\u001b[31m",
+        ] {
+            let e =
+                serde_json::from_str::<FileEntry>(&format!("{{\"size\":1,\"xxh3\":\"{bad}\"}}"))
+                    .unwrap_err()
+                    .to_string();
+            assert!(
+                e.contains("not an xxh3 hash") && !e.contains('\u{1b}'),
+                "{bad}: {e}"
+            );
+        }
+    }
+
+    #[test]
+    fn duplicate_keys_keep_the_last_value_as_serde_does() {
+        let m: BTreeMap<String, u64> = packed_map(&mut serde_json::Deserializer::from_str(
+            r#"{"b":1,"a":2,"b":3}"#,
+        ))
+        .unwrap();
+        assert_eq!(
+            m.into_iter().collect::<Vec<_>>(),
+            [("a".into(), 2), ("b".into(), 3)]
+        );
     }
 }

@@ -28,7 +28,7 @@ pub fn hash_files(root: &Path, files: &[String]) -> Result<BTreeMap<String, File
                 rel.clone(),
                 FileEntry {
                     size: bytes.len() as u64,
-                    xxh3: hash_hex(&bytes),
+                    xxh3: Xxh3::of(&bytes),
                 },
             ))
         })

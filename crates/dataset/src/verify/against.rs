@@ -24,7 +24,7 @@ use serde::Serialize;
 use crate::dataset::{self, Dataset};
 use crate::fingerprint;
 use crate::layout;
-use crate::manifest::{self, Manifest};
+use crate::manifest::{Manifest, Xxh3};
 use clevrtex_scene::Pass;
 use rayon::prelude::*;
 
@@ -79,25 +79,66 @@ impl Comparison {
 }
 
 /// One file of one sample on one side: what its finished manifest claims and, where the
-/// side's files are present, what is on disk.
+/// side's files are present, what is on disk. Small (24 bytes) for a side of manifests only:
+/// a manifest of a million files costs about its own size again.
 #[derive(Debug, Clone, Default)]
 struct SideFile {
     /// The xxh3 a finished manifest of the side records for it.
-    claimed: Option<String>,
-    /// Whether it was found on disk (a regular file of the sample's folder).
-    present: bool,
+    claimed: Option<Xxh3>,
+    /// The file as found on disk (a regular file of the sample's folder), if it was.
+    disk: Option<Box<DiskFile>>,
+}
+
+/// A file found on disk.
+#[derive(Debug, Clone)]
+struct DiskFile {
     /// Mask and metadata only: the xxh3 of its bytes as read, or why they were not read.
-    read: Option<Result<String, String>>,
+    read: Option<Result<Xxh3, String>>,
     /// Its path, and the dataset root it is read beneath.
     path: PathBuf,
     root: PathBuf,
 }
 
+/// One sample's files on one side: (file name, what is known of it), sorted by name.
+#[derive(Debug, Default)]
+struct SampleFiles(Vec<(Box<str>, SideFile)>);
+
+impl SampleFiles {
+    fn get(&self, name: &str) -> Option<&SideFile> {
+        let at = self.0.binary_search_by(|(n, _)| (**n).cmp(name)).ok()?;
+        Some(&self.0[at].1)
+    }
+
+    fn contains_key(&self, name: &str) -> bool {
+        self.get(name).is_some()
+    }
+
+    fn keys(&self) -> impl Iterator<Item = &str> {
+        self.0.iter().map(|(n, _)| &**n)
+    }
+
+    fn iter(&self) -> impl Iterator<Item = (&str, &SideFile)> {
+        self.0.iter().map(|(n, f)| (&**n, f))
+    }
+
+    /// The file `name`, added (unknown so far) where it is not listed yet.
+    fn entry(&mut self, name: &str) -> &mut SideFile {
+        let at = match self.0.binary_search_by(|(n, _)| (**n).cmp(name)) {
+            Ok(at) => at,
+            Err(at) => {
+                self.0.insert(at, (name.into(), SideFile::default()));
+                at
+            }
+        };
+        &mut self.0[at].1
+    }
+}
+
 /// A file found on disk: index, stem, name, path, and its hash as read (mask and metadata).
-type OnDisk = (u64, String, String, PathBuf, Option<Result<String, String>>);
+type OnDisk = (u64, String, String, PathBuf, Option<Result<Xxh3, String>>);
 
 /// One side's files of a variant: (index, stem) -> file name -> what is known of it.
-type Files = BTreeMap<(u64, String), BTreeMap<String, SideFile>>;
+type Files = BTreeMap<(u64, String), SampleFiles>;
 
 /// One side of a variant: its manifests (path, contents, dataset root), their files, and
 /// whether any sample's files were found on disk (else it is compared by its manifests'
@@ -112,16 +153,16 @@ struct Side {
 impl Side {
     /// The xxh3 this side holds for a file: what is on disk where the side's files are
     /// present (mask and metadata read; `None` when missing or unreadable), else its claim.
-    fn hash(&self, f: &SideFile) -> Option<String> {
+    fn hash(&self, f: &SideFile) -> Option<Xxh3> {
         if self.has_files {
-            match &f.read {
-                Some(Ok(h)) => Some(h.clone()),
-                Some(Err(_)) => None,
-                None if f.present => f.claimed.clone(),
+            match f.disk.as_deref().map(|d| &d.read) {
+                Some(Some(Ok(h))) => Some(*h),
+                Some(Some(Err(_))) => None,
+                Some(None) => f.claimed,
                 None => None,
             }
         } else {
-            f.claimed.clone()
+            f.claimed
         }
     }
 }
@@ -149,7 +190,6 @@ fn sides(roots: &[PathBuf]) -> Result<BTreeMap<String, Side>, String> {
                 let m = Manifest::read(p).map_err(|e| format!("`{}`: {e}", p.display()))?;
                 let side = out.entry(vd.variant.clone()).or_default();
                 if m.finished && m.variant == vd.variant {
-                    let vdir = p.parent().unwrap_or(Path::new("."));
                     for (rel, e) in &m.files {
                         let name = rel.rsplit('/').next().unwrap_or(rel);
                         if rel.contains("..") {
@@ -160,13 +200,8 @@ fn sides(roots: &[PathBuf]) -> Result<BTreeMap<String, Side>, String> {
                                 .files
                                 .entry((index, stem.to_string()))
                                 .or_default()
-                                .entry(name.to_string())
-                                .or_default();
-                            f.claimed = Some(e.xxh3.clone());
-                            if f.path.as_os_str().is_empty() {
-                                f.path = vdir.join(rel);
-                                f.root = ds.root.clone();
-                            }
+                                .entry(name);
+                            f.claimed = Some(e.xxh3);
                         }
                     }
                 }
@@ -191,23 +226,19 @@ fn sides(roots: &[PathBuf]) -> Result<BTreeMap<String, Side>, String> {
                         let path = s.path(name);
                         let read = compared_bytes(&s.stem, name).then(|| {
                             dataset::read(&ds.root, &path, dataset::MAX_FILE_BYTES)
-                                .map(|b| manifest::hash_hex(&b))
+                                .map(|b| Xxh3::of(&b))
                         });
                         (s.index, s.stem.clone(), name.clone(), path, read)
                     })
                 })
                 .collect();
             for (index, stem, name, path, read) in read {
-                let f = side
-                    .files
-                    .entry((index, stem))
-                    .or_default()
-                    .entry(name)
-                    .or_default();
-                f.present = true;
-                f.read = read;
-                f.path = path;
-                f.root = ds.root.clone();
+                let f = side.files.entry((index, stem)).or_default().entry(&name);
+                f.disk = Some(Box::new(DiskFile {
+                    read,
+                    path,
+                    root: ds.root.clone(),
+                }));
             }
         }
     }
@@ -217,19 +248,19 @@ fn sides(roots: &[PathBuf]) -> Result<BTreeMap<String, Side>, String> {
 /// What of one sample a side holds that its own manifests do not say (where its files are
 /// present): a file claimed but missing, a mask or metadata file of other bytes than claimed
 /// or unreadable, a file no finished manifest claims. `side` names it (`here`, `there`).
-fn own_problems(side: &Side, files: &BTreeMap<String, SideFile>, who: &str) -> Vec<String> {
+fn own_problems(side: &Side, files: &SampleFiles, who: &str) -> Vec<String> {
     if !side.has_files {
         return Vec::new();
     }
     let mut out = Vec::new();
-    for (name, f) in files {
+    for (name, f) in files.iter() {
         let name = clevrtex_scene::text::printable(name);
-        match (&f.claimed, f.present, &f.read) {
+        let read = f.disk.as_deref().and_then(|d| d.read.as_ref());
+        match (&f.claimed, f.disk.is_some(), read) {
             (Some(_), false, _) => out.push(format!("`{name}` is in a manifest {who} but missing")),
             (_, true, Some(Err(why))) => out.push(format!("`{name}` {who} {why}")),
             (Some(c), true, Some(Ok(h))) if c != h => out.push(format!(
-                "`{name}` {who} differs from its manifest (xxh3 {h}; manifest: {})",
-                clevrtex_scene::text::printable(c)
+                "`{name}` {who} differs from its manifest (xxh3 {h}; manifest: {c})"
             )),
             (None, true, _) => out.push(format!("`{name}` {who} is in no finished manifest")),
             _ => {}
@@ -238,16 +269,9 @@ fn own_problems(side: &Side, files: &BTreeMap<String, SideFile>, who: &str) -> V
     out
 }
 
-/// The suite a manifest names (`generate --suite`), read from its JSON.
-fn suite_of(root: &Path, path: &Path) -> Option<String> {
-    let bytes = dataset::read(root, path, dataset::MAX_FILE_BYTES).ok()?;
-    let v: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
-    v["suite"].as_str().map(str::to_string)
-}
-
 /// The settings in which the two sides' runs differ.
 fn settings(here: &Side, there: &Side) -> Vec<String> {
-    let (Some((hp, h, hr)), Some((tp, t, tr))) = (here.manifests.first(), there.manifests.first())
+    let (Some((_, h, _)), Some((_, t, _))) = (here.manifests.first(), there.manifests.first())
     else {
         return Vec::new();
     };
@@ -255,10 +279,9 @@ fn settings(here: &Side, there: &Side) -> Vec<String> {
     if h.total != t.total {
         d.push(format!("--total {} vs {}", h.total, t.total));
     }
-    let show = |s: Option<String>| s.unwrap_or_else(|| "(none)".into());
-    let (hs, ts) = (suite_of(hr, hp), suite_of(tr, tp));
-    if hs != ts {
-        d.push(format!("suite {} vs {}", show(hs), show(ts)));
+    let show = |s: &Option<String>| s.clone().unwrap_or_else(|| "(none)".into());
+    if h.suite != t.suite {
+        d.push(format!("suite {} vs {}", show(&h.suite), show(&t.suite)));
     }
     d.into_iter()
         .map(|x| clevrtex_scene::text::printable(&x).into_owned())
@@ -291,7 +314,8 @@ pub(crate) fn same_value(a: &serde_json::Value, b: &serde_json::Value) -> bool {
 /// `None` when one cannot be read (a side of manifests only).
 fn metadata_keys(a: &SideFile, b: &SideFile) -> Option<Vec<String>> {
     let read = |f: &SideFile| {
-        dataset::read(&f.root, &f.path, dataset::MAX_METADATA_BYTES)
+        let d = f.disk.as_deref()?;
+        dataset::read(&d.root, &d.path, dataset::MAX_METADATA_BYTES)
             .ok()
             .and_then(|bytes| fingerprint::layout_of(&bytes))
     };
@@ -385,7 +409,7 @@ fn compare(variant: &str, other: &Path, here: &Side, there: &Side) -> Comparison
         c.compared += 1;
         let mut problems = own_problems(here, h, "here");
         problems.extend(own_problems(there, t, "there"));
-        let names: BTreeSet<&String> = h.keys().chain(t.keys()).collect();
+        let names: BTreeSet<&str> = h.keys().chain(t.keys()).collect();
         for name in names {
             let (a, b) = (
                 h.get(name).and_then(|f| here.hash(f).map(|x| (f, x))),
@@ -412,17 +436,11 @@ fn compare(variant: &str, other: &Path, here: &Side, there: &Side) -> Comparison
                         keys.iter().take(10).cloned().collect::<Vec<_>>().join(", ")
                     )),
                     None => problems.push(format!(
-                        "metadata bytes differ (xxh3 {} vs {}; a side of manifests only cannot tell a provenance field from the layout: compare with both datasets' files)",
-                        clevrtex_scene::text::printable(&a),
-                        clevrtex_scene::text::printable(&b)
+                        "metadata bytes differ (xxh3 {a} vs {b}; a side of manifests only cannot tell a provenance field from the layout: compare with both datasets' files)"
                     )),
                 }
             } else if *name == layout::pass_file(stem, Pass::Mask) {
-                problems.push(format!(
-                    "mask differs (xxh3 {} vs {})",
-                    clevrtex_scene::text::printable(&a),
-                    clevrtex_scene::text::printable(&b)
-                ));
+                problems.push(format!("mask differs (xxh3 {a} vs {b})"));
             } else {
                 let pass = Pass::ALL
                     .iter()

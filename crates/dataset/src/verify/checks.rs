@@ -80,23 +80,23 @@ pub(super) fn check_sample(
         ));
     }
     let meta_name = layout::metadata_file(stem);
-    let listed = entries.get(&(f.variant_dir.clone(), stem.to_string()));
+    let listed = entries.get(&f.variant_dir, stem);
     let mut bytes_of: BTreeMap<String, Vec<u8>> = BTreeMap::new();
     for name in &f.files {
         match dataset::read(&f.root, &f.dir.join(name), dataset::MAX_FILE_BYTES) {
             Ok(b) => {
+                let hash = manifest::Xxh3::of(&b);
                 match listed.and_then(|l| l.get(name)) {
                     Some(es)
                         if !es
                             .iter()
-                            .any(|e| e.size == b.len() as u64 && e.xxh3 == manifest::hash_hex(&b)) =>
+                            .any(|(_, e)| e.size == b.len() as u64 && e.xxh3 == hash) =>
                     {
                         problems.push(format!(
-                            "`{name}` differs from the manifest ({} bytes, xxh3 {}; manifest: {} bytes, xxh3 {})",
+                            "`{name}` differs from the manifest ({} bytes, xxh3 {hash}; manifest: {} bytes, xxh3 {})",
                             b.len(),
-                            manifest::hash_hex(&b),
-                            es[0].size,
-                            es[0].xxh3
+                            es[0].1.size,
+                            es[0].1.xxh3
                         ))
                     }
                     None if listed_run => {
@@ -109,7 +109,7 @@ pub(super) fn check_sample(
             Err(why) => problems.push(format!("`{name}` {why}")),
         }
     }
-    for name in listed.into_iter().flat_map(|l| l.keys()) {
+    for name in listed.into_iter().flat_map(|l| l.names()) {
         if !f.files.contains(name) {
             problems.push(format!("`{name}` is in the manifest but missing"));
         }

@@ -169,7 +169,7 @@ pub(crate) fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) ->
     // The expected indices (the union of the runs' ranges), and the manifest entry of each
     // file. A run is the manifests of one range and shard count; its shards together make
     // `start..end`, and a shard without a manifest still belongs to the run.
-    let mut entries: Entries = BTreeMap::new();
+    let mut entries = Entries::default();
     let mut ranges = Vec::new();
     // Finished shards by run (start, end, n).
     let mut finished: BTreeMap<(u64, u64, u64), BTreeSet<u64>> = BTreeMap::new();
@@ -240,7 +240,7 @@ pub(crate) fn verify_variant(variant: &str, dirs: &[(&Dataset, &VariantDir)]) ->
                     .entry((*start, *end, *n))
                     .or_default()
                     .insert(m.shard[0]);
-                report::add_entries(&mut entries, path, m);
+                entries.add(path, m);
             }
             // A shard with no index in the range (e.g. shard 1/2 of a one-image run, as a
             // suite's small variant gets) makes nothing and needs no manifest.

@@ -1,7 +1,7 @@
 //! What `verify` reports: per variant ([`VariantReport`]), each broken sample ([`Broken`]).
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
@@ -142,30 +142,65 @@ pub(super) type ReadManifest = (PathBuf, Manifest, PathBuf);
 /// why it cannot be ([`super::rederive::config_of`]).
 pub(super) type Configs = BTreeMap<PathBuf, Result<clevrtex_scene::Config, String>>;
 
-/// Manifest entries by (variant folder, stem): file name -> the entries of every finished
-/// manifest that lists it (a later run with `--overwrite` may have changed the bytes).
-pub(super) type Entries = BTreeMap<(PathBuf, String), BTreeMap<String, Vec<FileEntry>>>;
+/// Manifest entries by variant folder and stem: each file name with the entries of every
+/// finished manifest that lists it (a later run with `--overwrite` may have changed the
+/// bytes). Kept compact (a list per sample, names once each), so a manifest of a million
+/// files costs about its size in memory again, not several times it.
+#[derive(Debug, Default)]
+pub(super) struct Entries {
+    dirs: Vec<(PathBuf, BTreeMap<Box<str>, SampleEntries>)>,
+}
 
-/// Add the files that the manifest `m` (read from `path`) records to `entries`, under its
-/// variant folder and each file's stem (names that are no sample's file are left out).
-pub(super) fn add_entries(
-    entries: &mut Entries,
-    path: &std::path::Path,
-    m: &crate::manifest::Manifest,
-) {
-    let vdir = path
-        .parent()
-        .unwrap_or(std::path::Path::new("."))
-        .to_path_buf();
-    for (rel, e) in &m.files {
-        let name = rel.rsplit('/').next().unwrap_or(rel);
-        if let Some((stem, _, _)) = crate::layout::parse_file_name(name) {
-            entries
-                .entry((vdir.clone(), stem.to_string()))
-                .or_default()
-                .entry(name.to_string())
-                .or_default()
-                .push(e.clone());
+/// One sample's manifest entries: (file name, entry), sorted by name, a name's entries in the
+/// order their manifests were added.
+#[derive(Debug, Default)]
+pub(super) struct SampleEntries(Vec<(Box<str>, FileEntry)>);
+
+impl Entries {
+    /// The entries of the sample `stem` of the variant folder `variant_dir`.
+    pub(super) fn get(&self, variant_dir: &Path, stem: &str) -> Option<&SampleEntries> {
+        let (_, samples) = self.dirs.iter().find(|(d, _)| d == variant_dir)?;
+        samples.get(stem)
+    }
+
+    /// Add the files that the manifest `m` (read from `path`) records, under its variant
+    /// folder and each file's stem (names that are no sample's file are left out).
+    pub(super) fn add(&mut self, path: &Path, m: &crate::manifest::Manifest) {
+        let vdir = path.parent().unwrap_or(Path::new("."));
+        let at = match self.dirs.iter().position(|(d, _)| d == vdir) {
+            Some(at) => at,
+            None => {
+                self.dirs.push((vdir.to_path_buf(), BTreeMap::new()));
+                self.dirs.len() - 1
+            }
+        };
+        let samples = &mut self.dirs[at].1;
+        for (rel, e) in &m.files {
+            let name = rel.rsplit('/').next().unwrap_or(rel);
+            if let Some((stem, _, _)) = crate::layout::parse_file_name(name) {
+                let list = &mut samples.entry(stem.into()).or_default().0;
+                let after = list.partition_point(|(n, _)| **n <= *name);
+                list.insert(after, (name.into(), *e));
+            }
         }
+    }
+}
+
+impl SampleEntries {
+    /// The entries of the file `name` (at least one), or `None` when no manifest lists it.
+    pub(super) fn get(&self, name: &str) -> Option<&[(Box<str>, FileEntry)]> {
+        let from = self.0.partition_point(|(n, _)| **n < *name);
+        let to = self.0.partition_point(|(n, _)| **n <= *name);
+        (from < to).then(|| &self.0[from..to])
+    }
+
+    /// The file names listed, each once, sorted.
+    pub(super) fn names(&self) -> impl Iterator<Item = &str> {
+        let mut last: Option<&str> = None;
+        self.0.iter().filter_map(move |(n, _)| {
+            let new = last != Some(&**n);
+            last = Some(n);
+            new.then_some(&**n)
+        })
     }
 }

@@ -51,14 +51,14 @@ impl ResumeCheck {
                 }
             }
         }
-        let mut entries: Entries = BTreeMap::new();
+        let mut entries = Entries::default();
         let mut finished = Vec::new();
         for (i, (path, m, _)) in manifests.iter().enumerate() {
             if !m.finished {
                 continue;
             }
             finished.push(i);
-            super::report::add_entries(&mut entries, path, m);
+            entries.add(path, m);
         }
         let configs = manifests
             .iter()
