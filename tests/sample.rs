@@ -1185,6 +1185,41 @@ fn sample_refuses_rendered_samples_other_runs_files_and_a_held_range_with_nothin
     std::fs::write(rendered.join("clevrtex_full/MANIFEST-0-1-0of1.json"), b"{}").unwrap();
     let o = sample_into(&rendered, &["--start", "10"]);
     assert!(text(&o).contains("holds rendered samples"), "{}", text(&o));
+    // Another variant beside a dataset's (its scene files would read as unfinished samples
+    // to `verify`), or into a suite's folder: refused before anything is made.
+    let before = all_files(&rendered);
+    let o = sample_cmd(
+        &[
+            "--variant",
+            "clevr",
+            "-n",
+            "2",
+            "--out",
+            &rendered.display().to_string(),
+        ],
+        &[],
+    );
+    let t = text(&o);
+    assert_ne!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("is a dataset") && t.contains("MANIFEST-0-1-0of1.json"),
+        "{t}"
+    );
+    assert!(
+        !rendered.join("clevrtex_clevr").exists(),
+        "a refused run made a folder"
+    );
+    assert_eq!(tree(&rendered), tree_of(&before));
+    let suite = tmp.path().join("suite");
+    std::fs::create_dir_all(&suite).unwrap();
+    std::fs::write(suite.join("SUITE.json"), b"{}").unwrap();
+    let o = sample_into(&suite, &[]);
+    assert!(
+        text(&o).contains("is a dataset") && text(&o).contains("SUITE.json"),
+        "{}",
+        text(&o)
+    );
+    assert!(!suite.join("clevrtex_full").exists());
 
     // Scene files of a committed run, then runs of other settings over them.
     let out = tmp.path().join("scenes");

@@ -80,6 +80,8 @@ pub fn run(
         .num_threads(req.threads)
         .build()
         .map_err(|e| format!("cannot start worker threads: {e}"))?;
+    // Not beside a dataset's variants (before anything is made).
+    scene_files::check_out(out, &config.name)?;
     // One writer per range, as `generate`: the lock makes the variant folder (not a link out
     // of `--out`); under it, nothing is replaced that this run did not write.
     let _lock = crate::run_lock::RunLock::acquire(

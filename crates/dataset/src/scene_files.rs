@@ -148,6 +148,41 @@ pub fn check_folder(variant_dir: &Path, run: &ScenesManifest) -> Result<(), Stri
     Ok(())
 }
 
+/// Refuse, before anything is made, to sample `variant` into `out` when `out` is a dataset:
+/// another variant's folder holds a `generate` manifest, or `out` holds a suite's
+/// `SUITE.json`. Scene files beside a dataset's variants would make `verify` of it fail (they
+/// read as unfinished samples) and offer to remove them. This variant's own folder is
+/// [`check_folder`]'s.
+pub fn check_out(out: &Path, variant: &str) -> Result<(), String> {
+    if !out.is_dir() {
+        return Ok(());
+    }
+    let root = files::root(out).map_err(|e| format!("cannot read `{}`: {e}", out.display()))?;
+    let own = crate::layout::variant_dir(out, variant);
+    for (name, path, kind) in files::list(&root, out).unwrap_or_default() {
+        if name == crate::suite::SUITE_FILE {
+            return Err(dataset_here(out, &path));
+        }
+        if !name.starts_with("clevrtex_") || path == own || !matches!(kind, files::Kind::Dir) {
+            continue;
+        }
+        for (inner, found, _) in files::list(&root, &path).unwrap_or_default() {
+            if crate::manifest::is_manifest_name(&inner) {
+                return Err(dataset_here(out, &found));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn dataset_here(out: &Path, found: &Path) -> String {
+    format!(
+        "`{}` is a dataset (`{}`): scene files written beside its variants would make `clevrtex verify` of it fail\nhint: pass another `--out` for scene files (`clevrtex render` reads them from there)",
+        out.display(),
+        printable(&found.display().to_string())
+    )
+}
+
 /// The refusal of a folder holding rendered samples (`found` one of their files).
 pub fn rendered_here(variant_dir: &Path, found: &Path) -> String {
     format!(
