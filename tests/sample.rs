@@ -1279,6 +1279,45 @@ fn sample_refuses_rendered_samples_other_runs_files_and_a_held_range_with_nothin
     drop(lock);
 }
 
+/// Issue 48, the other way: `generate` into a folder of committed scene files (their names are
+/// the samples' metadata files') is refused before anything is written, naming the commit;
+/// the scene files are unchanged and no plan is left. Refused before Blender is started.
+#[test]
+fn generate_refuses_a_folder_of_committed_scene_files_with_nothing_changed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("scenes");
+    let o = sample_into(&out, &["-n", "2"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let before = all_files(&out);
+    let o = clevrtex()
+        .args([
+            "generate",
+            "--variant",
+            "full",
+            "-n",
+            "2",
+            "--blender",
+            "/bin/false",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("SCENES-0-2-0of1.manifest")
+            && t.contains("commits scene files")
+            && t.contains("hint:"),
+        "{t}"
+    );
+    assert_eq!(
+        tree(&out),
+        tree_of(&before),
+        "a refused run changed the folder"
+    );
+}
+
 fn tree_of(files: &BTreeMap<String, Vec<u8>>) -> BTreeMap<String, Vec<u8>> {
     files
         .iter()

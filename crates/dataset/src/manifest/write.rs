@@ -113,6 +113,21 @@ impl Plan {
             passes: self.passes.iter().map(|p| p.name().to_string()).collect(),
             ..self.run.clone()
         };
+        // `clevrtex sample`'s committed scene files have the names of the samples' metadata:
+        // this run would replace them (`sample` refuses a folder of rendered samples alike).
+        #[cfg(feature = "tools")]
+        for (path, m) in crate::scene_files::manifests(&vdir) {
+            if crate::run_lock::overlaps((m.start, m.end, m.shard), (run.start, run.end, run.shard))
+            {
+                return Err(Error::Refused(format!(
+                    "`{}` commits scene files of indices {}..{} (written by `clevrtex sample`): rendering here would replace them with the samples' metadata files, which have their names\nhint: render them with `clevrtex render {} --out OTHER`, or pass another `--out` for this run",
+                    path.display(),
+                    m.start,
+                    m.end,
+                    out.display()
+                )));
+            }
+        }
         for (name, path, kind) in entries {
             if kind != crate::dataset::files::Kind::File || !is_manifest_name(&name) {
                 continue;
