@@ -700,4 +700,44 @@ fn every_writer_resolves_its_output_and_writes_nothing_into_a_dataset_it_reads()
         .unwrap();
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     assert!(base.join("sheet.png").is_file());
+    // Nor into a dataset the command does not read: a folder with a run's manifest in a
+    // variant folder, or a suite's folder, whichever part of it the path names.
+    let other = base.join("E");
+    crate::util::hand_png_sample(&other, "full", 0, (16, 12), (16, 12));
+    std::fs::write(other.join("clevrtex_full/MANIFEST-0-1-0of1.json"), b"{}").unwrap();
+    let suite = base.join("S");
+    std::fs::create_dir_all(&suite).unwrap();
+    std::fs::write(suite.join("SUITE.json"), b"{}").unwrap();
+    let others = tree(&other);
+    for args in [
+        vec![
+            "preview",
+            &d,
+            "--out",
+            "E/clevrtex_full/0/CLEVRTEX_full_000000.png",
+        ],
+        vec!["report", &d, "--out", "MISSING/../E/DATASET_CARD.md"],
+        vec!["export", &d, "E/wds"],
+        vec![
+            "eval",
+            &d,
+            &d,
+            "--json",
+            "link/../../E/clevrtex_full/e.json",
+        ],
+        vec!["verify", &d, "--json", "S/v.json"],
+    ] {
+        let o = clevrtex().args(&args).current_dir(base).output().unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {t}");
+        assert!(
+            t.contains("is inside the dataset") && t.contains("hint:"),
+            "{args:?}: {t}"
+        );
+        assert!(tree(&other) == others, "{args:?} changed the other dataset");
+        assert!(
+            !suite.join("v.json").exists(),
+            "{args:?} wrote into the suite"
+        );
+    }
 }

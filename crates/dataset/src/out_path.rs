@@ -98,7 +98,57 @@ pub fn check(out: &Path, flag: &str, read: &[&Path]) -> Result<PathBuf, String> 
             ));
         }
     }
+    if let Some(dataset) = dataset_holding(&resolved) {
+        let shown = clevrtex_scene::text::printable(&out.display().to_string()).into_owned();
+        return Err(format!(
+            "`{flag} {shown}` is inside the dataset `{}`: writing there would overwrite or add files of a dataset this command does not own\nhint: write the output outside that folder, e.g. `{flag} {}`",
+            clevrtex_scene::text::printable(&dataset.display().to_string()),
+            out.file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "out".into())
+        ));
+    }
     Ok(resolved)
+}
+
+/// The dataset folder that holds the resolved path `p` (or is it), if any: the nearest folder
+/// on its way that is a variant folder (`clevrtex_<name>` holding a run's `MANIFEST-*.json`
+/// or a `SCENES-*.manifest`), or that holds one, or a suite's `SUITE.json`. Every command's
+/// output is refused there, whether or not the command reads that dataset.
+pub fn dataset_holding(p: &Path) -> Option<PathBuf> {
+    let is_variant_dir = |d: &Path| {
+        d.file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with("clevrtex_"))
+            && std::fs::read_dir(d).is_ok_and(|entries| {
+                entries.flatten().any(|e| {
+                    let name = e.file_name();
+                    let name = name.to_string_lossy();
+                    crate::manifest::is_manifest_name(&name)
+                        || (name.starts_with("SCENES-") && name.ends_with(".manifest"))
+                })
+            })
+    };
+    for a in p.ancestors() {
+        if !a.is_dir() {
+            continue;
+        }
+        if is_variant_dir(a) {
+            return Some(a.parent().unwrap_or(a).to_path_buf());
+        }
+        if a.join("SUITE.json").is_file() {
+            return Some(a.to_path_buf());
+        }
+        let holds = std::fs::read_dir(a).is_ok_and(|entries| {
+            entries
+                .flatten()
+                .any(|e| e.file_type().is_ok_and(|t| t.is_dir()) && is_variant_dir(&e.path()))
+        });
+        if holds {
+            return Some(a.to_path_buf());
+        }
+    }
+    None
 }
 
 #[cfg(test)]
