@@ -99,6 +99,13 @@ struct BatchArgs {
     /// Blender executable (default: `CLEVRTEX_BLENDER`, else `blender` on `PATH`).
     #[arg(long, env = "CLEVRTEX_BLENDER")]
     blender: Option<PathBuf>,
+    #[command(flatten)]
+    limits: Limits,
+}
+
+/// The limits of a batch's Blender worker.
+#[derive(Debug, clap::Args)]
+struct Limits {
     /// Cycles threads, 0 to 1024 (0: automatic).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=crate::run_args::MAX_THREADS as i64))]
     threads: u32,
@@ -121,11 +128,19 @@ impl BatchArgs {
     /// What the material renders take of these arguments, checked; the Blender found and a
     /// Ctrl-C handler that stops it installed.
     fn render_options(&self) -> anyhow::Result<RenderOptions> {
+        let blender = clevrtex_render::blender::locate(self.blender.as_deref())?;
+        self.limits.render_options(blender)
+    }
+}
+
+impl Limits {
+    /// The render options of `blender` with these limits, checked; a Ctrl-C handler that
+    /// stops Blender installed.
+    fn render_options(&self, blender: PathBuf) -> anyhow::Result<RenderOptions> {
         let timeout = match self.timeout {
             Some(t) => Some(crate::run_args::seconds("--timeout", t)?),
             None => None,
         };
-        let blender = clevrtex_render::blender::locate(self.blender.as_deref())?;
         let interrupt = interrupt::flag(OnInterrupt::Stop {
             message: "stopping Blender",
         });
