@@ -77,20 +77,8 @@ def principled_input(node, name):
 #   One coat under one light at roughness 0.15-0.3, 4.5 over 3.4: peak 0.80-1.00, energy
 #   0.95-1.01 (one GGX lobe: 3.1-6.7x, 1.19-1.44); bench squared error at 64 samples 1.21x /
 #   0.98x 3.4's (one lobe: 2.31x / 1.46x), for three more lobes' shading time.
-# - `diffuse_roughness` (4.3+, whose node has a Diffuse Roughness input): v1's diffuse is
-#   Disney's, whose retro-reflection brightens it with roughness (a diffuse-only displaced
-#   backdrop: 0.1349 at roughness 0, 0.1541 at 1 on 3.4; 0.1420 at both on 4.5, v2's diffuse
-#   being Lambert's), so the catalogue's rough dielectrics (roughness 0.75-0.95: bricks, clay,
-#   dirt, rust) were 3-5% darker on 4.5. v2's Diffuse Roughness (an energy-preserving
-#   Oren-Nayar) is fed `DIFFUSE_ROUGHNESS_SCALE` x (Roughness - `DIFFUSE_ROUGHNESS_FROM`),
-#   clamped to 0..1. Objects respond about twice as strongly as the displaced backdrop, so
-#   the map is a compromise (docs/notes/materials.md, "Principled v2's Diffuse Roughness").
 PARITY = {"coat": True, "sheen": True, "ggx": True, "ior": True, "layers": True,
-          "fresnel": True, "light_tree": True, "coat_gtr1": True, "diffuse_roughness": True}
-
-# The map of `PARITY["diffuse_roughness"]`, fitted on 4.5 by `clevrtex materials parity`.
-DIFFUSE_ROUGHNESS_FROM = 0.3
-DIFFUSE_ROUGHNESS_SCALE = 0.4
+          "fresnel": True, "light_tree": True, "coat_gtr1": True}
 
 # Factor of a 3.x input's constant value for its 4.0+ input, per PARITY switch.
 _PRINCIPLED_SCALE = {"Clearcoat": ("coat", 0.25), "Sheen": ("sheen", 0.2)}
@@ -101,10 +89,7 @@ def parity_settings():
     for the run manifest and the bench."""
     if VERSION < (4, 0, 0):
         return {}
-    out = dict(PARITY)
-    if VERSION < (4, 3, 0):
-        del out["diffuse_roughness"]  # no Diffuse Roughness input before 4.3
-    return out
+    return dict(PARITY)
 
 
 def setup_principled(node):
@@ -279,36 +264,12 @@ def _weighted(nt, shader, weight_from=None, weight=None, complement=False):
     return mix.outputs["Shader"]
 
 
-def _diffuse_roughness(nt, bsdf):
-    """With `PARITY["diffuse_roughness"]`, feed `bsdf`'s Diffuse Roughness from its Roughness
-    (a link or a constant) as v1's roughening diffuse (see `PARITY`); nothing where the node
-    has no such input (before 4.3)."""
-    if not PARITY["diffuse_roughness"] or "Diffuse Roughness" not in bsdf.inputs:
-        return
-    src, dst = bsdf.inputs["Roughness"], bsdf.inputs["Diffuse Roughness"]
-    k, r0 = DIFFUSE_ROUGHNESS_SCALE, DIFFUSE_ROUGHNESS_FROM
-    if src.is_linked:
-        m = nt.nodes.new("ShaderNodeMath")
-        m.operation = "MULTIPLY_ADD"
-        m.use_clamp = True
-        nt.links.new(src.links[0].from_socket, m.inputs[0])
-        m.inputs[1].default_value = k
-        m.inputs[2].default_value = -k * r0
-        nt.links.new(m.outputs[0], dst)
-    else:
-        dst.default_value = min(1.0, max(0.0, k * (src.default_value - r0)))
-
-
 def principled_output(nt, bsdf):
     """The shader output of principled node `bsdf` (inputs already set in 3.x terms) to link
     to the material output: the node's own output, or on 4.0+ with `PARITY["layers"]` v1's
-    sum of lobes built around it (see `PARITY`); on 4.3+ its Diffuse Roughness fed from its
-    Roughness (`PARITY["diffuse_roughness"]`). Constants and links of the node's Specular,
+    sum of lobes built around it (see `PARITY`). Constants and links of the node's Specular,
     Metallic, Roughness, Normal and Coat inputs are carried over to the extra nodes."""
-    if VERSION < (4, 0, 0):
-        return bsdf.outputs["BSDF"]
-    _diffuse_roughness(nt, bsdf)
-    if not PARITY["layers"]:
+    if VERSION < (4, 0, 0) or not PARITY["layers"]:
         return bsdf.outputs["BSDF"]
     level = bsdf.inputs["Specular IOR Level"]
     out = bsdf.outputs["BSDF"]

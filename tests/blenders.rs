@@ -120,7 +120,6 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
             "layers",
             "fresnel",
             "coat_gtr1",
-            "diffuse_roughness",
         ] {
             assert_eq!(
                 meta_b["blender_compat"][switch],
