@@ -43,6 +43,7 @@ depth); n_bd: backdrop pixels.
                                  parity lobes' weight 0 (diffuse only)
   metallic=0                     every Principled BSDF's Metallic 0 (unlinked)
   roughness=F                    every Principled BSDF's Roughness F (unlinked)
+  sheen=F                        every Principled BSDF's Sheen Weight (4.x) multiplied by F
   diffuse_roughness=F            every Principled BSDF's Diffuse Roughness (4.3+) fed F times
                                  (what feeds its Roughness - R0), clamped to 0..1
   diffuse_roughness_from=R0      R0 of `diffuse_roughness` (default 0; give it first)
@@ -175,6 +176,11 @@ def apply_set(key, value, scene):
             s = n.inputs["Roughness"]
             unlink(t, s)
             s.default_value = f
+    elif key == "sheen":
+        for _t, n in nodes_of("BSDF_PRINCIPLED"):
+            if "Sheen Weight" not in n.inputs:
+                return "absent"
+            n.inputs["Sheen Weight"].default_value *= f
     elif key == "diffuse_roughness_from":
         DR_FROM[0] = f
     elif key == "diffuse_roughness":
