@@ -14,8 +14,8 @@
 //!   whole image and over the objects' pixels; a truly displaced backdrop included since issue
 //!   50 (`compat.true_displacement_method`; before, `forest_ground_twigs` displaced was ~27
 //!   levels darker on 4.5);
-//! - a displaced backdrop on its own, per material (`displace_parity_probe.py`): mean linear
-//!   luminance within 3%, mean depth within 1%.
+//! - a material as the displaced backdrop or on the objects (`clevrtex materials parity`): mean
+//!   linear luminance within 3%, mean depth within 1%.
 
 use std::path::Path;
 
@@ -406,83 +406,61 @@ fn bridge_lists_the_cuda_kernels_each_blender_ships() {
 
 /// Materials whose displaced backdrop 4.5 rendered 12-27% darker than 3.4 before issue 50
 /// (Cycles 4.x's bump derived from the displacement; `compat.true_displacement_method`).
-const DISPLACED_PARITY_MATERIALS: [&str; 3] =
-    ["jagged_cliff_rock", "copper_chainmail", "corrugated_iron"];
+const DISPLACED_PARITY_MATERIALS: &str = "jagged_cliff_rock,copper_chainmail,corrugated_iron";
 
-/// Largest relative difference of the displaced backdrop's mean linear luminance, 3.4 to 4.5.
-const DISPLACED_LUMINANCE_TOLERANCE: f64 = 0.03;
+/// Materials measured on the objects: a plain one and a displacing one.
+const OBJECT_PARITY_MATERIALS: &str = "plain,moss";
 
-/// Largest relative difference of the mean depth of the displaced backdrop's pixels (relief).
-const DISPLACED_DEPTH_TOLERANCE: f64 = 0.01;
-
-/// Each material's `PROBE` line of `blender_scripts/dev/displace_parity_probe.py` on one
-/// Blender: name -> (mean linear luminance, mean depth) of the backdrop's pixels.
-fn probe_backdrops(
-    blender: &Path,
-    materials_json: &Path,
-    scene: &Path,
-) -> std::collections::BTreeMap<String, (f64, f64)> {
-    let script = repo_root().join("blender_scripts/dev/displace_parity_probe.py");
-    let mut args: Vec<std::ffi::OsString> = vec![
-        "--materials".into(),
-        materials_json.into(),
-        "--scene".into(),
-        scene.into(),
-        "--no-objects".into(),
-    ];
-    for name in DISPLACED_PARITY_MATERIALS {
-        args.extend(["--material".into(), name.into()]);
-    }
-    let flavour = clevrtex_render::blender::flavour(blender);
-    let out = clevrtex_render::blender::worker_command(blender, flavour, &script, &args)
-        .output()
-        .unwrap();
-    let t = text(&out);
-    assert!(out.status.success(), "{}: {t}", blender.display());
-    let mut found = std::collections::BTreeMap::new();
-    for line in t.lines().filter(|l| l.starts_with("PROBE ")) {
-        let words: Vec<&str> = line.split_whitespace().collect();
-        let value = |key: &str| -> f64 {
-            let prefix = format!("{key}=");
-            let w = words.iter().find_map(|w| w.strip_prefix(prefix.as_str()));
-            w.unwrap_or_else(|| panic!("no {key} in {line}"))
-                .parse()
-                .unwrap()
-        };
-        found.insert(words[2].to_string(), (value("lum_bd"), value("depth_bd")));
-    }
-    assert_eq!(found.len(), DISPLACED_PARITY_MATERIALS.len(), "{t}");
-    found
-}
-
-/// A displaced backdrop renders alike on 3.4 and 4.5 (issue 50): its mean linear luminance
-/// within 3% and the mean depth of its pixels (the relief) within 1%, on the materials 4.5
-/// rendered darkest (96x72, 16 spp, seed 0, the `full8.json` backdrop without objects).
+/// `clevrtex materials parity` on 3.4 and 4.5 (issue 50): the displaced backdrops 4.5
+/// rendered darkest, and two materials on the objects, each within 3% in mean linear luminance
+/// and 1% in mean depth (the command's bounds); the table names both Blenders, and the
+/// command refuses to run with one.
 #[test]
-fn displaced_backdrops_render_alike_on_3_4_and_bpy_4_5() {
-    let test = "displaced_backdrops_render_alike_on_3_4_and_bpy_4_5";
+fn materials_render_alike_on_3_4_and_bpy_4_5_by_materials_parity() {
+    let test = "materials_render_alike_on_3_4_and_bpy_4_5_by_materials_parity";
     let (Some(blender), Some(bpy)) = (blender_or_skip(test), bpy_or_skip(test)) else {
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let materials_json = dir.path().join("materials.json");
-    let json = clevrtex().args(["materials", "json"]).output().unwrap();
-    assert!(json.status.success(), "{}", text(&json));
-    std::fs::write(&materials_json, &json.stdout).unwrap();
-    let scene = repo_root().join("tests/data/scenes/full8.json");
-    let a = probe_backdrops(&blender, &materials_json, &scene);
-    let b = probe_backdrops(&bpy, &materials_json, &scene);
-    for (name, (lum_a, depth_a)) in &a {
-        let (lum_b, depth_b) = b[name];
-        let (dl, dd) = (lum_b / lum_a - 1.0, depth_b / depth_a - 1.0);
-        eprintln!("{name}: luminance 3.4 {lum_a:.4} 4.5 {lum_b:.4} ({dl:+.3}), depth {depth_a:.4} {depth_b:.4} ({dd:+.4})");
+    let both = |role: &str, names: &str| {
+        let out = clevrtex()
+            .args(["materials", "parity", "--as", role, "--names", names])
+            .args(["--size", "64", "--samples", "16", "--blender"])
+            .arg(&blender)
+            .arg("--blender")
+            .arg(&bpy)
+            .output()
+            .unwrap();
+        let t = text(&out);
+        eprintln!("{t}");
+        assert!(out.status.success(), "{role}: {t}");
+        let stdout = String::from_utf8_lossy(&out.stdout).to_string();
         assert!(
-            dl.abs() <= DISPLACED_LUMINANCE_TOLERANCE,
-            "{name}: displaced backdrop luminance 3.4 {lum_a} vs 4.5 {lum_b} ({dl:+.3})"
+            stdout.contains("| material | as | 3.4.1 luminance, depth m | 4.5."),
+            "{stdout}"
         );
+        for name in names.split(',') {
+            assert!(
+                stdout.contains(&format!("| `{name}` | {role} | ")),
+                "{name}: {stdout}"
+            );
+        }
+        assert!(!stdout.contains("**past**"), "{stdout}");
         assert!(
-            dd.abs() <= DISPLACED_DEPTH_TOLERANCE,
-            "{name}: displaced backdrop depth 3.4 {depth_a} vs 4.5 {depth_b} ({dd:+.4})"
+            t.contains("within the bounds (luminance 3%, depth 1%)"),
+            "{t}"
         );
-    }
+    };
+    both("backdrop", DISPLACED_PARITY_MATERIALS);
+    both("object", OBJECT_PARITY_MATERIALS);
+    let one = clevrtex()
+        .args(["materials", "parity", "--names", "plain", "--blender"])
+        .arg(&blender)
+        .output()
+        .unwrap();
+    let t = text(&one);
+    assert_eq!(one.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("compares two or more Blenders, but has only `") && t.contains("hint:"),
+        "{t}"
+    );
 }

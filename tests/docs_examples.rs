@@ -2,15 +2,18 @@
 //! block of README.md and docs/**/*.md (docs/notes/ included) runs as written, in one
 //! temporary folder holding `data/` (a 10-image `camo` dataset rendered tiny by this build),
 //! `preds/` (its masks as predictions) and `out/` (its WebDataset export), with this build's
-//! `clevrtex` and the test venv's `python` first on PATH. A block directly under
-//! `<!-- not run: REASON -->` is left out, and listed with its reason.
+//! `clevrtex` and the test venv's `python` first on PATH, and `.venv-bpy` linked to the bpy
+//! venv of the real-render tests when there is one (the second Blender `clevrtex` finds, as in
+//! the repository's root). A block directly under `<!-- not run: REASON -->` is left out, and
+//! listed with its reason; one directly under `<!-- needs bpy -->` runs only with that venv
+//! (its absence skipped visibly, or a failure where `CLEVRTEX_REQUIRE_BPY=1`).
 //! Needs Blender and the test venv with the package and torch; skipped visibly without them,
 //! required in CI.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use crate::util::{blender_or_skip, repo_root, test_python_or_skip, text};
+use crate::util::{blender_or_skip, bpy_or_skip, repo_root, test_python_or_skip, text};
 
 /// One fenced block of a Markdown file.
 #[derive(Debug)]
@@ -23,10 +26,13 @@ struct Block {
     code: String,
     /// The reason of a `<!-- not run: REASON -->` directly above, if any.
     not_run: Option<String>,
+    /// Whether `<!-- needs bpy -->` is directly above.
+    needs_bpy: bool,
 }
 
 const LANGS: [&str; 3] = ["sh", "bash", "python"];
 const MARKER: &str = "<!-- not run:";
+const NEEDS_BPY: &str = "<!-- needs bpy -->";
 
 /// The shell and Python blocks of `text` (the file `name`), every other fence skipped whole.
 fn blocks(name: &str, text: &str) -> Vec<Block> {
@@ -64,6 +70,7 @@ fn blocks(name: &str, text: &str) -> Vec<Block> {
             lang,
             code,
             not_run,
+            needs_bpy: above == Some(NEEDS_BPY),
         });
     }
     out
@@ -101,10 +108,14 @@ fn all_blocks() -> Vec<Block> {
 
 #[test]
 fn docs_blocks_are_found_and_every_skip_says_why() {
-    let text = "a\n<!-- not run: needs a GPU -->\n```sh\nnvidia-smi\n```\n\n  ```python\n  print(1)\n    x = 2\n  ```\n```json\n```sh\n```\n";
+    let text = "a\n<!-- not run: needs a GPU -->\n```sh\nnvidia-smi\n```\n\n  ```python\n  print(1)\n    x = 2\n  ```\n<!-- needs bpy -->\n```sh\nx\n```\n```json\n```sh\n```\n";
     let b = blocks("t.md", text);
-    assert_eq!(b.len(), 2, "{b:?}");
+    assert_eq!(b.len(), 3, "{b:?}");
     assert_eq!(b[0].not_run.as_deref(), Some("needs a GPU"));
+    assert_eq!(
+        b.iter().map(|b| b.needs_bpy).collect::<Vec<_>>(),
+        [false, false, true]
+    );
     assert_eq!(
         (b[1].lang.as_str(), b[1].code.as_str()),
         ("python", "print(1)\n  x = 2\n")
@@ -179,6 +190,11 @@ fn docs_examples_run_as_written() {
     }
     let dir = tempfile::tempdir().unwrap();
     workspace(dir.path(), &python);
+    // The bpy venv where `clevrtex` looks for it (`./.venv-bpy`), as in the repository's root.
+    let bpy = bpy_or_skip(test);
+    if let Some(venv) = bpy.as_ref().and_then(|p| p.parent()?.parent()) {
+        std::os::unix::fs::symlink(venv, dir.path().join(".venv-bpy")).unwrap();
+    }
     let bin = Path::new(env!("CARGO_BIN_EXE_clevrtex")).parent().unwrap();
     let venv_bin = python.parent().unwrap();
     let path = std::env::join_paths(
@@ -194,6 +210,10 @@ fn docs_examples_run_as_written() {
     for (i, b) in all_blocks().iter().enumerate() {
         if let Some(why) = &b.not_run {
             eprintln!("not run: {} ({}): {why}", b.place, b.lang);
+            continue;
+        }
+        if b.needs_bpy && bpy.is_none() {
+            eprintln!("not run: {} ({}): needs bpy", b.place, b.lang);
             continue;
         }
         let file = dir.path().join(format!(

@@ -43,6 +43,10 @@ depth); n_bd: backdrop pixels.
                                  parity lobes' weight 0 (diffuse only)
   metallic=0                     every Principled BSDF's Metallic 0 (unlinked)
   roughness=F                    every Principled BSDF's Roughness F (unlinked)
+  sheen=F                        every Principled BSDF's Sheen Weight (4.x) multiplied by F
+  diffuse_roughness=F            every Principled BSDF's Diffuse Roughness (4.3+) fed F times
+                                 (what feeds its Roughness - R0), clamped to 0..1
+  diffuse_roughness_from=R0      R0 of `diffuse_roughness` (default 0; give it first)
   derived_bump=F                 Cycles' bump derived from the displacement built as a Bump
                                  node of filter width F (use with method=DISPLACEMENT)
   lights=NAME                    only light NAME (`sun`, an area light's name)
@@ -108,6 +112,9 @@ def unlink(tree, socket):
         tree.links.remove(link)
 
 
+DR_FROM = [0.0]
+
+
 def apply_set(key, value, scene):
     c = scene.cycles
     f = None
@@ -169,6 +176,29 @@ def apply_set(key, value, scene):
             s = n.inputs["Roughness"]
             unlink(t, s)
             s.default_value = f
+    elif key == "sheen":
+        for _t, n in nodes_of("BSDF_PRINCIPLED"):
+            if "Sheen Weight" not in n.inputs:
+                return "absent"
+            n.inputs["Sheen Weight"].default_value *= f
+    elif key == "diffuse_roughness_from":
+        DR_FROM[0] = f
+    elif key == "diffuse_roughness":
+        r0 = DR_FROM[0]
+        for t, n in list(nodes_of("BSDF_PRINCIPLED")):
+            if "Diffuse Roughness" not in n.inputs:
+                return "absent"
+            src, dst = n.inputs["Roughness"], n.inputs["Diffuse Roughness"]
+            if src.is_linked:
+                m = t.nodes.new("ShaderNodeMath")
+                m.operation = "MULTIPLY_ADD"
+                m.use_clamp = True
+                t.links.new(src.links[0].from_socket, m.inputs[0])
+                m.inputs[1].default_value = f
+                m.inputs[2].default_value = -f * r0
+                t.links.new(m.outputs[0], dst)
+            else:
+                dst.default_value = min(1.0, max(0.0, (src.default_value - r0) * f))
     elif key == "derived_bump":
         # 3.4's bump derived from the displacement, built as a Bump node: the Displacement
         # node's height and scale, filter width F, in front of the recipe's Bump node (else

@@ -1,6 +1,7 @@
-//! The Blender renders of `clevrtex materials sheet|check|stats|cost`: one worker for a batch
-//! of materials (a [`BlenderSession`]: `generate`'s restart-and-retry policy, Ctrl-C
-//! stopping Blender), one `material` request per material (`docs/bridge-protocol.md`).
+//! The Blender renders of `clevrtex materials sheet|check|stats|cost|parity`: one worker for a
+//! batch of materials (a [`BlenderSession`]: `generate`'s restart-and-retry policy, Ctrl-C
+//! stopping Blender), one `material` request per material (`docs/bridge-protocol.md`), or for
+//! `parity` one `render` request per scene file ([`render_scene`]).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -12,7 +13,7 @@ use clevrtex_materials::Catalogue;
 use crate::command_session::{BlenderSession, Settings};
 use crate::error::{RenderError, Result};
 use crate::user_materials::{check_before_run, Checked};
-use crate::worker::{MaterialReply, MaterialSettings};
+use crate::worker::{MaterialReply, MaterialSettings, Mode};
 
 /// How the materials are rendered: the Blender and the limits of its worker (the values of
 /// `materials`'s `--blender`, `--threads`, `--timeout`, `--retries` and `--startup-timeout`,
@@ -80,9 +81,37 @@ pub fn session(
 /// The time limit of one render: `--timeout`, else 600 s + 8 s per sample at 320x240 (the
 /// rule `generate` uses for scenes).
 fn timeout(a: &RenderOptions, s: &MaterialSettings) -> Duration {
-    let pixels = f64::from(s.size) * f64::from(s.size) / (320.0 * 240.0);
-    let auto = 600.0 + 8.0 * f64::from(s.samples) * pixels.max(0.05);
+    limit(a, (s.size, s.size), s.samples)
+}
+
+fn limit(a: &RenderOptions, (width, height): (u32, u32), samples: u32) -> Duration {
+    let pixels = f64::from(width) * f64::from(height) / (320.0 * 240.0);
+    let auto = 600.0 + 8.0 * f64::from(samples) * pixels.max(0.05);
     a.timeout.unwrap_or(Duration::from_secs_f64(auto))
+}
+
+/// Render `scene` (`label` in messages) as `generate` renders a scene file (the final render
+/// of its passes), written as `out_dir/scene.json` (`out_dir` must exist), into `out_dir`,
+/// under the time limit of [`timeout`]'s rule at the scene's size and samples; the multilayer
+/// EXR of the passes, checked to be a file the reply names in `out_dir` (Blender's output is
+/// not trusted).
+pub fn render_scene(
+    session: &mut BlenderSession,
+    a: &RenderOptions,
+    label: &str,
+    scene: &clevrtex_scene::SceneFile,
+    out_dir: &Path,
+) -> Result<PathBuf> {
+    let path = out_dir.join("scene.json");
+    clevrtex_scene::to_pretty_json(scene)
+        .map_err(std::io::Error::other)
+        .and_then(|json| clevrtex_dataset::atomic::write(&path, json.as_bytes()))
+        .map_err(|cause| RenderError::write(path.clone(), cause))?;
+    let r = &scene.render;
+    let limit = limit(a, (r.width, r.height), r.samples);
+    let reply =
+        session.request(|w| w.render_labelled(label, &path, Mode::Final, out_dir, limit))?;
+    reply.file("passes", out_dir)
 }
 
 /// Render each of `names` with `settings` into `out_dir/<name>.png`, in order. A material the

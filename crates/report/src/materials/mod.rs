@@ -3,8 +3,9 @@
 //! statistics of rendered tiles ([`stats`], also the CIELAB conversion the report uses), the
 //! render cost table ([`cost`]) and the dataset figures of `materials measure` ([`figures`]
 //! reads a dataset, [`regions`] computes the figures, [`measure_output`] writes them as
-//! tables or JSON), and the Blender batches of `check`, `stats` and `cost` ([`batches`], on
-//! `crates/render/src/material_renders.rs`); what the command prints of them ([`text`]).
+//! tables or JSON), the Blender batches of `check`, `stats` and `cost` ([`batches`], on
+//! `crates/render/src/material_renders.rs`), the table of `parity` across Blenders
+//! ([`parity`]); what the command prints of them ([`text`]).
 
 use std::path::Path;
 
@@ -15,6 +16,7 @@ pub mod batches;
 pub mod cost;
 pub mod figures;
 pub mod measure_output;
+pub mod parity;
 pub mod regions;
 pub mod sheet;
 pub mod stats;
