@@ -12,6 +12,8 @@
 
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
+#[cfg(test)]
+use std::time::Duration;
 
 use crate::bridge::BridgeDir;
 use crate::device::{DeviceChoice, Placement};
@@ -136,5 +138,50 @@ impl KeptWorkers {
 impl Drop for KeptWorkers {
     fn drop(&mut self) {
         self.close();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::AtomicBool;
+    use std::time::Duration;
+
+    /// A kept worker serves only a run whose workers would start alike: another thread count,
+    /// device, catalogue, Blender or interrupt flag is another worker.
+    #[test]
+    fn only_a_worker_started_alike_is_taken() {
+        let keep = KeptWorkers::new();
+        let bridge = keep.bridge("{\"materials\":{}}").unwrap();
+        // The same catalogue: the same bridge folder; another: a fresh one.
+        assert!(Arc::ptr_eq(
+            &bridge,
+            &keep.bridge("{\"materials\":{}}").unwrap()
+        ));
+        let other_bridge = BridgeDir::create("{\"materials\":{\"x\":{}}}").unwrap();
+        let flag = Arc::new(AtomicBool::new(false));
+        let base = WorkerOptions::new("/usr/bin/blender".into(), &bridge, Arc::clone(&flag))
+            .with_threads(1);
+        assert!(base.starts_like(&base.clone().with_startup_timeout(Duration::from_secs(1))));
+        let gpu = Placement {
+            kind: "CUDA".into(),
+            index: 0,
+            name: "gpu".into(),
+            compiles_kernel: None,
+        };
+        for other in [
+            base.clone().with_threads(2),
+            base.clone().with_device(gpu),
+            WorkerOptions::new("/usr/bin/blender".into(), &other_bridge, Arc::clone(&flag))
+                .with_threads(1),
+            WorkerOptions::new("/opt/blender".into(), &bridge, Arc::clone(&flag)).with_threads(1),
+            WorkerOptions::new("/usr/bin/blender".into(), &bridge, Arc::default()).with_threads(1),
+        ] {
+            assert!(!base.starts_like(&other), "{other:?}");
+        }
+        // Nothing kept: nothing taken, nothing counted.
+        assert!(keep.take(&base).is_none());
+        assert!(keep.is_empty());
+        assert_eq!(keep.reused(), 0);
     }
 }
