@@ -12,8 +12,6 @@
 
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
-#[cfg(test)]
-use std::time::Duration;
 
 use crate::bridge::BridgeDir;
 use crate::device::{DeviceChoice, Placement};
