@@ -324,12 +324,39 @@ def _die_with_parent():
     threading.Thread(target=watch, name="clevrtex-parent-watch", daemon=True).start()
 
 
+def _import_bpy_on(threads):
+    """Import `bpy` (PyPI's module) while this process may run on `threads` CPUs only, then
+    allow every CPU again: Blender sizes its TBB scheduler (scene sync, BVH builds, material
+    and mesh work) once, at import, from the CPUs the process may use, and `--threads` reaches
+    only Cycles' own threads. So a `--threads 1` worker of bpy 4.5 kept a second TBB thread
+    busy (spinning in sched_yield while it waits for work): 2.85 host CPU-s per `full` 320x240
+    image against Blender 3.4's 1.45 (docs/notes/performance.md, "bpy 4.5 with `--threads
+    1`"). The CPUs are allowed again at once, so workers are not pinned. Nothing happens in
+    Blender's executable (bpy is imported before this script runs, sized by its own `-t`),
+    with 0 threads (Blender's choice), with as many threads as CPUs, or where the affinity
+    mask cannot be read or set."""
+    if "bpy" in sys.modules or threads <= 0 or not hasattr(os, "sched_setaffinity"):
+        return
+    try:
+        allowed = os.sched_getaffinity(0)
+        if threads >= len(allowed):
+            return
+        os.sched_setaffinity(0, set(sorted(allowed)[:threads]))
+    except OSError:
+        return
+    try:
+        import bpy  # noqa: F401 (imported for its side effect: TBB sized now)
+    finally:
+        os.sched_setaffinity(0, allowed)
+
+
 def main():
     _die_with_parent()
     args = _parse_args(sys.argv)
     replier = Replier(_take_stdout(), args.tag)
     t0 = time.perf_counter()
     try:
+        _import_bpy_on(args.threads)
         worker = Worker(args, replier)
     except Exception as exc:
         replier.send({"type": "error", "id": None, "message": "worker start failed: %s" % exc,

@@ -415,6 +415,7 @@ fn render(blender: PathBuf, out: &Path, scenes: &[SceneFile]) -> Vec<SampleStats
         devices: Vec::new(),
         recycle: Default::default(),
         resume: None,
+        keep: None,
     };
     let stats = Mutex::new(Vec::new());
     let report = pool::run(&opts, jobs, &|ev| {

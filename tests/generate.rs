@@ -453,6 +453,7 @@ pub(crate) fn render_fixtures(
         devices: Vec::new(),
         recycle: Default::default(),
         resume: None,
+        keep: None,
     };
     let stats = Mutex::new(Vec::new());
     let report = pool::run(&opts, jobs, &|ev| {

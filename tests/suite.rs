@@ -296,6 +296,125 @@ print(json.dumps({"public": public, "ours": ours}))
     assert!(t.contains("whole (6 variants, 70 images)"), "{t}");
 }
 
+/// The starts of Blender a run's summaries count (`blender start ... (N start(s))`, one line
+/// per variant's run), added.
+fn starts(t: &str) -> u64 {
+    t.lines()
+        .filter_map(|l| l.split_once("s  (")?.1.strip_suffix(" start(s))"))
+        .map(|n| n.trim().parse::<u64>().unwrap())
+        .sum()
+}
+
+/// Issue 51: a suite's variants share their Blender workers. The 14-image suite (scale
+/// 0.0001: full 5, pbg, vbg, grassbg and camo 2 each, outd 1) with 2 workers starts Blender
+/// twice in all, the later variants' runs taking the workers of the one before (9 times, said
+/// in the suite's last line), and each variant's masks and metadata are byte-identical to a
+/// plain `generate` of that variant alone with a fresh worker. A `render` of scene files of
+/// two variants starts one worker for both.
+#[test]
+fn a_suites_variants_share_their_workers_and_make_what_fresh_workers_make() {
+    let Some(blender) = blender_or_skip("suite_variants_share_workers") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let (shared, alone) = (tmp.path().join("shared"), tmp.path().join("alone"));
+    let tiny = ["--width", "32", "--height", "24", "--samples", "1"];
+    let passes = ["--passes", "rgb,mask", "--threads", "1", "--blender"];
+    let o = clevrtex()
+        .args(["generate", "--suite", "clevrtex", "--scale", "0.0001"])
+        .args(tiny)
+        .args(["--workers", "2"])
+        .args(passes)
+        .arg(&blender)
+        .arg("--out")
+        .arg(&shared)
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("full 5, pbg 2, vbg 2, grassbg 2, camo 2, outd 1"),
+        "{t}"
+    );
+    assert_eq!(starts(&t), 2, "{t}");
+    assert!(
+        t.contains("9 worker(s) carried on from one variant to the next"),
+        "{t}"
+    );
+    let mut compared = 0;
+    for (v, n) in [
+        ("full", 5),
+        ("pbg", 2),
+        ("vbg", 2),
+        ("grassbg", 2),
+        ("camo", 2),
+        ("outd", 1),
+    ] {
+        let o = clevrtex()
+            .args(["generate", "--variant", v, "-n", &n.to_string()])
+            .args(tiny)
+            .args(["--workers", "1"])
+            .args(passes)
+            .arg(&blender)
+            .arg("--out")
+            .arg(&alone)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .unwrap();
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(0), "{v}: {t}");
+        assert_eq!(starts(&t), 1, "{v}: {t}");
+        for i in 0..n {
+            for suffix in ["_flat.png", ".json"] {
+                let rel = format!("clevrtex_{v}/0/CLEVRTEX_{v}_{i:06}{suffix}");
+                let want = std::fs::read(alone.join(&rel)).unwrap();
+                assert!(
+                    std::fs::read(shared.join(&rel)).unwrap() == want,
+                    "{rel}: the suite's shared worker made other bytes than a fresh one"
+                );
+                compared += 1;
+            }
+        }
+    }
+    assert_eq!(compared, 28);
+
+    // `render` of scene files of two variants (made tiny): one pool, one worker for both.
+    let (sampled, scenes) = (tmp.path().join("sampled"), tmp.path().join("scenes"));
+    std::fs::create_dir_all(&scenes).unwrap();
+    for v in ["pbg", "outd"] {
+        let o = clevrtex()
+            .args(["sample", "--variant", v, "-n", "1", "--out"])
+            .arg(&sampled)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{v}: {}", text(&o));
+        let name = format!("CLEVRTEX_{v}_000000.json");
+        let file = sampled.join(format!("clevrtex_{v}/0/{name}"));
+        let mut scene: Value = serde_json::from_slice(&std::fs::read(file).unwrap()).unwrap();
+        for (key, value) in [("width", 32), ("height", 24), ("samples", 1)] {
+            scene["render"][key] = value.into();
+        }
+        std::fs::write(scenes.join(name), scene.to_string()).unwrap();
+    }
+    let o = clevrtex()
+        .arg("render")
+        .arg(&scenes)
+        .args(["--workers", "1"])
+        .args(passes)
+        .arg(&blender)
+        .arg("--out")
+        .arg(tmp.path().join("rendered"))
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(t.contains("rendered 2 images"), "{t}");
+    assert_eq!(starts(&t), 1, "{t}");
+}
+
 /// The `clevrtex generate` commands a `verify` output offers: its indented command lines and
 /// its back-quoted `rerun `...`` ones.
 fn printed_commands(t: &str) -> Vec<String> {

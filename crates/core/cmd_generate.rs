@@ -155,15 +155,17 @@ pub fn run_generate(args: GenerateArgs) -> CmdResult {
         images,
         suite: None,
     };
-    run_part(&args, &part, None)
+    run_part(&args, &part, None, None)
 }
 
 /// Make (or with `--estimate`, plan) one variant's `part`; `estimate_sum` adds the
-/// prediction's wall and held hours to a suite's.
+/// prediction's wall and held hours to a suite's; `keep` holds the workers a suite's variants
+/// share (`clevrtex_render::kept`).
 pub(crate) fn run_part(
     args: &GenerateArgs,
     part: &Part,
     estimate_sum: Option<&std::cell::Cell<(f64, f64)>>,
+    keep: Option<&std::sync::Arc<clevrtex_render::kept::KeptWorkers>>,
 ) -> CmdResult {
     let catalogue = args.run.materials.catalogue()?;
     let hint = "pass an existing JSON file, e.g. one of `configs/`";
@@ -214,5 +216,11 @@ pub(crate) fn run_part(
     // Before anything is made: growing a dataset with another `--total` is refused.
     let (plan, a) = (prepared.plan, args);
     plan.check_splits(&a.run.out, prepared.splits, a.allow_split_mismatch)?;
-    crate::run::run_jobs(&a.run, prepared.jobs, a.max_attempts, Some(plan), catalogue)
+    crate::run::run_jobs(
+        &a.run,
+        prepared.jobs,
+        a.max_attempts,
+        (Some(plan), keep),
+        catalogue,
+    )
 }

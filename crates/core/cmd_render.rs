@@ -31,5 +31,6 @@ pub fn run(args: Args) -> CmdResult {
     let catalogue = args.run.materials.catalogue()?;
     let r = clevrtex_render::scene_jobs::of_scene_files(files, &args.run.out, passes, &catalogue)
         .map_err(command_error)?;
-    run_jobs(&args.run, r, 1, None, catalogue)
+    // One pool for every scene file, whatever its variant: its workers serve them all.
+    run_jobs(&args.run, r, 1, (None, None), catalogue)
 }

@@ -54,7 +54,7 @@ pub(crate) fn run(mut req: Request) -> CmdResult {
     let (catalogue, used) = &mut req.materials;
     let planned = pool_options(
         &args,
-        blender,
+        (blender, None),
         scratch.path().join("failures.jsonl"),
         req.max_attempts,
         &interrupt,

@@ -10,6 +10,7 @@ use std::time::Duration;
 use anyhow::bail;
 use clevrtex_dataset::manifest;
 use clevrtex_render::batch;
+use clevrtex_render::kept::KeptWorkers;
 use clevrtex_render::pool::PoolEvent;
 use clevrtex_render::scene_jobs::RunJobs;
 
@@ -25,12 +26,14 @@ use clevrtex_render::run_text::{self, BatchProgress};
 /// batch run ([`batch::run`]: under the range's lock, the plan written first and the manifest
 /// last). `catalogue` is the built-in one plus `--materials`; the user materials of it that
 /// `used` names are checked before any image is rendered ([`batch::plan`]) and recorded in the
-/// manifest and each sample's metadata.
+/// manifest and each sample's metadata. With `keep`, the workers of an earlier run of the
+/// command serve this one where they started alike, and this run's are kept for the next
+/// (`generate --suite`: [`clevrtex_render::kept`]).
 pub(crate) fn run_jobs(
     args: &RunArgs,
     RunJobs { jobs, ledger, used }: RunJobs,
     max_attempts: u32,
-    manifest: Option<manifest::Plan>,
+    (manifest, keep): (Option<manifest::Plan>, Option<&Arc<KeptWorkers>>),
     mut catalogue: clevrtex_materials::Catalogue,
 ) -> CmdResult {
     // The numbers given as flags first: a refusal never waits on Blender.
@@ -42,7 +45,7 @@ pub(crate) fn run_jobs(
     });
     let mut planned = pool_options(
         args,
-        blender,
+        (blender, keep),
         ledger.clone(),
         max_attempts,
         &interrupt,
@@ -196,7 +199,7 @@ pub(crate) fn checked_numbers(args: &RunArgs) -> anyhow::Result<(Option<Duration
 /// the workers and threads), its lines printed; `interrupt` stops it.
 pub(crate) fn pool_options(
     args: &RunArgs,
-    blender: PathBuf,
+    (blender, keep): (PathBuf, Option<&Arc<KeptWorkers>>),
     ledger: PathBuf,
     max_attempts: u32,
     interrupt: &Arc<std::sync::atomic::AtomicBool>,
@@ -221,6 +224,7 @@ pub(crate) fn pool_options(
         max_worker_memory: batch::memory_bound(args.max_worker_memory)
             .map_err(anyhow::Error::msg)?,
         recycle_after: args.recycle_after,
+        keep: keep.cloned(),
     };
     let planned = batch::plan(&settings, ledger, max_attempts, interrupt, materials)
         .map_err(crate::exit::command_error)?;

@@ -1,7 +1,8 @@
 //! `generate --suite`: a benchmark suite ([`clevrtex_scene::suite`]) made variant after
 //! variant into one folder, each variant's part of this shard of the whole suite made (or,
 //! with `--estimate`, planned) as one `generate` run, with the suite's plan recorded first
-//! (`clevrtex_dataset::suite`).
+//! (`clevrtex_dataset::suite`). The variants' runs share their Blender workers
+//! ([`clevrtex_render::kept`]): a worker started for one variant renders the next.
 
 use std::cell::Cell;
 
@@ -37,6 +38,7 @@ pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
         shard.n
     );
     let sum = Cell::new((0.0, 0.0));
+    let keep = std::sync::Arc::new(clevrtex_render::kept::KeptWorkers::new());
     let mut code = exit::OK;
     for v in &plan.variants {
         let images = clevrtex_render::generate::Part {
@@ -54,13 +56,16 @@ pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
         if images.shard.count(0, v.total) == 0 {
             continue;
         }
-        let c = run_part(args, &part, args.estimate.then_some(&sum))?;
+        let c = run_part(args, &part, args.estimate.then_some(&sum), Some(&keep))?;
         if c != exit::OK && c != exit::PARTIAL {
             // Interrupted: the later variants are not started.
             return Ok(c);
         }
         code = code.max(c);
     }
+    // The workers quit before the suite's last line.
+    let reused = keep.reused();
+    keep.close();
     if args.estimate {
         let (wall, held) = sum.get();
         println!(
@@ -74,7 +79,7 @@ pub(crate) fn run(args: &GenerateArgs, name: &str, scale: f64) -> CmdResult {
         );
     } else {
         println!(
-            "suite `{}`: check the whole suite with `clevrtex verify {}`",
+            "suite `{}`: {reused} worker(s) carried on from one variant to the next instead of starting Blender again; check the whole suite with `clevrtex verify {}`",
             plan.suite,
             out.display()
         );

@@ -47,6 +47,9 @@ pub struct Settings {
     pub max_worker_memory: Option<u64>,
     /// `--recycle-after` (`None`: never by count).
     pub recycle_after: Option<u64>,
+    /// Workers kept between the runs of one command (`generate --suite`: one run per variant),
+    /// and its device plan: [`crate::kept`]. `None`: this run's workers end with it.
+    pub keep: Option<Arc<crate::kept::KeptWorkers>>,
 }
 
 /// The pool's options for a run and the user materials it checked (which must outlive the
@@ -90,13 +93,19 @@ pub fn plan(
         Arc::clone(interrupt),
     )?;
     let materials_json = catalogue.resolved_json();
-    let devices = crate::gpu_probe::plan_devices(
-        s.device,
-        &s.blender,
-        &materials_json,
-        s.startup_timeout,
-        interrupt,
-    )?;
+    let probe = || {
+        crate::gpu_probe::plan_devices(
+            s.device,
+            &s.blender,
+            &materials_json,
+            s.startup_timeout,
+            interrupt,
+        )
+    };
+    let devices = match &s.keep {
+        Some(keep) => keep.devices(s.device, &s.blender, probe)?,
+        None => probe()?,
+    };
     let mut notes = Vec::new();
     if devices.iter().any(|d| d.is_gpu()) {
         let names: Vec<String> = devices.iter().map(|d| d.describe()).collect();
@@ -139,6 +148,7 @@ pub fn plan(
             after_images: s.recycle_after,
         },
         resume: None,
+        keep: s.keep.clone(),
     };
     Ok(Planned { opts, user, notes })
 }

@@ -16,6 +16,50 @@ pub fn own_group(cmd: &mut Command) {
     std::os::unix::process::CommandExt::process_group(cmd, 0);
 }
 
+/// What the spawning thread is sent: a command, and where its child goes.
+type SpawnRequest = (Command, std::sync::mpsc::Sender<std::io::Result<Child>>);
+
+/// Start `cmd` from one thread that lives as long as this process. The bridge asks the kernel
+/// to kill Blender when its parent dies (`PR_SET_PDEATHSIG`, worker.py), and Linux counts the
+/// *thread* that started a process as its parent: a worker started by a pool's thread was
+/// killed when that thread ended, so a worker could not outlive the run that started it
+/// (`crate::kept`: a suite's variants share their workers). Falls back to starting `cmd`
+/// here when that thread cannot be made.
+pub fn spawn_lasting(cmd: Command) -> std::io::Result<Child> {
+    static SPAWNER: std::sync::OnceLock<Option<Mutex<std::sync::mpsc::Sender<SpawnRequest>>>> =
+        std::sync::OnceLock::new();
+    let spawner = SPAWNER.get_or_init(|| {
+        let (tx, rx) = std::sync::mpsc::channel::<SpawnRequest>();
+        std::thread::Builder::new()
+            .name("clevrtex-spawner".into())
+            .spawn(move || {
+                for (mut cmd, back) in rx {
+                    let _ = back.send(cmd.spawn());
+                }
+            })
+            .ok()
+            .map(|_| Mutex::new(tx))
+    });
+    let mut cmd = cmd;
+    if let Some(tx) = spawner {
+        let (back, child) = std::sync::mpsc::channel();
+        let sent = tx
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .send((cmd, back));
+        match sent {
+            Ok(()) => {
+                if let Ok(result) = child.recv() {
+                    return result;
+                }
+                return Err(std::io::Error::other("the spawning thread ended"));
+            }
+            Err(std::sync::mpsc::SendError((c, _))) => cmd = c,
+        }
+    }
+    cmd.spawn()
+}
+
 /// SIGKILL the process group that `child` leads (see [`own_group`]), then reap `child`.
 ///
 /// The group is signalled before `child` is reaped, so its id cannot have been reused; a

@@ -46,7 +46,8 @@
 //   3. output, metadata, passes, ledger: a sample and the failure ledger written to disk
 //   4. worker (process, protocol, report): one Blender process
 //   5. session, gpu_probe, job, doctor: a worker restarted, asked for its GPUs, rendering one
-//      image, asked what it has (`doctor`; doctor_text: what `doctor` prints of it)
+//      image, asked what it has (`doctor`; doctor_text: what `doctor` prints of it); kept:
+//      workers kept between the pool runs of one command (a suite's variants)
 //   6. pool, command_session: the run; one restartable worker for the commands outside it;
 //      run_text: what a run prints, as text
 //   7. user_materials (copies): user materials checked and copied before a run renders
@@ -68,6 +69,7 @@ pub mod generate;
 pub mod gpu_probe;
 pub mod group;
 mod job;
+pub mod kept;
 mod ledger;
 pub mod material_renders;
 pub mod metadata;

@@ -72,6 +72,11 @@ pub struct PoolOptions {
     /// of one sample, against the manifests found before the run): one that fails is made
     /// again. `None` (`render`, `--overwrite`): every file present is complete.
     pub resume: Option<Arc<clevrtex_dataset::verify::ResumeCheck>>,
+    /// Workers kept from an earlier run of this command, and kept for the next
+    /// ([`crate::kept`]: a suite's variants); `None`: workers end with the run. With kept
+    /// workers, the threads of `threads = 0` are the cores shared by `workers`, not by the
+    /// workers this run's images need, so every run of the command starts its workers alike.
+    pub keep: Option<Arc<crate::kept::KeptWorkers>>,
 }
 
 /// Without `--timeout`, a worker that prints nothing at all for this long is hung (Cycles
@@ -256,7 +261,7 @@ impl RunReport {
 
 struct Shared<'a> {
     opts: &'a PoolOptions,
-    bridge: BridgeDir,
+    bridge: Arc<BridgeDir>,
     jobs: Jobs,
     /// Runs of indices into `jobs` still to do, in order (one run for a fresh range: a
     /// resumed run of 100 million images holds a few ranges, not a list).
@@ -286,7 +291,10 @@ pub fn run(
 ) -> Result<RunReport> {
     let started = Instant::now();
     let jobs: Jobs = jobs.into();
-    let bridge = BridgeDir::create(&opts.materials_json)?;
+    let bridge = match &opts.keep {
+        Some(keep) => keep.bridge(&opts.materials_json)?,
+        None => Arc::new(BridgeDir::create(&opts.materials_json)?),
+    };
     let ledger = Ledger::open(&opts.ledger)?;
     let report = RunReport {
         workers: opts.workers.max(1),
@@ -317,6 +325,8 @@ pub fn run(
         ever_started: Arc::new(AtomicBool::new(false)),
         threads: if opts.threads > 0 {
             opts.threads
+        } else if opts.keep.is_some() {
+            crate::device::default_threads(available_cores(), opts.workers.max(1))
         } else {
             crate::device::default_threads(available_cores(), n_workers)
         },
@@ -429,18 +439,28 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
     } else {
         Duration::ZERO
     };
-    let session = Session::new(
-        WorkerOptions::new(
-            opts.blender.clone(),
-            &shared.bridge,
-            Arc::clone(&opts.interrupt),
-        )
-        .with_threads(shared.threads)
-        .with_startup_timeout(opts.startup_timeout)
-        .with_device(placement),
-        opts.retries,
-        opts.timeout.is_none().then_some(IDLE_TIMEOUT + grace),
+    let options = WorkerOptions::new(
+        opts.blender.clone(),
+        &shared.bridge,
+        Arc::clone(&opts.interrupt),
     )
+    .with_threads(shared.threads)
+    .with_startup_timeout(opts.startup_timeout)
+    .with_device(placement);
+    let idle_timeout = opts.timeout.is_none().then_some(IDLE_TIMEOUT + grace);
+    // (pid of the slot's worker, images it made since it started)
+    let mut on_worker: (u32, u64) = (0, 0);
+    let kept = opts.keep.as_ref().and_then(|k| k.take(&options));
+    let session = match kept {
+        Some((mut session, images)) => {
+            // A live worker of an earlier run: a start failure from now on is one request's.
+            session.set_policy(opts.retries, idle_timeout);
+            shared.ever_started.store(true, Ordering::SeqCst);
+            on_worker = images;
+            session
+        }
+        None => Session::new(options, opts.retries, idle_timeout),
+    }
     .sharing_start_flag(Arc::clone(&shared.ever_started));
     let mut slot = Slot {
         shared,
@@ -457,8 +477,6 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
         user_materials: opts.user_materials.clone(),
         config_hash: opts.config_hash.clone(),
     };
-    // (pid of the slot's worker, images it made since it started)
-    let mut on_worker: (u32, u64) = (0, 0);
     loop {
         if shared.stopping() {
             break;
@@ -532,7 +550,11 @@ fn worker_thread(shared: &Shared, slot_index: usize) {
             }
         }
     }
-    slot.session.close();
+    // A live worker goes on to the command's next run, unless this run stops it.
+    match &opts.keep {
+        Some(keep) if !shared.stopping() => keep.put(slot.session, on_worker),
+        _ => slot.session.close(),
+    }
 }
 
 /// After an image (made or failed), between two requests: note the worker's memory, and let

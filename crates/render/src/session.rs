@@ -92,6 +92,22 @@ impl Session {
         self
     }
 
+    /// The options its workers start with.
+    pub fn options(&self) -> &WorkerOptions {
+        &self.options
+    }
+
+    /// Restart a failed worker up to `retries` times per request from now on, and give up on
+    /// a request when the worker is silent for `idle_timeout` ([`Worker::set_idle_timeout`];
+    /// the running worker's too): a kept session taken by another run (`crate::kept`).
+    pub fn set_policy(&mut self, retries: u32, idle_timeout: Option<Duration>) {
+        self.retries = retries;
+        self.idle_timeout = idle_timeout;
+        if let Some(w) = self.worker.as_mut() {
+            w.set_idle_timeout(idle_timeout);
+        }
+    }
+
     /// The running worker, if any (none before the first request, or after a failure).
     pub fn current(&self) -> Option<&Worker> {
         self.worker.as_ref().filter(|w| !w.is_dead())

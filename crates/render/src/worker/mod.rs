@@ -90,6 +90,19 @@ impl WorkerOptions {
         self.device = device;
         self
     }
+
+    /// Whether a worker started with these options is one started with `other`: what a
+    /// worker fixes at start (its Blender, bridge script and catalogue, Cycles threads,
+    /// device, interrupt flag) is the same; the start-up time limit is not compared (it only
+    /// bounds the start). Such a worker may serve `other`'s requests (`crate::kept`).
+    pub fn starts_like(&self, other: &WorkerOptions) -> bool {
+        self.blender == other.blender
+            && self.script == other.script
+            && self.materials == other.materials
+            && self.threads == other.threads
+            && self.device == other.device
+            && Arc::ptr_eq(&self.interrupt, &other.interrupt)
+    }
 }
 
 /// A running Blender worker. Dropping it kills the process.

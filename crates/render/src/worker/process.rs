@@ -92,7 +92,8 @@ impl Process {
         // Own process group: a Ctrl-C in the terminal reaches only us, and a kill reaches a
         // wrapper script's Blender too (`group`).
         crate::group::own_group(&mut cmd);
-        let mut child = cmd.spawn().map_err(|source| {
+        // From a thread that outlives the pool's (a worker may serve a later run).
+        let mut child = crate::group::spawn_lasting(cmd).map_err(|source| {
             if source.kind() == std::io::ErrorKind::NotFound {
                 RenderError::BlenderNotFound {
                     tried: Some(opts.blender.clone()),
