@@ -21,23 +21,16 @@ fn peak_of<T>(f: impl FnOnce() -> T) -> (T, usize) {
 /// A finished manifest of `n` samples of 7 files each (none on disk), written as `generate`
 /// writes one (pretty JSON), into `root/clevrtex_full/`; its size in bytes.
 fn write_manifest(root: &Path, n: u64) -> u64 {
-    let suffixes = [
-        ".json",
-        ".png",
-        "_albedo_0001.png",
-        "_depth_0001.png",
-        "_flat.png",
-        "_normal_0001.png",
-        "_shadow_0001.png",
-    ];
     let mut files = serde_json::Map::new();
     let mut seconds = serde_json::Map::new();
     for i in 0..n {
         let stem = format!("CLEVRTEX_full_{i:06}");
-        for (k, s) in suffixes.iter().enumerate() {
+        let names =
+            clevrtex_dataset::layout::expected_files(&stem, &clevrtex_scene::Pass::ALL, false);
+        for (k, name) in names.iter().enumerate() {
             let h = (i * 7 + k as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
             files.insert(
-                format!("{}/{stem}{s}", i / 1000),
+                format!("{}/{name}", i / 1000),
                 serde_json::json!({"size": 1000 + (i * 7 + k as u64) % 5000, "xxh3": format!("{h:016x}")}),
             );
         }
