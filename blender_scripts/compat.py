@@ -17,6 +17,7 @@ import bpy
 from compat_principled import (  # noqa: F401 (re-exported: callers use compat.*)
     PARITY,
     coat_gtr1_lobes,
+    disney_diffuse,
     parity_settings,
     principled_input,
     principled_output,

@@ -43,8 +43,12 @@ def principled_input(node, name):
 #   multiplies Clearcoat by 0.25 (versioning_400.cc, version_principled_bsdf_coat). At full
 #   strength the sharp coats (roughness 0-0.15) of most recipes reflect the small studio
 #   lights 4x as brightly: the caustic fireflies of 4.5, and a darker base under the coat.
-# - `sheen`: v2's sheen is a microfiber layer; Blender's versioning multiplies a constant
-#   Sheen by 0.2 with a white tint (version_principled_bsdf_sheen).
+# - `sheen`: v2's sheen is a microfiber layer, v1's a Schlick-Fresnel lobe added to the
+#   diffuse; v2 is set a constant Sheen x 0.04 with a white tint. Blender's versioning of 3.x
+#   files uses 0.2 (version_principled_bsdf_sheen), which on the studio lights adds ~4x what
+#   v1's sheen adds: the dark fabrics `rhombus_carpet` and `pyramid_upholstery` (Sheen 0.7-0.8)
+#   rendered 12-14% brighter than on 3.4. 0.04 puts every material with sheen within 2% in
+#   both roles (`clevrtex materials parity`, docs/notes/materials.md).
 # - `ggx`: v1's default distribution is single-scatter GGX, v2's multiscatter GGX (energy
 #   compensated, brighter rough metals); 3.4's is kept.
 # - `ior`: v1's specular reflectance comes from `Specular` alone (F0 = 0.08 x Specular);
@@ -77,11 +81,32 @@ def principled_input(node, name):
 #   One coat under one light at roughness 0.15-0.3, 4.5 over 3.4: peak 0.80-1.00, energy
 #   0.95-1.01 (one GGX lobe: 3.1-6.7x, 1.19-1.44); bench squared error at 64 samples 1.21x /
 #   0.98x 3.4's (one lobe: 2.31x / 1.46x), for three more lobes' shading time.
+# - `disney_diffuse`: v1's diffuse is Disney's, Lambert's times
+#   g(F_L) g(F_V), g(F) = 1 + (F_D90 - 1) F, F = (1 - cos)^5 of the light (L) and view (V)
+#   angles, F_D90 = 0.5 + 2 Roughness cos^2 theta_d (theta_d: between light and half
+#   vector; Cycles 3.x bsdf_principled_diffuse.h): darker than Lambert at grazing angles when
+#   smooth, brighter when rough. v2's diffuse is Lambert's (4.3+'s Diffuse Roughness is
+#   another model, Oren-Nayar; it was measured and does not match, docs/notes/materials.md).
+#   Measured on a flat backdrop, diffuse only, 3.4 over 4.5: 0.972 at Roughness 0, 1.015 at
+#   0.5, 1.060 at 1; on curved objects 0.947, 1.009, 1.074: the rough dielectrics (bricks,
+#   clay, rubber, drywall) rendered 3-6% darker on 4.5. [`disney_diffuse`] multiplies
+#   the base colour of the diffuse by v1's factor with the view term exact per shading point
+#   (Layer Weight's Facing is 1 - cos theta_V) and the light term and cos^2 theta_d at the
+#   studio lights' typical values ([`DISNEY_LIGHT_F`], [`DISNEY_COS2_D`], fitted to those
+#   measurements); metals keep their colour.
 PARITY = {"coat": True, "sheen": True, "ggx": True, "ior": True, "layers": True,
-          "fresnel": True, "light_tree": True, "coat_gtr1": True}
+          "fresnel": True, "light_tree": True, "coat_gtr1": True, "disney_diffuse": True}
+
+# v1's Disney diffuse on 4.x ([`disney_diffuse`]): the light term's F_L = (1 - cos theta_L)^5
+# and cos^2 theta_d taken at these values, fitted to 3.4's diffuse-only renders of `rubber`
+# (Roughness 0.9) and `plain` (0.5) as backdrop and on the objects under the studio lights
+# (dev/displace_parity_probe.py `--set glossy=0 --set disney=D,X`; all four within 0.6%;
+# docs/notes/materials.md, "Disney diffuse on 4.x").
+DISNEY_LIGHT_F = 0.02
+DISNEY_COS2_D = 0.7
 
 # Factor of a 3.x input's constant value for its 4.0+ input, per PARITY switch.
-_PRINCIPLED_SCALE = {"Clearcoat": ("coat", 0.25), "Sheen": ("sheen", 0.2)}
+_PRINCIPLED_SCALE = {"Clearcoat": ("coat", 0.25), "Sheen": ("sheen", 0.04)}
 
 
 def parity_settings():
@@ -105,6 +130,34 @@ def setup_principled(node):
         tint = node.inputs["Sheen Tint"]
         if tint.type == "RGBA":
             tint.default_value = (1.0, 1.0, 1.0, 1.0)
+
+
+def disney_diffuse(g, color, rough, metal):
+    """The base colour to give a Principled BSDF (material_nodes.Graph `g`; `color`,
+    `rough`, `metal` sockets or constants) so that 4.0+'s Lambert diffuse renders as v1's
+    Disney diffuse ([`PARITY`] `disney_diffuse`): `color` times
+    k = (1 + s F_V)(1 + s F_L), s = 2 cos^2 theta_d Roughness - 0.5, F_V = Facing^5 per
+    shading point, and k's excess faded out by Metallic (a metal's colour is its
+    reflectance, not a diffuse albedo). `color` itself before 4.0 or with the switch off."""
+    if VERSION < (4, 0, 0) or not PARITY["disney_diffuse"]:
+        return color
+    lw = g.node("ShaderNodeLayerWeight")
+    lw.inputs["Blend"].default_value = 0.5
+    fv = g.pow(lw.outputs["Facing"], 5.0)
+    s = g.madd(rough, 2.0 * DISNEY_COS2_D, -0.5)
+    k = g.mul(g.madd(s, fv, 1.0), g.madd(s, DISNEY_LIGHT_F, 1.0))
+    if _is_nonzero(metal):
+        k = g.madd(g.sub(1.0, k), metal, k)
+    if isinstance(color, (int, float)):
+        color = (color, color, color)
+    elif isinstance(color, (tuple, list)):
+        color = tuple(color)[:3]  # RGBA constants: the vector math takes RGB
+    return g.vscale(color, k)
+
+
+def _is_nonzero(x):
+    """Whether `x` (a socket or a constant) may be other than 0."""
+    return not isinstance(x, (int, float)) or x != 0.0
 
 
 def _copy_input(nt, src, dst):

@@ -141,7 +141,7 @@ def _principled(g, color, rough, metal, specular, albedo):
     same base colour (the pass is the material's base colour)."""
     bsdf = g.node("ShaderNodeBsdfPrincipled")
     compat.setup_principled(bsdf)
-    _set_bsdf(g, bsdf, "Base Color", color)
+    _set_bsdf(g, bsdf, "Base Color", compat.disney_diffuse(g, color, rough, metal))
     if albedo:
         aov = g.node("ShaderNodeOutputAOV")
         compat.set_aov_name(aov, ALBEDO_AOV)

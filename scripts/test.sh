@@ -23,5 +23,9 @@ summary() {
 trap summary EXIT
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets --locked -- -D warnings
-cargo test --workspace --locked
+# One test thread more than the CPUs: the integration tests spend much of their time waiting
+# (Blender starting, hung fake workers timing out, SLURM), and with one thread per CPU the
+# cores sat idle a third of the time (docs/notes/performance.md, "The test command's time").
+threads="${CLEVRTEX_TEST_THREADS:-$(($(nproc) + 1))}"
+cargo test --workspace --locked -- --test-threads="$threads"
 if [ -x scripts/smoke.sh ]; then ./scripts/smoke.sh; fi

@@ -120,6 +120,7 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
             "layers",
             "fresnel",
             "coat_gtr1",
+            "disney_diffuse",
         ] {
             assert_eq!(
                 meta_b["blender_compat"][switch],
@@ -405,14 +406,18 @@ fn bridge_lists_the_cuda_kernels_each_blender_ships() {
 }
 
 /// Materials whose displaced backdrop 4.5 rendered 12-27% darker than 3.4 before issue 50
-/// (Cycles 4.x's bump derived from the displacement; `compat.true_displacement_method`).
-const DISPLACED_PARITY_MATERIALS: &str = "jagged_cliff_rock,copper_chainmail,corrugated_iron";
+/// (Cycles 4.x's bump derived from the displacement; `compat.true_displacement_method`), and
+/// the rough brick 4.5 rendered 5.8% darker (v2's Lambert diffuse; `compat.disney_diffuse`).
+const DISPLACED_PARITY_MATERIALS: &str =
+    "jagged_cliff_rock,copper_chainmail,corrugated_iron,flemish_red_bricks";
 
-/// Materials measured on the objects: a plain one and a displacing one.
-const OBJECT_PARITY_MATERIALS: &str = "plain,moss";
+/// Materials measured on the objects: a plain one, a displacing one with sheen, a rough one
+/// 4.5 rendered 4.3% darker (`compat.disney_diffuse`) and a dark fabric with sheen it rendered
+/// 13% brighter (the sheen factor of `compat_principled._PRINCIPLED_SCALE`).
+const OBJECT_PARITY_MATERIALS: &str = "plain,moss,rubber,rhombus_carpet";
 
-/// `clevrtex materials parity` on 3.4 and 4.5 (issue 50): the displaced backdrops 4.5
-/// rendered darkest, and two materials on the objects, each within 3% in mean linear luminance
+/// `clevrtex materials parity` on 3.4 and 4.5 (issue 50): the materials 4.5 rendered darkest
+/// or brightest as backdrop and on the objects, each within 3% in mean linear luminance
 /// and 1% in mean depth (the command's bounds); the table names both Blenders, and the
 /// command refuses to run with one.
 #[test]
@@ -435,7 +440,7 @@ fn materials_render_alike_on_3_4_and_bpy_4_5_by_materials_parity() {
         assert!(out.status.success(), "{role}: {t}");
         let stdout = String::from_utf8_lossy(&out.stdout).to_string();
         assert!(
-            stdout.contains("| material | as | 3.4.1 luminance, depth m | 4.5."),
+            stdout.contains("| material | as | 3.4.1 luminance, depth m, albedo | 4.5."),
             "{stdout}"
         );
         for name in names.split(',') {

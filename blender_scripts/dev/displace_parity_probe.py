@@ -38,11 +38,15 @@ depth); n_bd: backdrop pixels.
   midlevel=F, disp_scale=F       every Displacement node's Midlevel / Scale multiplied
   space=OBJECT|WORLD             every Displacement node's space
   parity_off=KEY[+KEY..]|all     compat.PARITY switches off before the materials are built
+  disney=D,X                     compat's Disney diffuse constants cos^2 theta_d = D and
+                                 F_L = X (4.x; before the materials are built)
   normal=geometry                every Principled BSDF's Normal input unlinked
   glossy=0                       every Principled BSDF's specular level 0 and the added
                                  parity lobes' weight 0 (diffuse only)
   metallic=0                     every Principled BSDF's Metallic 0 (unlinked)
-  roughness=F                    every Principled BSDF's Roughness F (unlinked)
+  roughness=F                    every Principled BSDF's Roughness F (unlinked; 4.x's
+                                 Disney diffuse factor keeps the built roughness: add
+                                 parity_off=disney_diffuse to compare the bare BSDFs)
   sheen=F                        every Principled BSDF's Sheen Weight (4.x) multiplied by F
   diffuse_roughness=F            every Principled BSDF's Diffuse Roughness (4.3+) fed F times
                                  (what feeds its Roughness - R0), clamped to 0..1
@@ -235,7 +239,7 @@ def apply_set(key, value, scene):
             d = t.nodes.new("ShaderNodeBsdfDiffuse")
             d.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
             t.links.new(d.outputs[0], out.inputs["Surface"])
-    elif key == "parity_off":
+    elif key in ("parity_off", "disney"):
         pass  # applied before the build
     else:
         raise SystemExit("unknown --set key `%s`" % key)
@@ -284,6 +288,10 @@ def main():
         if k == "parity_off":
             for key in (compat.PARITY if v == "all" else v.split("+")):
                 compat.PARITY[key] = False
+        elif k == "disney":
+            import compat_principled
+            d, x = (float(t) for t in v.split(","))
+            compat_principled.DISNEY_COS2_D, compat_principled.DISNEY_LIGHT_F = d, x
     out = args.out or tempfile.mkdtemp(prefix="displace_probe_")
     os.makedirs(out, exist_ok=True)
     for name in args.material:

@@ -63,6 +63,9 @@ pub struct Figures {
     pub luminance: f64,
     /// Mean camera depth, metres.
     pub depth: f64,
+    /// Mean linear luminance of the albedo pass (the material's base colour, noise-free): a
+    /// gap here is the material's texture nodes, not its shading.
+    pub albedo: f64,
     /// How many pixels.
     pub pixels: usize,
 }
@@ -83,7 +86,7 @@ pub fn base_scene(s: Settings) -> anyhow::Result<(Config, SceneFile)> {
     let mut config = Config::builtin(VARIANT)?;
     config.base.render.width = s.width;
     config.base.render.height = (s.width * 3 / 4).max(1);
-    config.base.passes = vec![Pass::Rgb, Pass::Mask, Pass::Depth];
+    config.base.passes = vec![Pass::Rgb, Pass::Mask, Pass::Depth, Pass::Albedo];
     let req = SampleRequest {
         seed: SEED,
         index: INDEX,
@@ -126,14 +129,28 @@ pub fn measure(ch: &Channels, role: Role) -> anyhow::Result<Figures> {
         ch.get("ViewLayer.Combined.B")?,
     );
     let (index, depth) = (ch.get("ViewLayer.IndexOB.X")?, ch.get("ViewLayer.Depth.Z")?);
-    let (mut lum, mut z, mut n) = (0.0f64, 0.0f64, 0usize);
-    for i in 0..r.len().min(index.len()).min(depth.len()) {
+    let (ar, ag, ab) = (
+        ch.get("ViewLayer.BaseCol.R")?,
+        ch.get("ViewLayer.BaseCol.G")?,
+        ch.get("ViewLayer.BaseCol.B")?,
+    );
+    let lum_of = |r: &[f32], g: &[f32], b: &[f32], i: usize| {
+        0.2126 * f64::from(r[i]) + 0.7152 * f64::from(g[i]) + 0.0722 * f64::from(b[i])
+    };
+    let (mut lum, mut alb, mut z, mut n) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+    let len = [r, g, b, ar, ag, ab, index, depth]
+        .iter()
+        .map(|c| c.len())
+        .min()
+        .unwrap_or(0);
+    for i in 0..len {
         let mine = match role {
             Role::Backdrop => index[i] == 0.0 && depth[i] < 1e9,
             Role::Object => index[i] > 0.0,
         };
         if mine {
-            lum += 0.2126 * f64::from(r[i]) + 0.7152 * f64::from(g[i]) + 0.0722 * f64::from(b[i]);
+            lum += lum_of(r, g, b, i);
+            alb += lum_of(ar, ag, ab, i);
             z += f64::from(depth[i]);
             n += 1;
         }
@@ -144,6 +161,7 @@ pub fn measure(ch: &Channels, role: Role) -> anyhow::Result<Figures> {
     Ok(Figures {
         luminance: lum / n as f64,
         depth: z / n as f64,
+        albedo: alb / n as f64,
         pixels: n,
     })
 }
@@ -194,9 +212,10 @@ pub fn run(
                 .and_then(|ch| measure(&ch, *role))
                 .with_context(|| format!("Blender {version}, material `{label}`"))?;
             progress(format!(
-                "{version}: {label}: luminance {:.4}, depth {:.3} m ({} px, {:.1} s)",
+                "{version}: {label}: luminance {:.4}, depth {:.3} m, albedo {:.4} ({} px, {:.1} s)",
                 f.luminance,
                 f.depth,
+                f.albedo,
                 f.pixels,
                 started.elapsed().as_secs_f64()
             ));
@@ -228,13 +247,13 @@ pub fn table(columns: &[Column]) -> (String, usize) {
     };
     let _ = write!(
         out,
-        "| material | as | {} luminance, depth m |",
+        "| material | as | {} luminance, depth m, albedo |",
         first.version
     );
     for c in &columns[1..] {
         let _ = write!(
             out,
-            " {} luminance, depth m (/ {}) |",
+            " {} luminance, depth m, albedo (/ {}) |",
             c.version, first.version
         );
     }
@@ -245,10 +264,11 @@ pub fn table(columns: &[Column]) -> (String, usize) {
     for ((name, role), reference) in &first.figures {
         let _ = write!(
             out,
-            "| `{name}` | {} | {:.4}, {:.3} |",
+            "| `{name}` | {} | {:.4}, {:.3}, {:.4} |",
             role.name(),
             reference.luminance,
-            reference.depth
+            reference.depth,
+            reference.albedo
         );
         let mut bad = false;
         for c in &columns[1..] {
@@ -264,11 +284,13 @@ pub fn table(columns: &[Column]) -> (String, usize) {
             bad |= over;
             let _ = write!(
                 out,
-                " {:.4} ({:+.1}%), {:.3} ({:+.3}%){} |",
+                " {:.4} ({:+.1}%), {:.3} ({:+.3}%), {:.4} ({:+.1}%){} |",
                 f.luminance,
                 100.0 * dl,
                 f.depth,
                 100.0 * dd,
+                f.albedo,
+                100.0 * ratio(f.albedo, reference.albedo),
                 if over { " **past**" } else { "" }
             );
         }
@@ -312,6 +334,7 @@ mod tests {
         let f = Figures {
             luminance: lum,
             depth,
+            albedo: lum / 2.0,
             pixels: 10,
         };
         Column {
@@ -326,7 +349,10 @@ mod tests {
         let within = [column("3.4", 0.2, 10.0), column("4.5", 0.205, 10.05)];
         let (t, past) = table(&within);
         assert_eq!(past, 0, "{t}");
-        assert!(t.contains("0.2050 (+2.5%), 10.050 (+0.500%) |"), "{t}");
+        assert!(
+            t.contains("0.2050 (+2.5%), 10.050 (+0.500%), 0.1025 (+2.5%) |"),
+            "{t}"
+        );
         let dark = [column("3.4", 0.2, 10.0), column("4.5", 0.193, 10.0)];
         let (t, past) = table(&dark);
         assert_eq!(past, 1);
