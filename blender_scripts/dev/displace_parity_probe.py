@@ -43,6 +43,8 @@ depth); n_bd: backdrop pixels.
   normal=geometry                every Principled BSDF's Normal input unlinked
   glossy=0                       every Principled BSDF's specular level 0 and the added
                                  parity lobes' weight 0 (diffuse only)
+  coat=F                         every clearcoat multiplied by F (3.x: the Clearcoat input;
+                                 4.x: the weight of the coat lobes of compat's `layers`)
   metallic=0                     every Principled BSDF's Metallic 0 (unlinked)
   roughness=F                    every Principled BSDF's Roughness F (unlinked; 4.x's
                                  Disney diffuse factor keeps the built roughness: add
@@ -170,6 +172,15 @@ def apply_set(key, value, scene):
         for t, n in list(nodes_of("MIX_SHADER")):
             unlink(t, n.inputs["Fac"])
             n.inputs["Fac"].default_value = 0.0 if not n.inputs[1].is_linked else 1.0
+    elif key == "coat":
+        # 3.x: the Clearcoat input; 4.x: the weight of the coat lobes principled_output adds
+        # (Mix Shaders with only their second input linked; the specular lobe's has the first).
+        for t, n in list(nodes_of("BSDF_PRINCIPLED")):
+            if "Clearcoat" in n.inputs:
+                n.inputs["Clearcoat"].default_value *= f
+        for t, n in list(nodes_of("MIX_SHADER")):
+            if n.inputs[2].is_linked and not n.inputs[1].is_linked and not n.inputs["Fac"].is_linked:
+                n.inputs["Fac"].default_value *= f
     elif key == "metallic":
         for t, n in list(nodes_of("BSDF_PRINCIPLED")):
             s = n.inputs["Metallic"]
