@@ -101,7 +101,7 @@ PARITY = {"coat": True, "sheen": True, "ggx": True, "ior": True, "layers": True,
 # and cos^2 theta_d taken at these values, fitted to 3.4's diffuse-only renders of `rubber`
 # (Roughness 0.9) and `plain` (0.5) as backdrop and on the objects under the studio lights
 # (dev/displace_parity_probe.py `--set glossy=0 --set disney=D,X`; all four within 0.6%;
-# docs/notes/materials.md, "Disney diffuse on 4.x").
+# docs/notes/materials.md, "Disney diffuse and the sheen factor on 4.x").
 DISNEY_LIGHT_F = 0.02
 DISNEY_COS2_D = 0.7
 
