@@ -256,6 +256,123 @@ fn bench_render_rejects_bad_arguments_with_hints() {
 
     let out = clevrtex().args(["bench", "nothing"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+
+    // `--scene`: files not trusted, refused before any Blender is looked for.
+    let scenes = dir.path().join("scenes");
+    let o = clevrtex()
+        .args(["sample", "--variant", "camo", "-n", "1", "--out"])
+        .arg(&scenes)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let file = scenes.join("clevrtex_camo/0/CLEVRTEX_camo_000000.json");
+    let scene_bench = |paths: &[&Path], extra: &[&str]| {
+        let mut c = clevrtex();
+        c.args(["bench", "render", "--quick", "--out"])
+            .arg(dir.path().join("out"))
+            .args(extra)
+            .env("CLEVRTEX_BLENDER", "/nonexistent/blender");
+        for p in paths {
+            c.arg("--scene").arg(p);
+        }
+        c.output().unwrap()
+    };
+    let o = scene_bench(&[&file], &["--scenes", "2"]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    let copy = dir.path().join("copy.json");
+    std::fs::copy(&file, &copy).unwrap();
+    let o = scene_bench(&[&file, &copy], &[]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("are both `CLEVRTEX_camo_000000`") && t.contains("hint:"),
+        "{t}"
+    );
+    let mut v: Value = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+    v["backdrop"]["material"]["name"] = "no_such_material".into();
+    std::fs::write(&copy, serde_json::to_vec(&v).unwrap()).unwrap();
+    let o = scene_bench(&[&copy], &[]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("uses material `no_such_material`") && t.contains("--materials"),
+        "{t}"
+    );
+    let o = scene_bench(&[&dir.path().join("absent")], &[]);
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(t.contains("does not exist") && t.contains("hint:"), "{t}");
+}
+
+/// `--scene FILE`: the bench renders the scene file given (its stem names the rows), at the
+/// bench's size, against its own reference: e.g. the scenes with the most relief.
+#[test]
+fn bench_render_takes_scene_files() {
+    let Some(blender) = blender_or_skip("bench_render_takes_scene_files") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    let o = clevrtex()
+        .args([
+            "sample",
+            "--variant",
+            "vbg",
+            "-n",
+            "1",
+            "--start",
+            "3",
+            "--seed",
+            "9",
+        ])
+        .arg("--out")
+        .arg(&scenes)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let out = dir.path().join("out");
+    let o = clevrtex()
+        .args(["bench", "render", "--quick", "--only", "fixed-4"])
+        .args([
+            "--width",
+            "24",
+            "--height",
+            "16",
+            "--reference-samples",
+            "16",
+        ])
+        .arg("--scene")
+        .arg(&scenes)
+        .arg("--blender")
+        .arg(&blender)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    let rows = read_csv(&out.join("bench-render.csv"));
+    assert_eq!(rows.len(), 1, "{t}");
+    assert_eq!(rows[0]["scene"], "CLEVRTEX_vbg_000003", "{t}");
+    assert_eq!(
+        (rows[0]["width"].as_str(), rows[0]["height"].as_str()),
+        ("24", "16")
+    );
+    assert_eq!(rows[0]["mask_equal"], "true", "{rows:?}");
+    // The reference is of the file's scene: the cached reference's scene has its layout.
+    let refs: Vec<_> = std::fs::read_dir(out.join("references"))
+        .unwrap()
+        .flatten()
+        .collect();
+    assert_eq!(refs.len(), 1);
+    let rendered: Value =
+        serde_json::from_slice(&std::fs::read(refs[0].path().join("scene.json")).unwrap()).unwrap();
+    let file = scenes.join("clevrtex_vbg/0/CLEVRTEX_vbg_000003.json");
+    let given: Value = serde_json::from_slice(&std::fs::read(file).unwrap()).unwrap();
+    for key in ["objects", "backdrop", "camera", "seed", "index"] {
+        assert_eq!(rendered[key], given[key], "{key}");
+    }
+    assert_eq!(rendered["render"]["width"], 24);
 }
 
 #[test]

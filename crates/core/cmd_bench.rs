@@ -39,6 +39,12 @@ pub struct RenderArgs {
         clevrtex_bench::scenes::SEED
     ))]
     scenes: Option<usize>,
+    /// Bench these scene files instead of the fixed scenes: files, or folders searched for
+    /// `*.json` as `clevrtex render` takes them (e.g. `clevrtex sample` scenes whose backdrop
+    /// has the most relief). Rendered at `--width` x `--height`; each scene's rows are named by
+    /// its stem. At most 1024.
+    #[arg(long = "scene", value_name = "SCENES", conflicts_with_all = ["scenes", "plot_only"])]
+    scene_files: Vec<PathBuf>,
     /// Output folder: CSV, plot, renders and the reference cache.
     #[arg(long, default_value = "bench-out", value_name = "DIR")]
     out: PathBuf,
@@ -98,9 +104,26 @@ pub fn run(args: Args) -> CmdResult {
 
 fn run_render(args: RenderArgs) -> CmdResult {
     let quick = args.quick;
+    let files = if args.scene_files.is_empty() {
+        Vec::new()
+    } else {
+        clevrtex_dataset::scene_read::collect(&args.scene_files, &mut |w| eprintln!("{w}"))
+            .map_err(anyhow::Error::msg)?
+    };
+    if files.len() > clevrtex_bench::measure::MAX_SCENES {
+        anyhow::bail!(
+            "`--scene` found {} scene files, over {}\nhint: the bench compares a few scenes; pass some of them",
+            files.len(),
+            clevrtex_bench::measure::MAX_SCENES
+        );
+    }
     let plan = Plan::new(
         quick,
-        args.scenes,
+        if files.is_empty() {
+            args.scenes
+        } else {
+            Some(files.len())
+        },
         args.width,
         args.height,
         args.reference_samples,
@@ -121,7 +144,11 @@ fn run_render(args: RenderArgs) -> CmdResult {
     let (n, width, height) = (plan.scenes, plan.width, plan.height);
     let mut catalogue = args.materials.catalogue()?;
     let user = args.materials.materials.as_ref().map(|_| &catalogue);
-    let scenes = scenes::bench_scenes_in(n, width, height, user)?;
+    let scenes = if files.is_empty() {
+        scenes::bench_scenes_in(n, width, height, user)?
+    } else {
+        scenes::file_scenes(&files, width, height, &catalogue)?
+    };
     std::fs::create_dir_all(&args.out).with_context(|| {
         format!(
             "cannot create output folder `{}`\nhint: pass a writable folder with `--out`",

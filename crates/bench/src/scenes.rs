@@ -64,6 +64,40 @@ pub fn bench_scenes_in(
         .collect()
 }
 
+/// The scene files `files` (from `clevrtex sample`, found by
+/// `clevrtex_dataset::scene_read::collect`) as bench scenes at `width` x `height` with the
+/// rungs' passes: `bench render --scene`, e.g. the scenes of a variant with the most relief.
+/// Each file is read capped and validated (it is not trusted), its materials must be in
+/// `cat` (a user one needs `--materials`), and each is labelled by its stem, which must be
+/// unique (the stem names the scene's rows in the CSV).
+pub fn file_scenes(
+    files: &[std::path::PathBuf],
+    width: u32,
+    height: u32,
+    cat: &clevrtex_materials::Catalogue,
+) -> anyhow::Result<Vec<BenchScene>> {
+    let mut labels = std::collections::BTreeMap::new();
+    files
+        .iter()
+        .map(|f| {
+            let mut scene = clevrtex_dataset::scene_read::read(f).map_err(anyhow::Error::msg)?;
+            clevrtex_render::user_materials::used_by_scenes(cat, [(f.as_path(), &scene)])?;
+            let label = clevrtex_scene::text::printable(&scene.stem).into_owned();
+            if let Some(first) = labels.insert(label.clone(), f) {
+                anyhow::bail!(
+                    "scene files `{}` and `{}` are both `{label}`: the bench names a scene's rows by its stem\nhint: pass scene files of one `clevrtex sample` run, or copy one under another name",
+                    first.display(),
+                    f.display()
+                );
+            }
+            scene.render.width = width;
+            scene.render.height = height;
+            scene.passes = vec![Pass::Rgb, Pass::Mask, Pass::Depth];
+            Ok(BenchScene { label, scene })
+        })
+        .collect()
+}
+
 /// `scene` with the sampling settings `s`.
 pub fn with_sampling(scene: &SceneFile, s: &Sampling) -> SceneFile {
     let mut scene = scene.clone();
