@@ -56,29 +56,28 @@ fn tree(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
     out
 }
 
-/// The suite in two shards into `a` and in one run into `b`: `verify` calls `a` whole,
-/// `verify a --against b` finds the same layouts, masks and metadata in every variant (and
-/// the masks and metadata files are byte-identical), the public loader's splits equal
-/// `clevrtex.Dataset`'s, rerunning the same command renders nothing, and growing a variant
-/// with another `--total` is refused before Blender starts.
+/// The suite in two shards into `a`: `verify` calls `a` whole, the public loader's splits
+/// equal `clevrtex.Dataset`'s, the suite's command run whole over it renders nothing, growing
+/// a variant with another `--total` is refused before Blender starts, and `verify`'s repair
+/// hints run as printed. (That shards make the bytes of one run:
+/// `a_suites_variants_share_their_workers_and_make_what_fresh_workers_make`, on the smaller
+/// suite.)
 #[test]
-fn a_suite_in_two_shards_is_the_suite_of_one_run_with_the_public_loaders_splits() {
+fn a_suite_in_two_shards_is_whole_with_the_public_loaders_splits() {
     let Some(blender) = blender_or_skip("suite_in_two_shards") else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let (a, b) = (tmp.path().join("a"), tmp.path().join("b"));
+    let a = tmp.path().join("a");
     for shard in ["0/2", "1/2"] {
         let o = suite(&blender, &a, &["--shard", shard]);
-        assert_eq!(o.status.code(), Some(0), "shard {shard}: {}", text(&o));
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(0), "shard {shard}: {t}");
+        assert!(
+            t.contains("70 images (full 25, pbg 10, vbg 10, grassbg 10, camo 10, outd 5)"),
+            "{t}"
+        );
     }
-    let o = suite(&blender, &b, &[]);
-    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    let t = text(&o);
-    assert!(
-        t.contains("full 25, pbg 10, vbg 10, grassbg 10, camo 10, outd 5"),
-        "{t}"
-    );
 
     let o = clevrtex().arg("verify").arg(&a).output().unwrap();
     let t = text(&o);
@@ -87,50 +86,6 @@ fn a_suite_in_two_shards_is_the_suite_of_one_run_with_the_public_loaders_splits(
         t.contains("suite `clevrtex` at scale 0.0005: whole (6 variants, 70 images)"),
         "{t}"
     );
-
-    let o = clevrtex()
-        .arg("verify")
-        .arg(&a)
-        .arg("--against")
-        .arg(&b)
-        .output()
-        .unwrap();
-    let t = text(&o);
-    assert_eq!(o.status.code(), Some(0), "{t}");
-    for (v, n) in [
-        ("full", 25),
-        ("pbg", 10),
-        ("vbg", 10),
-        ("grassbg", 10),
-        ("camo", 10),
-        ("outd", 5),
-    ] {
-        assert!(
-            t.contains(&format!(
-                "{v}: against `{}`: {n} of {n} image(s) in both hold the same layout, mask and metadata",
-                b.display()
-            )),
-            "{v}: {t}"
-        );
-    }
-    assert_eq!(
-        t.matches("same layouts, masks and metadata").count(),
-        6,
-        "{t}"
-    );
-    // What `--against` claims, checked on the files themselves.
-    let (ta, tb) = (tree(&a), tree(&b));
-    let mut compared = 0;
-    for (rel, bytes) in &ta {
-        let name = rel.file_name().unwrap().to_string_lossy();
-        let per_image = name.starts_with("CLEVRTEX_")
-            && (name.ends_with("_flat.png") || name.ends_with(".json"));
-        if per_image {
-            assert_eq!(Some(bytes), tb.get(rel), "{} differs", rel.display());
-            compared += 1;
-        }
-    }
-    assert_eq!(compared, 2 * 70);
 
     // The public loader's splits (`tests/eval_reference/harness.py`, its `_reindex` and split
     // rule) against `clevrtex.Dataset`'s, for every variant, split by split.
@@ -186,7 +141,7 @@ print(json.dumps({"public": public, "ours": ours}))
     }
 
     // The card names the suite, and every variant is read unchanged by the public loader.
-    let card = std::fs::read_to_string(b.join("DATASET_CARD.md")).unwrap();
+    let card = std::fs::read_to_string(a.join("DATASET_CARD.md")).unwrap();
     assert!(card.contains("- **Suite**: `clevrtex`"), "{card}");
     for v in VARIANTS {
         assert!(
@@ -197,11 +152,12 @@ print(json.dumps({"public": public, "ours": ours}))
         );
     }
 
-    // The same command again: every sample is complete, nothing changes.
-    let before = tree(&b);
-    let o = suite(&blender, &b, &[]);
+    // The suite's command again, whole (no `--shard`): every sample is complete, nothing
+    // changes.
+    let before = tree(&a);
+    let o = suite(&blender, &a, &[]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    let after = tree(&b);
+    let after = tree(&a);
     let changed: Vec<_> = after
         .iter()
         .filter(|(rel, bytes)| {
@@ -218,14 +174,14 @@ print(json.dumps({"public": public, "ours": ours}))
     let bin = tmp.path().join("bin");
     std::fs::create_dir_all(&bin).unwrap();
     let wrapper = blender_wrapper(&bin, &format!(": > '{}'\nexit 1", marker.display()));
-    let before = tree(&b);
+    let before = tree(&a);
     let o = clevrtex()
         .args(["generate", "--variant", "full", "--start", "25", "-n", "5"])
         .args(["--width", "32", "--height", "24", "--samples", "1"])
         .args(["--passes", "rgb,mask", "--blender"])
         .arg(&wrapper)
         .arg("--out")
-        .arg(&b)
+        .arg(&a)
         .env_remove("SLURM_ARRAY_TASK_ID")
         .env_remove("JOB_COMPLETION_INDEX")
         .output()
@@ -240,7 +196,7 @@ print(json.dumps({"public": public, "ours": ours}))
         "{t}"
     );
     assert!(!marker.exists(), "Blender was started: {t}");
-    assert_eq!(tree(&b), before, "the refused run wrote into the folder");
+    assert_eq!(tree(&a), before, "the refused run wrote into the folder");
 
     // Issue 48: every repair hint `verify` prints for a suite runs as printed (the suite, its
     // scale and the size flags kept): a sample deleted from a two-shard suite, then the
@@ -380,6 +336,65 @@ fn a_suites_variants_share_their_workers_and_make_what_fresh_workers_make() {
         }
     }
     assert_eq!(compared, 28);
+
+    // The suite in two shards is the suite of one run: `verify --against` finds the same
+    // layouts, masks and metadata in every variant, and the files are byte-identical.
+    let sharded = tmp.path().join("sharded");
+    for shard in ["0/2", "1/2"] {
+        let o = clevrtex()
+            .args(["generate", "--suite", "clevrtex", "--scale", "0.0001"])
+            .args(tiny)
+            .args(["--workers", "1", "--shard", shard])
+            .args(passes)
+            .arg(&blender)
+            .arg("--out")
+            .arg(&sharded)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "shard {shard}: {}", text(&o));
+    }
+    let o = clevrtex()
+        .arg("verify")
+        .arg(&sharded)
+        .arg("--against")
+        .arg(&shared)
+        .output()
+        .unwrap();
+    let t = text(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("suite `clevrtex` at scale 0.0001: whole (6 variants, 14 images)"),
+        "{t}"
+    );
+    for (v, n) in [
+        ("full", 5),
+        ("pbg", 2),
+        ("vbg", 2),
+        ("grassbg", 2),
+        ("camo", 2),
+        ("outd", 1),
+    ] {
+        assert!(
+            t.contains(&format!(
+                "{v}: against `{}`: {n} of {n} image(s) in both hold the same layout, mask and metadata",
+                shared.display()
+            )),
+            "{v}: {t}"
+        );
+    }
+    let (ta, tb) = (tree(&sharded), tree(&shared));
+    let mut compared = 0;
+    for (rel, bytes) in &ta {
+        let name = rel.file_name().unwrap().to_string_lossy();
+        if name.starts_with("CLEVRTEX_") && (name.ends_with("_flat.png") || name.ends_with(".json"))
+        {
+            assert_eq!(Some(bytes), tb.get(rel), "{} differs", rel.display());
+            compared += 1;
+        }
+    }
+    assert_eq!(compared, 2 * 14);
 
     // `render` of scene files of two variants (made tiny): one pool, one worker for both.
     let (sampled, scenes) = (tmp.path().join("sampled"), tmp.path().join("scenes"));
