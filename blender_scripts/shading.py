@@ -8,6 +8,7 @@ import bpy
 
 import compat
 import materials
+import shapes
 
 
 def material_displaces(mat):
@@ -94,6 +95,10 @@ def assign_materials(built, catalogue, build_material, displacement):
         made[key] = mat
         return mat
 
+    # The objects as the final render renders them: the shape's mesh and its subdivision
+    # modifier (the visibility pass renders a copy of the subdivided mesh instead).
+    for obj, ospec in zip(built.objects, built.spec["objects"]):
+        shapes.make_final(obj, ospec["shape"])
     pairs = [(built.backdrop, built.spec["backdrop"]["material"], True)]
     pairs += [(o, s["material"], False) for o, s in zip(built.objects, built.spec["objects"])]
     for obj, inst, simple in pairs:
