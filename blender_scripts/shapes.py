@@ -10,15 +10,14 @@ shape carries, so cubes stay cubes and cylinders keep flat caps, as in CLEVR's s
 Meshes are cached for the worker's life and shared by every object of that shape (materials
 are linked to the object, not the mesh), so a rebuild never re-tessellates them.
 
-The visibility pass renders each object as a copy of its shape's level-1 subdivision, made
-once per worker by Blender's own modifier (`subdivided`), with no modifier of its own; the
-final render gets the shape's mesh and the modifier back (`make_final`), as before. So the
-visibility pass's mask comes from the same geometry, and the modifier, which Blender
-evaluated again for every object of every render (~0.07 s an object on this project's
-machines, most of a 32x24 image's time: docs/notes/performance.md, "The fixed cost of a small
-image"), runs once per image, in the final render. Only the final render needs the
-modifier: its materials may read coordinates that a subdivided mesh would change (Generated
-coordinates come from the unsubdivided mesh) or displace the object (adaptive subdivision).
+Each object is a copy of its shape's level-1 subdivision, made once per worker by Blender's
+own modifier (`subdivide`), with no modifier of its own: the same geometry, positions,
+normals and UVs as the shape's mesh with the modifier, which Blender evaluated again for
+every object of every render (~0.07 s an object on this project's machines, most of a 32x24
+image's time: docs/notes/performance.md, "The fixed cost of a small image"). An object gets
+the shape's mesh and the modifier back (`make_final`) where its material in the final render
+displaces it (adaptive subdivision subdivides the shape's mesh) or may read its Generated
+coordinates, which come from the unsubdivided mesh (shading.reads_unsubdivided).
 """
 
 import math
@@ -275,11 +274,10 @@ def subdivide(shapes):
 
 
 def new_object(shape, name, collection):
-    """A new object of `shape` as the visibility pass renders it, linked into `collection`:
-    its own copy of the shape's subdivision (`subdivide` first), no modifier. `make_final`
-    turns it into the object the final render renders. A copy for each object: objects that
-    share a mesh are instances to Cycles, traced with the object's transform applied to the
-    ray instead of to the vertices."""
+    """A new object of `shape`, linked into `collection`: its own copy of the shape's
+    subdivision (`subdivide` first), no modifier; `make_final` gives it the shape's mesh and
+    modifier. A copy for each object: objects that share a mesh are instances to Cycles,
+    traced with the object's transform applied to the ray instead of to the vertices."""
     obj = bpy.data.objects.new(name, _subdivided[shape].copy())
     collection.objects.link(obj)
     obj.material_slots[0].link = "OBJECT"
@@ -287,8 +285,9 @@ def new_object(shape, name, collection):
 
 
 def make_final(obj, shape):
-    """`obj` (of `new_object`) with the shape's mesh and its subdivision modifier, as the final
-    render renders it; the visibility pass's copy is removed. Nothing happens the second time."""
+    """`obj` (of `new_object`) with the shape's mesh and its subdivision modifier, for a
+    material that displaces it or may read its unsubdivided mesh; its copy is removed.
+    Nothing happens the second time."""
     if obj.modifiers.get("subdivision") is not None:
         return
     copy = obj.data
