@@ -332,6 +332,8 @@ class BuiltScene:
 def build(spec, key, threads):
     t0 = time.perf_counter()
     clear()
+    # Before anything else is in the scene: it evaluates the view layer (shapes.subdivide).
+    shapes.subdivide(o["shape"] for o in spec["objects"])
     scene = bpy.context.scene
     collection = scene.collection
     built = BuiltScene(spec, key)

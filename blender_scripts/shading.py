@@ -1,5 +1,6 @@
 """Materials on a built scene: node-tree templates per worker (assign_materials), adaptive
-subdivision where a material displaces."""
+subdivision where a material displaces, the shapes' subdivision modifier where a material
+may read the unsubdivided mesh (reads_unsubdivided)."""
 
 import json
 import time
@@ -8,6 +9,7 @@ import bpy
 
 import compat
 import materials
+import shapes
 
 
 def material_displaces(mat):
@@ -20,6 +22,52 @@ def material_displaces(mat):
         if node.type == "OUTPUT_MATERIAL" and node.is_active_output:
             sock = node.inputs.get("Displacement")
             return sock is not None and sock.is_linked
+    return False
+
+
+def reads_unsubdivided(mat):
+    """Whether `mat` may read something of its object's mesh that the shapes' subdivided copy
+    (shapes.new_object) gives otherwise than the shape's mesh with its subdivision modifier:
+    Generated coordinates, which come from the unsubdivided mesh (its texture space, and
+    positions interpolated linearly, not to the limit surface). Cycles reads them from a
+    Texture Coordinate node's Generated output, a texture node's unlinked Vector, a tangent
+    left unlinked on an anisotropic BSDF, a Tangent node, and may from a mesh attribute,
+    a script or a point density: each of these counts, in the material's tree and in every
+    node group in it. Positions, normals, UVs and Object coordinates are the same on both
+    (the catalogue's materials read Object coordinates). True where unsure."""
+    if mat is None or not mat.use_nodes or mat.node_tree is None:
+        return False
+    return _tree_reads_unsubdivided(mat.node_tree, set())
+
+
+def _tree_reads_unsubdivided(tree, seen):
+    if tree.name in seen:
+        return False
+    seen.add(tree.name)
+    for node in tree.nodes:
+        kind = node.type
+        if kind == "GROUP":
+            if node.node_tree is not None and _tree_reads_unsubdivided(node.node_tree, seen):
+                return True
+            continue
+        if kind == "TEX_COORD":
+            if node.outputs["Generated"].is_linked:
+                return True
+            continue
+        if kind in ("TANGENT", "SCRIPT", "TEX_POINTDENSITY", "CUSTOM"):
+            return True
+        if kind == "ATTRIBUTE" and node.attribute_type != "OBJECT":
+            return True
+        # Unused where disabled (white noise in 1D; 4.x's `get` does not find it then).
+        vector = next((i for i in node.inputs if i.identifier == "Vector"), None)
+        if kind.startswith("TEX_") and (vector is None or (
+                getattr(vector, "enabled", True) and not vector.is_linked)):
+            return True
+        tangent = node.inputs.get("Tangent")
+        if tangent is not None and not tangent.is_linked:
+            amount = node.inputs.get("Anisotropic") or node.inputs.get("Anisotropy")
+            if amount is None or amount.is_linked or amount.default_value != 0.0:
+                return True
     return False
 
 
@@ -94,13 +142,23 @@ def assign_materials(built, catalogue, build_material, displacement):
         made[key] = mat
         return mat
 
-    pairs = [(built.backdrop, built.spec["backdrop"]["material"], True)]
-    pairs += [(o, s["material"], False) for o, s in zip(built.objects, built.spec["objects"])]
-    for obj, inst, simple in pairs:
+    pairs = [(built.backdrop, built.spec["backdrop"]["material"], None)]
+    pairs += [(o, s["material"], s["shape"]) for o, s in zip(built.objects, built.spec["objects"])]
+    reads = {}
+    for obj, inst, shape in pairs:
         mat = get(inst)
-        obj.material_slots[0].material = mat
         displaces = displacement and material_displaces(mat)
-        _set_adaptive(obj, displaces, simple)
+        if shape is not None:
+            # The shape's mesh and its subdivision modifier where the material displaces it
+            # (adaptive subdivision) or may read what the object's subdivided copy changes;
+            # elsewhere that copy, the same geometry and pixels without the modifier
+            # evaluated again (shapes.make_final).
+            if mat.name not in reads:
+                reads[mat.name] = reads_unsubdivided(mat)
+            if displaces or reads[mat.name]:
+                shapes.make_final(obj, shape)
+        obj.material_slots[0].material = mat
+        _set_adaptive(obj, displaces, shape is None)
     keep = set(m.name for m in made.values())
     for name in old:
         mat = bpy.data.materials.get(name)

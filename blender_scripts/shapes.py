@@ -9,6 +9,15 @@ shape carries, so cubes stay cubes and cylinders keep flat caps, as in CLEVR's s
 
 Meshes are cached for the worker's life and shared by every object of that shape (materials
 are linked to the object, not the mesh), so a rebuild never re-tessellates them.
+
+Each object is a copy of its shape's level-1 subdivision, made once per worker by Blender's
+own modifier (`subdivide`), with no modifier of its own: the same geometry, positions,
+normals and UVs as the shape's mesh with the modifier, which Blender evaluated again for
+every object of every render (~0.07 s an object on this project's machines, most of a 32x24
+image's time: docs/notes/performance.md, "The fixed cost of a small image"). An object gets
+the shape's mesh and the modifier back (`make_final`) where its material in the final render
+displaces it (adaptive subdivision subdivides the shape's mesh) or may read its Generated
+coordinates, which come from the unsubdivided mesh (shading.reads_unsubdivided).
 """
 
 import math
@@ -29,8 +38,10 @@ SUBDIVISION_LEVEL = 1
 BEVEL_WIDTH = 0.08
 
 MESH_PREFIX = "clevrtex_shape_"
+SUBDIVIDED_PREFIX = "clevrtex_subdivided_"
 
 _cache = {}
+_subdivided = {}
 
 
 def _bevel(bm, edges, width=BEVEL_WIDTH, segments=2):
@@ -199,26 +210,89 @@ def mesh(shape):
     return me
 
 
-def cached_meshes():
-    """The cached meshes still alive. A factory reset (the `material` request's scenes start
-    from one) removes them: they are dropped here and `mesh` builds them again."""
+def _alive(cache):
+    """The meshes of `cache` still alive; a removed one (a factory reset removes them all) is
+    dropped from it, to be built again."""
     alive = []
-    for shape, me in list(_cache.items()):
+    for shape, me in list(cache.items()):
         try:
             me.name  # raises ReferenceError if something removed it
         except ReferenceError:
-            del _cache[shape]
+            del cache[shape]
             continue
         alive.append(me)
     return alive
 
 
-def new_object(shape, name, collection):
-    """A new object of `shape` with its subdivision modifier, linked into `collection`."""
-    obj = bpy.data.objects.new(name, mesh(shape))
-    collection.objects.link(obj)
+def cached_meshes():
+    """The cached meshes still alive (the shapes' and their subdivisions). A factory reset
+    (the `material` request's scenes start from one) removes them: they are dropped here and
+    `mesh` and `subdivide` build them again."""
+    return _alive(_cache) + _alive(_subdivided)
+
+
+def _new_subdivision_modifier(obj):
     mod = obj.modifiers.new("subdivision", "SUBSURF")
     mod.levels = SUBDIVISION_LEVEL
     mod.render_levels = SUBDIVISION_LEVEL
+    return mod
+
+
+def subdivide(shapes):
+    """Make the level-1 subdivision of each of `shapes` not made yet: the mesh Blender's
+    modifier makes of the shape's mesh (what an object of the final render carries), taken
+    from an evaluated temporary object. Call it with no other object in the scene (builder.build
+    does, right after clear()): the evaluation covers every object of the view layer."""
+    _alive(_subdivided)
+    todo = sorted(set(shapes) - set(_subdivided))
+    if not todo:
+        return
+    collection = bpy.context.scene.collection
+    temporary = []
+    for shape in todo:
+        obj = bpy.data.objects.new("clevrtex_subdivide_" + shape, mesh(shape))
+        collection.objects.link(obj)
+        _new_subdivision_modifier(obj)
+        temporary.append((shape, obj))
+    try:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        for shape, obj in temporary:
+            me = bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph),
+                                                 depsgraph=depsgraph)
+            me.name = SUBDIVIDED_PREFIX + shape
+            me.use_fake_user = True
+            # Level 1 makes a quad of every corner: anything else means the modifier did not
+            # run on the CPU (e.g. left to a GPU for drawing), and the mask would change.
+            if len(me.polygons) != len(obj.data.loops) or len(me.loops) != 4 * len(me.polygons):
+                bpy.data.meshes.remove(me)
+                raise RuntimeError("the subdivision of `%s` was not made (%d faces from %d "
+                                   "corners)" % (shape, len(me.polygons), len(obj.data.loops)))
+            _subdivided[shape] = me
+    finally:
+        for _, obj in temporary:
+            bpy.data.objects.remove(obj, do_unlink=True)
+
+
+def new_object(shape, name, collection):
+    """A new object of `shape`, linked into `collection`: its own copy of the shape's
+    subdivision (`subdivide` first), no modifier; `make_final` gives it the shape's mesh and
+    modifier. A copy for each object: objects that share a mesh are instances to Cycles,
+    traced with the object's transform applied to the ray instead of to the vertices."""
+    obj = bpy.data.objects.new(name, _subdivided[shape].copy())
+    collection.objects.link(obj)
     obj.material_slots[0].link = "OBJECT"
     return obj
+
+
+def make_final(obj, shape):
+    """`obj` (of `new_object`) with the shape's mesh and its subdivision modifier, for a
+    material that displaces it or may read its unsubdivided mesh; its copy is removed.
+    Nothing happens the second time."""
+    if obj.modifiers.get("subdivision") is not None:
+        return
+    copy = obj.data
+    obj.data = mesh(shape)
+    _new_subdivision_modifier(obj)
+    obj.material_slots[0].link = "OBJECT"
+    if copy.users == 0:
+        bpy.data.meshes.remove(copy)
