@@ -277,7 +277,11 @@ def new_object(shape, name, collection):
     """A new object of `shape`, linked into `collection`: its own copy of the shape's
     subdivision (`subdivide` first), no modifier; `make_final` gives it the shape's mesh and
     modifier. A copy for each object: objects that share a mesh are instances to Cycles,
-    traced with the object's transform applied to the ray instead of to the vertices."""
+    traced with the object's transform applied to the ray instead of to the vertices.
+    A shape not subdivided yet is subdivided here (slower with other objects in the scene:
+    the evaluation covers them too)."""
+    if shape not in _subdivided:
+        subdivide([shape])
     obj = bpy.data.objects.new(name, _subdivided[shape].copy())
     collection.objects.link(obj)
     obj.material_slots[0].link = "OBJECT"
