@@ -365,6 +365,17 @@ fn start_time(pid: u32) -> u64 {
 fn remove_broken_leaves_a_live_run_s_samples_and_temporaries_alone() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
+    let sub = out.join("clevrtex_clevr/0");
+    std::fs::create_dir_all(&sub).unwrap();
+    let mut gone = Command::new("true").spawn().unwrap();
+    let dead_pid = gone.id();
+    gone.wait().unwrap();
+    // The live run sweeps the folder of killed runs' temporaries once, when it first takes a
+    // job of it: this one gone means it has, and what the test leaves below stays for verify.
+    let swept = sub.join(format!(
+        "CLEVRTEX_clevr_000000.png.h42.{dead_pid}.1.clevrtex-tmp"
+    ));
+    std::fs::write(&swept, b"half").unwrap();
     let live = Hanging(Some(
         generate(&fake_blender(), &out, &["-n", "4"])
             .env("FAKE_BLENDER_MODE", "hang")
@@ -375,9 +386,15 @@ fn remove_broken_leaves_a_live_run_s_samples_and_temporaries_alone() {
             .unwrap(),
     ));
     wait_for(&lock(&out, ".clevrtex-run-0-4-0of1.lock"));
+    let start = std::time::Instant::now();
+    while swept.exists() {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(60),
+            "the live run never swept its folder"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
     let pid = live.id();
-    let sub = out.join("clevrtex_clevr/0");
-    std::fs::create_dir_all(&sub).unwrap();
     // Sample 1 as the live writer leaves it between two renames (its metadata comes last).
     std::fs::write(sub.join("CLEVRTEX_clevr_000001.png"), b"being written").unwrap();
     // A temporary of the live writer, and one of a dead one.
@@ -386,9 +403,6 @@ fn remove_broken_leaves_a_live_run_s_samples_and_temporaries_alone() {
         start_time(pid)
     ));
     std::fs::write(&live_tmp, b"half").unwrap();
-    let mut gone = Command::new("true").spawn().unwrap();
-    let dead_pid = gone.id();
-    gone.wait().unwrap();
     let dead_tmp = sub.join(format!(
         "CLEVRTEX_clevr_000003.png.h42.{dead_pid}.1.clevrtex-tmp"
     ));
