@@ -276,18 +276,22 @@ fn a_suites_variants_share_their_workers_and_make_what_fresh_workers_make() {
     let (shared, alone) = (tmp.path().join("shared"), tmp.path().join("alone"));
     let tiny = ["--width", "32", "--height", "24", "--samples", "1"];
     let passes = ["--passes", "rgb,mask", "--threads", "1", "--blender"];
-    let o = clevrtex()
-        .args(["generate", "--suite", "clevrtex", "--scale", "0.0001"])
-        .args(tiny)
-        .args(["--workers", "2"])
-        .args(passes)
-        .arg(&blender)
-        .arg("--out")
-        .arg(&shared)
-        .env_remove("SLURM_ARRAY_TASK_ID")
-        .env_remove("JOB_COMPLETION_INDEX")
-        .output()
-        .unwrap();
+    // The 14-image suite into `out` with `extra` (workers, shard).
+    let small_suite = |out: &Path, extra: &[&str]| {
+        clevrtex()
+            .args(["generate", "--suite", "clevrtex", "--scale", "0.0001"])
+            .args(tiny)
+            .args(extra)
+            .args(passes)
+            .arg(&blender)
+            .arg("--out")
+            .arg(out)
+            .env_remove("SLURM_ARRAY_TASK_ID")
+            .env_remove("JOB_COMPLETION_INDEX")
+            .output()
+            .unwrap()
+    };
+    let o = small_suite(&shared, &["--workers", "2"]);
     let t = text(&o);
     assert_eq!(o.status.code(), Some(0), "{t}");
     assert!(
@@ -341,18 +345,7 @@ fn a_suites_variants_share_their_workers_and_make_what_fresh_workers_make() {
     // layouts, masks and metadata in every variant, and the files are byte-identical.
     let sharded = tmp.path().join("sharded");
     for shard in ["0/2", "1/2"] {
-        let o = clevrtex()
-            .args(["generate", "--suite", "clevrtex", "--scale", "0.0001"])
-            .args(tiny)
-            .args(["--workers", "1", "--shard", shard])
-            .args(passes)
-            .arg(&blender)
-            .arg("--out")
-            .arg(&sharded)
-            .env_remove("SLURM_ARRAY_TASK_ID")
-            .env_remove("JOB_COMPLETION_INDEX")
-            .output()
-            .unwrap();
+        let o = small_suite(&sharded, &["--workers", "1", "--shard", shard]);
         assert_eq!(o.status.code(), Some(0), "shard {shard}: {}", text(&o));
     }
     let o = clevrtex()
