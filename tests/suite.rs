@@ -16,6 +16,15 @@ use crate::util::{blender_or_skip, blender_wrapper, clevrtex, test_python_or_ski
 /// The suite's scale in these tests: the try, 70 images (full 25, pbg, vbg, grassbg
 /// and camo 10 each, outd 5), every variant with a test split.
 const SCALE: &str = "0.0005";
+/// The images per variant of the suite at scale 0.0001 (14 in all).
+const SMALL_SUITE: [(&str, usize); 6] = [
+    ("full", 5),
+    ("pbg", 2),
+    ("vbg", 2),
+    ("grassbg", 2),
+    ("camo", 2),
+    ("outd", 1),
+];
 /// The public loader's variants: the suite's.
 const VARIANTS: [&str; 6] = ["full", "pbg", "vbg", "grassbg", "camo", "outd"];
 
@@ -304,14 +313,7 @@ fn a_suites_variants_share_their_workers_and_make_what_fresh_workers_make() {
         "{t}"
     );
     let mut compared = 0;
-    for (v, n) in [
-        ("full", 5),
-        ("pbg", 2),
-        ("vbg", 2),
-        ("grassbg", 2),
-        ("camo", 2),
-        ("outd", 1),
-    ] {
+    for (v, n) in SMALL_SUITE {
         let o = clevrtex()
             .args(["generate", "--variant", v, "-n", &n.to_string()])
             .args(tiny)
@@ -361,14 +363,7 @@ fn a_suites_variants_share_their_workers_and_make_what_fresh_workers_make() {
         t.contains("suite `clevrtex` at scale 0.0001: whole (6 variants, 14 images)"),
         "{t}"
     );
-    for (v, n) in [
-        ("full", 5),
-        ("pbg", 2),
-        ("vbg", 2),
-        ("grassbg", 2),
-        ("camo", 2),
-        ("outd", 1),
-    ] {
+    for (v, n) in SMALL_SUITE {
         assert!(
             t.contains(&format!(
                 "{v}: against `{}`: {n} of {n} image(s) in both hold the same layout, mask and metadata",
