@@ -94,8 +94,22 @@ def principled_input(node, name):
 #   (Layer Weight's Facing is 1 - cos theta_V) and the light term and cos^2 theta_d at the
 #   studio lights' typical values ([`DISNEY_LIGHT_F`], [`DISNEY_COS2_D`], fitted to those
 #   measurements); metals keep their colour.
+# - `metal_fresnel`: v1's metal is its specular lobe with F0 = the base colour, reflecting by
+#   `interpolate_fresnel_color`: F = c + (1 - c) FH, FH the dielectric Fresnel of the IOR of
+#   0.08 x Specular (1.5 at 0.5) at the microfacet's angle, normalised to 0 at normal
+#   incidence (Cycles 3.x bsdf_util.h). v2's metal is Schlick's F82-tint model, whose
+#   (1 - cos)^5 is up to 22% under FH between 45 and 70 degrees: metal objects rendered
+#   3.1-4.6% darker on 4.5 at 1024 samples. v2's dielectric specular layer reflects
+#   F = f0 + (1 - f0) FH with the same FH (its generalised Schlick of exponent -IOR,
+#   svm/closure.h) and f0 = F0(IOR) x Specular Tint, the tint not clamped above 1, so
+#   [`principled_output`] makes the metal a dielectric lobe of black base, that IOR and
+#   Specular Tint = colour / F0(IOR): exactly v1's metal Fresnel, at every angle. Weighted by
+#   Metallic, the principled node (diffuse, sheen) by 1 - Metallic, as v1's sum. (A correction
+#   of the metal colour by the view angle, tried first, fixed objects but overdid backdrops,
+#   where the half vector is far nearer the normal than the view: docs/notes/materials.md.)
 PARITY = {"coat": True, "sheen": True, "ggx": True, "ior": True, "layers": True,
-          "fresnel": True, "light_tree": True, "coat_gtr1": True, "disney_diffuse": True}
+          "fresnel": True, "light_tree": True, "coat_gtr1": True, "disney_diffuse": True,
+          "metal_fresnel": True}
 
 # v1's Disney diffuse on 4.x ([`disney_diffuse`]): the light term's F_L = (1 - cos theta_L)^5
 # and cos^2 theta_d taken at these values, fitted to 3.4's diffuse-only renders of `rubber`
@@ -137,8 +151,10 @@ def disney_diffuse(g, color, rough, metal):
     `rough`, `metal` sockets or constants) so that 4.0+'s Lambert diffuse renders as v1's
     Disney diffuse ([`PARITY`] `disney_diffuse`): `color` times
     k = (1 + s F_V)(1 + s F_L), s = 2 cos^2 theta_d Roughness - 0.5, F_V = Facing^5 per
-    shading point, and k's excess faded out by Metallic (a metal's colour is its
-    reflectance, not a diffuse albedo). `color` itself before 4.0 or with the switch off."""
+    shading point. Where the metal is the principled node's own (the `metal_fresnel` or
+    `layers` switch off) k's excess is faded out by Metallic (a metal's colour is its
+    reflectance, not a diffuse albedo); with them the node's colour is the diffuse's alone.
+    `color` itself before 4.0 or with the switch off."""
     if VERSION < (4, 0, 0) or not PARITY["disney_diffuse"]:
         return color
     lw = g.node("ShaderNodeLayerWeight")
@@ -146,13 +162,18 @@ def disney_diffuse(g, color, rough, metal):
     fv = g.pow(lw.outputs["Facing"], 5.0)
     s = g.madd(rough, 2.0 * DISNEY_COS2_D, -0.5)
     k = g.mul(g.madd(s, fv, 1.0), g.madd(s, DISNEY_LIGHT_F, 1.0))
-    if _is_nonzero(metal):
+    if _is_nonzero(metal) and not _metal_lobe_on():
         k = g.madd(g.sub(1.0, k), metal, k)
     if isinstance(color, (int, float)):
         color = (color, color, color)
     elif isinstance(color, (tuple, list)):
         color = tuple(color)[:3]  # RGBA constants: the vector math takes RGB
     return g.vscale(color, k)
+
+
+def _metal_lobe_on():
+    """Whether [`principled_output`] takes the metal out of the principled node (4.0+)."""
+    return VERSION >= (4, 0, 0) and PARITY["layers"] and PARITY["metal_fresnel"]
 
 
 def _is_nonzero(x):
@@ -274,7 +295,21 @@ def coat_gtr1_lobes(roughness, k=3):
     return _GTR1_LOBES[key]
 
 
-def _lobe(nt, f0, roughness_from, normal_from):
+def _scaled_color(nt, color, k):
+    """`color` (a socket, an RGB(A) tuple or a number) times `k`, as a constant or a socket."""
+    if isinstance(color, (int, float)):
+        return (color * k, color * k, color * k, 1.0)
+    if isinstance(color, (tuple, list)):
+        r, gr, b = tuple(color)[:3]
+        return (r * k, gr * k, b * k, 1.0)
+    vm = nt.nodes.new("ShaderNodeVectorMath")
+    vm.operation = "SCALE"
+    nt.links.new(color, vm.inputs[0])
+    vm.inputs["Scale"].default_value = k
+    return vm.outputs["Vector"]
+
+
+def _lobe(nt, f0, roughness_from, normal_from, tint=None):
     """A v2 principled node that is one GGX reflection lobe of normal-incidence reflectance
     `f0`, roughness and normal as the given input sockets (None: unbumped normal).
 
@@ -283,7 +318,8 @@ def _lobe(nt, f0, roughness_from, normal_from):
     specular and clearcoat lobes do (v1 interpolates between F0 and 1 by the dielectric
     Fresnel of the IOR of F0, which with an untinted F0 is that Fresnel exactly). Without it,
     a metal of base colour `f0` (white F82 tint): Schlick's approximation, which is up to 22%
-    under the dielectric between 45 and 70 degrees of incidence."""
+    under the dielectric between 45 and 70 degrees of incidence. `tint` (a colour constant or
+    socket) multiplies the dielectric's F0: v1's metal ([`PARITY`] `metal_fresnel`)."""
     n = nt.nodes.new("ShaderNodeBsdfPrincipled")
     n.distribution = "GGX"
     if PARITY["fresnel"]:
@@ -294,7 +330,12 @@ def _lobe(nt, f0, roughness_from, normal_from):
     else:
         n.inputs["Metallic"].default_value = 1.0
         n.inputs["Base Color"].default_value = (f0, f0, f0, 1.0)
-    if "Specular Tint" in n.inputs and n.inputs["Specular Tint"].type == "RGBA":
+    if tint is not None:
+        if isinstance(tint, tuple):
+            n.inputs["Specular Tint"].default_value = tint
+        else:
+            nt.links.new(tint, n.inputs["Specular Tint"])
+    elif "Specular Tint" in n.inputs and n.inputs["Specular Tint"].type == "RGBA":
         n.inputs["Specular Tint"].default_value = (1.0, 1.0, 1.0, 1.0)
     if isinstance(roughness_from, (int, float)):
         n.inputs["Roughness"].default_value = roughness_from
@@ -305,10 +346,12 @@ def _lobe(nt, f0, roughness_from, normal_from):
     return n
 
 
-def _weighted(nt, shader, weight_from=None, weight=None, complement=False):
+def _weighted(nt, shader, label, weight_from=None, weight=None, complement=False):
     """`shader` times a weight (a constant `weight`, or what feeds `weight_from`), or times one
-    minus it (`complement`), as a Mix Shader with one input left empty (no light)."""
+    minus it (`complement`), as a Mix Shader with one input left empty (no light), labelled
+    `label` (which lobe it weighs: "metal", "specular", "coat"; the dev probes find them so)."""
     mix = nt.nodes.new("ShaderNodeMixShader")
+    mix.label = label
     if weight_from is not None:
         _copy_input(nt, weight_from, mix.inputs["Fac"])
     else:
@@ -317,11 +360,13 @@ def _weighted(nt, shader, weight_from=None, weight=None, complement=False):
     return mix.outputs["Shader"]
 
 
-def principled_output(nt, bsdf):
+def principled_output(nt, bsdf, color=None):
     """The shader output of principled node `bsdf` (inputs already set in 3.x terms) to link
     to the material output: the node's own output, or on 4.0+ with `PARITY["layers"]` v1's
     sum of lobes built around it (see `PARITY`). Constants and links of the node's Specular,
-    Metallic, Roughness, Normal and Coat inputs are carried over to the extra nodes."""
+    Metallic, Roughness, Normal and Coat inputs are carried over to the extra nodes. `color`
+    is the material's base colour (a socket or a constant) before `disney_diffuse`: the
+    metal lobe's ([`PARITY`] `metal_fresnel`); None keeps the metal in the node."""
     if VERSION < (4, 0, 0) or not PARITY["layers"]:
         return bsdf.outputs["BSDF"]
     level = bsdf.inputs["Specular IOR Level"]
@@ -330,13 +375,35 @@ def principled_output(nt, bsdf):
         return out  # not in the recipes: keep v2's layering
     f0 = 0.08 * level.default_value
     level.default_value = 0.0
+    metal = bsdf.inputs["Metallic"]
+    if (PARITY["metal_fresnel"] and color is not None and f0 > 0.0
+            and (metal.is_linked or metal.default_value > 0.0)):
+        lobe = _lobe(nt, f0, bsdf.inputs["Roughness"], bsdf.inputs["Normal"],
+                     tint=_scaled_color(nt, color, 1.0 / f0))
+        lobe_out = lobe.outputs["BSDF"]
+        if metal.is_linked or metal.default_value < 1.0:
+            add = nt.nodes.new("ShaderNodeAddShader")
+            nt.links.new(_weighted(nt, out, "metal", weight_from=metal, complement=True),
+                         add.inputs[0])
+            nt.links.new(_weighted(nt, lobe_out, "metal", weight_from=metal), add.inputs[1])
+            out = add.outputs["Shader"]
+        else:
+            out = lobe_out  # a pure metal: no diffuse, sheen or dielectric specular
+            f0 = 0.0  # nor (1 - Metallic) x the specular lobe below
+    else:
+        metal = None  # the metal stays the node's own
     if f0 > 0.0:
         spec = _lobe(nt, f0, bsdf.inputs["Roughness"], bsdf.inputs["Normal"])
         add = nt.nodes.new("ShaderNodeAddShader")
         nt.links.new(out, add.inputs[0])
-        nt.links.new(_weighted(nt, spec.outputs["BSDF"], weight_from=bsdf.inputs["Metallic"],
-                               complement=True), add.inputs[1])
+        nt.links.new(_weighted(nt, spec.outputs["BSDF"], "specular",
+                               weight_from=bsdf.inputs["Metallic"], complement=True),
+                     add.inputs[1])
         out = add.outputs["Shader"]
+    if metal is not None:  # now the lobes above have their weights from it
+        if metal.is_linked:
+            nt.links.remove(metal.links[0])
+        metal.default_value = 0.0
     coat = bsdf.inputs["Coat Weight"]
     if not coat.is_linked and coat.default_value > 0.0:
         weight = coat.default_value
@@ -350,7 +417,8 @@ def principled_output(nt, bsdf):
             lobe = _lobe(nt, 0.04, r, None)
             add = nt.nodes.new("ShaderNodeAddShader")
             nt.links.new(out, add.inputs[0])
-            nt.links.new(_weighted(nt, lobe.outputs["BSDF"], weight=weight * w), add.inputs[1])
+            nt.links.new(_weighted(nt, lobe.outputs["BSDF"], "coat", weight=weight * w),
+                         add.inputs[1])
             out = add.outputs["Shader"]
     return out
 

@@ -211,7 +211,7 @@ def _build_layers(nt, out, recipe, instance, displace, albedo, vals):
         g.set(b.inputs["Height"], height)
         g.set(b.inputs["Distance"], bump)
         _set_bsdf(g, bsdf, "Normal", b.outputs["Normal"])
-    nt.links.new(compat.principled_output(nt, bsdf), out.inputs["Surface"])
+    nt.links.new(compat.principled_output(nt, bsdf, color), out.inputs["Surface"])
     relief = surf.get("relief", 0.0)
     if displace and relief > 0 and height is not None and hasattr(height, "node"):
         _displace(g, nt, out, vals, height, relief)
@@ -678,7 +678,7 @@ def _build_pbr(nt, out, name, recipe, instance, displace, albedo, vals):
         img = _pbr_image(name, maps["normal"], True)
         dx = recipe.get("normal_convention") == "dx"
         _set_bsdf(g, bsdf, "Normal", _pbr_normal(g, _samples(g, img, uvs), w, normal, dx))
-    nt.links.new(compat.principled_output(nt, bsdf), out.inputs["Surface"])
+    nt.links.new(compat.principled_output(nt, bsdf, color), out.inputs["Surface"])
     relief = float(recipe.get("relief") or 0.0)
     if displace and relief > 0 and maps.get("displacement"):
         height = channels("displacement", True)[0]

@@ -121,6 +121,7 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
             "fresnel",
             "coat_gtr1",
             "disney_diffuse",
+            "metal_fresnel",
         ] {
             assert_eq!(
                 meta_b["blender_compat"][switch],
@@ -347,6 +348,96 @@ print("FIT-OK")
         .unwrap();
     let t = text(&out);
     assert!(out.status.success() && t.contains("FIT-OK"), "{t}");
+}
+
+/// v1's Fresnel of a metal at 60 degrees of incidence (Cycles 3.x `interpolate_fresnel_color`):
+/// from colour `c` to white by the dielectric Fresnel of IOR 1.5 normalised to 0 at normal
+/// incidence.
+fn v1_metal_fresnel(c: f64, cos: f64) -> f64 {
+    let dielectric = |cos: f64| {
+        let eta: f64 = 1.5;
+        let g = (eta * eta - 1.0 + cos * cos).sqrt();
+        let a = (g - cos) / (g + cos);
+        let b = (cos * (g + cos) - 1.0) / (cos * (g - cos) + 1.0);
+        0.5 * a * a * (1.0 + b * b)
+    };
+    let f0 = dielectric(1.0);
+    let fh = (dielectric(cos) - f0) / (1.0 - f0);
+    c + (1.0 - c) * fh
+}
+
+/// A metal reflects by v1's Fresnel on 4.x too (`compat_principled.PARITY["metal_fresnel"]`:
+/// the metal made a dielectric lobe of tint colour / F0). One area light reflected by a
+/// flat metal plane at 60 degrees of incidence (`blender_scripts/dev/area_light_probe.py`,
+/// the whole reflection in view): on each Blender the dark metal's reflection over a white
+/// metal's (the same paths, so noise cancels) is v1's Fresnel at that angle; 4.x's own metal
+/// (the switch off: Schlick's curve, F82 tint white) is 6% under it, which the bounds catch.
+#[test]
+fn a_metal_reflects_by_v1s_fresnel_on_every_blender() {
+    let test = "a_metal_reflects_by_v1s_fresnel_on_every_blender";
+    let (Some(blender), Some(bpy)) = (blender_or_skip(test), bpy_or_skip(test)) else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let case = |name: &str, color: f64, off: &[&str]| {
+        serde_json::json!({
+            "name": name, "material": "principled",
+            "inputs": {"Metallic": 1.0, "Base Color": [color, color, color, 1.0],
+                       "Roughness": 0.2},
+            "cam_elev": 30, "light_elev": 30, "view": 12, "samples": 256,
+            "parity_off": off,
+        })
+    };
+    let cases = dir.path().join("cases.json");
+    std::fs::write(
+        &cases,
+        serde_json::to_string(&serde_json::json!([
+            case("white", 1.0, &[]),
+            case("dark", 0.2, &[]),
+            case("dark_schlick", 0.2, &["metal_fresnel"]),
+        ]))
+        .unwrap(),
+    )
+    .unwrap();
+    let script = repo_root().join("blender_scripts/dev/area_light_probe.py");
+    let expected = v1_metal_fresnel(0.2, 60f64.to_radians().cos());
+    let mut ratios = Vec::new();
+    for program in [&blender, &bpy] {
+        let out_path = dir.path().join(format!("out{}.jsonl", ratios.len()));
+        let flavour = clevrtex_render::blender::flavour(program);
+        let args = [cases.clone().into_os_string(), out_path.clone().into_os_string()];
+        let out = clevrtex_render::blender::worker_command(program, flavour, &script, &args)
+            .output()
+            .unwrap();
+        let t = text(&out);
+        assert!(out.status.success(), "{}: {t}", program.display());
+        let mut combined = std::collections::HashMap::new();
+        for line in std::fs::read_to_string(&out_path).unwrap().lines() {
+            let v: serde_json::Value = serde_json::from_str(line).unwrap();
+            let name = v["case"]["name"].as_str().unwrap().to_string();
+            combined.insert(name, v["means"]["Combined"].as_f64().unwrap());
+        }
+        let (white, dark) = (combined["white"], combined["dark"]);
+        assert!(white > 0.01, "{}: no reflection seen: {combined:?}", program.display());
+        let ratio = dark / white;
+        eprintln!(
+            "{}: dark / white metal {ratio:.4}, v1's Fresnel at 60 degrees {expected:.4}, \
+             4.x's own metal {:.4}",
+            program.display(),
+            combined["dark_schlick"] / white
+        );
+        assert!(
+            (ratio / expected - 1.0).abs() < 0.015,
+            "{}: a metal of colour 0.2 reflects {ratio:.4} of a white one at 60 degrees, \
+             v1's Fresnel {expected:.4}: {combined:?}",
+            program.display()
+        );
+        ratios.push((ratio, combined["dark_schlick"] / white));
+    }
+    // On 3.4 the switch is nothing; on 4.5 without it the metal is Schlick's, below the bounds
+    // (the check above would catch it).
+    assert!((ratios[0].1 / ratios[0].0 - 1.0).abs() < 1e-9, "{ratios:?}");
+    assert!(ratios[1].1 / expected < 0.96, "{ratios:?}");
 }
 
 /// The bridge lists the CUDA kernels each Blender's Cycles ships (`compat.cuda_kernels`, sent

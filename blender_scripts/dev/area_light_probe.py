@@ -136,7 +136,7 @@ def build_case(case):
             if isinstance(v, list):
                 v = tuple(v)
             sock.default_value = v
-        shader = compat.principled_output(nt, n)
+        shader = compat.principled_output(nt, n, tuple(n.inputs["Base Color"].default_value))
     else:
         raise SystemExit("unknown material `%s`" % kind)
     nt.links.new(shader, out.inputs["Surface"])
@@ -211,6 +211,7 @@ def render_case(case, tmp):
 
 def main():
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+    argv = [a for a in argv if a != "--factory-startup"]  # bpy started as the bridge is
     if argv and argv[0] == "--compare":
         compare(argv[1], argv[2])
         return

@@ -170,22 +170,29 @@ def apply_set(key, value, scene):
             unlink(t, s)
             s.default_value = 0.0
         for t, n in list(nodes_of("MIX_SHADER")):
-            unlink(t, n.inputs["Fac"])
-            n.inputs["Fac"].default_value = 0.0 if not n.inputs[1].is_linked else 1.0
+            if n.label in ("specular", "coat"):  # the metal's are kept, as on 3.x
+                unlink(t, n.inputs["Fac"])
+                n.inputs["Fac"].default_value = 0.0 if not n.inputs[1].is_linked else 1.0
     elif key == "coat":
         # 3.x: the Clearcoat input; 4.x: the weight of the coat lobes principled_output adds
-        # (Mix Shaders with only their second input linked; the specular lobe's has the first).
+        # (the Mix Shaders it labels "coat").
         for t, n in list(nodes_of("BSDF_PRINCIPLED")):
             if "Clearcoat" in n.inputs:
                 n.inputs["Clearcoat"].default_value *= f
         for t, n in list(nodes_of("MIX_SHADER")):
-            if n.inputs[2].is_linked and not n.inputs[1].is_linked and not n.inputs["Fac"].is_linked:
+            if n.label == "coat":
                 n.inputs["Fac"].default_value *= f
     elif key == "metallic":
+        # 4.x: also the weights principled_output gives its metal lobe and the principled node
+        # beside it, and its specular lobe's 1 - Metallic (Mix Shaders labelled so).
         for t, n in list(nodes_of("BSDF_PRINCIPLED")):
             s = n.inputs["Metallic"]
             unlink(t, s)
             s.default_value = 0.0
+        for t, n in list(nodes_of("MIX_SHADER")):
+            if n.label in ("metal", "specular"):
+                unlink(t, n.inputs["Fac"])
+                n.inputs["Fac"].default_value = 0.0
     elif key == "roughness":
         for t, n in list(nodes_of("BSDF_PRINCIPLED")):
             s = n.inputs["Roughness"]
