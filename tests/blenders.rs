@@ -405,7 +405,10 @@ fn a_metal_reflects_by_v1s_fresnel_on_every_blender() {
     for program in [&blender, &bpy] {
         let out_path = dir.path().join(format!("out{}.jsonl", ratios.len()));
         let flavour = clevrtex_render::blender::flavour(program);
-        let args = [cases.clone().into_os_string(), out_path.clone().into_os_string()];
+        let args = [
+            cases.clone().into_os_string(),
+            out_path.clone().into_os_string(),
+        ];
         let out = clevrtex_render::blender::worker_command(program, flavour, &script, &args)
             .output()
             .unwrap();
@@ -418,7 +421,11 @@ fn a_metal_reflects_by_v1s_fresnel_on_every_blender() {
             combined.insert(name, v["means"]["Combined"].as_f64().unwrap());
         }
         let (white, dark) = (combined["white"], combined["dark"]);
-        assert!(white > 0.01, "{}: no reflection seen: {combined:?}", program.display());
+        assert!(
+            white > 0.01,
+            "{}: no reflection seen: {combined:?}",
+            program.display()
+        );
         let ratio = dark / white;
         eprintln!(
             "{}: dark / white metal {ratio:.4}, v1's Fresnel at 60 degrees {expected:.4}, \

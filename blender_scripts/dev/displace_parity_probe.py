@@ -28,6 +28,8 @@ depth); n_bd: backdrop pixels.
   method=BUMP|DISPLACEMENT|BOTH  every material's displacement method
   bump=0                         unlink every Bump node's output (no bump on the shading
                                  normal; the displacement is kept)
+  bump_correction=0|1            every material's Bump Map Correction (4.0+; 3.x always
+                                 keeps a bumped reflection above the surface)
   bump_distance=F                multiply every Bump node's Distance
   bump_width=F                   every Bump node's Filter Width (4.4+)
   dicing_rate=F                  Cycles' render dicing rate (pixels)
@@ -135,6 +137,10 @@ def apply_set(key, value, scene):
     elif key == "bump":
         for t, n in list(nodes_of("BUMP")):
             unlink(t, n.outputs["Normal"])
+    elif key == "bump_correction":
+        for m in bpy.data.materials:
+            if hasattr(m.cycles, "use_bump_map_correction"):
+                m.cycles.use_bump_map_correction = bool(f)
     elif key == "bump_distance":
         for _t, n in nodes_of("BUMP"):
             n.inputs["Distance"].default_value *= f
