@@ -17,6 +17,8 @@ import bpy
 from compat_principled import (  # noqa: F401 (re-exported: callers use compat.*)
     PARITY,
     coat_gtr1_lobes,
+    coat_mis_shares,
+    coat_v1_lobes,
     disney_diffuse,
     parity_settings,
     principled_input,

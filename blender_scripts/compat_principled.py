@@ -81,6 +81,17 @@ def principled_input(node, name):
 #   One coat under one light at roughness 0.15-0.3, 4.5 over 3.4: peak 0.80-1.00, energy
 #   0.95-1.01 (one GGX lobe: 3.1-6.7x, 1.19-1.44); bench squared error at 64 samples 1.21x /
 #   0.98x 3.4's (one lobe: 2.31x / 1.46x), for three more lobes' shading time.
+# - `coat_mis`: what 3.4 renders of its clearcoat is not GTR1 alone. It samples the coat with
+#   GGX (alpha^2 = Roughness^4) but evaluates it, and reports its pdf to multiple importance
+#   sampling, with GTR1 (Cycles 3.x bsdf_microfacet.h: D cancels in a BSDF sample's weight).
+#   So a BSDF-sampled light counts GGX's reflection, weighted by the power heuristic of
+#   GTR1's pdf against the light's, and a light-sampled one GTR1's, weighted by the light's
+#   pdf: where GTR1's pdf beats the light's (a sharp coat's peak) 3.4 shows GGX, elsewhere
+#   GTR1's long tails, and the two add up to more than the coat's energy (~1.6x at Roughness
+#   0.05; 3.4's sharp coats reflect the studio lights "about twice as brightly").
+#   [`coat_v1_lobes`] gives the coat that sum for a light pdf [`COAT_LIGHT_PDF`] (D units,
+#   fitted to `onyx_tiles`): a GGX lobe of the coat's roughness weighted by its share, plus
+#   [`coat_gtr1_lobes`] weighted by GTR1's. Needs `coat_gtr1`.
 # - `disney_diffuse`: v1's diffuse is Disney's, Lambert's times
 #   g(F_L) g(F_V), g(F) = 1 + (F_D90 - 1) F, F = (1 - cos)^5 of the light (L) and view (V)
 #   angles, F_D90 = 0.5 + 2 Roughness cos^2 theta_d (theta_d: between light and half
@@ -109,7 +120,7 @@ def principled_input(node, name):
 #   where the half vector is far nearer the normal than the view: docs/notes/materials.md.)
 PARITY = {"coat": True, "sheen": True, "ggx": True, "ior": True, "layers": True,
           "fresnel": True, "light_tree": True, "coat_gtr1": True, "disney_diffuse": True,
-          "metal_fresnel": True}
+          "metal_fresnel": True, "coat_mis": True}
 
 # v1's Disney diffuse on 4.x ([`disney_diffuse`]): the light term's F_L = (1 - cos theta_L)^5
 # and cos^2 theta_d taken at these values, fitted to 3.4's diffuse-only renders of `rubber`
@@ -231,6 +242,61 @@ def _mix_fit(bs, ss, target):
 
 
 _GTR1_LOBES = {}
+
+# The light's pdf against which 3.4's clearcoat weighs GTR1's (`coat_mis`), in units of the
+# microfacet distribution D (the BSDF's pdf of a reflection is about D / (4 cos theta_o)):
+# fitted to 3.4's `onyx_tiles` backdrop (docs/notes/materials.md, "The clearcoat's multiple
+# importance sampling"); the studio lights span ~30 (the back light and the sun) to ~800
+# (the small fill light).
+COAT_LIGHT_PDF = 100.0
+
+_COAT_SHARES = {}
+
+
+def coat_mis_shares(roughness, light_pdf=None):
+    """(GGX's share, GTR1's share) of what 3.4 renders of a clearcoat of `roughness`
+    ([`PARITY`] `coat_mis`): the energy of GGX (alpha^2 = a2 = `roughness`^4) weighted by the
+    power heuristic w_B = D^2 / (D^2 + T^2), and of GTR1 (of a2) by 1 - w_B, D = GTR1's
+    distribution at each half-vector angle and T = `light_pdf` ([`COAT_LIGHT_PDF`]).
+    Integrated over s = tan^2 of the half vector's angle (log-spaced, a2 / 1e4 to 1e4):
+    GGX's energy density in s is a2 / (a2 + s)^2, GTR1's (1 / (a2 + s) - 1 / (1 + s)) /
+    ln(1 / a2), and D = (1 - a2)(1 + s) / (pi ln(1 / a2)(s + a2)). At Roughness 0.05 the sum
+    is 1.56-1.67 for T from 30 to 1000; at 0.2 and T >= 100 GTR1's alone (1.00)."""
+    t = COAT_LIGHT_PDF if light_pdf is None else light_pdf
+    if not 0.0 < roughness < 1.0:
+        return (0.0, 1.0)
+    key = (round(roughness, 6), round(t, 6))
+    if key in _COAT_SHARES:
+        return _COAT_SHARES[key]
+    a2 = roughness ** 4
+    ln = math.log(1.0 / a2)
+    n = 2000
+    lo, hi = math.log(a2 * 1e-4), math.log(1e4)
+    step = (hi - lo) / n
+    eg = et = 0.0
+    for i in range(n):
+        s = math.exp(lo + (i + 0.5) * step)
+        d = (1.0 - a2) * (1.0 + s) / (math.pi * ln * (s + a2))
+        wb = d * d / (d * d + t * t)
+        eg += a2 / (a2 + s) ** 2 * wb * s * step
+        et += (1.0 / (a2 + s) - 1.0 / (1.0 + s)) / ln * (1.0 - wb) * s * step
+    _COAT_SHARES[key] = (eg, et)
+    return eg, et
+
+
+def coat_v1_lobes(roughness):
+    """[(roughness, weight)] of the GGX lobes that render a clearcoat of `roughness` (weight 1)
+    as 3.4 does: with `coat_mis`, a GGX lobe of that roughness weighted by GGX's share (left
+    out under 1%) plus [`coat_gtr1_lobes`] times GTR1's ([`coat_mis_shares`]); else GTR1's
+    lobes alone."""
+    lobes = coat_gtr1_lobes(roughness)
+    if not PARITY["coat_mis"]:
+        return lobes
+    eg, et = coat_mis_shares(roughness)
+    out = [(r, w * et) for r, w in lobes]
+    if eg >= 0.01:
+        out.insert(0, (roughness, eg))
+    return out
 
 
 def coat_gtr1_lobes(roughness, k=3):
@@ -410,7 +476,7 @@ def principled_output(nt, bsdf, color=None):
         coat.default_value = 0.0
         rough = bsdf.inputs["Coat Roughness"]
         if PARITY["coat_gtr1"] and not rough.is_linked:
-            lobes = coat_gtr1_lobes(rough.default_value)
+            lobes = coat_v1_lobes(rough.default_value)
         else:
             lobes = [(rough, 1.0)]
         for r, w in lobes:

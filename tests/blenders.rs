@@ -122,6 +122,7 @@ fn blender_3_4_and_bpy_4_5_render_a_scene_alike() {
             "coat_gtr1",
             "disney_diffuse",
             "metal_fresnel",
+            "coat_mis",
         ] {
             assert_eq!(
                 meta_b["blender_compat"][switch],
@@ -303,8 +304,10 @@ print("DENOISE-DEVICE-OK")
 
 /// `compat.coat_gtr1_lobes` (the `coat_gtr1` parity switch): three GGX lobes whose weights sum
 /// to 1 and whose energy within each half-vector cone follows 3.4's GTR1 clearcoat closely,
-/// for the recipes' coat roughnesses; a mirror and a flat coat keep one lobe. The fit is pure
-/// Python, run in Blender 3.4 (the module imports `bpy`).
+/// for the recipes' coat roughnesses; a mirror and a flat coat keep one lobe. And
+/// `compat.coat_v1_lobes` (`coat_mis`): a sharp coat adds a GGX lobe and its sum is ~1.6x the
+/// coat's energy, a rough one is GTR1's lobes alone. The fit is pure Python, run in Blender
+/// 3.4 (the module imports `bpy`).
 #[test]
 fn coat_gtr1_lobes_fit_the_gtr1_clearcoat() {
     let Some(blender) = blender_or_skip("coat_gtr1_lobes_fit_the_gtr1_clearcoat") else {
@@ -333,6 +336,17 @@ for r in (0.05, 0.15, 0.3):
         worst = max(worst, abs(mix - gtr1))
     assert worst < 0.03, (r, worst)
     print("fit", r, round(worst, 4))
+# coat_mis: 3.4's sharp coat shows GGX's peak and GTR1's tails, more than the coat's energy;
+# a rough one GTR1 alone, so the lobes are coat_gtr1's.
+eg, et = compat.coat_mis_shares(0.05)
+assert 0.9 < eg < 1.0 and 0.55 < et < 0.8 and 1.5 < eg + et < 1.75, (eg, et)
+lobes = compat.coat_v1_lobes(0.05)
+assert lobes[0] == (0.05, eg) and len(lobes) == 4, lobes
+assert abs(sum(w for _, w in lobes[1:]) - et) < 1e-9, lobes
+eg, et = compat.coat_mis_shares(0.3)
+assert eg < 0.01 and et > 0.99, (eg, et)
+assert [r for r, _ in compat.coat_v1_lobes(0.3)] == [r for r, _ in compat.coat_gtr1_lobes(0.3)]
+print("MIS", compat.coat_mis_shares(0.05), compat.coat_mis_shares(0.15))
 assert compat.coat_gtr1_lobes(0.0) == [(0.0, 1.0)], compat.coat_gtr1_lobes(0.0)
 assert compat.coat_gtr1_lobes(1.0) == [(1.0, 1.0)], compat.coat_gtr1_lobes(1.0)
 print("FIT-OK")

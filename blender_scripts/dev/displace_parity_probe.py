@@ -40,6 +40,8 @@ depth); n_bd: backdrop pixels.
   midlevel=F, disp_scale=F       every Displacement node's Midlevel / Scale multiplied
   space=OBJECT|WORLD             every Displacement node's space
   parity_off=KEY[+KEY..]|all     compat.PARITY switches off before the materials are built
+  coat_light_pdf=T               compat's COAT_LIGHT_PDF (4.x; before the materials are
+                                 built)
   disney=D,X                     compat's Disney diffuse constants cos^2 theta_d = D and
                                  F_L = X (4.x; before the materials are built)
   normal=geometry                every Principled BSDF's Normal input unlinked
@@ -263,7 +265,7 @@ def apply_set(key, value, scene):
             d = t.nodes.new("ShaderNodeBsdfDiffuse")
             d.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
             t.links.new(d.outputs[0], out.inputs["Surface"])
-    elif key in ("parity_off", "disney"):
+    elif key in ("parity_off", "disney", "coat_light_pdf"):
         pass  # applied before the build
     else:
         raise SystemExit("unknown --set key `%s`" % key)
@@ -316,6 +318,9 @@ def main():
             import compat_principled
             d, x = (float(t) for t in v.split(","))
             compat_principled.DISNEY_COS2_D, compat_principled.DISNEY_LIGHT_F = d, x
+        elif k == "coat_light_pdf":
+            import compat_principled
+            compat_principled.COAT_LIGHT_PDF = float(v)
     out = args.out or tempfile.mkdtemp(prefix="displace_probe_")
     os.makedirs(out, exist_ok=True)
     for name in args.material:
