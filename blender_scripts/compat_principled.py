@@ -118,6 +118,7 @@ def principled_input(node, name):
 #   Metallic, the principled node (diffuse, sheen) by 1 - Metallic, as v1's sum. (A correction
 #   of the metal colour by the view angle, tried first, fixed objects but overdid backdrops,
 #   where the half vector is far nearer the normal than the view: docs/notes/materials.md.)
+#   Needs `layers` and `fresnel`.
 PARITY = {"coat": True, "sheen": True, "ggx": True, "ior": True, "layers": True,
           "fresnel": True, "light_tree": True, "coat_gtr1": True, "disney_diffuse": True,
           "metal_fresnel": True, "coat_mis": True}
@@ -184,7 +185,8 @@ def disney_diffuse(g, color, rough, metal):
 
 def _metal_lobe_on():
     """Whether [`principled_output`] takes the metal out of the principled node (4.0+)."""
-    return VERSION >= (4, 0, 0) and PARITY["layers"] and PARITY["metal_fresnel"]
+    return (VERSION >= (4, 0, 0) and PARITY["layers"] and PARITY["fresnel"]
+            and PARITY["metal_fresnel"])
 
 
 def _is_nonzero(x):
@@ -442,7 +444,7 @@ def principled_output(nt, bsdf, color=None):
     f0 = 0.08 * level.default_value
     level.default_value = 0.0
     metal = bsdf.inputs["Metallic"]
-    if (PARITY["metal_fresnel"] and color is not None and f0 > 0.0
+    if (_metal_lobe_on() and color is not None and f0 > 0.0
             and (metal.is_linked or metal.default_value > 0.0)):
         lobe = _lobe(nt, f0, bsdf.inputs["Roughness"], bsdf.inputs["Normal"],
                      tint=_scaled_color(nt, color, 1.0 / f0))

@@ -46,10 +46,12 @@ depth); n_bd: backdrop pixels.
                                  F_L = X (4.x; before the materials are built)
   normal=geometry                every Principled BSDF's Normal input unlinked
   glossy=0                       every Principled BSDF's specular level 0 and the added
-                                 parity lobes' weight 0 (diffuse only)
+                                 specular and coat lobes' weight 0 (diffuse only; 4.x's
+                                 metal lobe kept, as 3.x keeps its metal)
   coat=F                         every clearcoat multiplied by F (3.x: the Clearcoat input;
                                  4.x: the weight of the coat lobes of compat's `layers`)
-  metallic=0                     every Principled BSDF's Metallic 0 (unlinked)
+  metallic=0                     every Principled BSDF's Metallic 0 (unlinked; on 4.x
+                                 also the added metal lobe's weight)
   roughness=F                    every Principled BSDF's Roughness F (unlinked; 4.x's
                                  Disney diffuse factor keeps the built roughness: add
                                  parity_off=disney_diffuse to compare the bare BSDFs)
