@@ -28,6 +28,8 @@ depth); n_bd: backdrop pixels.
   method=BUMP|DISPLACEMENT|BOTH  every material's displacement method
   bump=0                         unlink every Bump node's output (no bump on the shading
                                  normal; the displacement is kept)
+  bump_width_facing=A,B          every Bump node's Filter Width (4.4+) fed A + B x Facing
+                                 (Layer Weight, blend 0.5: 0 face-on, 1 at grazing)
   bump_correction=0|1            every material's Bump Map Correction (4.0+; 3.x always
                                  keeps a bumped reflection above the surface)
   bump_distance=F                multiply every Bump node's Distance
@@ -141,6 +143,19 @@ def apply_set(key, value, scene):
     elif key == "bump":
         for t, n in list(nodes_of("BUMP")):
             unlink(t, n.outputs["Normal"])
+    elif key == "bump_width_facing":
+        a, b = (float(t) for t in value.split(","))
+        for t, n in list(nodes_of("BUMP")):
+            if "Filter Width" not in n.inputs:
+                continue
+            lw = t.nodes.new("ShaderNodeLayerWeight")
+            lw.inputs["Blend"].default_value = 0.5
+            m = t.nodes.new("ShaderNodeMath")
+            m.operation = "MULTIPLY_ADD"
+            t.links.new(lw.outputs["Facing"], m.inputs[0])
+            m.inputs[1].default_value = b
+            m.inputs[2].default_value = a
+            t.links.new(m.outputs["Value"], n.inputs["Filter Width"])
     elif key == "bump_correction":
         for m in bpy.data.materials:
             if hasattr(m.cycles, "use_bump_map_correction"):
