@@ -380,6 +380,41 @@ fn v1_metal_fresnel(c: f64, cos: f64) -> f64 {
     c + (1.0 - c) * fh
 }
 
+/// Each case of `cases` (JSON values of `blender_scripts/dev/area_light_probe.py`) rendered by
+/// `program` (started as the bridge is), in `dir`: the mean Combined pass by case name.
+fn area_light_means(
+    program: &Path,
+    cases: &[serde_json::Value],
+    dir: &Path,
+) -> std::collections::HashMap<String, f64> {
+    let stem = program.to_string_lossy().replace('/', "_");
+    let cases_path = dir.join(format!("cases{stem}.json"));
+    let out_path = dir.join(format!("out{stem}.jsonl"));
+    std::fs::write(&cases_path, serde_json::to_string(cases).unwrap()).unwrap();
+    let script = repo_root().join("blender_scripts/dev/area_light_probe.py");
+    let flavour = clevrtex_render::blender::flavour(program);
+    let args = [
+        cases_path.into_os_string(),
+        out_path.clone().into_os_string(),
+    ];
+    let out = clevrtex_render::blender::worker_command(program, flavour, &script, &args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}: {}",
+        program.display(),
+        text(&out)
+    );
+    let mut combined = std::collections::HashMap::new();
+    for line in std::fs::read_to_string(&out_path).unwrap().lines() {
+        let v: serde_json::Value = serde_json::from_str(line).unwrap();
+        let name = v["case"]["name"].as_str().unwrap().to_string();
+        combined.insert(name, v["means"]["Combined"].as_f64().unwrap());
+    }
+    combined
+}
+
 /// A metal reflects by v1's Fresnel on 4.x too (`compat_principled.PARITY["metal_fresnel"]`:
 /// the metal made a dielectric lobe of tint colour / F0). One area light reflected by a
 /// flat metal plane at 60 degrees of incidence (`blender_scripts/dev/area_light_probe.py`,
@@ -402,38 +437,15 @@ fn a_metal_reflects_by_v1s_fresnel_on_every_blender() {
             "parity_off": off,
         })
     };
-    let cases = dir.path().join("cases.json");
-    std::fs::write(
-        &cases,
-        serde_json::to_string(&serde_json::json!([
-            case("white", 1.0, &[]),
-            case("dark", 0.2, &[]),
-            case("dark_schlick", 0.2, &["metal_fresnel"]),
-        ]))
-        .unwrap(),
-    )
-    .unwrap();
-    let script = repo_root().join("blender_scripts/dev/area_light_probe.py");
+    let cases = [
+        case("white", 1.0, &[]),
+        case("dark", 0.2, &[]),
+        case("dark_schlick", 0.2, &["metal_fresnel"]),
+    ];
     let expected = v1_metal_fresnel(0.2, 60f64.to_radians().cos());
     let mut ratios = Vec::new();
     for program in [&blender, &bpy] {
-        let out_path = dir.path().join(format!("out{}.jsonl", ratios.len()));
-        let flavour = clevrtex_render::blender::flavour(program);
-        let args = [
-            cases.clone().into_os_string(),
-            out_path.clone().into_os_string(),
-        ];
-        let out = clevrtex_render::blender::worker_command(program, flavour, &script, &args)
-            .output()
-            .unwrap();
-        let t = text(&out);
-        assert!(out.status.success(), "{}: {t}", program.display());
-        let mut combined = std::collections::HashMap::new();
-        for line in std::fs::read_to_string(&out_path).unwrap().lines() {
-            let v: serde_json::Value = serde_json::from_str(line).unwrap();
-            let name = v["case"]["name"].as_str().unwrap().to_string();
-            combined.insert(name, v["means"]["Combined"].as_f64().unwrap());
-        }
+        let combined = area_light_means(program, &cases, dir.path());
         let (white, dark) = (combined["white"], combined["dark"]);
         assert!(
             white > 0.01,
@@ -487,34 +499,10 @@ fn a_sharp_clearcoat_reflects_a_light_as_on_3_4() {
             }));
         }
     }
-    let cases_path = dir.path().join("cases.json");
-    std::fs::write(&cases_path, serde_json::to_string(&cases).unwrap()).unwrap();
-    let script = repo_root().join("blender_scripts/dev/area_light_probe.py");
-    let mut runs = Vec::new();
-    for program in [&blender, &bpy] {
-        let out_path = dir.path().join(format!("out{}.jsonl", runs.len()));
-        let flavour = clevrtex_render::blender::flavour(program);
-        let args = [
-            cases_path.clone().into_os_string(),
-            out_path.clone().into_os_string(),
-        ];
-        let out = clevrtex_render::blender::worker_command(program, flavour, &script, &args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}: {}",
-            program.display(),
-            text(&out)
-        );
-        let mut combined = std::collections::HashMap::new();
-        for line in std::fs::read_to_string(&out_path).unwrap().lines() {
-            let v: serde_json::Value = serde_json::from_str(line).unwrap();
-            let name = v["case"]["name"].as_str().unwrap().to_string();
-            combined.insert(name, v["means"]["Combined"].as_f64().unwrap());
-        }
-        runs.push(combined);
-    }
+    let runs: Vec<_> = [&blender, &bpy]
+        .into_iter()
+        .map(|program| area_light_means(program, &cases, dir.path()))
+        .collect();
     let (old, new) = (&runs[0], &runs[1]);
     for elev in [60, 30] {
         let key = format!("coat{elev}");
