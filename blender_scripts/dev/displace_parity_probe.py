@@ -61,6 +61,8 @@ depth); n_bd: backdrop pixels.
   diffuse_roughness=F            every Principled BSDF's Diffuse Roughness (4.3+) fed F times
                                  (what feeds its Roughness - R0), clamped to 0..1
   diffuse_roughness_from=R0      R0 of `diffuse_roughness` (default 0; give it first)
+  derived_bump_glossy=F          the same on the added specular, metal and coat lobes only
+                                 (4.x; the diffuse's node keeps its normal)
   derived_bump=F                 Cycles' bump derived from the displacement built as a Bump
                                  node of filter width F (use with method=DISPLACEMENT)
   lights=NAME                    only light NAME (`sun`, an area light's name)
@@ -269,6 +271,29 @@ def apply_set(key, value, scene):
                            if n.type == "BSDF_PRINCIPLED" and not n.inputs["Normal"].is_linked]
             for sock in targets:
                 t.links.new(b.outputs["Normal"], sock)
+    elif key == "derived_bump_glossy":
+        # The same rebuilt bump, on the normals of the lobes compat's `layers` adds (principled
+        # nodes of black base: specular, metal, coat) only, after the recipe's own bump; the
+        # principled node that holds the diffuse keeps its normal.
+        for m in bpy.data.materials:
+            t = m.node_tree
+            if t is None:
+                continue
+            disp = next((n for n in t.nodes if n.type == "DISPLACEMENT"), None)
+            if disp is None or not disp.inputs["Height"].is_linked:
+                continue
+            b = t.nodes.new("ShaderNodeBump")
+            if "Filter Width" in b.inputs:
+                b.inputs["Filter Width"].default_value = f
+            t.links.new(disp.inputs["Height"].links[0].from_socket, b.inputs["Height"])
+            b.inputs["Distance"].default_value = disp.inputs["Scale"].default_value
+            recipe = next((n for n in t.nodes if n.type == "BUMP" and n != b), None)
+            if recipe is not None:
+                t.links.new(recipe.outputs["Normal"], b.inputs["Normal"])
+            for n in list(t.nodes):
+                base = n.inputs.get("Base Color") if n.type == "BSDF_PRINCIPLED" else None
+                if base is not None and not base.is_linked and max(base.default_value[:3]) == 0:
+                    t.links.new(b.outputs["Normal"], n.inputs["Normal"])
     elif key == "lights":
         for o in scene.objects:
             if o.type == "LIGHT":
