@@ -131,6 +131,27 @@ def unlink(tree, socket):
 DR_FROM = [0.0]
 
 
+def derived_bumps(width):
+    """[(tree, Bump node)]: in every material that displaces, a new Bump node of the
+    Displacement node's height and scale and filter width `width` (3.4's bump derived from the
+    displacement, rebuilt; its output left unlinked)."""
+    out = []
+    for m in bpy.data.materials:
+        t = m.node_tree
+        if t is None:
+            continue
+        disp = next((n for n in t.nodes if n.type == "DISPLACEMENT"), None)
+        if disp is None or not disp.inputs["Height"].is_linked:
+            continue
+        b = t.nodes.new("ShaderNodeBump")
+        if "Filter Width" in b.inputs:
+            b.inputs["Filter Width"].default_value = width
+        t.links.new(disp.inputs["Height"].links[0].from_socket, b.inputs["Height"])
+        b.inputs["Distance"].default_value = disp.inputs["Scale"].default_value
+        out.append((t, b))
+    return out
+
+
 def apply_set(key, value, scene):
     c = scene.cycles
     f = None
@@ -252,18 +273,7 @@ def apply_set(key, value, scene):
         # 3.4's bump derived from the displacement, built as a Bump node: the Displacement
         # node's height and scale, filter width F, in front of the recipe's Bump node (else
         # of every Principled BSDF's normal).
-        for m in bpy.data.materials:
-            t = m.node_tree
-            if t is None:
-                continue
-            disp = next((n for n in t.nodes if n.type == "DISPLACEMENT"), None)
-            if disp is None or not disp.inputs["Height"].is_linked:
-                continue
-            b = t.nodes.new("ShaderNodeBump")
-            if "Filter Width" in b.inputs:
-                b.inputs["Filter Width"].default_value = f
-            t.links.new(disp.inputs["Height"].links[0].from_socket, b.inputs["Height"])
-            b.inputs["Distance"].default_value = disp.inputs["Scale"].default_value
+        for t, b in derived_bumps(f):
             bumps = [n for n in t.nodes if n.type == "BUMP" and n != b]
             targets = [n.inputs["Normal"] for n in bumps]
             if not targets:
@@ -275,18 +285,7 @@ def apply_set(key, value, scene):
         # The same rebuilt bump, on the normals of the lobes compat's `layers` adds (principled
         # nodes of black base: specular, metal, coat) only, after the recipe's own bump; the
         # principled node that holds the diffuse keeps its normal.
-        for m in bpy.data.materials:
-            t = m.node_tree
-            if t is None:
-                continue
-            disp = next((n for n in t.nodes if n.type == "DISPLACEMENT"), None)
-            if disp is None or not disp.inputs["Height"].is_linked:
-                continue
-            b = t.nodes.new("ShaderNodeBump")
-            if "Filter Width" in b.inputs:
-                b.inputs["Filter Width"].default_value = f
-            t.links.new(disp.inputs["Height"].links[0].from_socket, b.inputs["Height"])
-            b.inputs["Distance"].default_value = disp.inputs["Scale"].default_value
+        for t, b in derived_bumps(f):
             recipe = next((n for n in t.nodes if n.type == "BUMP" and n != b), None)
             if recipe is not None:
                 t.links.new(recipe.outputs["Normal"], b.inputs["Normal"])
