@@ -7,6 +7,8 @@
         [--set KEY=VALUE ...] [--out DIR]
     .venv-bpy/bin/python blender_scripts/dev/displace_parity_probe.py --materials ... (the same)
 
+(any Python with bpy, 5.0 too: its multi-part EXR is written again interleaved to be read)
+
 `materials.json` is `clevrtex materials json`, SCENE.json a scene file of `clevrtex sample`
 (one with a displaced backdrop: variant `full`). The scene is built as the bridge builds it
 (builder.build, shading.assign_materials, materials.build_material with compat's switches),
@@ -34,6 +36,19 @@ depth); n_bd: backdrop pixels.
                                  keeps a bumped reflection above the surface)
   bump_distance=F                multiply every Bump node's Distance
   bump_width=F                   every Bump node's Filter Width (4.4+)
+  derived_bump_undisplaced=F     (4.x, with method=DISPLACEMENT, set before the build) 3.4's
+                                 bump derived from the displacement, rebuilt as a Bump node of
+                                 filter width F whose height is the material's height
+                                 evaluated where the surface was before its displacement
+                                 (the texture coordinate moved back along the normal by the
+                                 displacement at the shading point), in front of the recipe's
+                                 Bump node
+  derived_base_up=1              (set before the build, with derived_bump_undisplaced) that
+                                 Bump node's base normal +z (the undisplaced floor's)
+  derived_base_attr=1            (with derived_bump_undisplaced) its base normal the
+                                 undisplaced backdrop's: the base mesh's vertex normals as a
+                                 point attribute, interpolated (3.x's BOTH keeps the vertex
+                                 normals undisplaced and bumps them by the full gradient)
   dicing_rate=F                  Cycles' render dicing rate (pixels)
   offscreen_dicing_scale=F       Cycles' offscreen dicing scale
   max_subdivisions=N             Cycles' max subdivisions
@@ -129,6 +144,7 @@ def unlink(tree, socket):
 
 
 DR_FROM = [0.0]
+DERIVED_BASE_UP = [False]
 
 
 def derived_bumps(width):
@@ -150,6 +166,63 @@ def derived_bumps(width):
         b.inputs["Distance"].default_value = disp.inputs["Scale"].default_value
         out.append((t, b))
     return out
+
+
+def patch_undisplaced_bump(width):
+    """Wrap materials._layer so that, for a material that displaces, the layers are built a
+    second time on the texture coordinate moved back by the displacement (p - (h(p) - 0.5) x
+    scale x normal, one fixed-point step), and that second height feeds a Bump node of the
+    displacement's distance and filter width `width`, linked in front of the recipe's own
+    Bump node (else of the Principled BSDF's normal) when the material output gets its
+    Displacement (materials._displace)."""
+    state = {}
+    orig_layer, orig_displace = materials._layer, materials._displace
+
+    def layer(g, p, L, ctx, color, rough, metal, height):
+        st = state.setdefault(id(g.nt), {"layers": [], "p": p, "ctx": ctx})
+        st["layers"].append(L)
+        return orig_layer(g, p, L, ctx, color, rough, metal, height)
+
+    def displace(g, nt, out, vals, height, relief):
+        orig_displace(g, nt, out, vals, height, relief)
+        st = state.pop(id(g.nt), None)
+        if st is None:
+            return
+        # Back along the object-space normal by the displacement, in texture units: the
+        # coordinate is object position x object scale x k + offset; k per layer is folded
+        # into p by _coords (its MULTIPLY_ADD node's input 1).
+        tc = next(n for n in nt.nodes if n.type == "TEX_COORD")
+        shift = g.math("MULTIPLY", g.sub(height, 0.5), 1.0)
+        shift.node.label = "du_scale"  # x the displacement's scale, set after the build
+        back = g.vscale(tc.outputs["Normal"], shift)
+        back = g.vmath("MULTIPLY", back, (1.0, 1.0, 1.0))
+        back.node.label = "du_k"  # x the coordinate's scale k, set after the build
+        pu = g.vmath("SUBTRACT", st["p"], back)
+        ctx = dict(st["ctx"])
+        ctx.update({"cell": None, "inside": None, "_normal_xyz": None})
+        hu = None
+        c, r, m = (0.5, 0.5, 0.5), 0.5, 0.0
+        for L in st["layers"]:
+            c, r, m, hu = orig_layer(g, pu, L, ctx, c, r, m, hu)
+        b = nt.nodes.new("ShaderNodeBump")
+        if "Filter Width" in b.inputs:
+            b.inputs["Filter Width"].default_value = width
+        nt.links.new(hu, b.inputs["Height"])
+        b.label = "derived"  # Distance: the displacement's scale, set after the build
+        if DERIVED_BASE_UP[0]:
+            up = nt.nodes.new("ShaderNodeCombineXYZ")
+            up.inputs[2].default_value = 1.0
+            nt.links.new(up.outputs[0], b.inputs["Normal"])
+        recipe = [n for n in nt.nodes if n.type == "BUMP" and n != b]
+        if recipe:
+            for n in recipe:
+                nt.links.new(b.outputs["Normal"], n.inputs["Normal"])
+        else:
+            for n in nt.nodes:
+                if n.type == "BSDF_PRINCIPLED" and not n.inputs["Normal"].is_linked:
+                    nt.links.new(b.outputs["Normal"], n.inputs["Normal"])
+
+    materials._layer, materials._displace = layer, displace
 
 
 def apply_set(key, value, scene):
@@ -306,7 +379,52 @@ def apply_set(key, value, scene):
             d = t.nodes.new("ShaderNodeBsdfDiffuse")
             d.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
             t.links.new(d.outputs[0], out.inputs["Surface"])
-    elif key in ("parity_off", "disney", "coat_light_pdf"):
+    elif key == "derived_bump_undisplaced":
+        # The values patch_undisplaced_bump's nodes take from the instance (now assigned).
+        for m in bpy.data.materials:
+            t = m.node_tree
+            if t is None:
+                continue
+            d = next((n for n in t.nodes if n.type == "DISPLACEMENT"), None)
+            if d is None:
+                continue
+            scale = d.inputs["Scale"].default_value
+            tc = next(n for n in t.nodes if n.type == "TEX_COORD")
+            madd = next(n for n in t.nodes if n.type == "VECT_MATH"
+                        and n.operation == "MULTIPLY_ADD" and n.inputs[0].is_linked
+                        and n.inputs[0].links[0].from_node.type == "VECT_MATH"
+                        and n.inputs[0].links[0].from_node.inputs[0].is_linked
+                        and n.inputs[0].links[0].from_node.inputs[0].links[0].from_node == tc)
+            for n in t.nodes:
+                if n.label == "du_scale":
+                    n.inputs[1].default_value = scale
+                elif n.label == "du_k":
+                    n.inputs[1].default_value = madd.inputs[1].default_value
+                elif n.label == "derived":
+                    n.inputs["Distance"].default_value = scale
+    elif key == "derived_base_attr":
+        # The rebuilt derived bump's base normal: the undisplaced surface's, as 3.x's BOTH
+        # keeps it (a point attribute of the backdrop's vertex normals, interpolated).
+        obj = scene.objects["backdrop"]
+        me = obj.data
+        a = me.attributes.get("clevrtex_n0") or me.attributes.new(
+            "clevrtex_n0", "FLOAT_VECTOR", "POINT")
+        for i, v in enumerate(me.vertices):
+            a.data[i].vector = v.normal
+        for m in bpy.data.materials:
+            t = m.node_tree
+            if t is None:
+                continue
+            for b in [n for n in t.nodes if n.type == "BUMP" and n.label == "derived"]:
+                at = t.nodes.new("ShaderNodeAttribute")
+                at.attribute_name = "clevrtex_n0"
+                vt = t.nodes.new("ShaderNodeVectorTransform")
+                vt.vector_type = "NORMAL"
+                vt.convert_from = "OBJECT"
+                vt.convert_to = "WORLD"
+                t.links.new(at.outputs["Vector"], vt.inputs[0])
+                t.links.new(vt.outputs[0], b.inputs["Normal"])
+    elif key in ("parity_off", "disney", "coat_light_pdf", "derived_base_up"):
         pass  # applied before the build
     else:
         raise SystemExit("unknown --set key `%s`" % key)
@@ -327,7 +445,11 @@ def measure(path):
         raise KeyError(suffix)
 
     r, g, b = chan("Combined.R"), chan("Combined.G"), chan("Combined.B")
-    idx, z = chan("IndexOB.X"), chan("Depth.Z")
+    try:
+        idx = chan("IndexOB.X")
+    except KeyError:
+        idx = chan("Object Index.X")  # 5.0's long pass name
+    z = chan("Depth.Z")
     lum = [luminance(r[i], g[i], b[i]) for i in range(w * h)]
     bd = [i for i in range(w * h) if idx[i] == 0.0 and z[i] < 1e9]
     ob = [i for i in range(w * h) if idx[i] > 0.0]
@@ -362,6 +484,10 @@ def main():
         elif k == "coat_light_pdf":
             import compat_principled
             compat_principled.COAT_LIGHT_PDF = float(v)
+        elif k == "derived_bump_undisplaced":
+            patch_undisplaced_bump(float(v))
+        elif k == "derived_base_up":
+            DERIVED_BASE_UP[0] = bool(int(v))
     out = args.out or tempfile.mkdtemp(prefix="displace_probe_")
     os.makedirs(out, exist_ok=True)
     for name in args.material:
@@ -394,6 +520,10 @@ def main():
         wall = time.perf_counter() - t0
         path = os.path.join(out, "%s_%s.exr" % (name, args.role))
         builder._save(path, "EXR")
+        if hasattr(scene.render.image_settings, "use_exr_interleave"):
+            # 5.0 writes multi-part EXRs, which exr_dump does not read: again, interleaved.
+            scene.render.image_settings.use_exr_interleave = True
+            bpy.data.images["Render Result"].save_render(path, scene=scene)
         m = measure(path)
         print("PROBE %s %s %s %s lum_bd=%.5f lum_obj=%.5f lum_all=%.5f depth_bd=%.5f "
               "depth_sd_bd=%.5f n_bd=%d wall=%.1f" % (
